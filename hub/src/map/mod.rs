@@ -1,0 +1,246 @@
+//! Maps: the Ciber-Rato lab (walls, beacons, targets), the start grid, and the simulation
+//! parameters file, plus the built-in worlds.
+//!
+//! Everything here is plain data in SI units (metres, radians inside, degrees only where a file
+//! says degrees). Parsing lives in [`xml`] (the one module that talks to quick-xml) and the
+//! `<Row Pos Pattern>` maze shorthand in [`pattern`].
+
+pub mod builtin;
+pub mod pattern;
+pub mod xml;
+
+use nalgebra::Point2;
+
+pub use xml::{MapLoadError, TextPos};
+
+/// Height given to a wall that does not say its own (Ciber-Rato's `cbWall` default).
+pub const DEFAULT_WALL_HEIGHT_M: f64 = 4.0;
+
+/// A Ciber-Rato lab: the rectangle `[0, width] × [0, height]` and what stands in it.
+///
+/// The border of the rectangle is always a wall (Ciber-Rato adds it as wall 0); it is not listed
+/// in [`Lab::walls`] and is not serialised back.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Lab {
+    /// `Name` attribute (Ciber-Rato's default is "NO NAMED LAB").
+    pub name: String,
+    /// Extent along x, metres.
+    pub width_m: f64,
+    /// Extent along y, metres.
+    pub height_m: f64,
+    /// Interior walls, each a simple polygon with its corners counter-clockwise.
+    pub walls: Vec<Wall>,
+    /// Beacons, in file order (the beacon sensor's ids follow this order).
+    pub beacons: Vec<Beacon>,
+    /// Target areas, in file order (the ground sensor reports this index).
+    pub targets: Vec<Target>,
+}
+
+/// A wall: a simple polygon extruded to a height.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Wall {
+    /// Height in metres; beacons lower than a wall are hidden behind it.
+    pub height_m: f64,
+    /// At least 3 corners, counter-clockwise (the loader re-orders clockwise input).
+    pub corners: Vec<Point2<f64>>,
+}
+
+/// A beacon the beacon sensor can take bearings to.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Beacon {
+    /// Position in the lab frame, metres.
+    pub pos: Point2<f64>,
+    /// Height in metres (Ciber-Rato default 0).
+    pub height_m: f64,
+}
+
+/// A circular target area the ground sensor detects.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Target {
+    /// Centre in the lab frame, metres.
+    pub pos: Point2<f64>,
+    /// Radius in metres (Ciber-Rato default 2.0).
+    pub radius_m: f64,
+}
+
+/// One start pose of the grid file (`<Position X Y Dir/>`).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct StartPose {
+    /// Centre of movement, metres.
+    pub pos: Point2<f64>,
+    /// Heading in degrees, as written in the file.
+    pub heading_deg: f64,
+}
+
+/// The start grid: robot id k (1-based) starts at `poses[k-1]`.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct Grid {
+    /// Start poses in file order.
+    pub poses: Vec<StartPose>,
+}
+
+/// Standard deviations of the Gaussian noise on each sensor (Ciber-Rato defaults).
+/// Zero switches that noise off.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct NoiseParams {
+    /// Proximity distance, metres (`ObstacleNoise`).
+    pub proximity_m: f64,
+    /// Beacon bearing, degrees (`BeaconNoise`).
+    pub beacon_deg: f64,
+    /// Compass heading, degrees (`CompassNoise`).
+    pub compass_deg: f64,
+    /// GPS x and y, metres (`GPSLinNoise`).
+    pub gps_pos_m: f64,
+    /// GPS heading, degrees (`GPSDirNoise`).
+    pub gps_heading_deg: f64,
+    /// Motor output, multiplicative, as a fraction (`MotorsNoise` is in percent: 1.5 → 0.015).
+    pub motor_frac: f64,
+    /// Encoder slip, multiplicative on each wheel's travel, as a fraction (`EncoderNoise`, %).
+    pub encoder_slip_frac: f64,
+}
+
+impl NoiseParams {
+    /// Ciber-Rato's defaults (proximity 0.1, beacon 2°, compass 2°, GPS 0.5 / 5°, motors 1.5 %),
+    /// encoder slip off.
+    pub const CIBER_RATO: NoiseParams = NoiseParams {
+        proximity_m: 0.1,
+        beacon_deg: 2.0,
+        compass_deg: 2.0,
+        gps_pos_m: 0.5,
+        gps_heading_deg: 5.0,
+        motor_frac: 0.015,
+        encoder_slip_frac: 0.0,
+    };
+    /// Every noise switched off.
+    pub const NONE: NoiseParams = NoiseParams {
+        proximity_m: 0.0,
+        beacon_deg: 0.0,
+        compass_deg: 0.0,
+        gps_pos_m: 0.0,
+        gps_heading_deg: 0.0,
+        motor_frac: 0.0,
+        encoder_slip_frac: 0.0,
+    };
+}
+
+impl Default for NoiseParams {
+    fn default() -> Self {
+        Self::CIBER_RATO
+    }
+}
+
+/// Delay, in ticks, between measuring a sensor and reporting it (`XLatency` attributes).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct LatencyParams {
+    /// Proximity sensors (`ObstacleLatency`).
+    pub proximity: u32,
+    /// Beacon sensor (`BeaconLatency`).
+    pub beacon: u32,
+    /// Ground sensor (`GroundLatency`).
+    pub ground: u32,
+    /// Compass (`CompassLatency`).
+    pub compass: u32,
+    /// Collision sensor (`CollisionLatency`, also read as `collisionLatency`).
+    pub collision: u32,
+    /// GPS (`GPSLatency`, an iwsim extension).
+    pub gps: u32,
+}
+
+impl LatencyParams {
+    /// The largest latency of any sensor.
+    pub fn max(&self) -> u32 {
+        [self.proximity, self.beacon, self.ground, self.compass, self.collision, self.gps]
+            .into_iter()
+            .max()
+            .unwrap_or(0)
+    }
+}
+
+/// Which sensors a run offers (`GPS`, `BeaconSensor`, `CompassSensor` switches).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct SensorSwitches {
+    /// GPS on (Ciber-Rato default Off).
+    pub gps: bool,
+    /// Beacon sensor on (Ciber-Rato default Off).
+    pub beacon: bool,
+    /// Compass on (Ciber-Rato default On).
+    pub compass: bool,
+}
+
+impl Default for SensorSwitches {
+    fn default() -> Self {
+        Self { gps: false, beacon: false, compass: true }
+    }
+}
+
+/// Which sensors are sent only on request, and how many requests a robot may make per tick.
+/// The world computes every sensor; the bridges use these to decide what to send.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct RequestParams {
+    /// `NRequestsPerCycle`.
+    pub per_cycle: u32,
+    /// `ObstacleRequestable`.
+    pub obstacle: bool,
+    /// `BeaconRequestable`.
+    pub beacon: bool,
+    /// `GroundRequestable`.
+    pub ground: bool,
+    /// `CompassRequestable`.
+    pub compass: bool,
+    /// `CollisionRequestable`.
+    pub collision: bool,
+}
+
+/// Everything the Parameters XML file sets (root `<Parameters .../>`), with iwsim extensions.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Params {
+    /// Run length in ticks (`SimTime`); 0 means no limit.
+    pub sim_time_ticks: u64,
+    /// Real-time tick period in milliseconds (`CycleTime`); iwsim's default is 100.
+    pub cycle_ms: u32,
+    /// Sensor noise.
+    pub noise: NoiseParams,
+    /// Sensor latencies.
+    pub latency: LatencyParams,
+    /// Sensor switches.
+    pub sensors: SensorSwitches,
+    /// Requestable sensors (used by the UDP bridge).
+    pub requests: RequestParams,
+    /// Beacon aperture: half-angle in radians (`BeaconAperture`, default π).
+    pub beacon_aperture_rad: f64,
+    /// Default proximity sensor range in metres (`ObstacleRange`, iwsim extension, default 3.0).
+    pub proximity_range_m: f64,
+    /// Message delivery radius in metres (`MessageRange`, iwsim extension, default 8.0).
+    pub message_range_m: f64,
+    /// Encoder ticks per wheel revolution (`EncoderTicks`, iwsim extension, default 1024).
+    pub encoder_ticks_per_rev: u32,
+    /// Wheel radius in metres for the encoders (`WheelRadius`, iwsim extension, default 0.17).
+    pub wheel_radius_m: f64,
+}
+
+impl Default for Params {
+    fn default() -> Self {
+        Self {
+            sim_time_ticks: 0,
+            cycle_ms: 100,
+            noise: NoiseParams::default(),
+            latency: LatencyParams::default(),
+            sensors: SensorSwitches::default(),
+            requests: RequestParams::default(),
+            beacon_aperture_rad: std::f64::consts::PI,
+            proximity_range_m: 3.0,
+            message_range_m: 8.0,
+            encoder_ticks_per_rev: 1024,
+            wheel_radius_m: 0.17,
+        }
+    }
+}
+
+/// A lab together with its start grid: what the hub loads.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Map {
+    /// Walls, beacons, targets.
+    pub lab: Lab,
+    /// Start poses.
+    pub grid: Grid,
+}

@@ -1,0 +1,80 @@
+//! The collision phase: every moving robot's next pose against the walls and the other bodies.
+
+use super::{Motion, World, overlaps};
+use crate::geom::{PlacedBox, box_hits_triangle, boxes_intersect};
+
+impl World {
+    /// Fills `scratch.blocked[i]` with (hit, enforce) for every slot.
+    ///
+    /// A robot is refused its next pose when that pose meets a wall, or another body at either
+    /// its current or its next pose: testing both makes the outcome independent of the order
+    /// robots are visited in, and two robots can never move into each other. Something the
+    /// robot already overlaps at its current pose does not block it, so bodies that start
+    /// interpenetrated (a Real chair driven into a virtual one) can separate. Real robots are
+    /// never refused; `hit` then reports that they overlap something.
+    pub(super) fn resolve_collisions(&mut self, stats: &mut super::StepStats) {
+        let mut blocked = std::mem::take(&mut self.scratch.blocked);
+        blocked.clear();
+        blocked.resize(self.motion.len(), (false, false));
+        for (i, m) in self.motion.iter().enumerate() {
+            if !m.alive || !(m.moving || m.real) {
+                continue;
+            }
+            let hit = self.next_pose_hits(i, m);
+            if hit {
+                stats.colliding += 1;
+            }
+            blocked[i] = (hit, !m.real);
+        }
+        self.scratch.blocked = blocked;
+    }
+
+    fn next_pose_hits(&self, i: usize, m: &Motion) -> bool {
+        let escape = !m.real;
+        let s = &self.statics;
+        let (x0, y0, x1, y1) = s.spec.cell_range(m.next_min, m.next_max);
+        for iy in y0..=y1 {
+            for ix in x0..=x1 {
+                for &t in s.triangles_in(iy * s.spec.nx + ix) {
+                    let tri = &s.triangles[t as usize];
+                    if overlaps(m.next_min, m.next_max, tri.min, tri.max)
+                        && box_hits_triangle(&m.next, &tri.p)
+                        && !(escape && overlaps(m.cur_min, m.cur_max, tri.min, tri.max) && box_hits_triangle(&m.cur, &tri.p))
+                    {
+                        return true;
+                    }
+                }
+            }
+        }
+        let mut hit = false;
+        self.dyn_grid.query(m.next_min, m.next_max, |j| {
+            let j = j as usize;
+            if hit || j == i {
+                return;
+            }
+            let o = &self.motion[j];
+            let meets = |b: &PlacedBox, bmin, bmax| overlaps(m.next_min, m.next_max, bmin, bmax) && boxes_intersect(&m.next, b);
+            let meets_other = meets(&o.cur, o.cur_min, o.cur_max) || (o.moving && meets(&o.next, o.next_min, o.next_max));
+            if meets_other {
+                let already = escape && overlaps(m.cur_min, m.cur_max, o.cur_min, o.cur_max) && boxes_intersect(&m.cur, &o.cur);
+                hit = !already;
+            }
+        });
+        hit
+    }
+
+    /// Whether a placed rectangle touches any wall (the lab border included).
+    pub(super) fn box_hits_wall(&self, b: &PlacedBox) -> bool {
+        let (min, max) = super::aabb(b);
+        let s = &self.statics;
+        let (x0, y0, x1, y1) = s.spec.cell_range(min, max);
+        (y0..=y1).any(|iy| {
+            (x0..=x1).any(|ix| {
+                s.triangles_in(iy * s.spec.nx + ix).iter().any(|&t| {
+                    let tri = &s.triangles[t as usize];
+                    overlaps(min, max, tri.min, tri.max) && box_hits_triangle(b, &tri.p)
+                })
+            })
+        })
+    }
+}

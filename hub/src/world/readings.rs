@@ -1,0 +1,163 @@
+//! What a robot's sensors report each tick, and the messages it hears.
+
+use thiserror::Error;
+
+use super::RobotHandle;
+use super::body::MAX_PROXIMITY;
+use crate::math::Real;
+
+/// At most this many beacons in a lab (the beacon sensor has one reading per beacon).
+pub const MAX_BEACONS: usize = 16;
+/// A robot may say at most this many bytes per tick.
+pub const MAX_MESSAGE_BYTES: usize = 100;
+/// A robot hears at most this many bytes per tick; later messages are dropped.
+pub const MAX_INBOX_BYTES: usize = 400;
+
+/// GPS fix.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct GpsReading {
+    /// x, metres.
+    pub x_m: Real,
+    /// y, metres.
+    pub y_m: Real,
+    /// Heading, degrees in (−180, 180].
+    pub heading_deg: Real,
+}
+
+/// One tick's sensor readings of one robot, in SI units (degrees for angles).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SensorReadings {
+    /// The tick these readings were reported at (latency makes the measurement older).
+    pub tick: u64,
+    /// Distance to the nearest obstacle in each proximity sensor's cone, metres, capped at the
+    /// sensor's range; only the first `proximity_count` are meaningful.
+    pub proximity_m: [Real; MAX_PROXIMITY],
+    /// How many proximity sensors the robot has.
+    pub proximity_count: u8,
+    /// Compass heading in degrees, (−180, 180]; `None` when the compass is off.
+    pub compass_deg: Option<Real>,
+    /// GPS fix; `None` when GPS is off.
+    pub gps: Option<GpsReading>,
+    /// Bearing to each beacon relative to the heading, degrees; `None` when hidden, out of the
+    /// aperture, or the beacon sensor is off. Only the first `beacon_count` are meaningful.
+    pub beacons_deg: [Option<Real>; MAX_BEACONS],
+    /// How many beacons the lab has.
+    pub beacon_count: u8,
+    /// Index of the target area under the centre of movement.
+    pub ground: Option<u16>,
+    /// The robot's last move was refused (or, for a Real robot, it overlaps something).
+    pub collision: bool,
+    /// Cumulative wheel encoder ticks, left and right.
+    pub encoder_ticks: [i64; 2],
+}
+
+impl SensorReadings {
+    /// Readings before anything was measured: what latency reports for its first ticks.
+    pub const EMPTY: SensorReadings = SensorReadings {
+        tick: 0,
+        proximity_m: [0.0; MAX_PROXIMITY],
+        proximity_count: 0,
+        compass_deg: None,
+        gps: None,
+        beacons_deg: [None; MAX_BEACONS],
+        beacon_count: 0,
+        ground: None,
+        collision: false,
+        encoder_ticks: [0, 0],
+    };
+
+    /// The proximity distances of the robot's sensors.
+    pub fn proximity(&self) -> &[Real] {
+        &self.proximity_m[..self.proximity_count as usize]
+    }
+
+    /// The beacon bearings, one per beacon of the lab.
+    pub fn beacons(&self) -> &[Option<Real>] {
+        &self.beacons_deg[..self.beacon_count as usize]
+    }
+}
+
+/// The Ciber-Rato obstacle value of a distance: 1/d rounded to 0.1, saturating at 100 when
+/// d ≤ 0.01 (the UDP bridge sends this as `IRSensor Value`).
+pub fn ciber_rato_value(distance_m: Real) -> Real {
+    if distance_m > 0.01 { ((1.0 / distance_m) * 10.0).round() / 10.0 } else { 100.0 }
+}
+
+/// A message of at most [`MAX_MESSAGE_BYTES`] bytes.
+#[derive(Clone, Copy, PartialEq, Eq)]
+pub struct Message {
+    len: u8,
+    bytes: [u8; MAX_MESSAGE_BYTES],
+}
+
+impl std::fmt::Debug for Message {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "Message({:?})", String::from_utf8_lossy(self.as_bytes()))
+    }
+}
+
+/// A message longer than [`MAX_MESSAGE_BYTES`] was refused.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Error)]
+#[error("message of {len} bytes refused: at most {max} bytes may be sent per tick", max = MAX_MESSAGE_BYTES)]
+pub struct MessageTooLong {
+    /// Length given.
+    pub len: usize,
+}
+
+impl Message {
+    /// A message, refused when longer than [`MAX_MESSAGE_BYTES`].
+    pub fn new(bytes: &[u8]) -> Result<Self, MessageTooLong> {
+        if bytes.len() > MAX_MESSAGE_BYTES {
+            return Err(MessageTooLong { len: bytes.len() });
+        }
+        let mut m = Self { len: bytes.len() as u8, bytes: [0; MAX_MESSAGE_BYTES] };
+        m.bytes[..bytes.len()].copy_from_slice(bytes);
+        Ok(m)
+    }
+
+    /// The bytes.
+    pub fn as_bytes(&self) -> &[u8] {
+        &self.bytes[..self.len as usize]
+    }
+
+    /// Length in bytes.
+    pub fn len(&self) -> usize {
+        self.len as usize
+    }
+
+    /// Whether it is empty.
+    pub fn is_empty(&self) -> bool {
+        self.len == 0
+    }
+}
+
+/// A message heard this tick.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Heard {
+    /// Who said it.
+    pub from: RobotHandle,
+    /// What was said.
+    pub message: Message,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn ciber_rato_values_are_inverse_distances_rounded_to_a_tenth() {
+        assert_eq!(ciber_rato_value(1.0), 1.0);
+        assert_eq!(ciber_rato_value(0.5), 2.0);
+        assert_eq!(ciber_rato_value(0.3), 3.3);
+        assert_eq!(ciber_rato_value(3.0), 0.3);
+        assert_eq!(ciber_rato_value(0.01), 100.0);
+        assert_eq!(ciber_rato_value(0.0), 100.0);
+    }
+
+    #[test]
+    fn messages_over_a_hundred_bytes_are_refused() {
+        assert!(Message::new(&[b'a'; 100]).is_ok());
+        assert_eq!(Message::new(&[b'a'; 101]), Err(MessageTooLong { len: 101 }));
+        assert_eq!(Message::new(b"hi").expect("short").as_bytes(), b"hi");
+    }
+}

@@ -1,0 +1,489 @@
+//! The world model against hand-computed numbers: thesis equations, sensor geometry,
+//! collisions, messages and determinism.
+
+use std::f64::consts::{FRAC_PI_2, PI};
+
+use nalgebra::Point2;
+
+use super::*;
+use crate::map::{Beacon, NoiseParams, Target, Wall};
+
+fn empty_lab(w: Real, h: Real) -> Lab {
+    Lab { name: "test".into(), width_m: w, height_m: h, walls: vec![], beacons: vec![], targets: vec![] }
+}
+
+fn rect_wall(x0: Real, y0: Real, x1: Real, y1: Real, height_m: Real) -> Wall {
+    Wall {
+        height_m,
+        corners: vec![Point2::new(x0, y0), Point2::new(x1, y0), Point2::new(x1, y1), Point2::new(x0, y1)],
+    }
+}
+
+fn quiet() -> Params {
+    Params { noise: NoiseParams::NONE, proximity_range_m: 10.0, ..Params::default() }
+}
+
+fn world(lab: Lab, params: Params) -> World {
+    World::new(&lab, params, 1).expect("valid lab")
+}
+
+fn close(a: Real, b: Real, tol: Real) -> bool {
+    (a - b).abs() <= tol
+}
+
+#[test]
+fn straight_run_follows_the_motor_filter_and_eq_4_7() {
+    let mut w = world(empty_lab(20.0, 20.0), quiet());
+    let r = w.add_robot(RobotSpec::at(2.0, 5.0, 0.0).motors(0.5, 0.5)).expect("valid");
+    // out = 0.5, 0.75, 0.875 → v = 0.25, 0.375, 0.4375 m/s → Δx = 0.025, 0.0375, 0.04375 m.
+    let mut x = vec![];
+    for _ in 0..3 {
+        w.step(&[Action::motors(r, 1.0, 1.0)], 0.1);
+        x.push(w.robot(r).expect("alive").pose.x);
+    }
+    assert!(close(x[0], 2.025, 1e-12) && close(x[1], 2.0625, 1e-12) && close(x[2], 2.10625, 1e-12), "{x:?}");
+    let p = w.robot(r).expect("alive").pose;
+    assert_eq!((p.y, p.theta), (5.0, 0.0));
+}
+
+#[test]
+fn spin_in_place_turns_at_twice_max_speed_over_the_track() {
+    let mut w = world(empty_lab(20.0, 20.0), quiet());
+    let r = w.add_robot(RobotSpec::at(5.0, 5.0, 0.0).body(1.0, 0.5, 0.5).motors(0.5, 0.0)).expect("valid");
+    // ω = MaxSpeed·(R − L)/Height = 0.5·2/0.5 = 2 rad/s; five ticks of 0.1 s turn 1 rad.
+    for _ in 0..5 {
+        w.step(&[Action::motors(r, -1.0, 1.0)], 0.1);
+    }
+    let p = w.robot(r).expect("alive").pose;
+    assert_eq!((p.x, p.y), (5.0, 5.0));
+    assert!(close(p.theta, 1.0, 1e-12), "{}", p.theta);
+}
+
+#[test]
+fn an_arc_integrates_with_the_old_heading_eqs_4_7_to_4_9() {
+    let mut w = world(empty_lab(20.0, 20.0), quiet());
+    let r = w.add_robot(RobotSpec::at(5.0, 5.0, 0.0).motors(1.0, 0.0)).expect("valid");
+    // v = 0.75 m/s, ω = 0.5 rad/s.
+    w.step(&[Action::motors(r, 0.5, 1.0)], 0.1);
+    w.step(&[], 0.1);
+    let p = w.robot(r).expect("alive").pose;
+    assert!(close(p.x, 5.0 + 0.075 + 0.075 * 0.05f64.cos(), 1e-12));
+    assert!(close(p.y, 5.0 + 0.075 * 0.05f64.sin(), 1e-12));
+    assert!(close(p.theta, 0.1, 1e-12));
+}
+
+#[test]
+fn headings_wrap_past_180_degrees() {
+    let mut w = world(empty_lab(20.0, 20.0), quiet());
+    let r = w.add_robot(RobotSpec::at(5.0, 5.0, 170.0).body(1.0, 1.0, 0.5).motors(1.0, 0.0)).expect("valid");
+    // ω = 2 rad/s for 0.2 s: 170° + 22.9° wraps to −167.1°.
+    w.step(&[Action::motors(r, -1.0, 1.0)], 0.2);
+    let t = w.robot(r).expect("alive").pose.theta;
+    assert!(close(t, (170f64.to_radians() + 0.4) - 2.0 * PI, 1e-12), "{t}");
+}
+
+/// Speed samples of a full-power start from rest.
+fn speeds(max_speed: Real, curve: Real, dt: Real, ticks: usize) -> Vec<Real> {
+    let mut w = world(empty_lab(200.0, 20.0), quiet());
+    let r = w.add_robot(RobotSpec::at(2.0, 10.0, 0.0).motors(max_speed, curve)).expect("valid");
+    let mut last = 2.0;
+    (0..ticks)
+        .map(|_| {
+            w.step(&[Action::motors(r, 1.0, 1.0)], dt);
+            let x = w.robot(r).expect("alive").pose.x;
+            let v = (x - last) / dt;
+            last = x;
+            v
+        })
+        .collect()
+}
+
+#[test]
+fn the_10_to_90_percent_rise_time_for_curve_0_83_at_100_ms_is_1_2_s() {
+    let v = speeds(0.49, 0.83, 0.1, 200);
+    let top = *v.last().expect("samples");
+    assert!(close(top, 0.49, 1e-9), "top speed {top}");
+    let first = |frac: Real| v.iter().position(|&s| s >= frac * top).expect("reached");
+    // Samples are at t = 0.1·(n+1); 10 % is first reached at n = 0 (17 %), 90 % at n = 12.
+    assert_eq!((first(0.1), first(0.9)), (0, 12));
+    let rise = (first(0.9) - first(0.1)) as Real * 0.1;
+    assert!(close(rise, 1.2, 1e-12), "rise time {rise}");
+}
+
+#[test]
+fn top_speed_is_max_speed() {
+    for (max, curve) in [(0.5, 0.5), (1.2, 0.0), (0.26, 0.9)] {
+        let v = speeds(max, curve, 0.1, 400);
+        assert!(close(*v.last().expect("samples"), max, 1e-9));
+        assert!(v.iter().all(|&s| s <= max + 1e-12));
+    }
+}
+
+#[test]
+fn default_sensors_read_the_lab_border_within_a_millimetre() {
+    let mut w = world(empty_lab(10.0, 8.0), quiet());
+    let r = w.add_robot(RobotSpec::at(3.0, 2.0, 0.0)).expect("valid");
+    w.step(&[], 0.1);
+    let d = w.robot(r).expect("alive").readings.proximity().to_vec();
+    // front (3.5, 2): the wall x = 10 is 6.5 m ahead, but the cone's right edge (−30°) meets
+    // the floor wall y = 0 at 2 / sin 30° = 4 m. left (3, 2.5) → y = 8 at 5.5 (x = 0 along the
+    // cone edge would be 6); right (3, 1.5) → y = 0 at 1.5; back (2.5, 2) → x = 0 at 2.5.
+    for (got, want) in d.iter().zip([4.0, 5.5, 1.5, 2.5]) {
+        assert!(close(*got, want, 1e-3), "{d:?}");
+    }
+}
+
+#[test]
+fn readings_turn_with_the_robot_and_respect_com_0_8() {
+    let mut w = world(empty_lab(10.0, 8.0), quiet());
+    let spec = RobotSpec::at(3.0, 2.0, 90.0).body(1.2, 0.7, 0.8);
+    let r = w.add_robot(spec).expect("valid");
+    w.step(&[], 0.1);
+    let d = w.robot(r).expect("alive").readings.proximity().to_vec();
+    // Heading +y. front (3, 2.96) → y = 8 at 5.04; left (2.65, 2) → x = 0 at 2.65; right
+    // (3.35, 2) → x = 10 at 6.65 but its cone meets y = 0 at 2 / sin 30° = 4; back (3, 1.76) →
+    // y = 0 at 1.76.
+    for (got, want) in d.iter().zip([5.04, 2.65, 4.0, 1.76]) {
+        assert!(close(*got, want, 1e-3), "{d:?}");
+    }
+}
+
+#[test]
+fn a_box_beside_the_cone_is_read_along_the_cone_edge() {
+    let mut lab = empty_lab(10.0, 8.0);
+    lab.walls.push(rect_wall(5.0, 3.0, 6.0, 4.0, 2.0));
+    let mut w = world(lab, quiet());
+    let r = w.add_robot(RobotSpec::at(3.0, 2.0, 0.0)).expect("valid");
+    w.step(&[], 0.1);
+    let front = w.robot(r).expect("alive").readings.proximity()[0];
+    // The corner (5, 3) is 33.7° off the axis, outside the ±30° cone; the cone's left edge
+    // meets the box's lower face at (3.5 + √3, 3): 2 m away (the corner would be 1.80 m).
+    assert!(close(front, 2.0, 1e-3), "{front}");
+}
+
+#[test]
+fn narrow_cones_see_only_what_is_inside_them() {
+    let mut lab = empty_lab(10.0, 8.0);
+    lab.walls.push(rect_wall(5.0, 2.3, 6.0, 3.0, 2.0));
+    let mut w = world(lab, quiet());
+    let sensors = vec![ProximitySpec::deg(0.5, 0.0, 0.0, 10.0), ProximitySpec::deg(0.5, 0.0, 0.0, 60.0)];
+    let r = w.add_robot(RobotSpec::at(3.0, 2.0, 0.0).sensors(sensors)).expect("valid");
+    w.step(&[], 0.1);
+    let d = w.robot(r).expect("alive").readings.proximity().to_vec();
+    // The box's corner (5, 2.3) is at 8.5° from (3.5, 2): outside ±5°, inside ±30°.
+    assert!(close(d[0], 6.5, 1e-3), "{d:?}");
+    assert!(close(d[1], (1.5f64 * 1.5 + 0.3 * 0.3).sqrt(), 1e-3), "{d:?}");
+}
+
+#[test]
+fn other_robots_are_seen_by_proximity_sensors() {
+    let mut w = world(empty_lab(20.0, 8.0), quiet());
+    let a = w.add_robot(RobotSpec::at(3.0, 4.0, 0.0)).expect("valid");
+    w.add_robot(RobotSpec::at(7.0, 4.0, 90.0).body(1.0, 0.6, 0.5)).expect("valid");
+    w.step(&[], 0.1);
+    // B heading +y with half-height 0.3: its side faces x = 6.7. A's front sensor is at 3.5.
+    let front = w.robot(a).expect("alive").readings.proximity()[0];
+    assert!(close(front, 3.2, 1e-3), "{front}");
+}
+
+#[test]
+fn readings_are_capped_at_the_range_and_noise_can_be_switched_on() {
+    let mut p = quiet();
+    p.proximity_range_m = 3.0;
+    let mut w = world(empty_lab(20.0, 8.0), p);
+    let r = w.add_robot(RobotSpec::at(10.0, 4.0, 0.0)).expect("valid");
+    w.step(&[], 0.1);
+    assert_eq!(w.robot(r).expect("alive").readings.proximity()[0], 3.0);
+
+    let mut noisy = quiet();
+    noisy.noise.proximity_m = 0.1;
+    let mut w = world(empty_lab(10.0, 8.0), noisy);
+    let r = w.add_robot(RobotSpec::at(3.0, 2.0, 0.0)).expect("valid");
+    let mut samples = vec![];
+    for _ in 0..2000 {
+        w.step(&[], 0.1);
+        samples.push(w.robot(r).expect("alive").readings.proximity()[2]);
+    }
+    let mean = samples.iter().sum::<Real>() / samples.len() as Real;
+    let sd = (samples.iter().map(|s| (s - mean).powi(2)).sum::<Real>() / samples.len() as Real).sqrt();
+    assert!(close(mean, 1.5, 0.01) && close(sd, 0.1, 0.01), "mean {mean}, sd {sd}");
+}
+
+#[test]
+fn a_robot_stops_when_its_next_pose_hits_a_wall_and_counts_the_contact_once() {
+    let mut lab = empty_lab(20.0, 8.0);
+    lab.walls.push(rect_wall(6.0, 0.0, 7.0, 8.0, 2.0));
+    let mut w = world(lab, quiet());
+    let r = w.add_robot(RobotSpec::at(4.0, 4.0, 0.0).motors(1.0, 0.0)).expect("valid");
+    let mut last_x = 4.0;
+    let mut blocked_at = None;
+    for t in 0..40 {
+        w.step(&[Action::motors(r, 1.0, 1.0)], 0.1);
+        let rb = w.robot(r).expect("alive");
+        if rb.collision && blocked_at.is_none() {
+            blocked_at = Some(t);
+            // Refused: the robot kept its pose.
+            assert_eq!(rb.pose.x, last_x);
+        }
+        last_x = rb.pose.x;
+        assert!(rb.pose.x + 0.5 < 6.0, "front went into the wall: {}", rb.pose.x);
+    }
+    let rb = w.robot(r).expect("alive");
+    assert!(blocked_at.is_some() && rb.collision && rb.readings.collision);
+    assert_eq!(rb.collision_count, 1, "pushing on keeps one contact");
+    // Backing off clears it; driving in again counts a second contact.
+    for _ in 0..10 {
+        w.step(&[Action::motors(r, -1.0, -1.0)], 0.1);
+    }
+    assert!(!w.robot(r).expect("alive").collision);
+    for _ in 0..40 {
+        w.step(&[Action::motors(r, 1.0, 1.0)], 0.1);
+    }
+    assert_eq!(w.robot(r).expect("alive").collision_count, 2);
+}
+
+#[test]
+fn a_move_that_would_end_fully_inside_a_wall_or_a_body_is_refused() {
+    // A thick pillar and a small, fast robot that would jump wholly inside it in one tick:
+    // no edge of the robot crosses an edge of the pillar, yet it collides.
+    let mut lab = empty_lab(20.0, 8.0);
+    lab.walls.push(rect_wall(5.0, 2.0, 9.0, 6.0, 2.0));
+    let mut w = world(lab, quiet());
+    let small = RobotSpec::at(4.0, 4.0, 0.0).body(0.2, 0.2, 0.5).motors(30.0, 0.0);
+    let r = w.add_robot(small.clone()).expect("valid");
+    w.step(&[Action::motors(r, 1.0, 1.0)], 0.1); // would move 3 m to x = 7
+    assert_eq!(w.robot(r).expect("alive").pose.x, 4.0);
+    assert!(w.robot(r).expect("alive").collision);
+
+    // The same against a big robot.
+    let mut w = world(empty_lab(20.0, 8.0), quiet());
+    w.add_robot(RobotSpec::at(7.0, 4.0, 0.0).body(4.0, 4.0, 0.5)).expect("valid");
+    let r = w.add_robot(small).expect("valid");
+    w.step(&[Action::motors(r, 1.0, 1.0)], 0.1);
+    assert_eq!(w.robot(r).expect("alive").pose.x, 4.0);
+    assert!(w.robot(r).expect("alive").collision);
+}
+
+#[test]
+fn two_robots_driving_head_on_both_stop_and_never_overlap() {
+    let mut w = world(empty_lab(20.0, 8.0), quiet());
+    let a = w.add_robot(RobotSpec::at(5.0, 4.0, 0.0).motors(1.0, 0.0)).expect("valid");
+    let b = w.add_robot(RobotSpec::at(8.0, 4.0, 180.0).motors(1.0, 0.0)).expect("valid");
+    for _ in 0..30 {
+        w.step(&[Action::motors(a, 1.0, 1.0), Action::motors(b, 1.0, 1.0)], 0.1);
+        let (pa, pb) = (w.robot(a).expect("alive").pose, w.robot(b).expect("alive").pose);
+        assert!(pb.x - pa.x >= 1.0 - 1e-9, "overlap: {} {}", pa.x, pb.x);
+    }
+    assert!(w.robot(a).expect("alive").collision && w.robot(b).expect("alive").collision);
+}
+
+#[test]
+fn a_door_with_com_0_99_turns_about_its_hinge() {
+    let mut w = world(empty_lab(20.0, 8.0), quiet());
+    let door = RobotSpec::at(5.0, 4.0, 0.0).body(1.0, 0.1, 0.99).motors(0.5, 0.0).kind(RobotKind::Door);
+    let d = w.add_robot(door).expect("valid");
+    let before = w.robot(d).expect("alive").corners();
+    // ω = 0.5·2/0.1 = 10 rad/s: a tick of π/20 s turns it 90°.
+    w.step(&[Action::motors(d, -1.0, 1.0)], PI / 20.0);
+    let r = w.robot(d).expect("alive");
+    assert_eq!((r.pose.x, r.pose.y), (5.0, 4.0), "the hinge does not move");
+    assert!(close(r.pose.theta, FRAC_PI_2, 1e-12));
+    let after = r.corners();
+    // The leaf's far end swings from x = 5.99 to y = 4.99; the hinge end stays within 1 cm.
+    assert!(close(before[0].x, 5.99, 1e-12) && close(after[0].y, 4.99, 1e-12) && close(after[0].x, 5.05, 1e-12));
+    assert!((after[2] - Point2::new(5.0, 4.0)).norm() < 0.06);
+}
+
+#[test]
+fn real_robots_take_pushed_poses_are_never_blocked_and_report_collisions() {
+    let mut lab = empty_lab(20.0, 8.0);
+    lab.walls.push(rect_wall(6.0, 0.0, 7.0, 8.0, 2.0));
+    let mut w = world(lab, quiet());
+    let r = w.add_robot(RobotSpec::at(3.0, 4.0, 0.0).kind(RobotKind::Real)).expect("valid");
+    w.step(&[Action::pose(r, Pose::from_deg(4.0, 4.5, 30.0))], 0.1);
+    let rb = w.robot(r).expect("alive");
+    assert_eq!((rb.pose.x, rb.pose.y), (4.0, 4.5));
+    assert!(!rb.collision);
+    // Pushed into the wall: it goes there anyway, flagged.
+    w.step(&[Action::pose(r, Pose::from_deg(6.2, 4.0, 0.0))], 0.1);
+    let rb = w.robot(r).expect("alive");
+    assert_eq!(rb.pose.x, 6.2);
+    assert!(rb.collision && rb.collision_count == 1);
+    // A simulated robot cannot drive into the real one.
+    let s = w.add_robot(RobotSpec::at(3.0, 4.0, 0.0).motors(1.0, 0.0)).expect("valid");
+    for _ in 0..30 {
+        w.step(&[Action::motors(s, 1.0, 1.0)], 0.1);
+    }
+    let sx = w.robot(s).expect("alive").pose.x;
+    assert!(sx + 0.5 <= 6.2 - 0.5 + 1e-9 && w.robot(s).expect("alive").collision, "{sx}");
+}
+
+#[test]
+fn beacons_are_hidden_by_taller_walls_and_outside_the_aperture() {
+    let mut lab = empty_lab(20.0, 8.0);
+    lab.walls.push(rect_wall(9.0, 3.0, 10.0, 5.0, 2.0));
+    lab.beacons = vec![Beacon { pos: Point2::new(15.0, 4.0), height_m: 1.0 }, Beacon { pos: Point2::new(15.0, 4.0), height_m: 3.0 }, Beacon { pos: Point2::new(5.0, 7.0), height_m: 1.0 }];
+    let mut p = quiet();
+    p.sensors.beacon = true;
+    p.beacon_aperture_rad = FRAC_PI_2;
+    let mut w = world(lab, p);
+    let r = w.add_robot(RobotSpec::at(5.0, 4.0, 0.0)).expect("valid");
+    let r2 = w.add_robot(RobotSpec::at(5.0, 1.0, 180.0)).expect("valid");
+    w.step(&[], 0.1);
+    let b = w.robot(r).expect("alive").readings.beacons().to_vec();
+    assert_eq!(b[0], None, "a 1 m beacon behind a 2 m wall is hidden");
+    assert_eq!(b[1], Some(0.0), "a 3 m beacon is seen over it");
+    assert!(close(b[2].expect("seen"), 90.0, 1e-9), "bearing is relative to the heading: {b:?}");
+    // Facing away (−x), the robot at (5, 1) has beacon 2 at bearing −90° (inside the
+    // aperture) and beacon 1 at ~−167° (outside).
+    let b2 = w.robot(r2).expect("alive").readings.beacons().to_vec();
+    assert!(close(b2[2].expect("in aperture"), -90.0, 1e-9), "{b2:?}");
+    assert_eq!(b2[1], None);
+}
+
+#[test]
+fn compass_gps_and_ground_report_the_pose_when_noise_is_off() {
+    let mut lab = empty_lab(20.0, 8.0);
+    lab.targets = vec![Target { pos: Point2::new(15.0, 4.0), radius_m: 1.0 }, Target { pos: Point2::new(5.0, 4.0), radius_m: 0.5 }];
+    let mut p = quiet();
+    p.sensors.gps = true;
+    let mut w = world(lab, p);
+    let r = w.add_robot(RobotSpec::at(5.2, 4.1, -135.0)).expect("valid");
+    w.step(&[], 0.1);
+    let rd = w.robot(r).expect("alive").readings;
+    assert!(close(rd.compass_deg.expect("on"), -135.0, 1e-9));
+    let g = rd.gps.expect("on");
+    assert_eq!((g.x_m, g.y_m), (5.2, 4.1));
+    assert_eq!(rd.ground, Some(1));
+    assert_eq!(rd.tick, 1);
+}
+
+#[test]
+fn encoders_count_wheel_travel() {
+    let mut p = quiet();
+    p.encoder_ticks_per_rev = 1000;
+    p.wheel_radius_m = 0.5 / PI; // one revolution per metre... of 1000 ticks
+    let mut w = world(empty_lab(40.0, 8.0), p);
+    let r = w.add_robot(RobotSpec::at(2.0, 4.0, 0.0).motors(1.0, 0.0)).expect("valid");
+    for _ in 0..10 {
+        w.step(&[Action::motors(r, 0.5, 1.0)], 0.1);
+    }
+    // Left wheel 0.5 m/s, right 1 m/s for 1 s.
+    let [l, rt] = w.robot(r).expect("alive").readings.encoder_ticks;
+    assert!((l - 500).abs() <= 1 && (rt - 1000).abs() <= 1, "{l} {rt}");
+}
+
+#[test]
+fn latency_delays_a_sensor_by_whole_ticks() {
+    let mut p = quiet();
+    p.latency.compass = 3;
+    let mut w = world(empty_lab(20.0, 8.0), p);
+    let r = w.add_robot(RobotSpec::at(5.0, 4.0, 0.0).motors(0.5, 0.0)).expect("valid");
+    let mut compass = vec![];
+    let mut truth = vec![];
+    for _ in 0..6 {
+        w.step(&[Action::motors(r, -0.1, 0.1)], 0.1);
+        let rb = w.robot(r).expect("alive");
+        compass.push(rb.readings.compass_deg);
+        truth.push(rb.pose.heading_deg());
+    }
+    assert_eq!(&compass[..3], &[None, None, None]);
+    assert_eq!(compass[3], Some(truth[0]));
+    assert_eq!(compass[5], Some(truth[2]));
+}
+
+#[test]
+fn messages_reach_robots_within_8_m_and_no_farther() {
+    let mut w = world(empty_lab(40.0, 8.0), quiet());
+    let speaker = w.add_robot(RobotSpec::at(5.0, 4.0, 0.0)).expect("valid");
+    let near = w.add_robot(RobotSpec::at(12.9, 4.0, 0.0)).expect("valid");
+    let far = w.add_robot(RobotSpec::at(13.1, 4.0, 0.0)).expect("valid");
+    let msg = Message::new(b"after you").expect("short");
+    w.step(&[Action::say(speaker, msg)], 0.1);
+    let heard = &w.robot(near).expect("alive").inbox;
+    assert_eq!(heard.len(), 1);
+    assert_eq!((heard[0].from, heard[0].message.as_bytes()), (speaker, &b"after you"[..]));
+    assert!(w.robot(far).expect("alive").inbox.is_empty());
+    assert!(w.robot(speaker).expect("alive").inbox.is_empty(), "a speaker does not hear itself");
+    // Heard once: the next tick is silent.
+    w.step(&[], 0.1);
+    assert!(w.robot(near).expect("alive").inbox.is_empty());
+}
+
+#[test]
+fn a_robot_hears_at_most_400_bytes_a_tick() {
+    let mut w = world(empty_lab(40.0, 20.0), quiet());
+    let listener = w.add_robot(RobotSpec::at(10.0, 10.0, 0.0)).expect("valid");
+    let speakers: Vec<_> = (0..5).map(|k| w.add_robot(RobotSpec::at(4.0 + 3.0 * k as Real, 7.0, 0.0)).expect("valid")).collect();
+    let full = Message::new(&[b'x'; 100]).expect("100 bytes");
+    let actions: Vec<_> = speakers.iter().map(|&s| Action::say(s, full)).collect();
+    let stats = w.step(&actions, 0.1);
+    let inbox = &w.robot(listener).expect("alive").inbox;
+    assert_eq!(inbox.len(), 4);
+    assert_eq!(inbox.iter().map(|h| h.from).collect::<Vec<_>>(), speakers[..4].to_vec(), "first speakers first");
+    assert!(stats.dropped_messages >= 1);
+}
+
+#[test]
+fn actions_for_removed_robots_are_ignored_and_handles_do_not_alias() {
+    let mut w = world(empty_lab(20.0, 8.0), quiet());
+    let a = w.add_robot(RobotSpec::at(3.0, 4.0, 0.0)).expect("valid");
+    assert!(w.remove_robot(a));
+    assert!(!w.remove_robot(a));
+    let b = w.add_robot(RobotSpec::at(10.0, 4.0, 0.0)).expect("valid");
+    assert_eq!(a.index(), b.index());
+    assert!(w.robot(a).is_none());
+    let stats = w.step(&[Action::motors(a, 1.0, 1.0), Action::motors(b, f64::NAN, 0.5)], 0.1);
+    assert_eq!((stats.unknown_robot_actions, stats.bad_values), (1, 1));
+    assert_eq!(w.robot(b).expect("alive").motor_in, [0.0, 0.5]);
+}
+
+#[test]
+fn the_world_refuses_robots_past_its_capacity() {
+    let mut w = world(empty_lab(20.0, 8.0), quiet());
+    w.set_capacity(2);
+    w.add_robot(RobotSpec::at(3.0, 4.0, 0.0)).expect("room");
+    w.add_robot(RobotSpec::at(6.0, 4.0, 0.0)).expect("room");
+    assert_eq!(w.add_robot(RobotSpec::at(9.0, 4.0, 0.0)), Err(AddRobotError::Full { max: 2 }));
+}
+
+/// A noisy run with many robots, messages and collisions; returns the state hash per tick.
+fn noisy_run(seed: u64) -> Vec<u64> {
+    let mut lab = empty_lab(30.0, 20.0);
+    lab.walls.push(rect_wall(10.0, 5.0, 12.0, 15.0, 2.0));
+    lab.beacons.push(Beacon { pos: Point2::new(25.0, 10.0), height_m: 1.0 });
+    let mut p = Params::default();
+    p.sensors = crate::map::SensorSwitches { gps: true, beacon: true, compass: true };
+    p.noise.encoder_slip_frac = 0.01;
+    let mut w = World::new(&lab, p, seed).expect("valid");
+    let robots: Vec<_> = (0..20)
+        .map(|k| w.add_robot(RobotSpec::at(2.0 + (k % 5) as Real * 5.0, 2.0 + (k / 5) as Real * 4.0, k as Real * 37.0)).expect("valid"))
+        .collect();
+    let hello = Message::new(b"hello").expect("short");
+    (0..200)
+        .map(|t| {
+            let actions: Vec<_> = robots
+                .iter()
+                .enumerate()
+                .map(|(k, &r)| {
+                    let mut a = Action::motors(r, ((t + k) % 7) as Real / 6.0, ((t * 3 + k) % 5) as Real / 4.0 - 0.2);
+                    if (t + k) % 9 == 0 {
+                        a.say = Some(hello);
+                    }
+                    a
+                })
+                .collect();
+            w.step(&actions, 0.1);
+            w.state_hash()
+        })
+        .collect()
+}
+
+#[test]
+fn one_seed_gives_bit_identical_runs_and_another_seed_differs() {
+    let a = noisy_run(42);
+    let b = noisy_run(42);
+    let c = noisy_run(43);
+    assert_eq!(a, b);
+    assert_ne!(a.last(), c.last());
+}
