@@ -22,4 +22,5 @@ mod geom;
 pub mod map;
 pub mod math;
 pub mod rng;
+pub mod tiled;
 pub mod world;

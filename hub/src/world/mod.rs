@@ -156,6 +156,8 @@ pub struct Robot {
     sensor_count: usize,
     /// Radius around the centre of movement that every sensor's cone stays within.
     reach: Real,
+    /// Radius around the centre of movement that every sensor's origin lies within.
+    sensor_radius: Real,
     encoder_travel: [Real; 2],
     history: VecDeque<SensorReadings>,
     say: Option<Message>,
@@ -263,8 +265,7 @@ impl Geo {
 struct Scratch {
     edge_stamp: Vec<u32>,
     stamp: u32,
-    edges: Vec<u32>,
-    bodies: Vec<u32>,
+    edges: Vec<sensors::Segment>,
     blocked: Vec<(bool, bool)>,
     measured: Vec<SensorReadings>,
     deliveries: Vec<(u32, Heard)>,
@@ -403,10 +404,11 @@ impl World {
         let shape = BodyShape::new(&spec);
         let specs = if spec.sensors.is_empty() { spec.default_sensors() } else { spec.sensors.clone() };
         let mut sensors = [PreparedSensor::new(&specs[0], 1.0); MAX_PROXIMITY];
-        let mut reach: Real = 0.0;
+        let (mut reach, mut sensor_radius): (Real, Real) = (0.0, 0.0);
         for (k, s) in specs.iter().enumerate() {
             sensors[k] = PreparedSensor::new(s, self.params.proximity_range_m);
             reach = reach.max(sensors[k].origin.norm() + sensors[k].range);
+            sensor_radius = sensor_radius.max(sensors[k].origin.norm());
         }
         let readings = SensorReadings {
             proximity_count: specs.len() as u8,
@@ -426,6 +428,7 @@ impl World {
             sensors,
             sensor_count: specs.len(),
             reach,
+            sensor_radius,
             encoder_travel: [0.0; 2],
             history: VecDeque::new(),
             say: None,

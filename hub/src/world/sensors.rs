@@ -23,8 +23,34 @@ struct Scene<'a> {
 struct Candidates<'a> {
     edge_stamp: &'a mut Vec<u32>,
     stamp: &'a mut u32,
-    edges: &'a mut Vec<u32>,
-    bodies: &'a mut Vec<u32>,
+    /// Copies of the wall and body edges some sensor may see, dense for the per-sensor loops.
+    edges: &'a mut Vec<Segment>,
+}
+
+/// A segment with its outward normal.
+#[derive(Debug, Clone, Copy)]
+pub(super) struct Segment {
+    a: Point2<Real>,
+    b: Point2<Real>,
+    normal: Vector2<Real>,
+}
+
+impl Segment {
+    /// Whether any sensor of a robot at `centre`, whose sensors sit within `inner` of it and
+    /// see `reach − inner` far, could read this segment: not when every sensor is behind its
+    /// face, and not when it is out of reach.
+    #[inline]
+    fn visible_from(&self, centre: Point2<Real>, inner: Real, reach: Real) -> bool {
+        let w = self.a - centre;
+        let h = -self.normal.dot(&w);
+        if h < -inner || h > reach {
+            return false;
+        }
+        let d = self.b - self.a;
+        let dd = d.norm_squared();
+        let t = if dd > 0.0 { (-w.dot(&d) / dd).clamp(0.0, 1.0) } else { 0.0 };
+        (w + d * t).norm_squared() <= reach * reach
+    }
 }
 
 impl World {
@@ -38,7 +64,6 @@ impl World {
             edge_stamp: &mut scratch.edge_stamp,
             stamp: &mut scratch.stamp,
             edges: &mut scratch.edges,
-            bodies: &mut scratch.bodies,
         };
         for (i, slot) in slots.iter().enumerate() {
             if let Some(r) = &slot.robot {
@@ -93,7 +118,7 @@ impl Scene<'_> {
         self.gather(i, r, cands);
         let (s, c) = r.pose.theta.sin_cos();
         for k in 0..r.sensor_count {
-            let d = self.proximity(&r.sensors[k], pos, c, s, cands);
+            let d = Self::proximity(&r.sensors[k], pos, c, s, cands);
             out.proximity_m[k] = if noise.proximity_m > 0.0 { rng.noisy(d, noise.proximity_m).max(0.0) } else { d };
         }
 
@@ -125,10 +150,9 @@ impl Scene<'_> {
         out
     }
 
-    /// Collects the wall edges and bodies within the robot's sensor reach.
+    /// Collects the wall and body edges that some sensor of the robot may see.
     fn gather(&self, i: usize, r: &Robot, cands: &mut Candidates<'_>) {
         cands.edges.clear();
-        cands.bodies.clear();
         *cands.stamp = cands.stamp.wrapping_add(1);
         if *cands.stamp == 0 {
             cands.edge_stamp.iter_mut().for_each(|s| *s = 0);
@@ -136,7 +160,8 @@ impl Scene<'_> {
         }
         let stamp = *cands.stamp;
         let pos = r.pose.position();
-        let e = Vector2::new(r.reach, r.reach);
+        let (inner, reach) = (r.sensor_radius, r.reach);
+        let e = Vector2::new(reach, reach);
         let (lo, hi) = (pos - e, pos + e);
         let s = self.statics;
         let (x0, y0, x1, y1) = s.spec.cell_range(lo, hi);
@@ -146,23 +171,32 @@ impl Scene<'_> {
                     let seen = &mut cands.edge_stamp[edge as usize];
                     if *seen != stamp {
                         *seen = stamp;
-                        cands.edges.push(edge);
+                        let e = &s.edges[edge as usize];
+                        let seg = Segment { a: e.a, b: e.b, normal: e.normal };
+                        if seg.visible_from(pos, inner, reach) {
+                            cands.edges.push(seg);
+                        }
                     }
                 }
             }
         }
         self.dyn_grid.query(lo, hi, |j| {
             let g = &self.geo[j as usize];
-            let reach = r.reach + g.bound_radius;
-            if j as usize != i && g.alive && (g.centre - pos).norm_squared() <= reach * reach {
-                cands.bodies.push(j);
+            let near = reach + g.bound_radius;
+            if j as usize != i && g.alive && (g.centre - pos).norm_squared() <= near * near {
+                for k in 0..4 {
+                    let seg = Segment { a: g.corners[k], b: g.corners[(k + 1) % 4], normal: g.normals[k] };
+                    if seg.visible_from(pos, inner, reach) {
+                        cands.edges.push(seg);
+                    }
+                }
             }
         });
     }
 
     /// The distance from a sensor to the nearest wall or body inside its cone, capped at its
     /// range.
-    fn proximity(&self, sensor: &PreparedSensor, pos: Point2<Real>, c: Real, s: Real, cands: &Candidates<'_>) -> Real {
+    fn proximity(sensor: &PreparedSensor, pos: Point2<Real>, c: Real, s: Real, cands: &Candidates<'_>) -> Real {
         let p = pos + rotate(sensor.origin, c, s);
         let right = rotate(sensor.edge_right, c, s);
         let left = rotate(sensor.edge_left, c, s);
@@ -178,15 +212,8 @@ impl Scene<'_> {
         };
         let mut best = sensor.range;
         for &(u1, u2) in cones {
-            for &e in cands.edges.iter() {
-                let edge = &self.statics.edges[e as usize];
-                best = cone_distance(p, u1, u2, edge.a, edge.b, edge.normal, best);
-            }
-            for &j in cands.bodies.iter() {
-                let g = &self.geo[j as usize];
-                for k in 0..4 {
-                    best = cone_distance(p, u1, u2, g.corners[k], g.corners[(k + 1) % 4], g.normals[k], best);
-                }
+            for seg in cands.edges.iter() {
+                best = cone_distance(p, u1, u2, seg.a, seg.b, seg.normal, best);
             }
         }
         best
