@@ -201,6 +201,8 @@ struct Motion {
     next_min: Point2<Real>,
     next_max: Point2<Real>,
     next_pose: Pose,
+    /// Cosine and sine of the next heading.
+    next_cs: (Real, Real),
 }
 
 /// Per-slot committed geometry the sensors read for every neighbour.
@@ -210,7 +212,11 @@ struct Geo {
     centre: Point2<Real>,
     bound_radius: Real,
     corners: [Point2<Real>; 4],
+    /// Outward normals of the edges front, left, rear, right; `normals[0]` is the heading's
+    /// (cos θ, sin θ).
     normals: [Vector2<Real>; 4],
+    /// 1/length² of the front/rear and the side edges.
+    inv_len2: [Real; 2],
 }
 
 const DEAD_BOX: PlacedBox = PlacedBox {
@@ -233,6 +239,7 @@ impl Motion {
         next_min: Point2::new(0.0, 0.0),
         next_max: Point2::new(0.0, 0.0),
         next_pose: Pose { x: 0.0, y: 0.0, theta: 0.0 },
+        next_cs: (1.0, 0.0),
     };
 }
 
@@ -243,10 +250,16 @@ impl Geo {
         bound_radius: 0.0,
         corners: [Point2::new(0.0, 0.0); 4],
         normals: [Vector2::new(0.0, 0.0); 4],
+        inv_len2: [0.0; 2],
     };
 
     fn of(robot: &Robot) -> Geo {
         let (s, c) = robot.pose.theta.sin_cos();
+        Self::of_cs(robot, c, s)
+    }
+
+    /// The geometry of a robot whose heading's cosine and sine are known.
+    fn of_cs(robot: &Robot, c: Real, s: Real) -> Geo {
         let heading = Vector2::new(c, s);
         let left = Vector2::new(-s, c);
         Geo {
@@ -256,6 +269,7 @@ impl Geo {
             corners: robot.shape.corners_ccw(&robot.pose, c, s),
             // Outward normals of the edges front, left, rear, right (corner i → i+1).
             normals: [heading, left, -heading, -left],
+            inv_len2: [1.0 / (4.0 * robot.shape.half.y * robot.shape.half.y), 1.0 / (4.0 * robot.shape.half.x * robot.shape.half.x)],
         }
     }
 }
@@ -265,10 +279,12 @@ impl Geo {
 struct Scratch {
     edge_stamp: Vec<u32>,
     stamp: u32,
-    edges: Vec<sensors::Segment>,
+    segments: Vec<grid::Segment>,
+    local: Vec<sensors::LocalSegment>,
     blocked: Vec<(bool, bool)>,
-    measured: Vec<SensorReadings>,
     deliveries: Vec<(u32, Heard)>,
+    speakers: Vec<u32>,
+    listeners: Vec<u32>,
 }
 
 /// Box corners (min, max) of a placed rectangle.
@@ -521,12 +537,7 @@ impl World {
     }
 
     fn apply_actions(&mut self, actions: &[Action], stats: &mut StepStats) {
-        for slot in &mut self.slots {
-            if let Some(r) = &mut slot.robot {
-                r.say = None;
-                r.pushed = None;
-            }
-        }
+        self.scratch.speakers.clear();
         for a in actions {
             let Some(slot) = self.slots.get_mut(a.robot.index as usize) else {
                 stats.unknown_robot_actions += 1;
@@ -551,6 +562,9 @@ impl World {
                 }
             }
             if a.say.is_some() {
+                if r.say.is_none() {
+                    self.scratch.speakers.push(a.robot.index);
+                }
                 r.say = a.say;
             }
         }
@@ -562,19 +576,23 @@ impl World {
         let motor_noise = self.params.noise.motor_frac;
         for (i, slot) in self.slots.iter_mut().enumerate() {
             let Some(r) = &mut slot.robot else { continue };
+            // The heading's cosine and sine as of the last commit.
+            let h = self.geo[i].normals[0];
+            let (co, s) = (h.x, h.y);
             let next = match r.spec.kind {
                 RobotKind::Real => {
                     r.motor_out = [0.0; 2];
-                    r.pushed.unwrap_or(r.pose)
+                    r.pushed.take().unwrap_or(r.pose)
                 }
                 RobotKind::Simulated | RobotKind::Door => {
+                    // Only Real robots take pushed poses.
+                    r.pushed = None;
                     let c = r.spec.accel_curve;
                     for w in 0..2 {
                         let out = (1.0 - c) * r.motor_in[w] + c * r.motor_out[w];
                         r.motor_out[w] = if motor_noise > 0.0 { out * (1.0 + motor_noise * self.rng.gaussian()) } else { out };
                     }
                     let (v, omega) = r.velocity();
-                    let (s, co) = r.pose.theta.sin_cos();
                     Pose {
                         x: r.pose.x + v * co * dt,
                         y: r.pose.y + v * s * dt,
@@ -582,9 +600,16 @@ impl World {
                     }
                 }
             };
-            let cur = r.shape.placed(&r.pose);
+            let cur = r.shape.placed_cs(&r.pose, co, s);
             let moving = next != r.pose;
-            let nb = if moving { r.shape.placed(&next) } else { cur };
+            let (next_cs, nb) = if !moving {
+                ((co, s), cur)
+            } else if next.theta == r.pose.theta {
+                ((co, s), r.shape.placed_cs(&next, co, s))
+            } else {
+                let (ns, nc) = next.theta.sin_cos();
+                ((nc, ns), r.shape.placed_cs(&next, nc, ns))
+            };
             let (cur_min, cur_max) = aabb(&cur);
             let (next_min, next_max) = if moving { aabb(&nb) } else { (cur_min, cur_max) };
             self.motion[i] = Motion {
@@ -598,6 +623,7 @@ impl World {
                 next_min,
                 next_max,
                 next_pose: next,
+                next_cs,
             };
         }
         // Index every robot by the box that holds both its current and its next pose: the
@@ -631,59 +657,63 @@ impl World {
                         }
                         r.encoder_travel[w] += travel;
                     }
+                    r.readings.encoder_ticks = [
+                        (r.encoder_travel[0] * ticks_per_m).floor() as i64,
+                        (r.encoder_travel[1] * ticks_per_m).floor() as i64,
+                    ];
                 }
+                self.geo[i] = Geo::of_cs(r, m.next_cs.0, m.next_cs.1);
             }
             if hit && !r.collision {
                 r.collision_count += 1;
             }
             r.collision = hit;
-            r.readings.encoder_ticks = [
-                (r.encoder_travel[0] * ticks_per_m).floor() as i64,
-                (r.encoder_travel[1] * ticks_per_m).floor() as i64,
-            ];
-            if moved {
-                self.geo[i] = Geo::of(r);
-            }
         }
     }
 
     fn deliver_messages(&mut self, stats: &mut StepStats) {
-        let range = self.params.message_range_m;
-        let deliveries = &mut self.scratch.deliveries;
-        deliveries.clear();
-        for (i, slot) in self.slots.iter().enumerate() {
-            let Some(r) = &slot.robot else { continue };
-            let Some(message) = r.say else { continue };
-            let from = RobotHandle { index: i as u32, generation: slot.generation };
-            let c = self.geo[i].centre;
-            let e = Vector2::new(range, range);
-            self.dyn_grid.query(c - e, c + e, |j| {
-                let g = &self.geo[j as usize];
-                if j as usize != i && g.alive && (g.centre - c).norm_squared() <= range * range {
-                    deliveries.push((j, Heard { from, message }));
-                }
-            });
-        }
-        // Grid order is by cell; delivery order must be by speaker, then by listener.
-        deliveries.sort_by_key(|(j, h)| (h.from.index, *j));
-        for slot in &mut self.slots {
-            if let Some(r) = &mut slot.robot {
+        // Last tick's listeners forget what they heard; only they have anything to forget.
+        for &j in &self.scratch.listeners {
+            if let Some(r) = self.slots[j as usize].robot.as_mut() {
                 r.inbox.clear();
             }
         }
-        for (j, heard) in deliveries.drain(..) {
+        self.scratch.listeners.clear();
+        if self.scratch.speakers.is_empty() {
+            return;
+        }
+        let range = self.params.message_range_m;
+        let deliveries = &mut self.scratch.deliveries;
+        deliveries.clear();
+        // Speakers in slot order, so every inbox lists speakers in slot order.
+        self.scratch.speakers.sort_unstable();
+        for &i in &self.scratch.speakers {
+            let slot = &mut self.slots[i as usize];
+            let Some(r) = slot.robot.as_mut() else { continue };
+            let Some(message) = r.say.take() else { continue };
+            let from = RobotHandle { index: i, generation: slot.generation };
+            let c = self.geo[i as usize].centre;
+            let e = Vector2::new(range, range);
+            let first = deliveries.len();
+            self.dyn_grid.query(c - e, c + e, |j| {
+                let g = &self.geo[j as usize];
+                if j != i && g.alive && (g.centre - c).norm_squared() <= range * range {
+                    deliveries.push((j, Heard { from, message }));
+                }
+            });
+            // The grid lists by cell; listeners in slot order keep drops deterministic.
+            deliveries[first..].sort_unstable_by_key(|(j, _)| *j);
+        }
+        for &(j, heard) in deliveries.iter() {
             let Some(r) = self.slots[j as usize].robot.as_mut() else { continue };
             let used: usize = r.inbox.iter().map(|h| h.message.len()).sum();
             if used + heard.message.len() <= MAX_INBOX_BYTES {
+                if r.inbox.is_empty() {
+                    self.scratch.listeners.push(j);
+                }
                 r.inbox.push(heard);
             } else {
                 stats.dropped_messages += 1;
-            }
-        }
-        // Keep the inbox in speaker order.
-        for slot in &mut self.slots {
-            if let Some(r) = &mut slot.robot {
-                r.inbox.sort_by_key(|h| h.from.index);
             }
         }
     }

@@ -487,3 +487,4 @@ fn one_seed_gives_bit_identical_runs_and_another_seed_differs() {
     assert_eq!(a, b);
     assert_ne!(a.last(), c.last());
 }
+
