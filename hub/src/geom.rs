@@ -5,9 +5,7 @@
 
 use nalgebra::{Isometry2, Point2, Vector2};
 use parry2d::math::{Pose, Vec2};
-use parry2d::query::details::{
-    intersection_test_cuboid_cuboid, intersection_test_cuboid_triangle,
-};
+use parry2d::query::details::{intersection_test_cuboid_cuboid, intersection_test_cuboid_triangle};
 use parry2d::shape::{Cuboid, Triangle};
 
 /// A rectangle placed in the world: its centre pose and half extents (metres).
@@ -42,11 +40,7 @@ pub(crate) fn boxes_intersect(a: &PlacedBox, b: &PlacedBox) -> bool {
 pub(crate) fn box_hits_triangle(a: &PlacedBox, tri: &[Point2<f64>; 3]) -> bool {
     let origin = Point2::from(a.iso.translation.vector);
     let pa = to_local_pose(&a.iso, origin);
-    let t = Triangle::new(
-        local_point(tri[0], origin),
-        local_point(tri[1], origin),
-        local_point(tri[2], origin),
-    );
+    let t = Triangle::new(local_point(tri[0], origin), local_point(tri[1], origin), local_point(tri[2], origin));
     // The triangle is already in the local frame, so its pose relative to the box is the
     // inverse of the box pose.
     intersection_test_cuboid_triangle(&pa.inverse(), &cuboid(a.half), &t)

@@ -42,7 +42,11 @@ pub fn chair_spec(pose: Pose) -> RobotSpec {
         ProximitySpec::deg(rear, -side, -135.0, 45.0),
         ProximitySpec::deg(rear, 0.0, 180.0, 45.0),
     ];
-    RobotSpec { pose, ..RobotSpec::at(0.0, 0.0, 0.0) }.named("chair").body(w, h, com).motors(0.49, 0.83).sensors(sensors)
+    RobotSpec { pose, ..RobotSpec::at(0.0, 0.0, 0.0) }
+        .named("chair")
+        .body(w, h, com)
+        .motors(0.49, 0.83)
+        .sensors(sensors)
 }
 
 /// Why the tiled world could not be built.
@@ -70,10 +74,12 @@ pub fn tiled_lab(floors: usize) -> Result<(Lab, (usize, usize)), TiledBuildError
     for fy in 0..rows {
         for fx in 0..cols {
             let offset = Vector2::new(fx as Real * fw, fy as Real * fh);
-            walls.extend(floor.walls.iter().map(|w| Wall {
-                height_m: w.height_m,
-                corners: w.corners.iter().map(|c| c + offset).collect(),
-            }));
+            walls.extend(
+                floor
+                    .walls
+                    .iter()
+                    .map(|w| Wall { height_m: w.height_m, corners: w.corners.iter().map(|c| c + offset).collect() }),
+            );
         }
     }
     let lab = Lab {
@@ -93,11 +99,14 @@ impl TiledWorld {
     pub fn build(robots: usize, seed: u64) -> Result<Self, TiledBuildError> {
         let floors = robots.div_ceil(ROBOTS_PER_FLOOR);
         let (lab, (cols, rows)) = tiled_lab(floors)?;
-        let params = Params { sensors: crate::map::SensorSwitches { gps: true, beacon: false, compass: true }, ..Params::default() };
+        let params = Params {
+            sensors: crate::map::SensorSwitches { gps: true, beacon: false, compass: true },
+            ..Params::default()
+        };
         let mut world = World::new(&lab, params, seed)?;
         world.set_capacity(robots.max(world.len()));
         let floor = builtin::map("liacc").ok_or(TiledBuildError::NoLiacc)?.lab;
-        let mut rng = Rng::seed_from_u64(seed ^ 0x5EED_F100_D5);
+        let mut rng = Rng::seed_from_u64(seed ^ 0x005E_EDF1_00D5);
         let mut handles = Vec::with_capacity(robots);
         let mut placed_on_floor: Vec<Point2<Real>> = Vec::new();
         for k in 0..robots {
@@ -112,8 +121,9 @@ impl TiledWorld {
                 if tries > 10_000 {
                     return Err(TiledBuildError::NoRoom(k));
                 }
-                let p = Point2::new(rng.uniform(1.0, floor.width_m - 1.0), rng.uniform(1.0, floor.height_m - 1.0)) + origin;
-                let spec = chair_spec(Pose::new(p.x, p.y, rng.uniform(-3.14159, 3.14159)));
+                let p =
+                    Point2::new(rng.uniform(1.0, floor.width_m - 1.0), rng.uniform(1.0, floor.height_m - 1.0)) + origin;
+                let spec = chair_spec(Pose::new(p.x, p.y, rng.uniform(-std::f64::consts::PI, std::f64::consts::PI)));
                 // 2.2 m apart: two chairs (bound radius 0.93 m) never start touching.
                 if placed_on_floor.iter().all(|q| (q - p).norm() > 2.2) && world.is_clear_of_walls(&spec) {
                     placed_on_floor.push(p);

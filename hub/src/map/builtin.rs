@@ -82,10 +82,7 @@ pub fn load_grid_spec(spec: &str) -> Result<Grid, MapLoadError> {
 }
 
 fn unknown(name: &str) -> MapLoadError {
-    MapLoadError::UnknownBuiltin {
-        name: name.to_owned(),
-        known: NAMES.join(", "),
-    }
+    MapLoadError::UnknownBuiltin { name: name.to_owned(), known: NAMES.join(", ") }
 }
 
 #[cfg(test)]
@@ -97,24 +94,17 @@ mod tests {
     fn load(name: &str) -> Map {
         match map(name) {
             Some(map) => map,
-            None => panic!(
-                "built-in map {name} does not load: {:?}",
-                lab_xml(name).map(parse_lab)
-            ),
+            None => panic!("built-in map {name} does not load: {:?}", lab_xml(name).map(parse_lab)),
         }
     }
 
     /// (min x, min y, max x, max y) of a wall.
     fn bbox(wall: &Wall) -> (f64, f64, f64, f64) {
-        wall.corners.iter().fold(
-            (
-                f64::INFINITY,
-                f64::INFINITY,
-                f64::NEG_INFINITY,
-                f64::NEG_INFINITY,
-            ),
-            |(x0, y0, x1, y1), c| (x0.min(c.x), y0.min(c.y), x1.max(c.x), y1.max(c.y)),
-        )
+        wall.corners
+            .iter()
+            .fold((f64::INFINITY, f64::INFINITY, f64::NEG_INFINITY, f64::NEG_INFINITY), |(x0, y0, x1, y1), c| {
+                (x0.min(c.x), y0.min(c.y), x1.max(c.x), y1.max(c.y))
+            })
     }
 
     /// Walls whose bounding box overlaps the open rectangle (x0, y0)–(x1, y1), by index.
@@ -167,11 +157,7 @@ mod tests {
         assert_eq!(lab.name, "IW_LIACC");
         assert_eq!((lab.width_m, lab.height_m), (44.0, 17.75));
         assert_eq!(lab.walls.len(), 23);
-        assert!(
-            lab.walls
-                .iter()
-                .all(|w| w.corners.len() == 4 && w.height_m == 2.5)
-        );
+        assert!(lab.walls.iter().all(|w| w.corners.len() == 4 && w.height_m == 2.5));
         assert!(lab.beacons.is_empty() && lab.targets.is_empty());
         // First and last walls as printed in Annex D.
         assert_eq!(bbox(&lab.walls[0]), (9.37, 0.0, 9.519, 5.4));
@@ -203,11 +189,7 @@ mod tests {
                 let (_, wy0, wx1, _) = bbox(&map.lab.walls[3]);
                 assert!(wx1 - x0 < 0.02 && y1 - wy0 < 0.011);
             } else {
-                assert!(
-                    hits.is_empty(),
-                    "start pose {} {pose:?} touches walls {hits:?}",
-                    k + 1
-                );
+                assert!(hits.is_empty(), "start pose {} {pose:?} touches walls {hits:?}", k + 1);
             }
         }
     }
@@ -237,11 +219,7 @@ mod tests {
         assert_poses_inside_lab(&map);
         for pose in &map.grid.poses {
             let (x0, y0, x1, y1) = unit_square(pose.pos.x, pose.pos.y);
-            assert_eq!(
-                walls_touching(&map.lab, x0, y0, x1, y1),
-                Vec::<usize>::new(),
-                "{pose:?}"
-            );
+            assert_eq!(walls_touching(&map.lab, x0, y0, x1, y1), Vec::<usize>::new(), "{pose:?}");
         }
     }
 
@@ -336,11 +314,7 @@ mod tests {
             .chain(map.lab.beacons.iter().map(|b| b.pos))
             .chain(map.lab.targets.iter().map(|t| t.pos));
         for p in points {
-            assert_eq!(
-                ((p.x - 1.0) % CELL_M, (p.y - 1.0) % CELL_M),
-                (0.0, 0.0),
-                "{p:?}"
-            );
+            assert_eq!(((p.x - 1.0) % CELL_M, (p.y - 1.0) % CELL_M), (0.0, 0.0), "{p:?}");
             let (x0, y0, x1, y1) = unit_square(p.x, p.y);
             assert!(walls_touching(&map.lab, x0, y0, x1, y1).is_empty(), "{p:?}");
         }
@@ -367,19 +341,13 @@ mod tests {
         let err = load_lab_spec("builtin:atlantis").expect_err("no such map");
         assert!(matches!(&err, MapLoadError::UnknownBuiltin { name, .. } if name == "atlantis"));
         assert!(err.to_string().contains("liacc, thesis, maze"), "{err}");
-        assert!(matches!(
-            load_grid_spec("builtin:"),
-            Err(MapLoadError::UnknownBuiltin { .. })
-        ));
+        assert!(matches!(load_grid_spec("builtin:"), Err(MapLoadError::UnknownBuiltin { .. })));
     }
 
     #[test]
     fn a_missing_file_spec_is_an_io_error_naming_the_file() {
         let err = load_grid_spec("/nonexistent/iwsim/grid.xml").expect_err("no such file");
         assert!(matches!(&err, MapLoadError::Io { path, .. } if path.ends_with("grid.xml")));
-        assert!(
-            err.to_string().contains("/nonexistent/iwsim/grid.xml"),
-            "{err}"
-        );
+        assert!(err.to_string().contains("/nonexistent/iwsim/grid.xml"), "{err}");
     }
 }

@@ -43,13 +43,7 @@ pub fn expand_row(pos: i64, pattern: &str, height_m: f64) -> Vec<Wall> {
 
     for (column, _) in cells.iter().enumerate().filter(|(_, ch)| **ch == '|') {
         let x = CELL_M * (column as f64 + 1.0) / COLUMNS_PER_CELL as f64;
-        walls.push(rectangle(
-            x - HALF_THICKNESS_M,
-            y0,
-            x + HALF_THICKNESS_M,
-            y0 + CELL_M,
-            height_m,
-        ));
+        walls.push(rectangle(x - HALF_THICKNESS_M, y0, x + HALF_THICKNESS_M, y0 + CELL_M, height_m));
     }
 
     if pos.rem_euclid(2) == 1 {
@@ -57,13 +51,7 @@ pub fn expand_row(pos: i64, pattern: &str, height_m: f64) -> Vec<Wall> {
         let mut push_run = |first: usize, last: usize| {
             let x0 = CELL_M * (first / COLUMNS_PER_CELL) as f64;
             let x1 = CELL_M * (last / COLUMNS_PER_CELL + 1) as f64;
-            walls.push(rectangle(
-                x0,
-                y - HALF_THICKNESS_M,
-                x1,
-                y + HALF_THICKNESS_M,
-                height_m,
-            ));
+            walls.push(rectangle(x0, y - HALF_THICKNESS_M, x1, y + HALF_THICKNESS_M, height_m));
         };
         // (first column of the run, last column of the run that holds '-')
         let mut run: Option<(usize, usize)> = None;
@@ -87,15 +75,7 @@ pub fn expand_row(pos: i64, pattern: &str, height_m: f64) -> Vec<Wall> {
 
 /// An axis-aligned rectangle as a wall, corners counter-clockwise from the lower left.
 fn rectangle(x0: f64, y0: f64, x1: f64, y1: f64, height_m: f64) -> Wall {
-    Wall {
-        height_m,
-        corners: vec![
-            Point2::new(x0, y0),
-            Point2::new(x1, y0),
-            Point2::new(x1, y1),
-            Point2::new(x0, y1),
-        ],
-    }
+    Wall { height_m, corners: vec![Point2::new(x0, y0), Point2::new(x1, y0), Point2::new(x1, y1), Point2::new(x0, y1)] }
 }
 
 #[cfg(test)]
@@ -138,14 +118,7 @@ mod tests {
     fn every_bar_of_an_even_row_is_a_vertical_wall_two_metres_tall() {
         let walls = expand_row(0, "  |  |                                |  ", 1.5);
         let got: Vec<_> = walls.iter().map(bounds).collect();
-        assert_eq!(
-            got,
-            [
-                (1.9, 0.0, 2.1, 2.0),
-                (3.9, 0.0, 4.1, 2.0),
-                (25.9, 0.0, 26.1, 2.0)
-            ]
-        );
+        assert_eq!(got, [(1.9, 0.0, 2.1, 2.0), (3.9, 0.0, 4.1, 2.0), (25.9, 0.0, 26.1, 2.0)]);
         assert!(walls.iter().all(|w| w.height_m == 1.5));
     }
 
@@ -156,24 +129,14 @@ mod tests {
         assert_eq!(pattern.chars().count(), 41);
         let walls = expand_row(3, &pattern, 4.0);
         let got: Vec<_> = walls.iter().map(bounds).collect();
-        assert_eq!(
-            got,
-            [
-                (0.0, 3.9, 4.0, 4.1),
-                (6.0, 3.9, 8.0, 4.1),
-                (26.0, 3.9, 28.0, 4.1)
-            ]
-        );
+        assert_eq!(got, [(0.0, 3.9, 4.0, 4.1), (6.0, 3.9, 8.0, 4.1), (26.0, 3.9, 28.0, 4.1)]);
     }
 
     #[test]
     fn a_full_row_of_dashes_spans_the_whole_lab() {
         let pattern = "-".repeat(41);
         let walls = expand_row(11, &pattern, 4.0);
-        assert_eq!(
-            walls.iter().map(bounds).collect::<Vec<_>>(),
-            [(0.0, 11.9, 28.0, 12.1)]
-        );
+        assert_eq!(walls.iter().map(bounds).collect::<Vec<_>>(), [(0.0, 11.9, 28.0, 12.1)]);
     }
 
     #[test]
@@ -186,10 +149,7 @@ mod tests {
         // Column 1 and 2 hold '-' but column 3 is a space: the run is cell 0 only.
         // Column 7 holds '-' but column 6 does not: no wall for cell 2.
         let walls = expand_row(1, "---    -  ", 4.0);
-        assert_eq!(
-            walls.iter().map(bounds).collect::<Vec<_>>(),
-            [(0.0, 1.9, 2.0, 2.1)]
-        );
+        assert_eq!(walls.iter().map(bounds).collect::<Vec<_>>(), [(0.0, 1.9, 2.0, 2.1)]);
     }
 
     #[test]

@@ -221,10 +221,7 @@ pub enum MapFile {
 
 /// Reads a whole file as text.
 pub fn read_text(path: &Path) -> Result<String, MapLoadError> {
-    std::fs::read_to_string(path).map_err(|source| MapLoadError::Io {
-        path: path.to_owned(),
-        source,
-    })
+    std::fs::read_to_string(path).map_err(|source| MapLoadError::Io { path: path.to_owned(), source })
 }
 
 /// Parses a Ciber-Rato lab: `<Lab Name Width Height>` with `<Beacon>`, `<Target>`, `<Wall>`
@@ -277,10 +274,7 @@ struct Element {
 
 impl Element {
     fn attr(&self, name: &str) -> Option<&str> {
-        self.attrs
-            .iter()
-            .find(|(key, _)| key == name)
-            .map(|(_, value)| value.as_str())
+        self.attrs.iter().find(|(key, _)| key == name).map(|(_, value)| value.as_str())
     }
 }
 
@@ -300,12 +294,7 @@ struct LineIndex<'a> {
 impl<'a> LineIndex<'a> {
     fn new(text: &'a str) -> Self {
         let line_starts = std::iter::once(0)
-            .chain(
-                text.bytes()
-                    .enumerate()
-                    .filter(|(_, b)| *b == b'\n')
-                    .map(|(i, _)| i + 1),
-            )
+            .chain(text.bytes().enumerate().filter(|(_, b)| *b == b'\n').map(|(i, _)| i + 1))
             .collect();
         Self { text, line_starts }
     }
@@ -314,18 +303,11 @@ impl<'a> LineIndex<'a> {
         let offset = offset.min(self.text.len());
         // The first line starts at 0 <= offset, so `line >= 1`.
         let line = self.line_starts.partition_point(|&start| start <= offset);
-        let start = self
-            .line_starts
-            .get(line.wrapping_sub(1))
-            .copied()
-            .unwrap_or(0);
+        let start = self.line_starts.get(line.wrapping_sub(1)).copied().unwrap_or(0);
         let before = self.text.as_bytes().get(start..offset).unwrap_or_default();
         // Count characters, not bytes: skip UTF-8 continuation bytes.
         let chars = before.iter().filter(|b| (**b & 0xC0) != 0x80).count();
-        TextPos {
-            line: saturate(line),
-            column: saturate(chars + 1),
-        }
+        TextPos { line: saturate(line), column: saturate(chars + 1) }
     }
 }
 
@@ -356,18 +338,12 @@ impl Document {
                 Ok(event) => event,
                 Err(err) => {
                     let at = usize::try_from(reader.error_position()).unwrap_or(usize::MAX);
-                    return Err(MapLoadError::Syntax {
-                        pos: index.pos(at),
-                        message: describe_xml_error(&err),
-                    });
+                    return Err(MapLoadError::Syntax { pos: index.pos(at), message: describe_xml_error(&err) });
                 }
             };
             // Markup starts at its `<`; text events in between are reported separately, so the
             // `<` is the first one from where the previous event ended.
-            let tag_start = text
-                .get(before..)
-                .and_then(|rest| rest.find('<'))
-                .map_or(before, |i| before + i);
+            let tag_start = text.get(before..).and_then(|rest| rest.find('<')).map_or(before, |i| before + i);
             match event {
                 Event::Start(tag) => {
                     let id = add_element(&mut elements, &open, &tag, tag_start, &index)?;
@@ -388,16 +364,9 @@ impl Document {
                             ),
                         });
                     };
-                    let expected = elements
-                        .get(id)
-                        .map(|e| e.name.as_str())
-                        .unwrap_or_default();
+                    let expected = elements.get(id).map(|e| e.name.as_str()).unwrap_or_default();
                     if expected != found {
-                        return Err(MapLoadError::MismatchedEndTag {
-                            pos,
-                            expected: expected.to_owned(),
-                            found,
-                        });
+                        return Err(MapLoadError::MismatchedEndTag { pos, expected: expected.to_owned(), found });
                     }
                 }
                 Event::Text(content) => {
@@ -418,10 +387,7 @@ impl Document {
             }
         }
         if let Some(element) = open.last().and_then(|&id| elements.get(id)) {
-            return Err(MapLoadError::UnclosedTag {
-                pos: element.pos,
-                tag: element.name.clone(),
-            });
+            return Err(MapLoadError::UnclosedTag { pos: element.pos, tag: element.name.clone() });
         }
         if elements.is_empty() {
             return Err(MapLoadError::Empty);
@@ -435,10 +401,7 @@ impl Document {
     }
 
     fn children<'d>(&'d self, parent: &'d Element) -> impl Iterator<Item = &'d Element> + 'd {
-        parent
-            .children
-            .iter()
-            .filter_map(|&id| self.elements.get(id))
+        parent.children.iter().filter_map(|&id| self.elements.get(id))
     }
 }
 
@@ -456,9 +419,7 @@ fn add_element(
     if parent.is_none() && !elements.is_empty() {
         return Err(MapLoadError::Syntax {
             pos,
-            message: format!(
-                "<{name}> is a second root element: expected everything inside the first one"
-            ),
+            message: format!("<{name}> is a second root element: expected everything inside the first one"),
         });
     }
     let raw: &str = tag;
@@ -471,10 +432,7 @@ fn add_element(
                 let key = attr.key.as_ref().to_owned();
                 let value = attr
                     .normalized_value(XmlVersion::Implicit1_0)
-                    .map_err(|err| MapLoadError::Syntax {
-                        pos,
-                        message: format!("<{name}> attribute {key}: {err}"),
-                    })?;
+                    .map_err(|err| MapLoadError::Syntax { pos, message: format!("<{name}> attribute {key}: {err}") })?;
                 attrs.push((key, value.into_owned()));
             }
             Err(AttrError::Duplicated(offset, _)) => {
@@ -483,28 +441,16 @@ fn add_element(
                     .and_then(|rest| rest.split(|c: char| c == '=' || c.is_whitespace()).next())
                     .unwrap_or_default()
                     .to_owned();
-                return Err(MapLoadError::DuplicateAttribute {
-                    pos: at(offset),
-                    element: name,
-                    attr,
-                });
+                return Err(MapLoadError::DuplicateAttribute { pos: at(offset), element: name, attr });
             }
             Err(err) => {
                 let (offset, message) = describe_attr_error(&err);
-                return Err(MapLoadError::Syntax {
-                    pos: at(offset),
-                    message: format!("in <{name}>, {message}"),
-                });
+                return Err(MapLoadError::Syntax { pos: at(offset), message: format!("in <{name}>, {message}") });
             }
         }
     }
     let id = elements.len();
-    elements.push(Element {
-        name,
-        pos,
-        attrs,
-        children: Vec::new(),
-    });
+    elements.push(Element { name, pos, attrs, children: Vec::new() });
     if let Some(parent) = parent.and_then(|p| elements.get_mut(p)) {
         parent.children.push(id);
     }
@@ -513,22 +459,12 @@ fn add_element(
 
 fn describe_attr_error(err: &AttrError) -> (usize, String) {
     match err {
-        AttrError::ExpectedEq(at) => (
-            *at,
-            "an attribute name must be followed by `=` and a quoted value".to_owned(),
-        ),
+        AttrError::ExpectedEq(at) => (*at, "an attribute name must be followed by `=` and a quoted value".to_owned()),
         AttrError::ExpectedValue(at) => (*at, "`=` must be followed by a quoted value".to_owned()),
-        AttrError::UnquotedValue(at) => (
-            *at,
-            "an attribute value must be enclosed in \" or '".to_owned(),
-        ),
-        AttrError::ExpectedQuote(at, quote) => (
-            *at,
-            format!(
-                "an attribute value is not closed with {}",
-                char::from(*quote)
-            ),
-        ),
+        AttrError::UnquotedValue(at) => (*at, "an attribute value must be enclosed in \" or '".to_owned()),
+        AttrError::ExpectedQuote(at, quote) => {
+            (*at, format!("an attribute value is not closed with {}", char::from(*quote)))
+        }
         AttrError::Duplicated(at, _) => (*at, "an attribute appears twice".to_owned()),
     }
 }
@@ -544,8 +480,7 @@ fn describe_xml_error(err: &quick_xml::Error) -> String {
         }
         Error::Syntax(SyntaxError::UnclosedSingleQuotedAttributeValue)
         | Error::Syntax(SyntaxError::UnclosedDoubleQuotedAttributeValue) => {
-            "an attribute value opened in this tag is never closed: expected a closing quote"
-                .to_owned()
+            "an attribute value opened in this tag is never closed: expected a closing quote".to_owned()
         }
         other => other.to_string(),
     }
@@ -563,11 +498,7 @@ const DEFAULT_LAB_SIZE_M: f64 = 16.0;
 const DEFAULT_TARGET_RADIUS_M: f64 = 2.0;
 
 fn unknown_root(root: &Element, expected: &'static str) -> MapLoadError {
-    MapLoadError::UnknownRoot {
-        pos: root.pos,
-        found: root.name.clone(),
-        expected,
-    }
+    MapLoadError::UnknownRoot { pos: root.pos, found: root.name.clone(), expected }
 }
 
 fn ignore(child: &Element, parent: &str) {
@@ -616,11 +547,7 @@ fn check(
     ok: impl Fn(f64) -> bool,
     expected: &'static str,
 ) -> Result<f64, MapLoadError> {
-    if ok(value) {
-        Ok(value)
-    } else {
-        Err(out_of_range(element, attr, expected))
-    }
+    if ok(value) { Ok(value) } else { Err(out_of_range(element, attr, expected)) }
 }
 
 const POSITIVE: &str = "a number greater than 0";
@@ -636,14 +563,8 @@ fn lab_from(root: &Element, doc: &Document, expected: &'static str) -> Result<La
     let width = check(root, "Width", width, |v| v > 0.0, POSITIVE)?;
     let height = number(root, "Height")?.unwrap_or(DEFAULT_LAB_SIZE_M);
     let height = check(root, "Height", height, |v| v > 0.0, POSITIVE)?;
-    let mut lab = Lab {
-        name,
-        width_m: width,
-        height_m: height,
-        walls: Vec::new(),
-        beacons: Vec::new(),
-        targets: Vec::new(),
-    };
+    let mut lab =
+        Lab { name, width_m: width, height_m: height, walls: Vec::new(), beacons: Vec::new(), targets: Vec::new() };
     let inside_x = |v: f64| (-BORDER_TOLERANCE_M..=width + BORDER_TOLERANCE_M).contains(&v);
     let inside_y = |v: f64| (-BORDER_TOLERANCE_M..=height + BORDER_TOLERANCE_M).contains(&v);
     const INSIDE_X: &str = "an x inside the lab, from 0 to its Width";
@@ -656,31 +577,19 @@ fn lab_from(root: &Element, doc: &Document, expected: &'static str) -> Result<La
                 let y = check(child, "Y", required(child, "Y")?, inside_y, INSIDE_Y)?;
                 let h = number(child, "Height")?.unwrap_or(0.0);
                 let h = check(child, "Height", h, |v| v >= 0.0, NOT_NEGATIVE)?;
-                lab.beacons.push(Beacon {
-                    pos: Point2::new(x, y),
-                    height_m: h,
-                });
+                lab.beacons.push(Beacon { pos: Point2::new(x, y), height_m: h });
             }
             "Target" => {
                 let x = check(child, "X", required(child, "X")?, inside_x, INSIDE_X)?;
                 let y = check(child, "Y", required(child, "Y")?, inside_y, INSIDE_Y)?;
                 let r = number(child, "Radius")?.unwrap_or(DEFAULT_TARGET_RADIUS_M);
                 let r = check(child, "Radius", r, |v| v > 0.0, POSITIVE)?;
-                lab.targets.push(Target {
-                    pos: Point2::new(x, y),
-                    radius_m: r,
-                });
+                lab.targets.push(Target { pos: Point2::new(x, y), radius_m: r });
             }
             "Wall" => lab.walls.push(wall_from(child, doc, width, height)?),
             "Row" => {
                 let pos = required(child, "Pos")?;
-                let pos = check(
-                    child,
-                    "Pos",
-                    pos,
-                    |v| v >= 0.0 && v.fract() == 0.0 && v <= 1e9,
-                    WHOLE,
-                )?;
+                let pos = check(child, "Pos", pos, |v| v >= 0.0 && v.fract() == 0.0 && v <= 1e9, WHOLE)?;
                 let Some(pattern) = child.attr("Pattern") else {
                     return Err(MapLoadError::MissingAttribute {
                         pos: child.pos,
@@ -712,12 +621,7 @@ fn lab_from(root: &Element, doc: &Document, expected: &'static str) -> Result<La
     Ok(lab)
 }
 
-fn wall_from(
-    element: &Element,
-    doc: &Document,
-    width: f64,
-    height: f64,
-) -> Result<Wall, MapLoadError> {
+fn wall_from(element: &Element, doc: &Document, width: f64, height: f64) -> Result<Wall, MapLoadError> {
     let h = number(element, "Height")?.unwrap_or(DEFAULT_WALL_HEIGHT_M);
     let h = check(element, "Height", h, |v| v >= 0.0, NOT_NEGATIVE)?;
     let corner_elements: Vec<&Element> = doc
@@ -731,10 +635,7 @@ fn wall_from(
         })
         .collect();
     if corner_elements.len() < 3 {
-        return Err(MapLoadError::TooFewCorners {
-            pos: element.pos,
-            count: corner_elements.len(),
-        });
+        return Err(MapLoadError::TooFewCorners { pos: element.pos, count: corner_elements.len() });
     }
     let mut corners: Vec<Point2<f64>> = Vec::with_capacity(corner_elements.len());
     for corner in corner_elements {
@@ -743,13 +644,7 @@ fn wall_from(
         let inside = (-BORDER_TOLERANCE_M..=width + BORDER_TOLERANCE_M).contains(&x)
             && (-BORDER_TOLERANCE_M..=height + BORDER_TOLERANCE_M).contains(&y);
         if !inside {
-            return Err(MapLoadError::CornerOutsideLab {
-                pos: corner.pos,
-                x,
-                y,
-                width,
-                height,
-            });
+            return Err(MapLoadError::CornerOutsideLab { pos: corner.pos, x, y, width, height });
         }
         // A corner repeated right after itself (or the first one repeated at the end, as some
         // tools close polygons) adds no edge.
@@ -770,21 +665,14 @@ fn wall_from(
             rest.reverse();
         }
     }
-    Ok(Wall {
-        height_m: h,
-        corners,
-    })
+    Ok(Wall { height_m: h, corners })
 }
 
 /// The signed area (positive when counter-clockwise), by the shoelace formula.
 fn signed_area(corners: &[Point2<f64>]) -> f64 {
     let n = corners.len();
-    let twice: f64 = corners
-        .iter()
-        .zip(corners.iter().cycle().skip(1))
-        .take(n)
-        .map(|(a, b)| a.x * b.y - b.x * a.y)
-        .sum();
+    let twice: f64 =
+        corners.iter().zip(corners.iter().cycle().skip(1)).take(n).map(|(a, b)| a.x * b.y - b.x * a.y).sum();
     twice / 2.0
 }
 
@@ -854,10 +742,7 @@ fn grid_from(root: &Element, doc: &Document, expected: &'static str) -> Result<G
         let x = required(child, "X")?;
         let y = required(child, "Y")?;
         let dir = number(child, "Dir")?.unwrap_or(0.0);
-        grid.poses.push(StartPose {
-            pos: Point2::new(x, y),
-            heading_deg: dir,
-        });
+        grid.poses.push(StartPose { pos: Point2::new(x, y), heading_deg: dir });
     }
     Ok(grid)
 }
@@ -870,30 +755,17 @@ fn params_from(root: &Element, expected: &'static str) -> Result<Params, MapLoad
     for (name, raw) in &root.attrs {
         let attr = name.as_str();
         let value = || -> Result<f64, MapLoadError> { required(root, attr) };
-        let not_negative = || -> Result<f64, MapLoadError> {
-            check(root, attr, value()?, |v| v >= 0.0, NOT_NEGATIVE)
-        };
-        let positive =
-            || -> Result<f64, MapLoadError> { check(root, attr, value()?, |v| v > 0.0, POSITIVE) };
+        let not_negative = || -> Result<f64, MapLoadError> { check(root, attr, value()?, |v| v >= 0.0, NOT_NEGATIVE) };
+        let positive = || -> Result<f64, MapLoadError> { check(root, attr, value()?, |v| v > 0.0, POSITIVE) };
         let whole = |max: f64| -> Result<f64, MapLoadError> {
-            check(
-                root,
-                attr,
-                value()?,
-                |v| v >= 0.0 && v.fract() == 0.0 && v <= max,
-                WHOLE,
-            )
+            check(root, attr, value()?, |v| v >= 0.0 && v.fract() == 0.0 && v <= max, WHOLE)
         };
         let count = || -> Result<u32, MapLoadError> { Ok(whole(f64::from(u32::MAX))? as u32) };
         let switch = || -> Result<bool, MapLoadError> {
             match raw.trim().to_ascii_lowercase().as_str() {
                 "on" | "true" | "yes" => Ok(true),
                 "off" | "false" | "no" => Ok(false),
-                _ => Err(out_of_range(
-                    root,
-                    attr,
-                    "On or Off (or True/False, Yes/No)",
-                )),
+                _ => Err(out_of_range(root, attr, "On or Off (or True/False, Yes/No)")),
             }
         };
         match attr {
@@ -973,35 +845,23 @@ mod tests {
 
     #[test]
     fn an_element_left_open_at_the_end_is_reported_at_its_opening_tag() {
-        let err =
-            lab_err("<Lab Width=\"10\" Height=\"10\">\n  <Wall>\n    <Corner X=\"1\" Y=\"1\"/>\n");
-        assert!(
-            matches!(&err, MapLoadError::UnclosedTag { pos, tag } if *pos == at(2, 3) && tag == "Wall"),
-            "{err:?}"
-        );
-        assert!(
-            err.to_string().starts_with("2:3: <Wall> is never closed"),
-            "{err}"
-        );
+        let err = lab_err("<Lab Width=\"10\" Height=\"10\">\n  <Wall>\n    <Corner X=\"1\" Y=\"1\"/>\n");
+        assert!(matches!(&err, MapLoadError::UnclosedTag { pos, tag } if *pos == at(2, 3) && tag == "Wall"), "{err:?}");
+        assert!(err.to_string().starts_with("2:3: <Wall> is never closed"), "{err}");
     }
 
     #[test]
     fn a_lone_open_root_is_an_unclosed_tag() {
         let err = lab_err("\n\n   <Lab Name=\"x\">");
-        assert!(
-            matches!(&err, MapLoadError::UnclosedTag { pos, tag } if *pos == at(3, 4) && tag == "Lab"),
-            "{err:?}"
-        );
+        assert!(matches!(&err, MapLoadError::UnclosedTag { pos, tag } if *pos == at(3, 4) && tag == "Lab"), "{err:?}");
     }
 
     #[test]
     fn a_wall_with_two_corners_is_too_few() {
-        let text = "<Lab>\n<Wall Height=\"1\">\n  <Corner X=\"1\" Y=\"1\"/>\n  <Corner X=\"2\" Y=\"1\"/>\n</Wall>\n</Lab>";
+        let text =
+            "<Lab>\n<Wall Height=\"1\">\n  <Corner X=\"1\" Y=\"1\"/>\n  <Corner X=\"2\" Y=\"1\"/>\n</Wall>\n</Lab>";
         let err = lab_err(text);
-        assert!(
-            matches!(err, MapLoadError::TooFewCorners { pos, count: 2 } if pos == at(2, 1)),
-            "{err:?}"
-        );
+        assert!(matches!(err, MapLoadError::TooFewCorners { pos, count: 2 } if pos == at(2, 1)), "{err:?}");
     }
 
     #[test]
@@ -1013,10 +873,7 @@ mod tests {
                 if *pos == at(3, 5) && element == "Corner" && attr == "Y" && value == "NaN"),
             "{err:?}"
         );
-        assert!(
-            err.to_string()
-                .starts_with("3:5: <Corner> attribute Y=\"NaN\" is not a number")
-        );
+        assert!(err.to_string().starts_with("3:5: <Corner> attribute Y=\"NaN\" is not a number"));
     }
 
     #[test]
@@ -1041,10 +898,7 @@ mod tests {
     #[test]
     fn columns_count_characters_not_bytes() {
         let err = lab_err("<Lab Name=\"Ção\"><Beacon X=\"1\" Y=\"é\"/></Lab>");
-        assert!(
-            matches!(err, MapLoadError::NotANumber { pos, .. } if pos == at(1, 17)),
-            "{err:?}"
-        );
+        assert!(matches!(err, MapLoadError::NotANumber { pos, .. } if pos == at(1, 17)), "{err:?}");
     }
 
     #[test]
@@ -1071,10 +925,7 @@ mod tests {
              <Corner X=\"0\" Y=\"0\"/><Corner X=\"10\" Y=\"0\"/><Corner X=\"10\" Y=\"-0.001\"/>\
              </Wall></Lab>",
         );
-        assert!(
-            matches!(err, MapLoadError::CornerOutsideLab { .. }),
-            "{err:?}"
-        );
+        assert!(matches!(err, MapLoadError::CornerOutsideLab { .. }), "{err:?}");
     }
 
     #[test]
@@ -1123,10 +974,7 @@ mod tests {
         let text = "<Lab>\n<Wall>\n<Corner X=\"0\" Y=\"0\"/><Corner X=\"2\" Y=\"2\"/>\
                     <Corner X=\"2\" Y=\"0\"/><Corner X=\"0\" Y=\"2\"/>\n</Wall>\n</Lab>";
         let err = lab_err(text);
-        assert!(
-            matches!(err, MapLoadError::DegenerateWall { pos } if pos == at(2, 1)),
-            "{err:?}"
-        );
+        assert!(matches!(err, MapLoadError::DegenerateWall { pos } if pos == at(2, 1)), "{err:?}");
     }
 
     #[test]
@@ -1134,20 +982,15 @@ mod tests {
         let text = "<Lab>\n  <Wall><Corner X=\"1\" Y=\"1\"/><Corner X=\"6\" Y=\"1\"/><Corner X=\"6\" Y=\"4\"/>\
                     <Corner X=\"2\" Y=\"4\"/><Corner X=\"4\" Y=\"0.5\"/></Wall>\n</Lab>";
         let err = lab_err(text);
-        assert!(
-            matches!(err, MapLoadError::DegenerateWall { pos } if pos == at(2, 3)),
-            "{err:?}"
-        );
+        assert!(matches!(err, MapLoadError::DegenerateWall { pos } if pos == at(2, 3)), "{err:?}");
     }
 
     #[test]
     fn a_wall_with_collinear_corners_is_degenerate() {
-        let text = "<Lab><Wall><Corner X=\"1\" Y=\"1\"/><Corner X=\"2\" Y=\"2\"/><Corner X=\"3\" Y=\"3\"/></Wall></Lab>";
+        let text =
+            "<Lab><Wall><Corner X=\"1\" Y=\"1\"/><Corner X=\"2\" Y=\"2\"/><Corner X=\"3\" Y=\"3\"/></Wall></Lab>";
         let err = lab_err(text);
-        assert!(
-            matches!(err, MapLoadError::DegenerateWall { pos } if pos == at(1, 6)),
-            "{err:?}"
-        );
+        assert!(matches!(err, MapLoadError::DegenerateWall { pos } if pos == at(1, 6)), "{err:?}");
     }
 
     #[test]
@@ -1156,10 +999,7 @@ mod tests {
         let text = "<Lab><Wall><Corner X=\"1\" Y=\"1\"/><Corner X=\"3\" Y=\"1\"/><Corner X=\"4\" Y=\"1\"/>\
                     <Corner X=\"3\" Y=\"1.0\"/><Corner X=\"3\" Y=\"3\"/><Corner X=\"1\" Y=\"3\"/></Wall></Lab>";
         let err = lab_err(text);
-        assert!(
-            matches!(err, MapLoadError::DegenerateWall { .. }),
-            "{err:?}"
-        );
+        assert!(matches!(err, MapLoadError::DegenerateWall { .. }), "{err:?}");
     }
 
     #[test]
@@ -1168,10 +1008,7 @@ mod tests {
             "<Lab><Wall><Corner X=\"1\" Y=\"1\"/><Corner X=\"1\" Y=\"2\"/>\
              <Corner X=\"2\" Y=\"2\"/><Corner X=\"2\" Y=\"1\"/></Wall></Lab>",
         );
-        assert_eq!(
-            corners(&lab.walls[0]),
-            [(1.0, 1.0), (2.0, 1.0), (2.0, 2.0), (1.0, 2.0)]
-        );
+        assert_eq!(corners(&lab.walls[0]), [(1.0, 1.0), (2.0, 1.0), (2.0, 2.0), (1.0, 2.0)]);
         assert!(signed_area(&lab.walls[0].corners) > 0.0);
     }
 
@@ -1181,10 +1018,7 @@ mod tests {
             "<Lab><Wall><Corner X=\"1\" Y=\"1\"/><Corner X=\"2\" Y=\"1\"/>\
              <Corner X=\"2\" Y=\"2\"/><Corner X=\"1\" Y=\"2\"/></Wall></Lab>",
         );
-        assert_eq!(
-            corners(&lab.walls[0]),
-            [(1.0, 1.0), (2.0, 1.0), (2.0, 2.0), (1.0, 2.0)]
-        );
+        assert_eq!(corners(&lab.walls[0]), [(1.0, 1.0), (2.0, 1.0), (2.0, 2.0), (1.0, 2.0)]);
     }
 
     #[test]
@@ -1213,20 +1047,8 @@ mod tests {
              </Lab>",
         );
         assert_eq!(lab.name, "A & B");
-        assert_eq!(
-            lab.beacons,
-            [Beacon {
-                pos: Point2::new(1.0, 2.0),
-                height_m: 0.0
-            }]
-        );
-        assert_eq!(
-            lab.targets,
-            [Target {
-                pos: Point2::new(3.0, 4.0),
-                radius_m: 2.0
-            }]
-        );
+        assert_eq!(lab.beacons, [Beacon { pos: Point2::new(1.0, 2.0), height_m: 0.0 }]);
+        assert_eq!(lab.targets, [Target { pos: Point2::new(3.0, 4.0), radius_m: 2.0 }]);
         assert_eq!(lab.walls[0].height_m, DEFAULT_WALL_HEIGHT_M);
     }
 
@@ -1250,41 +1072,24 @@ mod tests {
              <Row Pos=\"11\" Pattern=\"--+--\" Height=\"1.5\"/>\n</Lab>",
         );
         assert_eq!(lab.walls.len(), 2);
-        assert_eq!(
-            corners(&lab.walls[0]),
-            [(7.9, 12.0), (8.1, 12.0), (8.1, 14.0), (7.9, 14.0)]
-        );
+        assert_eq!(corners(&lab.walls[0]), [(7.9, 12.0), (8.1, 12.0), (8.1, 14.0), (7.9, 14.0)]);
         assert_eq!(lab.walls[0].height_m, DEFAULT_WALL_HEIGHT_M);
-        assert_eq!(
-            corners(&lab.walls[1]),
-            [(0.0, 11.9), (4.0, 11.9), (4.0, 12.1), (0.0, 12.1)]
-        );
+        assert_eq!(corners(&lab.walls[1]), [(0.0, 11.9), (4.0, 11.9), (4.0, 12.1), (0.0, 12.1)]);
         assert_eq!(lab.walls[1].height_m, 1.5);
     }
 
     #[test]
     fn a_row_reaching_past_the_lab_is_reported_at_the_row() {
-        let err = lab_err(
-            "<Lab Width=\"4\" Height=\"14\">\n  <Row Pos=\"12\" Pattern=\"     |\"/>\n</Lab>",
-        );
-        assert!(
-            matches!(err, MapLoadError::CornerOutsideLab { pos, .. } if pos == at(2, 3)),
-            "{err:?}"
-        );
+        let err = lab_err("<Lab Width=\"4\" Height=\"14\">\n  <Row Pos=\"12\" Pattern=\"     |\"/>\n</Lab>");
+        assert!(matches!(err, MapLoadError::CornerOutsideLab { pos, .. } if pos == at(2, 3)), "{err:?}");
     }
 
     #[test]
     fn a_row_needs_a_whole_non_negative_pos_and_a_pattern() {
         let err = lab_err("<Lab><Row Pos=\"1.5\" Pattern=\"--\"/></Lab>");
-        assert!(
-            matches!(&err, MapLoadError::OutOfRange { attr, .. } if attr == "Pos"),
-            "{err:?}"
-        );
+        assert!(matches!(&err, MapLoadError::OutOfRange { attr, .. } if attr == "Pos"), "{err:?}");
         let err = lab_err("<Lab><Row Pos=\"-2\" Pattern=\"--\"/></Lab>");
-        assert!(
-            matches!(&err, MapLoadError::OutOfRange { attr, .. } if attr == "Pos"),
-            "{err:?}"
-        );
+        assert!(matches!(&err, MapLoadError::OutOfRange { attr, .. } if attr == "Pos"), "{err:?}");
         let err = lab_err("<Lab><Row Pos=\"2\"/></Lab>");
         assert!(
             matches!(&err, MapLoadError::MissingAttribute { attr, pos, .. } if attr == "Pattern" && *pos == at(1, 6)),
@@ -1297,26 +1102,10 @@ mod tests {
         let cases = [
             ("<Lab Width=\"0\"/>", "Lab", "Width"),
             ("<Lab Height=\"-3\"/>", "Lab", "Height"),
-            (
-                "<Lab><Target X=\"1\" Y=\"1\" Radius=\"0\"/></Lab>",
-                "Target",
-                "Radius",
-            ),
-            (
-                "<Lab><Beacon X=\"1\" Y=\"1\" Height=\"-1\"/></Lab>",
-                "Beacon",
-                "Height",
-            ),
-            (
-                "<Lab Width=\"5\"><Beacon X=\"6\" Y=\"1\"/></Lab>",
-                "Beacon",
-                "X",
-            ),
-            (
-                "<Lab Height=\"5\"><Target X=\"1\" Y=\"-1\"/></Lab>",
-                "Target",
-                "Y",
-            ),
+            ("<Lab><Target X=\"1\" Y=\"1\" Radius=\"0\"/></Lab>", "Target", "Radius"),
+            ("<Lab><Beacon X=\"1\" Y=\"1\" Height=\"-1\"/></Lab>", "Beacon", "Height"),
+            ("<Lab Width=\"5\"><Beacon X=\"6\" Y=\"1\"/></Lab>", "Beacon", "X"),
+            ("<Lab Height=\"5\"><Target X=\"1\" Y=\"-1\"/></Lab>", "Target", "Y"),
             (
                 "<Lab><Wall Height=\"-1\"><Corner X=\"1\" Y=\"1\"/><Corner X=\"2\" Y=\"1\"/>\
                  <Corner X=\"2\" Y=\"2\"/></Wall></Lab>",
@@ -1345,30 +1134,15 @@ mod tests {
         ];
         for (text, want) in cases {
             let err = lab_err(text);
-            assert!(
-                matches!(&err, MapLoadError::Syntax { pos, .. } if *pos == want),
-                "{text:?}: {err:?}"
-            );
-            assert!(
-                err.to_string()
-                    .starts_with(&format!("{want}: malformed XML: ")),
-                "{err}"
-            );
+            assert!(matches!(&err, MapLoadError::Syntax { pos, .. } if *pos == want), "{text:?}: {err:?}");
+            assert!(err.to_string().starts_with(&format!("{want}: malformed XML: ")), "{err}");
         }
     }
 
     #[test]
     fn a_file_without_elements_is_empty() {
-        for text in [
-            "",
-            "   \n",
-            "<?xml version=\"1.0\"?><!-- nothing -->",
-            "just text",
-        ] {
-            assert!(
-                matches!(parse_lab(text), Err(MapLoadError::Empty)),
-                "{text:?}"
-            );
+        for text in ["", "   \n", "<?xml version=\"1.0\"?><!-- nothing -->", "just text"] {
+            assert!(matches!(parse_lab(text), Err(MapLoadError::Empty)), "{text:?}");
         }
     }
 
@@ -1376,31 +1150,21 @@ mod tests {
     fn a_byte_order_mark_is_skipped() {
         assert_eq!(lab_ok("\u{feff}<Lab Name=\"bom\"/>").name, "bom");
         let err = lab_err("\u{feff}<Lab Width=\"x\"/>");
-        assert!(
-            matches!(err, MapLoadError::NotANumber { pos, .. } if pos == at(1, 1)),
-            "{err:?}"
-        );
+        assert!(matches!(err, MapLoadError::NotANumber { pos, .. } if pos == at(1, 1)), "{err:?}");
     }
 
     #[test]
     fn a_grid_reads_positions_in_order_with_dir_defaulting_to_zero() {
-        let grid = match parse_grid(
-            "<Grid>\n<Position X=\"9\" Y=\"3\" Dir=\"90\"/>\n<Position X=\"5\" Y=\"7\"/>\n</Grid>",
-        ) {
-            Ok(grid) => grid,
-            Err(err) => panic!("{err}"),
-        };
+        let grid =
+            match parse_grid("<Grid>\n<Position X=\"9\" Y=\"3\" Dir=\"90\"/>\n<Position X=\"5\" Y=\"7\"/>\n</Grid>") {
+                Ok(grid) => grid,
+                Err(err) => panic!("{err}"),
+            };
         assert_eq!(
             grid.poses,
             [
-                StartPose {
-                    pos: Point2::new(9.0, 3.0),
-                    heading_deg: 90.0
-                },
-                StartPose {
-                    pos: Point2::new(5.0, 7.0),
-                    heading_deg: 0.0
-                },
+                StartPose { pos: Point2::new(9.0, 3.0), heading_deg: 90.0 },
+                StartPose { pos: Point2::new(5.0, 7.0), heading_deg: 0.0 },
             ]
         );
     }
@@ -1454,14 +1218,7 @@ mod tests {
         assert_eq!(p.noise.gps_pos_m, 0.4);
         assert_eq!(p.noise.gps_heading_deg, 4.0);
         assert_eq!(p.noise.encoder_slip_frac, 0.02);
-        assert_eq!(
-            p.sensors,
-            crate::map::SensorSwitches {
-                gps: true,
-                beacon: true,
-                compass: false
-            }
-        );
+        assert_eq!(p.sensors, crate::map::SensorSwitches { gps: true, beacon: true, compass: false });
         assert_eq!(
             p.requests,
             crate::map::RequestParams {
@@ -1475,14 +1232,7 @@ mod tests {
         );
         assert_eq!(
             p.latency,
-            crate::map::LatencyParams {
-                proximity: 1,
-                beacon: 2,
-                ground: 3,
-                compass: 4,
-                collision: 0,
-                gps: 5
-            }
+            crate::map::LatencyParams { proximity: 1, beacon: 2, ground: 3, compass: 4, collision: 0, gps: 5 }
         );
         assert_eq!(p.beacon_aperture_rad, 1.25);
         assert_eq!(p.proximity_range_m, 2.5);
@@ -1493,10 +1243,7 @@ mod tests {
 
     #[test]
     fn the_example_params_file_spells_out_the_defaults() {
-        assert_eq!(
-            params_ok(include_str!("../../maps/params-example.xml")),
-            Params::default()
-        );
+        assert_eq!(params_ok(include_str!("../../maps/params-example.xml")), Params::default());
     }
 
     #[test]
@@ -1508,10 +1255,7 @@ mod tests {
             ("<Parameters SimTime=\"-1\"/>", "SimTime"),
             ("<Parameters EncoderTicks=\"0\"/>", "EncoderTicks"),
             ("<Parameters WheelRadius=\"0\"/>", "WheelRadius"),
-            (
-                "<Parameters ObstacleLatency=\"99999999999\"/>",
-                "ObstacleLatency",
-            ),
+            ("<Parameters ObstacleLatency=\"99999999999\"/>", "ObstacleLatency"),
         ];
         for (text, want_attr) in cases {
             let err = parse_params(text).expect_err(text);
@@ -1521,19 +1265,14 @@ mod tests {
             );
         }
         let err = parse_params("<Parameters\n  BeaconNoise=\"lots\"/>").expect_err("not a number");
-        assert!(
-            matches!(&err, MapLoadError::NotANumber { attr, .. } if attr == "BeaconNoise"),
-            "{err:?}"
-        );
+        assert!(matches!(&err, MapLoadError::NotANumber { attr, .. } if attr == "BeaconNoise"), "{err:?}");
     }
 
     #[test]
     fn parse_any_dispatches_on_the_root_element() {
         assert!(matches!(parse_any("<Lab/>"), Ok(MapFile::Lab(_))));
         assert!(matches!(parse_any("<Grid/>"), Ok(MapFile::Grid(_))));
-        assert!(
-            matches!(parse_any("<Parameters GPS=\"On\"/>"), Ok(MapFile::Params(p)) if p.sensors.gps)
-        );
+        assert!(matches!(parse_any("<Parameters GPS=\"On\"/>"), Ok(MapFile::Params(p)) if p.sensors.gps));
         let err = parse_any("\n <Robot Name=\"r\"/>").expect_err("not a map file");
         assert!(
             matches!(&err, MapLoadError::UnknownRoot { pos, found, expected: "Lab, Grid or Parameters" }
@@ -1541,18 +1280,13 @@ mod tests {
             "{err:?}"
         );
         // Errors inside a dispatched file are the file's own.
-        assert!(matches!(
-            parse_any("<Grid><Position X=\"a\" Y=\"1\"/></Grid>"),
-            Err(MapLoadError::NotANumber { .. })
-        ));
+        assert!(matches!(parse_any("<Grid><Position X=\"a\" Y=\"1\"/></Grid>"), Err(MapLoadError::NotANumber { .. })));
     }
 
     #[test]
     fn reading_a_missing_file_is_an_io_error() {
         let err = read_text(Path::new("/nonexistent/iwsim/lab.xml")).expect_err("missing");
-        assert!(
-            matches!(&err, MapLoadError::Io { path, .. } if path == Path::new("/nonexistent/iwsim/lab.xml"))
-        );
+        assert!(matches!(&err, MapLoadError::Io { path, .. } if path == Path::new("/nonexistent/iwsim/lab.xml")));
         assert!(std::error::Error::source(&err).is_some());
     }
 

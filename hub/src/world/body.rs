@@ -185,7 +185,9 @@ impl RobotSpec {
             return Err(AddRobotError::TooManySensors { count: self.sensors.len(), max: MAX_PROXIMITY });
         }
         for (index, s) in self.sensors.iter().enumerate() {
-            for (field, v) in [("sensor x", s.x_m), ("sensor y", s.y_m), ("sensor angle", s.angle_rad), ("sensor cone", s.cone_rad)] {
+            for (field, v) in
+                [("sensor x", s.x_m), ("sensor y", s.y_m), ("sensor angle", s.angle_rad), ("sensor cone", s.cone_rad)]
+            {
                 if !v.is_finite() {
                     return Err(AddRobotError::BadSensor { index, field, value: v, expected: "a finite number" });
                 }
@@ -309,11 +311,7 @@ impl BodyShape {
         let half = Vector2::new(spec.width_m / 2.0, spec.height_m / 2.0);
         let front = spec.com * spec.width_m;
         let rear = (1.0 - spec.com) * spec.width_m;
-        Self {
-            centre_offset: (spec.com - 0.5) * spec.width_m,
-            half,
-            bound_radius: front.max(rear).hypot(half.y),
-        }
+        Self { centre_offset: (spec.com - 0.5) * spec.width_m, half, bound_radius: front.max(rear).hypot(half.y) }
     }
 
     /// The rectangle placed at a pose.
@@ -377,7 +375,8 @@ mod tests {
         for com in [0.5, 0.8] {
             let spec = RobotSpec::at(0.0, 0.0, 0.0).body(1.2, 0.7, com);
             let d = spec.default_sensors();
-            let want = [(com * 1.2, 0.0, 0.0), (0.0, 0.35, 90.0), (0.0, -0.35, -90.0), (-(1.0 - com) * 1.2, 0.0, 180.0)];
+            let want =
+                [(com * 1.2, 0.0, 0.0), (0.0, 0.35, 90.0), (0.0, -0.35, -90.0), (-(1.0 - com) * 1.2, 0.0, 180.0)];
             assert_eq!(d.len(), 4);
             for (s, (x, y, a)) in d.iter().zip(want) {
                 assert!((s.x_m - x).abs() < 1e-12 && (s.y_m - y).abs() < 1e-12);
@@ -391,10 +390,22 @@ mod tests {
     fn invalid_parameters_are_refused_with_the_field_named() {
         let ok = RobotSpec::at(1.0, 1.0, 0.0);
         assert_eq!(ok.validate(), Ok(()));
-        assert!(matches!(ok.clone().body(0.0, 1.0, 0.5).validate(), Err(AddRobotError::OutOfRange { field: "width", .. })));
-        assert!(matches!(ok.clone().body(1.0, 1.0, 1.0).validate(), Err(AddRobotError::OutOfRange { field: "com", .. })));
-        assert!(matches!(ok.clone().motors(0.5, 1.0).validate(), Err(AddRobotError::OutOfRange { field: "accel_curve", .. })));
-        assert!(matches!(ok.clone().body(f64::NAN, 1.0, 0.5).validate(), Err(AddRobotError::NotFinite { field: "width" })));
+        assert!(matches!(
+            ok.clone().body(0.0, 1.0, 0.5).validate(),
+            Err(AddRobotError::OutOfRange { field: "width", .. })
+        ));
+        assert!(matches!(
+            ok.clone().body(1.0, 1.0, 1.0).validate(),
+            Err(AddRobotError::OutOfRange { field: "com", .. })
+        ));
+        assert!(matches!(
+            ok.clone().motors(0.5, 1.0).validate(),
+            Err(AddRobotError::OutOfRange { field: "accel_curve", .. })
+        ));
+        assert!(matches!(
+            ok.clone().body(f64::NAN, 1.0, 0.5).validate(),
+            Err(AddRobotError::NotFinite { field: "width" })
+        ));
         let nine = vec![ProximitySpec::deg(0.0, 0.0, 0.0, 60.0); 9];
         assert!(matches!(ok.clone().sensors(nine).validate(), Err(AddRobotError::TooManySensors { count: 9, max: 8 })));
         let bad_cone = vec![ProximitySpec::deg(0.0, 0.0, 0.0, 0.0)];

@@ -39,7 +39,9 @@ impl World {
                     let tri = &s.triangles[t as usize];
                     if overlaps(m.next_min, m.next_max, tri.min, tri.max)
                         && box_hits_triangle(&m.next, &tri.p)
-                        && !(escape && overlaps(m.cur_min, m.cur_max, tri.min, tri.max) && box_hits_triangle(&m.cur, &tri.p))
+                        && !(escape
+                            && overlaps(m.cur_min, m.cur_max, tri.min, tri.max)
+                            && box_hits_triangle(&m.cur, &tri.p))
                     {
                         return true;
                     }
@@ -53,10 +55,13 @@ impl World {
                 return;
             }
             let o = &self.motion[j];
-            let meets = |b: &PlacedBox, bmin, bmax| overlaps(m.next_min, m.next_max, bmin, bmax) && boxes_intersect(&m.next, b);
-            let meets_other = meets(&o.cur, o.cur_min, o.cur_max) || (o.moving && meets(&o.next, o.next_min, o.next_max));
+            let meets =
+                |b: &PlacedBox, bmin, bmax| overlaps(m.next_min, m.next_max, bmin, bmax) && boxes_intersect(&m.next, b);
+            let meets_other =
+                meets(&o.cur, o.cur_min, o.cur_max) || (o.moving && meets(&o.next, o.next_min, o.next_max));
             if meets_other {
-                let already = escape && overlaps(m.cur_min, m.cur_max, o.cur_min, o.cur_max) && boxes_intersect(&m.cur, &o.cur);
+                let already =
+                    escape && overlaps(m.cur_min, m.cur_max, o.cur_min, o.cur_max) && boxes_intersect(&m.cur, &o.cur);
                 hit = !already;
             }
         });

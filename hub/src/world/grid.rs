@@ -334,9 +334,7 @@ pub(crate) fn triangulate(poly: &[Point2<Real>]) -> Option<Vec<[usize; 3]>> {
             if cross(b - a, c - b) <= 0.0 {
                 continue; // reflex or collinear: not an ear
             }
-            let blocked = idx.iter().any(|&j| {
-                j != ip && j != ic && j != inx && point_in_triangle(poly[j], a, b, c)
-            });
+            let blocked = idx.iter().any(|&j| j != ip && j != ic && j != inx && point_in_triangle(poly[j], a, b, c));
             if !blocked {
                 out.push([ip, ic, inx]);
                 idx.remove(i);

@@ -23,8 +23,8 @@ use thiserror::Error;
 pub use body::{AddRobotError, MAX_NAME_LEN, MAX_PROXIMITY, ProximitySpec, RobotKind, RobotSpec};
 pub use grid::StaticBuildError;
 pub use readings::{
-    GpsReading, Heard, MAX_BEACONS, MAX_INBOX_BYTES, MAX_MESSAGE_BYTES, Message, MessageTooLong,
-    SensorReadings, ciber_rato_value,
+    GpsReading, Heard, MAX_BEACONS, MAX_INBOX_BYTES, MAX_MESSAGE_BYTES, Message, MessageTooLong, SensorReadings,
+    ciber_rato_value,
 };
 
 use crate::geom::PlacedBox;
@@ -269,7 +269,10 @@ impl Geo {
             corners: robot.shape.corners_ccw(&robot.pose, c, s),
             // Outward normals of the edges front, left, rear, right (corner i → i+1).
             normals: [heading, left, -heading, -left],
-            inv_len2: [1.0 / (4.0 * robot.shape.half.y * robot.shape.half.y), 1.0 / (4.0 * robot.shape.half.x * robot.shape.half.x)],
+            inv_len2: [
+                1.0 / (4.0 * robot.shape.half.y * robot.shape.half.y),
+                1.0 / (4.0 * robot.shape.half.x * robot.shape.half.x),
+            ],
         }
     }
 }
@@ -352,10 +355,15 @@ impl World {
             }
         }
         let statics = StaticIndex::build(lab, STATIC_CELL_M)?;
-        let dyn_spec = GridSpec::covering(statics.spec.min, statics.spec.min + Vector2::new(
-            statics.spec.nx as Real * statics.spec.cell,
-            statics.spec.ny as Real * statics.spec.cell,
-        ), DYN_CELL_M);
+        let dyn_spec = GridSpec::covering(
+            statics.spec.min,
+            statics.spec.min
+                + Vector2::new(
+                    statics.spec.nx as Real * statics.spec.cell,
+                    statics.spec.ny as Real * statics.spec.cell,
+                ),
+            DYN_CELL_M,
+        );
         let scratch = Scratch { edge_stamp: vec![0; statics.edges.len()], ..Scratch::default() };
         Ok(Self {
             lab: lab.clone(),
@@ -509,8 +517,14 @@ impl World {
             Some(_) => {
                 let g = &self.geo[i];
                 let r = g.bound_radius;
-                let far = g.centre.x + r < min.x || g.centre.x - r > max.x || g.centre.y + r < min.y || g.centre.y - r > max.y;
-                far || !crate::geom::boxes_intersect(&placed, &s.robot.as_ref().map(|r| r.shape.placed(&r.pose)).unwrap_or(placed))
+                let far = g.centre.x + r < min.x
+                    || g.centre.x - r > max.x
+                    || g.centre.y + r < min.y
+                    || g.centre.y - r > max.y;
+                far || !crate::geom::boxes_intersect(
+                    &placed,
+                    &s.robot.as_ref().map(|r| r.shape.placed(&r.pose)).unwrap_or(placed),
+                )
             }
             None => true,
         })
@@ -590,7 +604,8 @@ impl World {
                     let c = r.spec.accel_curve;
                     for w in 0..2 {
                         let out = (1.0 - c) * r.motor_in[w] + c * r.motor_out[w];
-                        r.motor_out[w] = if motor_noise > 0.0 { out * (1.0 + motor_noise * self.rng.gaussian()) } else { out };
+                        r.motor_out[w] =
+                            if motor_noise > 0.0 { out * (1.0 + motor_noise * self.rng.gaussian()) } else { out };
                     }
                     let (v, omega) = r.velocity();
                     Pose {
@@ -640,7 +655,8 @@ impl World {
     }
 
     fn commit(&mut self, dt: Real) {
-        let ticks_per_m = self.params.encoder_ticks_per_rev as Real / (std::f64::consts::TAU * self.params.wheel_radius_m);
+        let ticks_per_m =
+            self.params.encoder_ticks_per_rev as Real / (std::f64::consts::TAU * self.params.wheel_radius_m);
         let slip = self.params.noise.encoder_slip_frac;
         for (i, slot) in self.slots.iter_mut().enumerate() {
             let Some(r) = &mut slot.robot else { continue };

@@ -103,7 +103,8 @@ impl Scene<'_> {
         self.gather(i, r, cands);
         // The heading's cosine and sine, computed when the pose was committed.
         let heading = self.geo[i].normals[0];
-        let distances = proximity_all(&r.sensors[..r.sensor_count], pos, heading.x, heading.y, cands.local, cands.segments);
+        let distances =
+            proximity_all(&r.sensors[..r.sensor_count], pos, heading.x, heading.y, cands.local, cands.segments);
         for (k, &d) in distances.iter().enumerate().take(r.sensor_count) {
             out.proximity_m[k] = if noise.proximity_m > 0.0 { rng.noisy(d, noise.proximity_m).max(0.0) } else { d };
         }
@@ -172,7 +173,8 @@ impl Scene<'_> {
             let near = reach + g.bound_radius;
             if j as usize != i && g.alive && (g.centre - pos).norm_squared() <= near * near {
                 for k in 0..4 {
-                    let seg = Segment::with_normal(g.corners[k], g.corners[(k + 1) % 4], g.normals[k], g.inv_len2[k & 1]);
+                    let seg =
+                        Segment::with_normal(g.corners[k], g.corners[(k + 1) % 4], g.normals[k], g.inv_len2[k & 1]);
                     if visible_from(&seg, pos, inner, reach) {
                         cands.segments.push(seg);
                         cands.local.push(LocalSegment::new(&seg, pos));
@@ -220,6 +222,8 @@ struct F8([f32; 8]);
 #[derive(Debug, Clone, Copy)]
 struct M8([bool; 8]);
 
+// Index loops over the eight lanes are the shape LLVM vectorises most reliably.
+#[allow(clippy::needless_range_loop)]
 impl F8 {
     const ZERO: F8 = F8([0.0; 8]);
 
@@ -253,7 +257,7 @@ impl F8 {
 
     #[inline(always)]
     fn clamp01(self) -> F8 {
-        self.zip(F8::ZERO, |a, _| if a < 0.0 { 0.0 } else if a > 1.0 { 1.0 } else { a })
+        self.zip(F8::ZERO, |a, _| a.clamp(0.0, 1.0))
     }
 
     #[inline(always)]
@@ -267,6 +271,7 @@ impl F8 {
     }
 }
 
+#[allow(clippy::needless_range_loop)]
 impl M8 {
     #[inline(always)]
     fn and(self, o: M8) -> M8 {
@@ -342,7 +347,8 @@ fn proximity_all(
     segments: &[Segment],
 ) -> [Real; MAX_PROXIMITY] {
     const L: usize = MAX_PROXIMITY;
-    let (mut px, mut py, mut u1x, mut u1y, mut u2x, mut u2y) = (F8::ZERO, F8::ZERO, F8::ZERO, F8::ZERO, F8::ZERO, F8::ZERO);
+    let (mut px, mut py, mut u1x, mut u1y, mut u2x, mut u2y) =
+        (F8::ZERO, F8::ZERO, F8::ZERO, F8::ZERO, F8::ZERO, F8::ZERO);
     let mut best_sq = F8::ZERO;
     for (k, sensor) in sensors.iter().enumerate() {
         let p = rotate(sensor.origin, c, s);
@@ -367,14 +373,19 @@ fn proximity_all(
         let a_sq = in_cone(cone, wx, wy).select(wx * wx + wy * wy, inf);
         let b_sq = in_cone(cone, bx, by).select(bx * bx + by * by, inf);
         let w_x_d = wx * dy - wy * dx;
-        let edge_sq = cross_edge_sq(u1x, u1y, wx, wy, dx, dy, w_x_d).min(cross_edge_sq(u2x, u2y, wx, wy, dx, dy, w_x_d));
+        let edge_sq =
+            cross_edge_sq(u1x, u1y, wx, wy, dx, dy, w_x_d).min(cross_edge_sq(u2x, u2y, wx, wy, dx, dy, w_x_d));
         let d_sq = in_cone(cone, qx, qy).select(qx * qx + qy * qy, a_sq.min(b_sq).min(edge_sq));
         best_sq = best_sq.min(facing.select(d_sq, inf));
     }
     let best_sq = best_sq.0;
     let mut out = [0.0; L];
     for (k, sensor) in sensors.iter().enumerate() {
-        out[k] = if sensor.wide { proximity(sensor, pos, c, s, segments) } else { (best_sq[k] as Real).sqrt().min(sensor.range) };
+        out[k] = if sensor.wide {
+            proximity(sensor, pos, c, s, segments)
+        } else {
+            (best_sq[k] as Real).sqrt().min(sensor.range)
+        };
     }
     out
 }
@@ -415,7 +426,14 @@ fn noisy_deg(rng: &mut Rng, angle_rad: Real, sigma_deg: Real) -> Real {
 /// segment's closest point to `p` lies in the cone, that is the answer; only otherwise is the
 /// segment clipped to the cone.
 #[inline]
-pub(crate) fn cone_distance_sq(p: Point2<Real>, u1: Vector2<Real>, u2: Vector2<Real>, seg: &Segment, best: &mut Real, best_sq: &mut Real) {
+pub(crate) fn cone_distance_sq(
+    p: Point2<Real>,
+    u1: Vector2<Real>,
+    u2: Vector2<Real>,
+    seg: &Segment,
+    best: &mut Real,
+    best_sq: &mut Real,
+) {
     let w = seg.a - p;
     let h = -seg.normal.dot(&w);
     if h < 0.0 || h >= *best {
@@ -441,7 +459,13 @@ pub(crate) fn cone_distance_sq(p: Point2<Real>, u1: Vector2<Real>, u2: Vector2<R
 /// cone, given that its unconstrained closest point t* is outside the cone: the answer is the
 /// clipped end nearer to t*.
 #[cold]
-fn clipped_distance_sq(u1: Vector2<Real>, u2: Vector2<Real>, w: Vector2<Real>, d: Vector2<Real>, t_star: Real) -> Option<Real> {
+fn clipped_distance_sq(
+    u1: Vector2<Real>,
+    u2: Vector2<Real>,
+    w: Vector2<Real>,
+    d: Vector2<Real>,
+    t_star: Real,
+) -> Option<Real> {
     // Keep the part of w + t·d with cross(u1, ·) ≥ 0 and cross(·, u2) ≥ 0; k0 + t·k1 is
     // each side's value along the segment.
     let sides = [(cross(u1, w), cross(u1, d)), (cross(w, u2), cross(d, u2))];
@@ -468,7 +492,15 @@ fn clipped_distance_sq(u1: Vector2<Real>, u2: Vector2<Real>, w: Vector2<Real>, d
 
 /// The distance form of [`cone_distance_sq`], for tests.
 #[cfg(test)]
-fn cone_distance(p: Point2<Real>, u1: Vector2<Real>, u2: Vector2<Real>, a: Point2<Real>, b: Point2<Real>, normal: Vector2<Real>, best: Real) -> Real {
+fn cone_distance(
+    p: Point2<Real>,
+    u1: Vector2<Real>,
+    u2: Vector2<Real>,
+    a: Point2<Real>,
+    b: Point2<Real>,
+    normal: Vector2<Real>,
+    best: Real,
+) -> Real {
     let len2 = (b - a).norm_squared();
     let seg = Segment::with_normal(a, b, normal, 1.0 / len2);
     let (mut best, mut best_sq) = (best, best * best);
@@ -517,7 +549,15 @@ mod tests {
     fn a_corner_inside_the_cone_is_the_nearest_point() {
         // A face from (2, 1) to (2, 10) seen with a ±30° cone: the corner at (2, 1) is in the
         // cone (26.6°), so the distance is √5.
-        let d = cone_distance(Point2::origin(), unit(-30.0), unit(30.0), Point2::new(2.0, 10.0), Point2::new(2.0, 1.0), Vector2::new(-1.0, 0.0), 10.0);
+        let d = cone_distance(
+            Point2::origin(),
+            unit(-30.0),
+            unit(30.0),
+            Point2::new(2.0, 10.0),
+            Point2::new(2.0, 1.0),
+            Vector2::new(-1.0, 0.0),
+            10.0,
+        );
         assert!((d - 5f64.sqrt()).abs() < 1e-12, "{d}");
     }
 

@@ -13,10 +13,7 @@ fn empty_lab(w: Real, h: Real) -> Lab {
 }
 
 fn rect_wall(x0: Real, y0: Real, x1: Real, y1: Real, height_m: Real) -> Wall {
-    Wall {
-        height_m,
-        corners: vec![Point2::new(x0, y0), Point2::new(x1, y0), Point2::new(x1, y1), Point2::new(x0, y1)],
-    }
+    Wall { height_m, corners: vec![Point2::new(x0, y0), Point2::new(x1, y0), Point2::new(x1, y1), Point2::new(x0, y1)] }
 }
 
 fn quiet() -> Params {
@@ -322,7 +319,11 @@ fn real_robots_take_pushed_poses_are_never_blocked_and_report_collisions() {
 fn beacons_are_hidden_by_taller_walls_and_outside_the_aperture() {
     let mut lab = empty_lab(20.0, 8.0);
     lab.walls.push(rect_wall(9.0, 3.0, 10.0, 5.0, 2.0));
-    lab.beacons = vec![Beacon { pos: Point2::new(15.0, 4.0), height_m: 1.0 }, Beacon { pos: Point2::new(15.0, 4.0), height_m: 3.0 }, Beacon { pos: Point2::new(5.0, 7.0), height_m: 1.0 }];
+    lab.beacons = vec![
+        Beacon { pos: Point2::new(15.0, 4.0), height_m: 1.0 },
+        Beacon { pos: Point2::new(15.0, 4.0), height_m: 3.0 },
+        Beacon { pos: Point2::new(5.0, 7.0), height_m: 1.0 },
+    ];
     let mut p = quiet();
     p.sensors.beacon = true;
     p.beacon_aperture_rad = FRAC_PI_2;
@@ -344,7 +345,10 @@ fn beacons_are_hidden_by_taller_walls_and_outside_the_aperture() {
 #[test]
 fn compass_gps_and_ground_report_the_pose_when_noise_is_off() {
     let mut lab = empty_lab(20.0, 8.0);
-    lab.targets = vec![Target { pos: Point2::new(15.0, 4.0), radius_m: 1.0 }, Target { pos: Point2::new(5.0, 4.0), radius_m: 0.5 }];
+    lab.targets = vec![
+        Target { pos: Point2::new(15.0, 4.0), radius_m: 1.0 },
+        Target { pos: Point2::new(5.0, 4.0), radius_m: 0.5 },
+    ];
     let mut p = quiet();
     p.sensors.gps = true;
     let mut w = world(lab, p);
@@ -414,7 +418,8 @@ fn messages_reach_robots_within_8_m_and_no_farther() {
 fn a_robot_hears_at_most_400_bytes_a_tick() {
     let mut w = world(empty_lab(40.0, 20.0), quiet());
     let listener = w.add_robot(RobotSpec::at(10.0, 10.0, 0.0)).expect("valid");
-    let speakers: Vec<_> = (0..5).map(|k| w.add_robot(RobotSpec::at(4.0 + 3.0 * k as Real, 7.0, 0.0)).expect("valid")).collect();
+    let speakers: Vec<_> =
+        (0..5).map(|k| w.add_robot(RobotSpec::at(4.0 + 3.0 * k as Real, 7.0, 0.0)).expect("valid")).collect();
     let full = Message::new(&[b'x'; 100]).expect("100 bytes");
     let actions: Vec<_> = speakers.iter().map(|&s| Action::say(s, full)).collect();
     let stats = w.step(&actions, 0.1);
@@ -452,12 +457,15 @@ fn noisy_run(seed: u64) -> Vec<u64> {
     let mut lab = empty_lab(30.0, 20.0);
     lab.walls.push(rect_wall(10.0, 5.0, 12.0, 15.0, 2.0));
     lab.beacons.push(Beacon { pos: Point2::new(25.0, 10.0), height_m: 1.0 });
-    let mut p = Params::default();
-    p.sensors = crate::map::SensorSwitches { gps: true, beacon: true, compass: true };
+    let mut p =
+        Params { sensors: crate::map::SensorSwitches { gps: true, beacon: true, compass: true }, ..Params::default() };
     p.noise.encoder_slip_frac = 0.01;
     let mut w = World::new(&lab, p, seed).expect("valid");
     let robots: Vec<_> = (0..20)
-        .map(|k| w.add_robot(RobotSpec::at(2.0 + (k % 5) as Real * 5.0, 2.0 + (k / 5) as Real * 4.0, k as Real * 37.0)).expect("valid"))
+        .map(|k| {
+            w.add_robot(RobotSpec::at(2.0 + (k % 5) as Real * 5.0, 2.0 + (k / 5) as Real * 4.0, k as Real * 37.0))
+                .expect("valid")
+        })
         .collect();
     let hello = Message::new(b"hello").expect("short");
     (0..200)
@@ -487,4 +495,3 @@ fn one_seed_gives_bit_identical_runs_and_another_seed_differs() {
     assert_eq!(a, b);
     assert_ne!(a.last(), c.last());
 }
-

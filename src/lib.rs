@@ -1,0 +1,37 @@
+//! The `iwsim` command: one binary for every process of the simulator. Each subcommand lives
+//! in its own module as a library function, so tests and benches call the same code.
+#![warn(missing_docs)]
+
+pub mod bench;
+pub mod cli;
+pub mod demo;
+pub mod mapcheck;
+
+use std::process::ExitCode;
+
+use cli::{BenchCommand, Cli, Command, MapCommand};
+
+/// Logs go to stderr, filtered by `RUST_LOG` (e.g. `RUST_LOG=debug` or `RUST_LOG=hub=trace`);
+/// warnings and errors by default.
+pub fn init_logging() {
+    use tracing_subscriber::filter::{LevelFilter, Targets};
+    let filter = std::env::var("RUST_LOG")
+        .ok()
+        .and_then(|s| s.parse::<Targets>().ok())
+        .unwrap_or_else(|| Targets::new().with_default(LevelFilter::WARN));
+    use tracing_subscriber::layer::SubscriberExt;
+    use tracing_subscriber::util::SubscriberInitExt;
+    let _ = tracing_subscriber::registry()
+        .with(tracing_subscriber::fmt::layer().with_writer(std::io::stderr))
+        .with(filter)
+        .try_init();
+}
+
+/// Runs a parsed command line.
+pub fn run(cli: Cli) -> anyhow::Result<ExitCode> {
+    match cli.command {
+        Command::Map { command: MapCommand::Check { file } } => mapcheck::check(&file),
+        Command::Bench { command: BenchCommand::World(args) } => bench::world(&args),
+        Command::Demo(args) => demo::run(&args),
+    }
+}

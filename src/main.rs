@@ -1,0 +1,17 @@
+//! The `iwsim` binary: parses the command line, starts logging, runs the command.
+
+use std::process::ExitCode;
+
+use clap::Parser;
+
+fn main() -> ExitCode {
+    let cli = iwsim::cli::Cli::parse();
+    iwsim::init_logging();
+    match iwsim::run(cli) {
+        Ok(code) => code,
+        Err(err) => {
+            eprintln!("iwsim: error: {err:#}");
+            ExitCode::FAILURE
+        }
+    }
+}

@@ -1,0 +1,106 @@
+//! The `iwsim` binary run as a user runs it: real processes, real files, exit codes and output.
+
+use std::path::PathBuf;
+use std::process::{Command, Output};
+
+fn iwsim(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_iwsim")).args(args).output().expect("iwsim runs")
+}
+
+fn temp_file(name: &str, text: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("iwsim-cli-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("temp dir");
+    let path = dir.join(name);
+    std::fs::write(&path, text).expect("write temp file");
+    path
+}
+
+#[test]
+fn map_check_summarises_every_built_in_lab() {
+    for (name, walls) in [("liacc", "walls: 23"), ("thesis", "walls: 2"), ("maze", "walls: ")] {
+        let out = iwsim(&["map", "check", &format!("builtin:{name}")]);
+        let text = String::from_utf8_lossy(&out.stdout);
+        assert!(out.status.success(), "{name}: {}", String::from_utf8_lossy(&out.stderr));
+        assert!(text.contains(walls), "{name}: {text}");
+    }
+    let thesis = String::from_utf8_lossy(&iwsim(&["map", "check", "builtin:thesis"]).stdout).into_owned();
+    assert!(
+        thesis.contains("28 m x 14 m") && thesis.contains("beacons: 1") && thesis.contains("targets: 1"),
+        "{thesis}"
+    );
+}
+
+#[test]
+fn map_check_names_the_line_and_column_of_a_bad_corner() {
+    let path = temp_file(
+        "bad-corner.xml",
+        "<Lab Name=\"bad\" Width=\"10\" Height=\"5\">\n  <Wall Height=\"1\">\n    <Corner X=\"1\" Y=\"1\"/>\n    <Corner X=\"12\" Y=\"1\"/>\n    <Corner X=\"2\" Y=\"2\"/>\n  </Wall>\n</Lab>\n",
+    );
+    let out = iwsim(&["map", "check", path.to_str().expect("utf-8 path")]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1));
+    assert!(err.contains(":4:5:"), "{err}");
+    assert!(err.to_lowercase().contains("outside"), "{err}");
+}
+
+#[test]
+fn map_check_reports_an_unclosed_tag_without_panicking() {
+    let path = temp_file("unclosed.xml", "<Lab Width=\"10\" Height=\"5\">\n  <Wall>\n    <Corner X=\"1\" Y=\"1\"/>\n");
+    let out = iwsim(&["map", "check", path.to_str().expect("utf-8 path")]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(err.contains(":2:3:") && err.contains("Wall"), "{err}");
+    assert!(!err.contains("panicked"), "{err}");
+}
+
+#[test]
+fn map_check_reads_grid_and_parameter_files() {
+    let grid = temp_file(
+        "grid.xml",
+        "<Grid>\n<Position X=\"3\" Y=\"11\" Dir=\"90\"/>\n<Position X=\"5\" Y=\"7\"/>\n</Grid>\n",
+    );
+    let out = iwsim(&["map", "check", grid.to_str().expect("utf-8 path")]);
+    assert!(out.status.success());
+    assert!(String::from_utf8_lossy(&out.stdout).contains("grid, 2 start poses"));
+    let params = temp_file("params.xml", "<Parameters CycleTime=\"50\" GPS=\"On\" MotorsNoise=\"0\"/>\n");
+    let out = iwsim(&["map", "check", params.to_str().expect("utf-8 path")]);
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(out.status.success() && text.contains("cycle 50 ms") && text.contains("gps on"), "{text}");
+}
+
+#[test]
+fn map_check_refuses_an_unknown_root_and_a_missing_file() {
+    let path = temp_file("hello.xml", "<Hello/>\n");
+    let out = iwsim(&["map", "check", path.to_str().expect("utf-8 path")]);
+    assert_eq!(out.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&out.stderr).contains(":1:1:"));
+    let out = iwsim(&["map", "check", "/nonexistent/lab.xml"]);
+    assert_eq!(out.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("/nonexistent/lab.xml"));
+}
+
+#[test]
+fn bench_world_prints_the_documented_json_keys() {
+    let out = iwsim(&["bench", "world", "--robots", "30", "--ticks", "20", "--json"]);
+    assert!(out.status.success());
+    let text = String::from_utf8_lossy(&out.stdout);
+    for key in ["\"robots\":30", "\"ticks\":20", "\"ticks_per_s\":", "\"us_per_robot_tick\":"] {
+        assert!(text.contains(key), "{key} missing from {text}");
+    }
+}
+
+#[test]
+fn the_demo_runs_headless_and_logs_csv_with_units() {
+    let dir = std::env::temp_dir().join(format!("iwsim-demo-{}", std::process::id()));
+    let out = iwsim(&["demo", "--seconds", "5", "--out", dir.to_str().expect("utf-8 path")]);
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(text.contains("top speed 0.490 m/s") && text.contains("rise time 1.2 s"), "{text}");
+    let log = std::fs::read_to_string(dir.join("chair1.csv")).expect("log written");
+    let mut lines = log.lines();
+    assert!(
+        lines.next().expect("header").starts_with("tick,time_s,encoder_left_ticks,encoder_right_ticks,proximity0_m")
+    );
+    assert_eq!(lines.count(), 50, "one line per tick");
+    let _ = std::fs::remove_dir_all(dir);
+}
