@@ -170,13 +170,16 @@ pub fn wander(world: &World, robots: &[RobotHandle], out: &mut Vec<Action>) {
         if d.len() < 5 {
             continue;
         }
-        let front = d[0].min(d[1]).min(d[2]);
-        let (left, right) = (d[1].min(d[3]), d[2].min(d[4]));
-        let turn_left = left > right || (left == right && k % 2 == 0);
-        let (l, rr) = if front < 0.8 || r.collision {
+        // Straight ahead decides whether to turn on the spot; the diagonals and sides only
+        // steer, so a chair follows a corridor narrower than its sensors' reach.
+        let (ahead, front_left, front_right, left, right) = (d[0], d[1], d[2], d[3], d[4]);
+        let turn_left = front_left + left > front_right + right || (front_left == front_right && k % 2 == 0);
+        let (l, rr) = if ahead < 0.7 || r.collision {
             if turn_left { (-0.4, 0.4) } else { (0.4, -0.4) }
-        } else if left < 0.6 || right < 0.6 {
-            if turn_left { (0.4, 0.8) } else { (0.8, 0.4) }
+        } else if front_left < 0.45 || left < 0.3 {
+            (0.8, 0.45)
+        } else if front_right < 0.45 || right < 0.3 {
+            (0.45, 0.8)
         } else {
             (0.9, 0.9)
         };

@@ -56,11 +56,6 @@ impl GridSpec {
     pub(crate) fn cell_range(&self, min: Point2<Real>, max: Point2<Real>) -> (usize, usize, usize, usize) {
         (self.clamp_ix(min.x), self.clamp_iy(min.y), self.clamp_ix(max.x), self.clamp_iy(max.y))
     }
-
-    fn cell_box(&self, ix: usize, iy: usize) -> (Point2<Real>, Point2<Real>) {
-        let lo = Point2::new(self.min.x + ix as Real * self.cell, self.min.y + iy as Real * self.cell);
-        (lo, lo + Vector2::new(self.cell, self.cell))
-    }
 }
 
 /// A segment with what the sensor loops need precomputed: its direction `d = b − a`, `1/|d|²`,
@@ -98,11 +93,14 @@ impl Segment {
     }
 }
 
-/// A wall edge and the height of its wall.
+/// A wall edge, the height of its wall, and the first cell (lowest x and y) of the cells it is
+/// listed in: a query over a box of cells takes the edge only in the first of its cells inside
+/// the box, so nothing is seen twice without marking what was seen.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub(crate) struct Edge {
     pub seg: Segment,
     pub height: Real,
+    pub first_cell: (u32, u32),
 }
 
 /// A triangle of a wall's triangulation, with its bounding box for the broad phase.
@@ -205,7 +203,7 @@ impl StaticIndex {
             }
             for i in 0..poly.len() {
                 if let Some(seg) = Segment::new(poly[i], poly[(i + 1) % poly.len()]) {
-                    edges.push(Edge { seg, height: *height });
+                    edges.push(Edge { seg, height: *height, first_cell: (0, 0) });
                 }
             }
         }
@@ -213,16 +211,16 @@ impl StaticIndex {
         let spec = GridSpec::covering(Point2::new(-t, -t), Point2::new(w + t, h + t), cell);
         let n_cells = spec.nx * spec.ny;
         let mut pairs = Vec::new();
-        for (i, e) in edges.iter().enumerate() {
+        // Edges are listed in every cell of their bounding box (not only the cells they cross),
+        // so that the first cell of any query box that holds an edge lists it.
+        for (i, e) in edges.iter_mut().enumerate() {
             let (a, b) = (e.seg.a, e.seg.b());
             let (x0, y0, x1, y1) =
                 spec.cell_range(Point2::new(a.x.min(b.x), a.y.min(b.y)), Point2::new(a.x.max(b.x), a.y.max(b.y)));
+            e.first_cell = (x0 as u32, y0 as u32);
             for iy in y0..=y1 {
                 for ix in x0..=x1 {
-                    let (lo, hi) = spec.cell_box(ix, iy);
-                    if segment_touches_box(a, b, lo, hi) {
-                        pairs.push(((iy * spec.nx + ix) as u32, i as u32));
-                    }
+                    pairs.push(((iy * spec.nx + ix) as u32, i as u32));
                 }
             }
         }
@@ -385,31 +383,6 @@ pub(crate) fn segments_cross(p1: Point2<Real>, p2: Point2<Real>, q1: Point2<Real
         d == 0.0 && p.x >= a.x.min(b.x) && p.x <= a.x.max(b.x) && p.y >= a.y.min(b.y) && p.y <= a.y.max(b.y)
     };
     on(q1, q2, p1, d1) || on(q1, q2, p2, d2) || on(p1, p2, q1, d3) || on(p1, p2, q2, d4)
-}
-
-/// Whether a segment touches an axis-aligned box (slab test).
-fn segment_touches_box(a: Point2<Real>, b: Point2<Real>, lo: Point2<Real>, hi: Point2<Real>) -> bool {
-    let (mut t0, mut t1) = (0.0, 1.0);
-    let d = b - a;
-    for axis in 0..2 {
-        let (p, dd, l, h) = (a[axis], d[axis], lo[axis], hi[axis]);
-        if dd == 0.0 {
-            if p < l || p > h {
-                return false;
-            }
-        } else {
-            let (mut ta, mut tb) = ((l - p) / dd, (h - p) / dd);
-            if ta > tb {
-                std::mem::swap(&mut ta, &mut tb);
-            }
-            t0 = if ta > t0 { ta } else { t0 };
-            t1 = if tb < t1 { tb } else { t1 };
-            if t0 > t1 {
-                return false;
-            }
-        }
-    }
-    true
 }
 
 /// A loose grid over moving bodies: each body is listed once, in the cell of its centre, and

@@ -38,7 +38,7 @@ use grid::{DynGrid, GridSpec, StaticIndex};
 pub const DEFAULT_CAPACITY: usize = 10_000;
 
 /// Cell size of the wall index, metres.
-const STATIC_CELL_M: Real = 2.0;
+const STATIC_CELL_M: Real = 4.0;
 /// Cell size of the robot index, metres (about one chair).
 const DYN_CELL_M: Real = 2.0;
 
@@ -280,8 +280,6 @@ impl Geo {
 /// Reused buffers, so a warm tick allocates nothing.
 #[derive(Debug, Clone, Default)]
 struct Scratch {
-    edge_stamp: Vec<u32>,
-    stamp: u32,
     segments: Vec<grid::Segment>,
     local: Vec<sensors::LocalSegment>,
     blocked: Vec<(bool, bool)>,
@@ -364,7 +362,7 @@ impl World {
                 ),
             DYN_CELL_M,
         );
-        let scratch = Scratch { edge_stamp: vec![0; statics.edges.len()], ..Scratch::default() };
+        let scratch = Scratch::default();
         Ok(Self {
             lab: lab.clone(),
             params,

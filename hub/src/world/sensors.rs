@@ -21,8 +21,6 @@ struct Scene<'a> {
 
 /// Candidate segments for one robot's proximity sensors.
 struct Candidates<'a> {
-    edge_stamp: &'a mut Vec<u32>,
-    stamp: &'a mut u32,
     /// Copies of the wall and body edges some sensor may see, dense for the per-sensor loops.
     segments: &'a mut Vec<Segment>,
     /// The same, relative to the robot and in f32.
@@ -50,12 +48,7 @@ impl World {
     pub(super) fn sense(&mut self) {
         let World { statics, dyn_grid, geo, lab, params, slots, rng, scratch, tick, .. } = self;
         let scene = Scene { statics, dyn_grid, geo, lab, params };
-        let mut cands = Candidates {
-            edge_stamp: &mut scratch.edge_stamp,
-            stamp: &mut scratch.stamp,
-            segments: &mut scratch.segments,
-            local: &mut scratch.local,
-        };
+        let mut cands = Candidates { segments: &mut scratch.segments, local: &mut scratch.local };
         let lat = params.latency;
         let depth = lat.max() as usize;
         for (i, slot) in slots.iter_mut().enumerate() {
@@ -141,12 +134,6 @@ impl Scene<'_> {
     fn gather(&self, i: usize, r: &Robot, cands: &mut Candidates<'_>) {
         cands.segments.clear();
         cands.local.clear();
-        *cands.stamp = cands.stamp.wrapping_add(1);
-        if *cands.stamp == 0 {
-            cands.edge_stamp.iter_mut().for_each(|s| *s = 0);
-            *cands.stamp = 1;
-        }
-        let stamp = *cands.stamp;
         let pos = r.pose.position();
         let (inner, reach) = (r.sensor_radius, r.reach);
         let e = Vector2::new(reach, reach);
@@ -156,14 +143,12 @@ impl Scene<'_> {
         for iy in y0..=y1 {
             for ix in x0..=x1 {
                 for &edge in s.edges_in(iy * s.spec.nx + ix) {
-                    let seen = &mut cands.edge_stamp[edge as usize];
-                    if *seen != stamp {
-                        *seen = stamp;
-                        let seg = &s.edges[edge as usize].seg;
-                        if visible_from(seg, pos, inner, reach) {
-                            cands.segments.push(*seg);
-                            cands.local.push(LocalSegment::new(seg, pos));
-                        }
+                    let e = &s.edges[edge as usize];
+                    // Take each edge once: in the first of its cells inside the query box.
+                    let first = (e.first_cell.0.max(x0 as u32), e.first_cell.1.max(y0 as u32));
+                    if first == (ix as u32, iy as u32) && visible_from(&e.seg, pos, inner, reach) {
+                        cands.segments.push(e.seg);
+                        cands.local.push(LocalSegment::new(&e.seg, pos));
                     }
                 }
             }
