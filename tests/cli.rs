@@ -81,7 +81,7 @@ fn map_check_refuses_an_unknown_root_and_a_missing_file() {
 
 #[test]
 fn bench_world_prints_the_documented_json_keys() {
-    let out = iwsim(&["bench", "world", "--robots", "30", "--ticks", "20", "--json"]);
+    let out = iwsim(&["bench", "world", "--robots", "30", "--ticks", "20", "--warmup", "5", "--json"]);
     assert!(out.status.success());
     let text = String::from_utf8_lossy(&out.stdout);
     for key in ["\"robots\":30", "\"ticks\":20", "\"ticks_per_s\":", "\"us_per_robot_tick\":"] {
