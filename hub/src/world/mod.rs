@@ -511,20 +511,14 @@ impl World {
             return false;
         }
         let (min, max) = aabb(&placed);
-        self.slots.iter().enumerate().all(|(i, s)| match &s.robot {
-            Some(_) => {
-                let g = &self.geo[i];
-                let r = g.bound_radius;
-                let far = g.centre.x + r < min.x
-                    || g.centre.x - r > max.x
-                    || g.centre.y + r < min.y
-                    || g.centre.y - r > max.y;
-                far || !crate::geom::boxes_intersect(
-                    &placed,
-                    &s.robot.as_ref().map(|r| r.shape.placed(&r.pose)).unwrap_or(placed),
-                )
-            }
-            None => true,
+        // Every robot, not the grid: the grid was built at the last step and misses robots
+        // added since. A bounding-circle test keeps the parry calls to near neighbours.
+        self.slots.iter().zip(&self.geo).all(|(slot, g)| {
+            let Some(other) = &slot.robot else { return true };
+            let r = g.bound_radius;
+            let far =
+                g.centre.x + r < min.x || g.centre.x - r > max.x || g.centre.y + r < min.y || g.centre.y - r > max.y;
+            far || !crate::geom::boxes_intersect(&placed, &other.shape.placed(&other.pose))
         })
     }
 

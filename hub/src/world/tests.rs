@@ -495,3 +495,16 @@ fn one_seed_gives_bit_identical_runs_and_another_seed_differs() {
     assert_eq!(a, b);
     assert_ne!(a.last(), c.last());
 }
+
+#[test]
+fn is_free_sees_walls_and_robots_added_since_the_last_step() {
+    let mut lab = empty_lab(20.0, 8.0);
+    lab.walls.push(rect_wall(6.0, 0.0, 7.0, 8.0, 2.0));
+    let mut w = world(lab, quiet());
+    assert!(w.is_free(&RobotSpec::at(3.0, 4.0, 0.0)));
+    assert!(!w.is_free(&RobotSpec::at(5.8, 4.0, 0.0)), "overlaps the wall");
+    assert!(!w.is_free(&RobotSpec::at(0.3, 4.0, 0.0)), "overlaps the lab border");
+    w.add_robot(RobotSpec::at(3.0, 4.0, 0.0)).expect("valid");
+    assert!(!w.is_free(&RobotSpec::at(3.5, 4.5, 45.0)), "overlaps the robot just added");
+    assert!(w.is_free(&RobotSpec::at(3.0, 6.0, 0.0)));
+}
