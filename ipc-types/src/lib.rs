@@ -1,0 +1,746 @@
+//! The fixed-layout types that cross process boundaries in iwsim: world snapshots, per-robot
+//! sensor blocks, actions, registration, run control and the map, as iceoryx2 zero-copy
+//! payloads.
+//!
+//! Every type is `#[repr(C)]`, made of fixed-width scalars and fixed arrays, has an explicit
+//! versioned iceoryx2 type name, spells its padding out as `_reserved` (bytemuck's `Pod`
+//! derive refuses hidden padding), and has its size asserted at compile time. Units are SI and
+//! degrees, as on every iwsim wire; the unit is in the field name where it is not obvious.
+//!
+//! ```
+//! use ipc_types::{FixedName, RobotRegistration, RobotKind};
+//!
+//! let mut reg = RobotRegistration::new("chair-1");
+//! reg.kind = RobotKind::Simulated as u32;
+//! assert_eq!(reg.name.as_str(), Some("chair-1"));
+//! assert_eq!(FixedName::new("x".repeat(40).as_str()), None, "names are at most 31 bytes");
+//! ```
+#![no_std]
+#![warn(missing_docs)]
+
+use bytemuck::{Pod, Zeroable};
+use iceoryx2_bb_derive_macros::ZeroCopySend;
+use iceoryx2_bb_elementary_traits::zero_copy_send::ZeroCopySend;
+
+/// Robots one hub serves.
+pub const MAX_ROBOTS: usize = 10_000;
+/// Agent processes one hub serves.
+pub const MAX_AGENTS: usize = 128;
+/// Proximity sensors per robot.
+pub const MAX_PROXIMITY: usize = 8;
+/// Beacons in a lab.
+pub const MAX_BEACONS: usize = 16;
+/// Bytes of a name, its terminating zero included.
+pub const NAME_BYTES: usize = 32;
+/// Bytes a robot may say per tick.
+pub const MESSAGE_BYTES: usize = 100;
+/// Bytes a robot may hear per tick.
+pub const INBOX_BYTES: usize = 400;
+/// Messages a robot may hear per tick (the bytes limit usually binds first).
+pub const MAX_INBOX_MESSAGES: usize = 16;
+
+/// Service name parts, below `iwsim/<session>/`. The services crate builds full names.
+pub mod service {
+    /// World snapshots (pub/sub, slice of [`crate::RobotState`] with a [`crate::WorldHeader`]),
+    /// and the tick doorbell (event) under the same name.
+    pub const WORLD: &str = "world";
+    /// The map (pub/sub with history, slice of [`crate::MapItem`] with a [`crate::MapHeader`]).
+    pub const MAP: &str = "map";
+    /// Actions from every agent (pub/sub, slice of [`crate::ActionBlock`] with an
+    /// [`crate::ActionHeader`]), and the agents' doorbell to the hub (event).
+    pub const ACTIONS: &str = "actions";
+    /// Agent hello and robot registration (request-response).
+    pub const REGISTER: &str = "register";
+    /// Run control (request-response).
+    pub const CONTROL: &str = "control";
+    /// Per-agent sensor blocks: `agent/<id>/sensors` (pub/sub, slice of
+    /// [`crate::SensorBlock`] with a [`crate::TickHeader`]).
+    pub const AGENT_SENSORS_PREFIX: &str = "agent";
+}
+
+/// A name in a fixed buffer: UTF-8, zero-padded, at most `NAME_BYTES − 1` bytes.
+#[repr(C)]
+#[derive(Clone, Copy, PartialEq, Eq, Pod, Zeroable, ZeroCopySend)]
+#[type_name("iwsim::FixedName.v1")]
+pub struct FixedName {
+    /// The bytes, zero-padded.
+    pub bytes: [u8; NAME_BYTES],
+}
+const _: () = assert!(core::mem::size_of::<FixedName>() == 32);
+
+impl FixedName {
+    /// The empty name.
+    pub const EMPTY: FixedName = FixedName { bytes: [0; NAME_BYTES] };
+
+    /// A name, or `None` when it is longer than `NAME_BYTES − 1` bytes or holds a zero byte.
+    pub fn new(name: &str) -> Option<Self> {
+        let b = name.as_bytes();
+        if b.len() >= NAME_BYTES || b.contains(&0) {
+            return None;
+        }
+        let mut bytes = [0; NAME_BYTES];
+        bytes[..b.len()].copy_from_slice(b);
+        Some(Self { bytes })
+    }
+
+    /// The name, or `None` when the buffer does not hold UTF-8 (it came from outside).
+    pub fn as_str(&self) -> Option<&str> {
+        let len = self.bytes.iter().position(|&b| b == 0).unwrap_or(NAME_BYTES);
+        core::str::from_utf8(&self.bytes[..len]).ok()
+    }
+}
+
+impl core::fmt::Debug for FixedName {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        write!(f, "{:?}", self.as_str().unwrap_or("<not utf-8>"))
+    }
+}
+
+/// How a robot moves (`RobotState::kind`, `RobotRegistration::kind`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[repr(u32)]
+pub enum RobotKind {
+    /// Moved by the hub from its motor powers.
+    Simulated = 0,
+    /// A physical chair whose agent pushes its pose.
+    Real = 1,
+    /// A door, driven like any robot.
+    Door = 2,
+}
+
+impl RobotKind {
+    /// The kind a wire value names.
+    pub fn from_u32(v: u32) -> Option<Self> {
+        match v {
+            0 => Some(Self::Simulated),
+            1 => Some(Self::Real),
+            2 => Some(Self::Door),
+            _ => None,
+        }
+    }
+}
+
+/// The run's state (`WorldHeader::run_state`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[repr(u32)]
+pub enum RunState {
+    /// Waiting for agents or a start command; nothing moves.
+    Waiting = 0,
+    /// Stepping.
+    Running = 1,
+    /// Paused by a command; nothing moves.
+    Paused = 2,
+    /// The run is over (time limit or stop); the hub is shutting down.
+    Finished = 3,
+}
+
+impl RunState {
+    /// The state a wire value names.
+    pub fn from_u32(v: u32) -> Option<Self> {
+        match v {
+            0 => Some(Self::Waiting),
+            1 => Some(Self::Running),
+            2 => Some(Self::Paused),
+            3 => Some(Self::Finished),
+            _ => None,
+        }
+    }
+}
+
+/// The header of every world snapshot.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable, ZeroCopySend)]
+#[type_name("iwsim::WorldHeader.v1")]
+pub struct WorldHeader {
+    /// Tick this snapshot shows (0 before the first step).
+    pub tick: u64,
+    /// Simulated seconds.
+    pub sim_time_s: f64,
+    /// The world's state hash after this tick (see `hub::world::World::state_hash`).
+    pub state_hash: u64,
+    /// [`RunState`] as u32.
+    pub run_state: u32,
+    /// Robots in the slice that follows.
+    pub robot_count: u32,
+    /// Live agent processes.
+    pub agent_count: u32,
+    /// Whether the hub steps in lock-step (1) or real time (0).
+    pub lockstep: u32,
+}
+const _: () = assert!(core::mem::size_of::<WorldHeader>() == 40);
+
+/// `RobotState::flags`: the last move was refused (or a Real robot overlaps something).
+pub const ROBOT_COLLISION: u32 = 1;
+/// `RobotState::flags`: the robot's agent died; the robot is frozen.
+pub const ROBOT_FROZEN: u32 = 1 << 1;
+/// `RobotState::flags`: the robot's agent missed the lock-step deadline this tick.
+pub const ROBOT_LAGGING: u32 = 1 << 2;
+
+/// One robot in a world snapshot.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable, ZeroCopySend)]
+#[type_name("iwsim::RobotState.v1")]
+pub struct RobotState {
+    /// Robot id (1-based, unique in the run).
+    pub id: u32,
+    /// [`RobotKind`] as u32.
+    pub kind: u32,
+    /// `ROBOT_*` flags.
+    pub flags: u32,
+    /// Contacts so far.
+    pub collision_count: u32,
+    /// Centre of movement x, metres.
+    pub x_m: f64,
+    /// Centre of movement y, metres.
+    pub y_m: f64,
+    /// Heading, degrees in (−180, 180].
+    pub heading_deg: f64,
+    /// Length along the heading, metres.
+    pub width_m: f32,
+    /// Size across the heading, metres.
+    pub height_m: f32,
+    /// Where the wheel axis sits along the length, (0, 1).
+    pub com: f32,
+    /// Owning agent's id.
+    pub agent_id: u32,
+    /// Motor outputs, left and right, in [−1, 1].
+    pub motor_out: [f32; 2],
+    /// Name.
+    pub name: FixedName,
+}
+const _: () = assert!(core::mem::size_of::<RobotState>() == 96);
+
+/// `SensorBlock::present`: compass reading present.
+pub const HAS_COMPASS: u32 = 1;
+/// `SensorBlock::present`: GPS reading present.
+pub const HAS_GPS: u32 = 1 << 1;
+/// `SensorBlock::present`: the robot is over a target (`ground` is valid).
+pub const HAS_GROUND: u32 = 1 << 2;
+/// `SensorBlock::present`: the robot collided.
+pub const COLLISION: u32 = 1 << 3;
+
+/// One message heard: who said it and where its bytes are in `SensorBlock::inbox_bytes`.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Pod, Zeroable, ZeroCopySend)]
+#[type_name("iwsim::InboxEntry.v1")]
+pub struct InboxEntry {
+    /// Speaker's robot id.
+    pub from_id: u32,
+    /// Offset in `inbox_bytes`.
+    pub offset: u16,
+    /// Length in bytes.
+    pub len: u16,
+}
+
+/// One robot's sensor readings for one tick.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable, ZeroCopySend)]
+#[type_name("iwsim::SensorBlock.v1")]
+pub struct SensorBlock {
+    /// Tick these readings belong to.
+    pub tick: u64,
+    /// Robot id.
+    pub robot_id: u32,
+    /// `HAS_*` and `COLLISION` bits.
+    pub present: u32,
+    /// Proximity distances, metres (first `proximity_count`).
+    pub proximity_m: [f64; MAX_PROXIMITY],
+    /// Compass heading, degrees.
+    pub compass_deg: f64,
+    /// GPS x, metres.
+    pub gps_x_m: f64,
+    /// GPS y, metres.
+    pub gps_y_m: f64,
+    /// GPS heading, degrees.
+    pub gps_heading_deg: f64,
+    /// Bearing to each beacon relative to the heading, degrees; NaN when not visible.
+    pub beacons_deg: [f64; MAX_BEACONS],
+    /// Cumulative encoder ticks, left and right.
+    pub encoder_ticks: [i64; 2],
+    /// Pose as the hub has it (ground truth, for logging and Real robots), metres/degrees.
+    pub pose: [f64; 3],
+    /// Contacts so far.
+    pub collision_count: u32,
+    /// Index of the target under the robot (valid with `HAS_GROUND`).
+    pub ground: u32,
+    /// Proximity sensors the robot has.
+    pub proximity_count: u32,
+    /// Beacons in the lab.
+    pub beacon_count: u32,
+    /// Messages heard (first `inbox_count` entries).
+    pub inbox_count: u32,
+    /// Messages dropped because the inbox was full.
+    pub inbox_dropped: u32,
+    /// Where each message heard is in `inbox_bytes`.
+    pub inbox: [InboxEntry; MAX_INBOX_MESSAGES],
+    /// The bytes of the messages heard.
+    pub inbox_bytes: [u8; INBOX_BYTES],
+}
+const _: () = assert!(core::mem::size_of::<SensorBlock>() == 832);
+
+impl SensorBlock {
+    /// The messages heard: (speaker id, bytes).
+    pub fn messages(&self) -> impl Iterator<Item = (u32, &[u8])> {
+        self.inbox[..(self.inbox_count as usize).min(MAX_INBOX_MESSAGES)].iter().filter_map(|e| {
+            let (start, end) = (e.offset as usize, e.offset as usize + e.len as usize);
+            self.inbox_bytes.get(start..end).map(|b| (e.from_id, b))
+        })
+    }
+}
+
+/// The header of the sensor blocks a hub sends an agent each tick.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable, ZeroCopySend)]
+#[type_name("iwsim::TickHeader.v1")]
+pub struct TickHeader {
+    /// The tick.
+    pub tick: u64,
+    /// Simulated seconds.
+    pub sim_time_s: f64,
+    /// [`RunState`] as u32.
+    pub run_state: u32,
+    /// Blocks in the slice.
+    pub count: u32,
+}
+const _: () = assert!(core::mem::size_of::<TickHeader>() == 24);
+
+/// `ActionBlock::flags`: set the motor powers.
+pub const ACT_MOTORS: u32 = 1;
+/// `ActionBlock::flags`: push the pose (Real robots).
+pub const ACT_POSE: u32 = 1 << 1;
+/// `ActionBlock::flags`: say `say_bytes[..say_len]`.
+pub const ACT_SAY: u32 = 1 << 2;
+/// `ActionBlock::flags`: the end LED (Ciber-Rato `EndLed`).
+pub const LED_END: u32 = 1 << 8;
+/// `ActionBlock::flags`: the returning LED.
+pub const LED_RETURNING: u32 = 1 << 9;
+/// `ActionBlock::flags`: the visiting LED.
+pub const LED_VISITING: u32 = 1 << 10;
+
+/// What an agent asks for one robot in one tick.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable, ZeroCopySend)]
+#[type_name("iwsim::ActionBlock.v1")]
+pub struct ActionBlock {
+    /// Robot id.
+    pub robot_id: u32,
+    /// `ACT_*` and `LED_*` bits.
+    pub flags: u32,
+    /// Left and right motor powers in [−1, 1].
+    pub motors: [f64; 2],
+    /// Pushed pose of a Real robot: x, y metres, heading degrees.
+    pub pose: [f64; 3],
+    /// Sensors requested (a bit per sensor; used by the UDP bridge).
+    pub sensor_requests: u32,
+    /// Length of the message in `say_bytes`.
+    pub say_len: u32,
+    /// The message to say.
+    pub say_bytes: [u8; MESSAGE_BYTES],
+    /// Padding.
+    pub _reserved: [u8; 4],
+}
+const _: () = assert!(core::mem::size_of::<ActionBlock>() == 160);
+
+impl ActionBlock {
+    /// Motor powers for a robot.
+    pub fn motors(robot_id: u32, left: f64, right: f64) -> Self {
+        Self { robot_id, flags: ACT_MOTORS, motors: [left, right], ..Zeroable::zeroed() }
+    }
+
+    /// A pushed pose (metres, degrees) for a Real robot.
+    pub fn pose(robot_id: u32, x_m: f64, y_m: f64, heading_deg: f64) -> Self {
+        Self { robot_id, flags: ACT_POSE, pose: [x_m, y_m, heading_deg], ..Zeroable::zeroed() }
+    }
+
+    /// Adds a message; `false` (and no change) when it is longer than `MESSAGE_BYTES`.
+    pub fn with_say(&mut self, bytes: &[u8]) -> bool {
+        if bytes.len() > MESSAGE_BYTES {
+            return false;
+        }
+        self.say_bytes[..bytes.len()].copy_from_slice(bytes);
+        self.say_len = bytes.len() as u32;
+        self.flags |= ACT_SAY;
+        true
+    }
+}
+
+/// The header of an agent's actions for one tick.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Pod, Zeroable, ZeroCopySend)]
+#[type_name("iwsim::ActionHeader.v1")]
+pub struct ActionHeader {
+    /// The tick whose readings these actions answer.
+    pub tick: u64,
+    /// The agent.
+    pub agent_id: u32,
+    /// Blocks in the slice.
+    pub count: u32,
+}
+const _: () = assert!(core::mem::size_of::<ActionHeader>() == 16);
+
+/// One proximity sensor at registration (thesis Table 4.4).
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable, ZeroCopySend)]
+#[type_name("iwsim::SensorSpec.v1")]
+pub struct SensorSpec {
+    /// Position along the heading from the centre of movement, metres.
+    pub x_m: f64,
+    /// Position across the heading (left positive), metres.
+    pub y_m: f64,
+    /// Direction relative to the heading, degrees.
+    pub angle_deg: f64,
+    /// Full opening of the cone, degrees.
+    pub cone_deg: f64,
+    /// Range, metres; 0 takes the hub's default.
+    pub range_m: f64,
+}
+
+/// `RobotRegistration::flags`: the registration gives a start pose (else the grid slot's).
+pub const REG_HAS_POSE: u32 = 1;
+
+/// A robot as an agent registers it (thesis Tables 4.3 and 4.4).
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable, ZeroCopySend)]
+#[type_name("iwsim::RobotRegistration.v1")]
+pub struct RobotRegistration {
+    /// Requested id = 1-based grid slot; 0 takes the first free one.
+    pub requested_id: u32,
+    /// [`RobotKind`] as u32.
+    pub kind: u32,
+    /// `REG_*` bits.
+    pub flags: u32,
+    /// Proximity sensors given (0 = the four defaults of thesis Table 4.5).
+    pub sensor_count: u32,
+    /// Length along the heading, metres.
+    pub width_m: f64,
+    /// Size across the heading, metres.
+    pub height_m: f64,
+    /// Centre of movement, (0, 1).
+    pub com: f64,
+    /// Top speed, m/s.
+    pub max_speed_mps: f64,
+    /// Motor filter coefficient, [0, 1).
+    pub accel_curve: f64,
+    /// Start pose: x, y metres, heading degrees (with `REG_HAS_POSE`).
+    pub pose: [f64; 3],
+    /// Sensors.
+    pub sensors: [SensorSpec; MAX_PROXIMITY],
+    /// Name.
+    pub name: FixedName,
+}
+const _: () = assert!(core::mem::size_of::<RobotRegistration>() == 432);
+
+impl RobotRegistration {
+    /// A simulated robot with the thesis defaults (1 m × 1 m, COM 0.5, 0.5 m/s, curve 0.5),
+    /// starting at the first free grid slot. Names longer than 31 bytes are cut short.
+    pub fn new(name: &str) -> Self {
+        let mut end = name.len().min(NAME_BYTES - 1);
+        while !name.is_char_boundary(end) {
+            end -= 1;
+        }
+        Self {
+            kind: RobotKind::Simulated as u32,
+            width_m: 1.0,
+            height_m: 1.0,
+            com: 0.5,
+            max_speed_mps: 0.5,
+            accel_curve: 0.5,
+            name: FixedName::new(&name[..end]).unwrap_or(FixedName::EMPTY),
+            ..Zeroable::zeroed()
+        }
+    }
+}
+
+/// What an agent sends on the register service.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable, ZeroCopySend)]
+#[type_name("iwsim::RegisterRequest.v1")]
+pub struct RegisterRequest {
+    /// [`RegisterKind`] as u32.
+    pub kind: u32,
+    /// The agent's process id (the hub watches it to notice the agent's death).
+    pub pid: u32,
+    /// The agent id the hub gave in its welcome (0 in a hello).
+    pub agent_id: u32,
+    /// Padding.
+    pub _reserved: u32,
+    /// The robot (with `RegisterKind::Robot`).
+    pub robot: RobotRegistration,
+}
+const _: () = assert!(core::mem::size_of::<RegisterRequest>() == 448);
+
+/// What a register request asks for.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[repr(u32)]
+pub enum RegisterKind {
+    /// A new agent process says hello and gets an agent id.
+    Hello = 0,
+    /// An agent registers one robot.
+    Robot = 1,
+    /// An agent says it has registered all its robots and is ready for tick 0.
+    Ready = 2,
+    /// An agent leaves; its robots are removed.
+    Bye = 3,
+}
+
+impl RegisterKind {
+    /// The kind a wire value names.
+    pub fn from_u32(v: u32) -> Option<Self> {
+        match v {
+            0 => Some(Self::Hello),
+            1 => Some(Self::Robot),
+            2 => Some(Self::Ready),
+            3 => Some(Self::Bye),
+            _ => None,
+        }
+    }
+}
+
+/// Why a registration was refused (`RegisterResponse::status`); 0 is accepted.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[repr(u32)]
+pub enum Refusal {
+    /// Accepted.
+    Accepted = 0,
+    /// The requested id is taken.
+    DuplicateId = 1,
+    /// The requested id is past the grid.
+    NoSuchSlot = 2,
+    /// No free grid slot and no pose given.
+    GridFull = 3,
+    /// A parameter is out of range or not a number (see `detail`).
+    BadParameters = 4,
+    /// The hub holds `MAX_ROBOTS` robots, or `MAX_AGENTS` agents.
+    Capacity = 5,
+    /// The agent id is unknown (no hello, or the agent was dropped).
+    UnknownAgent = 6,
+    /// The run has started and takes no new robots.
+    RunStarted = 7,
+    /// The request was malformed (unknown kind, bad name).
+    Malformed = 8,
+}
+
+impl Refusal {
+    /// The reason a wire value names.
+    pub fn from_u32(v: u32) -> Option<Self> {
+        match v {
+            0 => Some(Self::Accepted),
+            1 => Some(Self::DuplicateId),
+            2 => Some(Self::NoSuchSlot),
+            3 => Some(Self::GridFull),
+            4 => Some(Self::BadParameters),
+            5 => Some(Self::Capacity),
+            6 => Some(Self::UnknownAgent),
+            7 => Some(Self::RunStarted),
+            8 => Some(Self::Malformed),
+            _ => None,
+        }
+    }
+}
+
+/// The hub's answer to a register request.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Pod, Zeroable, ZeroCopySend)]
+#[type_name("iwsim::RegisterResponse.v1")]
+pub struct RegisterResponse {
+    /// [`Refusal`] as u32; 0 = accepted.
+    pub status: u32,
+    /// The agent id (hello) or the agent's id (robot).
+    pub agent_id: u32,
+    /// The robot's id (robot).
+    pub robot_id: u32,
+    /// Proximity sensors the robot got.
+    pub sensor_count: u32,
+    /// A short human-readable reason when refused (e.g. "com = 1.2 is out of range").
+    pub detail: [u8; 64],
+}
+const _: () = assert!(core::mem::size_of::<RegisterResponse>() == 80);
+
+/// Run control commands (`ControlRequest::command`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[repr(u32)]
+pub enum Command {
+    /// Start (or resume) stepping.
+    Start = 0,
+    /// Pause stepping.
+    Pause = 1,
+    /// Step once while paused or waiting.
+    Step = 2,
+    /// End the run; the hub shuts down.
+    Stop = 3,
+    /// Remove robot `robot_id`.
+    RemoveRobot = 4,
+}
+
+impl Command {
+    /// The command a wire value names.
+    pub fn from_u32(v: u32) -> Option<Self> {
+        match v {
+            0 => Some(Self::Start),
+            1 => Some(Self::Pause),
+            2 => Some(Self::Step),
+            3 => Some(Self::Stop),
+            4 => Some(Self::RemoveRobot),
+            _ => None,
+        }
+    }
+}
+
+/// A run control request.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Pod, Zeroable, ZeroCopySend)]
+#[type_name("iwsim::ControlRequest.v1")]
+pub struct ControlRequest {
+    /// [`Command`] as u32.
+    pub command: u32,
+    /// Robot for `RemoveRobot`.
+    pub robot_id: u32,
+}
+
+/// The hub's answer to a control request.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Pod, Zeroable, ZeroCopySend)]
+#[type_name("iwsim::ControlResponse.v1")]
+pub struct ControlResponse {
+    /// 0 = done, 1 = unknown command, 2 = unknown robot, 3 = not possible now.
+    pub status: u32,
+    /// [`RunState`] after the command.
+    pub run_state: u32,
+    /// The tick after the command.
+    pub tick: u64,
+}
+
+/// The header of the map.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable, ZeroCopySend)]
+#[type_name("iwsim::MapHeader.v1")]
+pub struct MapHeader {
+    /// Lab width, metres.
+    pub width_m: f64,
+    /// Lab height, metres.
+    pub height_m: f64,
+    /// Items in the slice.
+    pub item_count: u32,
+    /// Walls.
+    pub wall_count: u32,
+    /// Beacons.
+    pub beacon_count: u32,
+    /// Targets.
+    pub target_count: u32,
+    /// Grid start poses.
+    pub grid_count: u32,
+    /// Real-time tick period, milliseconds.
+    pub cycle_ms: u32,
+    /// Lab name.
+    pub name: FixedName,
+}
+const _: () = assert!(core::mem::size_of::<MapHeader>() == 72);
+
+/// `MapItem::kind`: a wall starts; `a` = height in metres, `index` = wall number. Its corners
+/// follow as `MAP_CORNER` items.
+pub const MAP_WALL: u32 = 1;
+/// `MapItem::kind`: a wall corner; `a`, `b` = x, y metres.
+pub const MAP_CORNER: u32 = 2;
+/// `MapItem::kind`: a beacon; `a`, `b` = x, y, `c` = height, metres.
+pub const MAP_BEACON: u32 = 3;
+/// `MapItem::kind`: a target; `a`, `b` = x, y, `c` = radius, metres.
+pub const MAP_TARGET: u32 = 4;
+/// `MapItem::kind`: a grid start pose; `a`, `b` = x, y metres, `c` = heading degrees.
+pub const MAP_GRID: u32 = 5;
+
+/// One item of the map, so agents and viewers never parse map files.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable, ZeroCopySend)]
+#[type_name("iwsim::MapItem.v1")]
+pub struct MapItem {
+    /// `MAP_*`.
+    pub kind: u32,
+    /// Index of the wall, beacon, target or grid slot.
+    pub index: u32,
+    /// First value (see the kind).
+    pub a: f64,
+    /// Second value.
+    pub b: f64,
+    /// Third value.
+    pub c: f64,
+}
+const _: () = assert!(core::mem::size_of::<MapItem>() == 32);
+
+/// The iceoryx2 type name of a payload type (as other processes must spell it).
+pub fn type_name_of<T: ZeroCopySend>() -> &'static str {
+    // The derive's `type_name` is an `unsafe fn` only because a wrong manual implementation
+    // could lie about layout; the derived one just returns the attribute's string.
+    #[allow(unsafe_code)]
+    // SAFETY: calling the derived type_name has no preconditions; it returns a constant.
+    unsafe {
+        <T as ZeroCopySend>::type_name()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_payload_has_a_versioned_type_name() {
+        assert_eq!(type_name_of::<WorldHeader>(), "iwsim::WorldHeader.v1");
+        assert_eq!(type_name_of::<RobotState>(), "iwsim::RobotState.v1");
+        assert_eq!(type_name_of::<SensorBlock>(), "iwsim::SensorBlock.v1");
+        assert_eq!(type_name_of::<ActionBlock>(), "iwsim::ActionBlock.v1");
+        assert_eq!(type_name_of::<RegisterRequest>(), "iwsim::RegisterRequest.v1");
+        assert_eq!(type_name_of::<MapItem>(), "iwsim::MapItem.v1");
+    }
+
+    #[test]
+    fn names_round_trip_and_reject_what_does_not_fit() {
+        let n = FixedName::new("chair-7").expect("fits");
+        assert_eq!(n.as_str(), Some("chair-7"));
+        assert!(FixedName::new(&"a".repeat(31)).is_some());
+        assert!(FixedName::new(&"a".repeat(32)).is_none());
+        assert!(FixedName::new("a\0b").is_none());
+        let junk = FixedName { bytes: [0xff; NAME_BYTES] };
+        assert_eq!(junk.as_str(), None);
+        // Registration cuts long names at a character boundary.
+        let r = RobotRegistration::new("ééééééééééééééééé"); // 34 bytes
+        assert_eq!(r.name.as_str(), Some("ééééééééééééééé"));
+    }
+
+    #[test]
+    fn inbox_messages_come_back_and_bad_offsets_are_skipped() {
+        let mut b = SensorBlock::zeroed();
+        b.inbox_bytes[..5].copy_from_slice(b"hello");
+        b.inbox_bytes[5..7].copy_from_slice(b"hi");
+        b.inbox[0] = InboxEntry { from_id: 3, offset: 0, len: 5 };
+        b.inbox[1] = InboxEntry { from_id: 9, offset: 5, len: 2 };
+        b.inbox[2] = InboxEntry { from_id: 1, offset: 399, len: 50 };
+        b.inbox_count = 3;
+        let got: [(u32, &[u8]); 2] = [(3, b"hello"), (9, b"hi")];
+        assert!(b.messages().eq(got.iter().copied()));
+        // A count from outside is bounded by the array; the out-of-range entry is still skipped.
+        b.inbox_count = 1000;
+        assert_eq!(b.messages().count(), MAX_INBOX_MESSAGES - 1);
+    }
+
+    #[test]
+    fn says_longer_than_a_hundred_bytes_are_refused() {
+        let mut a = ActionBlock::motors(1, 0.5, 0.5);
+        assert!(a.with_say(&[b'x'; 100]));
+        assert!(!a.with_say(&[b'x'; 101]));
+        assert_eq!(a.say_len, 100);
+    }
+
+    #[test]
+    fn wire_codes_round_trip() {
+        for k in [RobotKind::Simulated, RobotKind::Real, RobotKind::Door] {
+            assert_eq!(RobotKind::from_u32(k as u32), Some(k));
+        }
+        assert_eq!(RobotKind::from_u32(7), None);
+        for c in 0..5 {
+            assert_eq!(Command::from_u32(c).map(|c| c as u32), Some(c));
+        }
+        for r in 0..9 {
+            assert_eq!(Refusal::from_u32(r).map(|r| r as u32), Some(r));
+        }
+        assert_eq!(RunState::from_u32(4), None);
+    }
+}
