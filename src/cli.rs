@@ -24,12 +24,128 @@ pub enum Command {
         #[command(subcommand)]
         command: MapCommand,
     },
+    /// Runs a hub: loads a map and serves its world over shared memory to agents.
+    Hub(HubArgs),
+    /// Runs an agent process.
+    Agent {
+        /// Which agent.
+        #[command(subcommand)]
+        agent: AgentCommand,
+    },
     /// Benchmarks that print figures (add --json for machine-readable output).
     Bench {
         /// Which benchmark.
         #[command(subcommand)]
         command: BenchCommand,
     },
+}
+
+/// Options of `iwsim hub`.
+#[derive(Debug, Args, Clone)]
+pub struct HubArgs {
+    /// Lab file, or builtin:liacc, builtin:thesis, builtin:maze.
+    #[arg(long, default_value = "builtin:liacc")]
+    pub lab: String,
+    /// Grid file (start poses); a built-in lab brings its own grid.
+    #[arg(long)]
+    pub grid: Option<String>,
+    /// Parameters file (Ciber-Rato `<Parameters>`).
+    #[arg(long)]
+    pub param: Option<PathBuf>,
+    /// Session name: hubs, agents and viewers of one run share it.
+    #[arg(long, default_value = "default")]
+    pub session: String,
+    /// Tick period in milliseconds (real time; also the simulated step in lock-step).
+    #[arg(long)]
+    pub cycle_ms: Option<u32>,
+    /// Step as soon as every agent has answered, instead of every cycle.
+    #[arg(long)]
+    pub lockstep: bool,
+    /// Lock-step: step without an agent that has not answered after this long.
+    #[arg(long, default_value_t = 1000)]
+    pub deadline_ms: u64,
+    /// Seed of the world's random generator.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Stop after this many ticks (0: run until stopped).
+    #[arg(long, default_value_t = 0)]
+    pub ticks: u64,
+    /// Switch every sensor and motor noise off.
+    #[arg(long)]
+    pub no_noise: bool,
+    /// Start tick 0 once this many agents are ready.
+    #[arg(long, default_value_t = 0)]
+    pub wait_agents: usize,
+    /// Wait for a Start command before tick 0.
+    #[arg(long)]
+    pub start_on_command: bool,
+    /// Print the end-of-run summary as one JSON object.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// `iwsim agent …`
+#[derive(Debug, Subcommand)]
+pub enum AgentCommand {
+    /// One or more wheelchairs driven with constant powers (a first user of the agent SDK).
+    Wheelchair(WheelchairArgs),
+}
+
+/// Options of `iwsim agent wheelchair`.
+#[derive(Debug, Args, Clone)]
+pub struct WheelchairArgs {
+    /// Session of the hub to join.
+    #[arg(long, default_value = "default")]
+    pub session: String,
+    /// Robots to register.
+    #[arg(long, default_value_t = 1)]
+    pub robots: usize,
+    /// Name prefix of the robots.
+    #[arg(long, default_value = "chair")]
+    pub name: String,
+    /// Requested id of the first robot (0: first free grid slot).
+    #[arg(long, default_value_t = 0)]
+    pub id: u32,
+    /// Start pose of the first robot as X,Y,DIR (metres, degrees); further robots are placed
+    /// 2 m apart along y. Without it, robots take grid slots.
+    #[arg(long, value_parser = parse_triple)]
+    pub pose: Option<[f64; 3]>,
+    /// Motor powers LEFT,RIGHT in [-1, 1].
+    #[arg(long, value_parser = parse_pair, default_value = "0.5,0.5")]
+    pub powers: [f64; 2],
+    /// Length along the heading, metres.
+    #[arg(long, default_value_t = 1.0)]
+    pub width: f64,
+    /// Size across the heading, metres.
+    #[arg(long, default_value_t = 1.0)]
+    pub height: f64,
+    /// Centre of movement, (0, 1).
+    #[arg(long, default_value_t = 0.5)]
+    pub com: f64,
+    /// Top speed, m/s.
+    #[arg(long, default_value_t = 0.5)]
+    pub max_speed: f64,
+    /// Acceleration curve, [0, 1).
+    #[arg(long, default_value_t = 0.5)]
+    pub accel_curve: f64,
+    /// Stop after answering this many ticks (0: until the run ends).
+    #[arg(long, default_value_t = 0)]
+    pub ticks: u64,
+    /// Spin on shared memory instead of sleeping between ticks.
+    #[arg(long)]
+    pub busy_poll: bool,
+}
+
+fn parse_pair(s: &str) -> Result<[f64; 2], String> {
+    let v: Vec<f64> =
+        s.split(',').map(|x| x.trim().parse::<f64>().map_err(|e| format!("{x:?}: {e}"))).collect::<Result<_, _>>()?;
+    <[f64; 2]>::try_from(v).map_err(|_| format!("expected two numbers LEFT,RIGHT, got {s:?}"))
+}
+
+fn parse_triple(s: &str) -> Result<[f64; 3], String> {
+    let v: Vec<f64> =
+        s.split(',').map(|x| x.trim().parse::<f64>().map_err(|e| format!("{x:?}: {e}"))).collect::<Result<_, _>>()?;
+    <[f64; 3]>::try_from(v).map_err(|_| format!("expected three numbers X,Y,DIR, got {s:?}"))
 }
 
 /// `iwsim map …`

@@ -2,14 +2,16 @@
 //! in its own module as a library function, so tests and benches call the same code.
 #![warn(missing_docs)]
 
+pub mod agentcmd;
 pub mod bench;
 pub mod cli;
 pub mod demo;
+pub mod hubcmd;
 pub mod mapcheck;
 
 use std::process::ExitCode;
 
-use cli::{BenchCommand, Cli, Command, MapCommand};
+use cli::{AgentCommand, BenchCommand, Cli, Command, MapCommand};
 
 /// Logs go to stderr, filtered by `RUST_LOG` (e.g. `RUST_LOG=debug` or `RUST_LOG=hub=trace`);
 /// warnings and errors by default.
@@ -33,5 +35,7 @@ pub fn run(cli: Cli) -> anyhow::Result<ExitCode> {
         Command::Map { command: MapCommand::Check { file } } => mapcheck::check(&file),
         Command::Bench { command: BenchCommand::World(args) } => bench::world(&args),
         Command::Demo(args) => demo::run(&args),
+        Command::Hub(args) => hubcmd::run(&args),
+        Command::Agent { agent: AgentCommand::Wheelchair(args) } => agentcmd::wheelchair(&args),
     }
 }

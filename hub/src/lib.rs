@@ -22,5 +22,6 @@ mod geom;
 pub mod map;
 pub mod math;
 pub mod rng;
+pub mod serve;
 pub mod tiled;
 pub mod world;

@@ -90,6 +90,12 @@ impl FixedName {
     }
 }
 
+impl Default for FixedName {
+    fn default() -> Self {
+        Self::EMPTY
+    }
+}
+
 impl core::fmt::Debug for FixedName {
     fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
         write!(f, "{:?}", self.as_str().unwrap_or("<not utf-8>"))
@@ -149,7 +155,7 @@ impl RunState {
 
 /// The header of every world snapshot.
 #[repr(C)]
-#[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable, ZeroCopySend)]
+#[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable, ZeroCopySend, Default)]
 #[type_name("iwsim::WorldHeader.v1")]
 pub struct WorldHeader {
     /// Tick this snapshot shows (0 before the first step).
@@ -290,7 +296,7 @@ impl SensorBlock {
 
 /// The header of the sensor blocks a hub sends an agent each tick.
 #[repr(C)]
-#[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable, ZeroCopySend)]
+#[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable, ZeroCopySend, Default)]
 #[type_name("iwsim::TickHeader.v1")]
 pub struct TickHeader {
     /// The tick.
@@ -366,7 +372,7 @@ impl ActionBlock {
 
 /// The header of an agent's actions for one tick.
 #[repr(C)]
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Pod, Zeroable, ZeroCopySend)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Pod, Zeroable, ZeroCopySend, Default)]
 #[type_name("iwsim::ActionHeader.v1")]
 pub struct ActionHeader {
     /// The tick whose readings these actions answer.
@@ -551,10 +557,32 @@ pub struct RegisterResponse {
     pub robot_id: u32,
     /// Proximity sensors the robot got.
     pub sensor_count: u32,
+    /// The hub's process id (agents watch it to notice the hub's death).
+    pub hub_pid: u32,
+    /// The current tick.
+    pub tick: u32,
     /// A short human-readable reason when refused (e.g. "com = 1.2 is out of range").
     pub detail: [u8; 64],
 }
-const _: () = assert!(core::mem::size_of::<RegisterResponse>() == 80);
+const _: () = assert!(core::mem::size_of::<RegisterResponse>() == 88);
+
+impl RegisterResponse {
+    /// The detail text (empty when accepted).
+    pub fn detail(&self) -> &str {
+        let len = self.detail.iter().position(|&b| b == 0).unwrap_or(self.detail.len());
+        core::str::from_utf8(&self.detail[..len]).unwrap_or("")
+    }
+
+    /// Sets the detail text, cut at 63 bytes on a character boundary.
+    pub fn set_detail(&mut self, text: &str) {
+        let mut end = text.len().min(self.detail.len() - 1);
+        while !text.is_char_boundary(end) {
+            end -= 1;
+        }
+        self.detail = [0; 64];
+        self.detail[..end].copy_from_slice(&text.as_bytes()[..end]);
+    }
+}
 
 /// Run control commands (`ControlRequest::command`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -612,7 +640,7 @@ pub struct ControlResponse {
 
 /// The header of the map.
 #[repr(C)]
-#[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable, ZeroCopySend)]
+#[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable, ZeroCopySend, Default)]
 #[type_name("iwsim::MapHeader.v1")]
 pub struct MapHeader {
     /// Lab width, metres.

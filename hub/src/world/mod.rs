@@ -151,6 +151,9 @@ pub struct Robot {
     pub readings: SensorReadings,
     /// Messages heard this tick, in the order of the speakers' slots.
     pub inbox: Vec<Heard>,
+    /// A frozen robot does not move and its motors read zero (its controller is gone); it
+    /// is still an obstacle and still senses.
+    pub frozen: bool,
     shape: BodyShape,
     sensors: [PreparedSensor; MAX_PROXIMITY],
     sensor_count: usize,
@@ -446,6 +449,7 @@ impl World {
             collision_count: 0,
             readings,
             inbox: Vec::new(),
+            frozen: false,
             shape,
             sensors,
             sensor_count: specs.len(),
@@ -486,6 +490,17 @@ impl World {
         self.free.push(handle.index);
         self.live -= 1;
         true
+    }
+
+    /// Freezes (or thaws) a robot; returns false when the handle names no robot.
+    pub fn set_frozen(&mut self, handle: RobotHandle, frozen: bool) -> bool {
+        match self.slots.get_mut(handle.index as usize) {
+            Some(Slot { generation, robot: Some(r) }) if *generation == handle.generation => {
+                r.frozen = frozen;
+                true
+            }
+            _ => false,
+        }
     }
 
     /// The robot a handle names.
@@ -586,6 +601,12 @@ impl World {
             let h = self.geo[i].normals[0];
             let (co, s) = (h.x, h.y);
             let next = match r.spec.kind {
+                _ if r.frozen => {
+                    r.pushed = None;
+                    r.motor_in = [0.0; 2];
+                    r.motor_out = [0.0; 2];
+                    r.pose
+                }
                 RobotKind::Real => {
                     r.motor_out = [0.0; 2];
                     r.pushed.take().unwrap_or(r.pose)

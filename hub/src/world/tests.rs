@@ -508,3 +508,26 @@ fn is_free_sees_walls_and_robots_added_since_the_last_step() {
     assert!(!w.is_free(&RobotSpec::at(3.5, 4.5, 45.0)), "overlaps the robot just added");
     assert!(w.is_free(&RobotSpec::at(3.0, 6.0, 0.0)));
 }
+
+#[test]
+fn a_frozen_robot_stops_at_once_and_stays_an_obstacle() {
+    let mut w = world(empty_lab(20.0, 8.0), quiet());
+    let a = w.add_robot(RobotSpec::at(3.0, 4.0, 0.0).motors(1.0, 0.0)).expect("valid");
+    let b = w.add_robot(RobotSpec::at(8.0, 4.0, 180.0)).expect("valid");
+    w.step(&[Action::motors(a, 1.0, 1.0)], 0.1);
+    assert!(w.set_frozen(a, true));
+    let x = w.robot(a).expect("alive").pose.x;
+    for _ in 0..5 {
+        w.step(&[Action::motors(a, 1.0, 1.0)], 0.1);
+    }
+    assert_eq!(w.robot(a).expect("alive").pose.x, x);
+    assert_eq!(w.robot(a).expect("alive").motor_out, [0.0, 0.0]);
+    // The other robot still sees it and cannot drive through it.
+    for _ in 0..60 {
+        w.step(&[Action::motors(b, 1.0, 1.0)], 0.1);
+    }
+    assert!(w.robot(b).expect("alive").pose.x - x >= 1.0 - 1e-9);
+    assert!(w.set_frozen(a, false));
+    w.step(&[Action::motors(a, -1.0, -1.0)], 0.1);
+    assert!(w.robot(a).expect("alive").pose.x < x);
+}

@@ -1,0 +1,394 @@
+//! The agent SDK: connect to a hub's session, register robots, then loop "wait for a tick →
+//! read my sensor blocks → send my actions".
+//!
+//! ```no_run
+//! use agent_sdk::{Agent, Wait};
+//! use ipc_types::{ActionBlock, RobotRegistration};
+//!
+//! let mut agent = Agent::connect("demo", "my-agent").expect("a hub serves session demo");
+//! let id = agent.register(&RobotRegistration::new("chair")).expect("accepted");
+//! agent.ready().expect("hub still there");
+//! while let Some(tick) = agent.wait_tick(Wait::Blocking).expect("hub alive") {
+//!     let front = tick.sensors[0].proximity_m[0];
+//!     let power = if front < 0.8 { 0.0 } else { 0.8 };
+//!     agent.send(tick.tick, &[ActionBlock::motors(id, power, power)]).expect("sent");
+//! }
+//! ```
+//!
+//! Agents depend on `ipc-types` and `ipc-services` only, never on the hub.
+#![warn(missing_docs)]
+
+use std::time::{Duration, Instant};
+
+use ipc_services::iceoryx2::node::Node;
+use ipc_services::iceoryx2::port::client::Client;
+use ipc_services::iceoryx2::port::listener::Listener;
+use ipc_services::iceoryx2::port::notifier::Notifier;
+use ipc_services::iceoryx2::port::publisher::Publisher;
+use ipc_services::iceoryx2::port::subscriber::Subscriber;
+use ipc_services::{Role, SLICE_ALLOCATION, ServicesError, Session, Svc};
+use ipc_types::{
+    ActionBlock, ActionHeader, MapHeader, MapItem, Refusal, RegisterKind, RegisterRequest, RegisterResponse,
+    RobotRegistration, RobotState, RunState, SensorBlock, TickHeader, WorldHeader,
+};
+
+/// How long an agent waits for a tick before it checks the hub is still alive.
+const LIVENESS_SLICE: Duration = Duration::from_millis(100);
+/// How long an answer to a registration may take.
+const ANSWER_TIMEOUT: Duration = Duration::from_secs(5);
+
+/// How `wait_tick` waits.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Wait {
+    /// Sleep until the hub rings the tick (the default: costs no CPU while waiting).
+    Blocking,
+    /// Spin on shared memory: lowest latency, one core busy. Only sensible when processes ≤
+    /// cores.
+    BusyPoll,
+}
+
+/// Why an agent call failed.
+#[derive(Debug, thiserror::Error)]
+pub enum AgentError {
+    /// The session's services could not be opened (no hub, or a bad session name).
+    #[error(transparent)]
+    Services(#[from] ServicesError),
+    /// The hub refused a request.
+    #[error("the hub refused: {reason:?}: {detail}")]
+    Refused {
+        /// Why.
+        reason: Refusal,
+        /// The hub's explanation.
+        detail: String,
+    },
+    /// The hub's process is gone.
+    #[error("the hub (pid {pid}) of session {session:?} has exited")]
+    HubGone {
+        /// The hub's pid.
+        pid: u32,
+        /// The session.
+        session: String,
+    },
+    /// The hub did not answer in time.
+    #[error("the hub of session {0:?} did not answer within 5 s")]
+    NoAnswer(String),
+    /// SIGINT or SIGTERM arrived.
+    #[error("interrupted by a termination signal")]
+    Interrupted,
+    /// iceoryx2 failed.
+    #[error("iceoryx2 failed to {0}")]
+    Ipc(String),
+}
+
+fn ipc<E: std::fmt::Debug>(what: &str) -> impl FnOnce(E) -> AgentError + '_ {
+    move |e| AgentError::Ipc(format!("{what}: {e:?}"))
+}
+
+/// One tick as an agent sees it.
+#[derive(Debug, Clone)]
+pub struct Tick<'a> {
+    /// The tick number; answer it with [`Agent::send`].
+    pub tick: u64,
+    /// Simulated seconds.
+    pub sim_time_s: f64,
+    /// The run state.
+    pub run_state: RunState,
+    /// This agent's robots' sensor blocks, in registration order.
+    pub sensors: &'a [SensorBlock],
+}
+
+/// The map as the hub published it.
+#[derive(Debug, Clone)]
+pub struct MapData {
+    /// Lab size and counts.
+    pub header: MapHeader,
+    /// Walls, corners, beacons, targets, grid slots.
+    pub items: Vec<MapItem>,
+}
+
+/// A connection to a hub.
+pub struct Agent {
+    session: Session,
+    node: Node<Svc>,
+    agent_id: u32,
+    hub_pid: u32,
+    register: Client<Svc, RegisterRequest, (), RegisterResponse, ()>,
+    sensors: Option<Subscriber<Svc, [SensorBlock], TickHeader>>,
+    actions: Publisher<Svc, [ActionBlock], ActionHeader>,
+    tick_listener: Listener<Svc>,
+    doorbell: Notifier<Svc>,
+    robots: Vec<u32>,
+    last_tick: Option<u64>,
+    last_header: TickHeader,
+    blocks: Vec<SensorBlock>,
+    finished: bool,
+}
+
+impl Drop for Agent {
+    fn drop(&mut self) {
+        self.goodbye();
+    }
+}
+
+impl std::fmt::Debug for Agent {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Agent")
+            .field("session", &self.session.name())
+            .field("agent_id", &self.agent_id)
+            .field("robots", &self.robots)
+            .finish()
+    }
+}
+
+impl Agent {
+    /// Connects to the hub serving `session` and says hello.
+    pub fn connect(session: &str, name: &str) -> Result<Self, AgentError> {
+        let session = Session::new(session)?;
+        let node = session.node(name)?;
+        let register_svc = session.register(&node, Role::Client)?;
+        let actions_svc = session.actions(&node, Role::Client)?;
+        let tick_svc = session.tick_event(&node, Role::Client)?;
+        let doorbell_svc = session.hub_event(&node, Role::Client)?;
+        let register = register_svc.client_builder().create().map_err(ipc("create a register client"))?;
+        let actions = actions_svc
+            .publisher_builder()
+            .initial_max_slice_len(4)
+            .allocation_strategy(SLICE_ALLOCATION)
+            .create()
+            .map_err(ipc("create the actions publisher"))?;
+        let tick_listener = tick_svc.listener_builder().create().map_err(ipc("create the tick listener"))?;
+        let doorbell = doorbell_svc.notifier_builder().create().map_err(ipc("create the hub doorbell"))?;
+        let mut agent = Self {
+            session,
+            node,
+            agent_id: 0,
+            hub_pid: 0,
+            register,
+            sensors: None,
+            actions,
+            tick_listener,
+            doorbell,
+            robots: Vec::new(),
+            last_tick: None,
+            last_header: TickHeader::default(),
+            blocks: Vec::new(),
+            finished: false,
+        };
+        let resp = agent.request(RegisterKind::Hello, None)?;
+        agent.agent_id = resp.agent_id;
+        agent.hub_pid = resp.hub_pid;
+        let sensors_svc = agent.session.agent_sensors(&agent.node, agent.agent_id, Role::Client)?;
+        agent.sensors = Some(sensors_svc.subscriber_builder().create().map_err(ipc("create the sensor subscriber"))?);
+        Ok(agent)
+    }
+
+    /// The id the hub gave this agent.
+    pub fn id(&self) -> u32 {
+        self.agent_id
+    }
+
+    /// The hub's process id.
+    pub fn hub_pid(&self) -> u32 {
+        self.hub_pid
+    }
+
+    /// This agent's robots, in registration order.
+    pub fn robots(&self) -> &[u32] {
+        &self.robots
+    }
+
+    fn hub_alive(&self) -> bool {
+        self.hub_pid == 0 || std::path::Path::new(&format!("/proc/{}", self.hub_pid)).exists()
+    }
+
+    fn check(&self) -> Result<(), AgentError> {
+        if self.node.wait(Duration::ZERO).is_err() {
+            return Err(AgentError::Interrupted);
+        }
+        if !self.hub_alive() {
+            return Err(AgentError::HubGone { pid: self.hub_pid, session: self.session.name().to_owned() });
+        }
+        Ok(())
+    }
+
+    fn request(
+        &mut self,
+        kind: RegisterKind,
+        robot: Option<&RobotRegistration>,
+    ) -> Result<RegisterResponse, AgentError> {
+        let req = RegisterRequest {
+            kind: kind as u32,
+            pid: std::process::id(),
+            agent_id: self.agent_id,
+            _reserved: 0,
+            robot: robot.copied().unwrap_or_else(bytemuck::Zeroable::zeroed),
+        };
+        let pending = self.register.send_copy(req).map_err(ipc("send a registration"))?;
+        let _ = self.doorbell.notify();
+        let start = Instant::now();
+        loop {
+            if let Some(resp) = pending.receive().map_err(ipc("receive an answer"))? {
+                let r = *resp.payload();
+                return match Refusal::from_u32(r.status) {
+                    Some(Refusal::Accepted) => Ok(r),
+                    reason => Err(AgentError::Refused {
+                        reason: reason.unwrap_or(Refusal::Malformed),
+                        detail: r.detail().to_owned(),
+                    }),
+                };
+            }
+            self.check()?;
+            if start.elapsed() > ANSWER_TIMEOUT {
+                return Err(AgentError::NoAnswer(self.session.name().to_owned()));
+            }
+            // The hub answers within its loop; a short nap keeps the wait cheap.
+            std::thread::sleep(Duration::from_micros(200));
+        }
+    }
+
+    /// Registers a robot; its id, or the hub's typed refusal.
+    pub fn register(&mut self, robot: &RobotRegistration) -> Result<u32, AgentError> {
+        let resp = self.request(RegisterKind::Robot, Some(robot))?;
+        self.robots.push(resp.robot_id);
+        Ok(resp.robot_id)
+    }
+
+    /// Tells the hub every robot is registered: the agent joins the lock-step barrier.
+    pub fn ready(&mut self) -> Result<(), AgentError> {
+        self.request(RegisterKind::Ready, None).map(|_| ())
+    }
+
+    /// Waits for the next tick and returns this agent's sensor blocks; `None` once the run
+    /// has finished. Fails when the hub exits or a termination signal arrives.
+    pub fn wait_tick(&mut self, wait: Wait) -> Result<Option<Tick<'_>>, AgentError> {
+        if self.finished {
+            return Ok(None);
+        }
+        loop {
+            if self.take_sensors()? {
+                let h = self.header_of_last();
+                if RunState::from_u32(h.run_state) == Some(RunState::Finished) {
+                    self.finished = true;
+                    return Ok(None);
+                }
+                return Ok(Some(Tick {
+                    tick: h.tick,
+                    sim_time_s: h.sim_time_s,
+                    run_state: RunState::from_u32(h.run_state).unwrap_or(RunState::Running),
+                    sensors: &self.blocks,
+                }));
+            }
+            match wait {
+                Wait::Blocking => {
+                    self.tick_listener.timed_wait(|_| {}, LIVENESS_SLICE).map_err(ipc("wait for a tick"))?;
+                    self.check()?;
+                }
+                Wait::BusyPoll => {
+                    // Check liveness now and then, not on every spin.
+                    let spin_until = Instant::now() + LIVENESS_SLICE;
+                    while Instant::now() < spin_until {
+                        if self.sensors.as_ref().is_some_and(|s| s.has_samples().unwrap_or(false)) {
+                            break;
+                        }
+                        std::hint::spin_loop();
+                    }
+                    self.check()?;
+                }
+            }
+        }
+    }
+
+    fn header_of_last(&self) -> TickHeader {
+        self.last_header
+    }
+
+    /// Reads the newest sensor sample if it is for a tick not seen yet.
+    fn take_sensors(&mut self) -> Result<bool, AgentError> {
+        let Some(sub) = &self.sensors else { return Ok(false) };
+        let mut fresh = false;
+        while let Some(sample) = sub.receive().map_err(ipc("receive sensor blocks"))? {
+            let h = *sample.user_header();
+            if self.last_tick.is_some_and(|t| h.tick <= t)
+                && RunState::from_u32(h.run_state) != Some(RunState::Finished)
+            {
+                continue;
+            }
+            self.blocks.clear();
+            self.blocks.extend_from_slice(sample.payload());
+            self.last_tick = Some(h.tick);
+            self.last_header = h;
+            fresh = true;
+        }
+        Ok(fresh)
+    }
+
+    /// Sends this agent's actions answering `tick` and rings the hub.
+    pub fn send(&mut self, tick: u64, actions: &[ActionBlock]) -> Result<(), AgentError> {
+        let mut sample = self.actions.loan_slice_uninit(actions.len()).map_err(ipc("loan actions"))?;
+        *sample.user_header_mut() = ActionHeader { tick, agent_id: self.agent_id, count: actions.len() as u32 };
+        sample.write_from_slice(actions).send().map_err(ipc("send actions"))?;
+        self.doorbell.notify().map_err(ipc("ring the hub"))?;
+        Ok(())
+    }
+
+    /// Leaves the session: says goodbye (the hub removes this agent's robots) unless the run
+    /// has finished, closes every port, and removes the session's last file if this was the
+    /// last process in it.
+    pub fn close(mut self) {
+        self.goodbye();
+        let session = self.session.clone();
+        drop(self);
+        session.release_if_unused();
+    }
+
+    fn goodbye(&mut self) {
+        if !self.finished && self.agent_id != 0 && self.hub_alive() {
+            let req = RegisterRequest {
+                kind: RegisterKind::Bye as u32,
+                pid: std::process::id(),
+                agent_id: self.agent_id,
+                _reserved: 0,
+                robot: bytemuck::Zeroable::zeroed(),
+            };
+            if self.register.send_copy(req).is_ok() {
+                let _ = self.doorbell.notify();
+            }
+            // Said once: the hub needs no answer, and a second goodbye would name a stranger.
+            self.finished = true;
+        }
+    }
+
+    /// The latest world snapshot: every robot's state.
+    pub fn world(&self) -> Result<(WorldHeader, Vec<RobotState>), AgentError> {
+        let svc = self.session.world(&self.node, Role::Client)?;
+        let sub = svc.subscriber_builder().create().map_err(ipc("create a world subscriber"))?;
+        let start = Instant::now();
+        loop {
+            if let Some(s) = sub.receive().map_err(ipc("receive the world"))? {
+                return Ok((*s.user_header(), s.payload().to_vec()));
+            }
+            self.check()?;
+            if start.elapsed() > ANSWER_TIMEOUT {
+                return Err(AgentError::NoAnswer(self.session.name().to_owned()));
+            }
+            std::thread::sleep(Duration::from_millis(1));
+        }
+    }
+
+    /// The map, as the hub published it.
+    pub fn map(&self) -> Result<MapData, AgentError> {
+        let svc = self.session.map(&self.node, Role::Client)?;
+        let sub = svc.subscriber_builder().create().map_err(ipc("create a map subscriber"))?;
+        let start = Instant::now();
+        loop {
+            if let Some(s) = sub.receive().map_err(ipc("receive the map"))? {
+                return Ok(MapData { header: *s.user_header(), items: s.payload().to_vec() });
+            }
+            self.check()?;
+            if start.elapsed() > ANSWER_TIMEOUT {
+                return Err(AgentError::NoAnswer(self.session.name().to_owned()));
+            }
+            std::thread::sleep(Duration::from_millis(1));
+        }
+    }
+}

@@ -1,0 +1,90 @@
+//! `iwsim hub`: loads the map and parameters, runs the hub, prints how the run ended.
+
+use std::process::ExitCode;
+use std::time::Duration;
+
+use anyhow::Context as _;
+use hub::map::builtin::{self, PREFIX};
+use hub::map::xml::{parse_params, read_text};
+use hub::map::{Grid, NoiseParams};
+use hub::serve::HubConfig;
+use hub::serve::core::Mode;
+
+use crate::cli::HubArgs;
+
+/// Builds the hub's configuration from the command line.
+pub fn config(args: &HubArgs) -> anyhow::Result<HubConfig> {
+    let lab = builtin::load_lab_spec(&args.lab).map_err(|e| anyhow::anyhow!("{}:{e}", args.lab))?;
+    let grid = match (&args.grid, args.lab.strip_prefix(PREFIX)) {
+        (Some(g), _) => builtin::load_grid_spec(g).map_err(|e| anyhow::anyhow!("{g}:{e}"))?,
+        (None, Some(name)) => builtin::map(name).map(|m| m.grid).unwrap_or_default(),
+        (None, None) => Grid::default(),
+    };
+    let mut params = match &args.param {
+        Some(path) => {
+            let text = read_text(path).map_err(|e| anyhow::anyhow!("{e}"))?;
+            parse_params(&text).map_err(|e| anyhow::anyhow!("{}:{e}", path.display()))?
+        }
+        None => hub::map::Params::default(),
+    };
+    if let Some(ms) = args.cycle_ms {
+        params.cycle_ms = ms;
+    }
+    if args.no_noise {
+        params.noise = NoiseParams::NONE;
+    }
+    let tick_limit = if args.ticks > 0 { args.ticks } else { params.sim_time_ticks };
+    Ok(HubConfig {
+        session: args.session.clone(),
+        lab,
+        grid,
+        params,
+        seed: args.seed,
+        mode: if args.lockstep { Mode::LockStep } else { Mode::RealTime },
+        deadline: Duration::from_millis(args.deadline_ms),
+        wait_agents: args.wait_agents,
+        start_on_command: args.start_on_command,
+        tick_limit,
+    })
+}
+
+/// `iwsim hub`.
+pub fn run(args: &HubArgs) -> anyhow::Result<ExitCode> {
+    let cfg = config(args)?;
+    eprintln!(
+        "iwsim hub: session {:?}, lab {:?}, {} mode{}",
+        cfg.session,
+        cfg.lab.name,
+        if cfg.mode == Mode::LockStep { "lock-step" } else { "real-time" },
+        if cfg.tick_limit > 0 { format!(", {} ticks", cfg.tick_limit) } else { String::new() }
+    );
+    let out = hub::serve::run(cfg).context("hub")?;
+    if args.json {
+        let robots: Vec<String> = out
+            .robots
+            .iter()
+            .map(|(id, x, y, h, f)| {
+                format!("{{\"id\":{id},\"x_m\":{x},\"y_m\":{y},\"heading_deg\":{h},\"flags\":{f}}}")
+            })
+            .collect();
+        println!(
+            "{{\"ticks\":{},\"state_hash\":\"{:016x}\",\"agents_seen\":{},\"agents_died\":{},\"interrupted\":{},\"robots\":[{}]}}",
+            out.ticks,
+            out.state_hash,
+            out.agents_seen,
+            out.agents_died,
+            out.interrupted,
+            robots.join(",")
+        );
+    } else {
+        println!("tick {} state hash {:016x}", out.ticks, out.state_hash);
+        println!("agents: {} connected, {} died", out.agents_seen, out.agents_died);
+        for (id, x, y, h, f) in &out.robots {
+            println!("robot {id}: x {x:.4} m, y {y:.4} m, heading {h:.2} deg, flags {f}");
+        }
+        if out.interrupted {
+            println!("stopped by a termination signal");
+        }
+    }
+    Ok(ExitCode::SUCCESS)
+}
