@@ -9,7 +9,8 @@ use crate::cli::WheelchairArgs;
 
 /// `iwsim agent wheelchair`: registers robots and drives them with constant powers.
 pub fn wheelchair(args: &WheelchairArgs) -> anyhow::Result<ExitCode> {
-    let mut agent = Agent::connect(&args.session, &format!("wheelchair-{}", std::process::id()))?;
+    let timeout = std::time::Duration::from_secs_f64(args.connect_timeout.max(0.0));
+    let mut agent = Agent::connect_within(&args.session, &format!("wheelchair-{}", std::process::id()), timeout)?;
     let mut ids = Vec::new();
     for k in 0..args.robots {
         let mut reg = RobotRegistration::new(&format!("{}{}", args.name, k + 1));

@@ -79,6 +79,9 @@ pub struct HubArgs {
     /// Wait for a Start command before tick 0.
     #[arg(long)]
     pub start_on_command: bool,
+    /// Robots the hub accepts (at most 10,000).
+    #[arg(long, default_value_t = ipc_types::MAX_ROBOTS)]
+    pub max_robots: usize,
     /// Print the end-of-run summary as one JSON object.
     #[arg(long)]
     pub json: bool,
@@ -108,10 +111,10 @@ pub struct WheelchairArgs {
     pub id: u32,
     /// Start pose of the first robot as X,Y,DIR (metres, degrees); further robots are placed
     /// 2 m apart along y. Without it, robots take grid slots.
-    #[arg(long, value_parser = parse_triple)]
+    #[arg(long, value_parser = parse_triple, allow_hyphen_values = true)]
     pub pose: Option<[f64; 3]>,
     /// Motor powers LEFT,RIGHT in [-1, 1].
-    #[arg(long, value_parser = parse_pair, default_value = "0.5,0.5")]
+    #[arg(long, value_parser = parse_pair, default_value = "0.5,0.5", allow_hyphen_values = true)]
     pub powers: [f64; 2],
     /// Length along the heading, metres.
     #[arg(long, default_value_t = 1.0)]
@@ -134,6 +137,9 @@ pub struct WheelchairArgs {
     /// Spin on shared memory instead of sleeping between ticks.
     #[arg(long)]
     pub busy_poll: bool,
+    /// Wait this many seconds for the hub to start serving the session.
+    #[arg(long, default_value_t = 5.0)]
+    pub connect_timeout: f64,
 }
 
 fn parse_pair(s: &str) -> Result<[f64; 2], String> {

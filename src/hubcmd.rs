@@ -45,6 +45,7 @@ pub fn config(args: &HubArgs) -> anyhow::Result<HubConfig> {
         wait_agents: args.wait_agents,
         start_on_command: args.start_on_command,
         tick_limit,
+        max_robots: args.max_robots,
     })
 }
 

@@ -10,8 +10,10 @@
 //!
 //! let session = Session::new("demo").expect("a valid session name");
 //! let node = session.node("agent-1").expect("iceoryx2 node");
-//! let world = session.world(&node, Role::Client);
-//! assert!(world.is_err() || world.is_ok()); // Err(NotRunning) when no hub serves "demo"
+//! // Fails with ServicesError::NotRunning when no hub serves "demo".
+//! let world = session.world(&node, Role::Client).expect("a hub serves the session");
+//! let subscriber = world.subscriber_builder().create().expect("a free subscriber slot");
+//! # drop(subscriber);
 //! ```
 #![warn(missing_docs)]
 

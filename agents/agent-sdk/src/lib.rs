@@ -9,7 +9,7 @@
 //! let id = agent.register(&RobotRegistration::new("chair")).expect("accepted");
 //! agent.ready().expect("hub still there");
 //! while let Some(tick) = agent.wait_tick(Wait::Blocking).expect("hub alive") {
-//!     let front = tick.sensors[0].proximity_m[0];
+//!     let front = agent.sensors()[0].proximity_m[0];
 //!     let power = if front < 0.8 { 0.0 } else { 0.8 };
 //!     agent.send(tick.tick, &[ActionBlock::motors(id, power, power)]).expect("sent");
 //! }
@@ -26,6 +26,7 @@ use ipc_services::iceoryx2::port::listener::Listener;
 use ipc_services::iceoryx2::port::notifier::Notifier;
 use ipc_services::iceoryx2::port::publisher::Publisher;
 use ipc_services::iceoryx2::port::subscriber::Subscriber;
+use ipc_services::iceoryx2::prelude::PortFactory as _;
 use ipc_services::{Role, SLICE_ALLOCATION, ServicesError, Session, Svc};
 use ipc_types::{
     ActionBlock, ActionHeader, MapHeader, MapItem, Refusal, RegisterKind, RegisterRequest, RegisterResponse,
@@ -84,17 +85,51 @@ fn ipc<E: std::fmt::Debug>(what: &str) -> impl FnOnce(E) -> AgentError + '_ {
     move |e| AgentError::Ipc(format!("{what}: {e:?}"))
 }
 
-/// One tick as an agent sees it.
-#[derive(Debug, Clone)]
-pub struct Tick<'a> {
+/// One tick as an agent sees it; the sensor blocks are in [`Agent::sensors`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Tick {
     /// The tick number; answer it with [`Agent::send`].
     pub tick: u64,
     /// Simulated seconds.
     pub sim_time_s: f64,
     /// The run state.
     pub run_state: RunState,
-    /// This agent's robots' sensor blocks, in registration order.
-    pub sensors: &'a [SensorBlock],
+}
+
+/// Sends a run-control command to the hub of `session` (start, pause, step, stop, remove a
+/// robot) and returns its answer.
+pub fn control(
+    session: &str,
+    command: ipc_types::Command,
+    robot_id: u32,
+) -> Result<ipc_types::ControlResponse, AgentError> {
+    let session = Session::new(session)?;
+    let node = session.node(&format!("iwsim-control-{}", std::process::id()))?;
+    let svc = session.control(&node, Role::Client)?;
+    let start = Instant::now();
+    while svc.dynamic_config().number_of_servers() == 0 {
+        if start.elapsed() > ANSWER_TIMEOUT {
+            return Err(AgentError::NoAnswer(session.name().to_owned()));
+        }
+        std::thread::sleep(Duration::from_micros(200));
+    }
+    let doorbell =
+        session.hub_event(&node, Role::Client)?.notifier_builder().create().map_err(ipc("create the hub doorbell"))?;
+    let client = svc.client_builder().create().map_err(ipc("create a control client"))?;
+    let pending = client
+        .send_copy(ipc_types::ControlRequest { command: command as u32, robot_id })
+        .map_err(ipc("send a command"))?;
+    let _ = doorbell.notify();
+    let start = Instant::now();
+    loop {
+        if let Some(r) = pending.receive().map_err(ipc("receive an answer"))? {
+            return Ok(*r.payload());
+        }
+        if start.elapsed() > ANSWER_TIMEOUT {
+            return Err(AgentError::NoAnswer(session.name().to_owned()));
+        }
+        std::thread::sleep(Duration::from_micros(200));
+    }
 }
 
 /// The map as the hub published it.
@@ -120,6 +155,8 @@ pub struct Agent {
     robots: Vec<u32>,
     last_tick: Option<u64>,
     last_header: TickHeader,
+    world_sub: Option<Subscriber<Svc, [RobotState], WorldHeader>>,
+    last_world: Option<(WorldHeader, Vec<RobotState>)>,
     blocks: Vec<SensorBlock>,
     finished: bool,
 }
@@ -149,6 +186,18 @@ impl Agent {
         let actions_svc = session.actions(&node, Role::Client)?;
         let tick_svc = session.tick_event(&node, Role::Client)?;
         let doorbell_svc = session.hub_event(&node, Role::Client)?;
+        // The hub creates its services first and its ports right after: a request sent in
+        // between would reach no server and be lost, so wait until the hub's ports exist.
+        let start = Instant::now();
+        while register_svc.dynamic_config().number_of_servers() == 0
+            || doorbell_svc.dynamic_config().number_of_listeners() == 0
+            || actions_svc.dynamic_config().number_of_subscribers() == 0
+        {
+            if start.elapsed() > ANSWER_TIMEOUT {
+                return Err(AgentError::NoAnswer(session.name().to_owned()));
+            }
+            std::thread::sleep(Duration::from_micros(200));
+        }
         let register = register_svc.client_builder().create().map_err(ipc("create a register client"))?;
         let actions = actions_svc
             .publisher_builder()
@@ -171,6 +220,8 @@ impl Agent {
             robots: Vec::new(),
             last_tick: None,
             last_header: TickHeader::default(),
+            world_sub: None,
+            last_world: None,
             blocks: Vec::new(),
             finished: false,
         };
@@ -180,6 +231,21 @@ impl Agent {
         let sensors_svc = agent.session.agent_sensors(&agent.node, agent.agent_id, Role::Client)?;
         agent.sensors = Some(sensors_svc.subscriber_builder().create().map_err(ipc("create the sensor subscriber"))?);
         Ok(agent)
+    }
+
+    /// Like [`Agent::connect`], but waits up to `timeout` for a hub to start serving the
+    /// session, so an agent may be started before its hub.
+    pub fn connect_within(session: &str, name: &str, timeout: Duration) -> Result<Self, AgentError> {
+        let start = Instant::now();
+        loop {
+            match Self::connect(session, name) {
+                Err(AgentError::Services(ServicesError::NotRunning { .. })) if start.elapsed() < timeout => {
+                    // Polling for the hub's services to appear; nothing to wait on before they exist.
+                    std::thread::sleep(Duration::from_millis(10));
+                }
+                other => return other,
+            }
+        }
     }
 
     /// The id the hub gave this agent.
@@ -260,7 +326,7 @@ impl Agent {
 
     /// Waits for the next tick and returns this agent's sensor blocks; `None` once the run
     /// has finished. Fails when the hub exits or a termination signal arrives.
-    pub fn wait_tick(&mut self, wait: Wait) -> Result<Option<Tick<'_>>, AgentError> {
+    pub fn wait_tick(&mut self, wait: Wait) -> Result<Option<Tick>, AgentError> {
         if self.finished {
             return Ok(None);
         }
@@ -275,7 +341,6 @@ impl Agent {
                     tick: h.tick,
                     sim_time_s: h.sim_time_s,
                     run_state: RunState::from_u32(h.run_state).unwrap_or(RunState::Running),
-                    sensors: &self.blocks,
                 }));
             }
             match wait {
@@ -296,6 +361,12 @@ impl Agent {
                 }
             }
         }
+    }
+
+    /// This agent's robots' sensor blocks of the last tick returned by [`Agent::wait_tick`],
+    /// in registration order.
+    pub fn sensors(&self) -> &[SensorBlock] {
+        &self.blocks
     }
 
     fn header_of_last(&self) -> TickHeader {
@@ -358,14 +429,23 @@ impl Agent {
         }
     }
 
-    /// The latest world snapshot: every robot's state.
-    pub fn world(&self) -> Result<(WorldHeader, Vec<RobotState>), AgentError> {
-        let svc = self.session.world(&self.node, Role::Client)?;
-        let sub = svc.subscriber_builder().create().map_err(ipc("create a world subscriber"))?;
+    /// The latest world snapshot: every robot's state. The first call subscribes (and gets
+    /// the snapshot the hub keeps for late subscribers); later calls return the newest one.
+    pub fn world(&mut self) -> Result<(WorldHeader, Vec<RobotState>), AgentError> {
+        if self.world_sub.is_none() {
+            let svc = self.session.world(&self.node, Role::Client)?;
+            self.world_sub = Some(svc.subscriber_builder().create().map_err(ipc("create a world subscriber"))?);
+        }
         let start = Instant::now();
         loop {
-            if let Some(s) = sub.receive().map_err(ipc("receive the world"))? {
-                return Ok((*s.user_header(), s.payload().to_vec()));
+            let sub = self.world_sub.as_ref().ok_or_else(|| AgentError::Ipc("world subscriber".into()))?;
+            let mut newest = None;
+            while let Some(s) = sub.receive().map_err(ipc("receive the world"))? {
+                newest = Some((*s.user_header(), s.payload().to_vec()));
+            }
+            if let Some(latest) = newest.or_else(|| self.last_world.take()) {
+                self.last_world = Some(latest.clone());
+                return Ok(latest);
             }
             self.check()?;
             if start.elapsed() > ANSWER_TIMEOUT {

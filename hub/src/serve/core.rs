@@ -72,6 +72,9 @@ pub struct HubCore {
     id_by_slot: Vec<u32>,
     next_agent_id: u32,
     tick_limit: u64,
+    seed: u64,
+    settled: bool,
+    max_robots: usize,
     pending: Vec<Action>,
     /// Steps left to take while paused (from `Step` commands).
     single_steps: u32,
@@ -101,9 +104,17 @@ impl HubCore {
             id_by_slot: Vec::new(),
             next_agent_id: 1,
             tick_limit,
+            seed,
+            settled: false,
+            max_robots: MAX_ROBOTS,
             pending: Vec::new(),
             single_steps: 0,
         })
+    }
+
+    /// Lowers how many robots the hub accepts (never above `MAX_ROBOTS`).
+    pub fn set_max_robots(&mut self, max: usize) {
+        self.max_robots = max.min(MAX_ROBOTS);
     }
 
     /// The world.
@@ -160,8 +171,8 @@ impl HubCore {
         if !self.agents.get(&agent_id).is_some_and(|a| a.alive) {
             return Err(Refused::new(Refusal::UnknownAgent, format!("agent {agent_id} has not said hello")));
         }
-        if self.robots.len() >= MAX_ROBOTS {
-            return Err(Refused::new(Refusal::Capacity, format!("the hub serves at most {MAX_ROBOTS} robots")));
+        if self.robots.len() >= self.max_robots {
+            return Err(Refused::new(Refusal::Capacity, format!("the hub serves at most {} robots", self.max_robots)));
         }
         let has_pose = reg.flags & REG_HAS_POSE != 0;
         let id = if reg.requested_id == 0 {
@@ -373,8 +384,50 @@ impl HubCore {
         0
     }
 
+    /// Rebuilds the world with its robots added in id order: registrations arrive in whatever
+    /// order the agents' processes run, and the world's slot order fixes the order of every
+    /// random draw, so without this two runs with one seed could differ.
+    fn settle_slots(&mut self) {
+        let mut world = match World::new(self.world.lab(), self.world.params().clone(), self.seed) {
+            Ok(w) => w,
+            Err(_) => return, // the same lab and parameters built once already
+        };
+        world.set_capacity(MAX_ROBOTS);
+        self.id_by_slot.clear();
+        for (&id, entry) in self.robots.iter_mut() {
+            let Some(r) = self.world.robot(entry.handle) else { continue };
+            let spec = RobotSpec { pose: r.pose, ..r.spec.clone() };
+            let frozen = r.frozen;
+            let Ok(handle) = world.add_robot(spec) else { continue };
+            world.set_frozen(handle, frozen);
+            entry.handle = handle;
+            let slot = handle.index() as usize;
+            if self.id_by_slot.len() <= slot {
+                self.id_by_slot.resize(slot + 1, 0);
+            }
+            self.id_by_slot[slot] = id;
+        }
+        self.world = world;
+    }
+
     /// Steps the world once with the actions taken since the last step.
     pub fn step(&mut self) {
+        if self.world.tick() == 0 && !self.settled {
+            self.settled = true;
+            let pending = std::mem::take(&mut self.pending);
+            // Pending actions name world handles: map them to ids and back across the rebuild.
+            let by_handle: BTreeMap<RobotHandle, u32> = self.robots.iter().map(|(&id, e)| (e.handle, id)).collect();
+            let ids: Vec<Option<u32>> = pending.iter().map(|a| by_handle.get(&a.robot).copied()).collect();
+            self.settle_slots();
+            self.pending = pending
+                .into_iter()
+                .zip(ids)
+                .filter_map(|(mut a, id)| {
+                    a.robot = self.robots.get(&id?)?.handle;
+                    Some(a)
+                })
+                .collect();
+        }
         if self.state != RunState::Running {
             self.single_steps = self.single_steps.saturating_sub(1);
         }
@@ -617,6 +670,36 @@ mod tests {
         let heard: Vec<_> = b.messages().collect();
         assert_eq!(heard, vec![(r1, &b"go first"[..])]);
         assert_eq!(b.pose[0], 14.0, "grid slot 2 of LIACC");
+    }
+
+    #[test]
+    fn the_first_step_orders_robots_by_id_whatever_the_registration_order() {
+        let run = |first_b: bool| {
+            let mut c = core(Mode::LockStep);
+            let params = Params::default(); // noise on: slot order decides the draws
+            c = HubCore::new(c.world.lab(), c.grid.clone(), params, 5, Mode::LockStep, 0).expect("valid");
+            let a = c.hello(1).expect("room");
+            let b = c.hello(2).expect("room");
+            let mut ra = RobotRegistration::new("a");
+            ra.requested_id = 1;
+            let mut rb = RobotRegistration::new("b");
+            rb.requested_id = 2;
+            if first_b {
+                c.register(b, &rb).expect("ok");
+                c.register(a, &ra).expect("ok");
+            } else {
+                c.register(a, &ra).expect("ok");
+                c.register(b, &rb).expect("ok");
+            }
+            c.command(Command::Start, 0);
+            for t in 0..20 {
+                c.actions(a, t, &[ActionBlock::motors(1, 0.9, 0.4)]);
+                c.actions(b, t, &[ActionBlock::motors(2, 0.2, 0.8)]);
+                c.step();
+            }
+            c.world().state_hash()
+        };
+        assert_eq!(run(false), run(true));
     }
 
     #[test]

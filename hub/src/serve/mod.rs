@@ -46,6 +46,8 @@ pub struct HubConfig {
     pub start_on_command: bool,
     /// Stop after this many ticks (0: run until stopped).
     pub tick_limit: u64,
+    /// Robots the hub accepts (at most `ipc_types::MAX_ROBOTS`).
+    pub max_robots: usize,
 }
 
 /// Why the hub stopped with an error.
@@ -145,6 +147,7 @@ pub fn run(cfg: HubConfig) -> Result<HubOutcome, HubError> {
     }
     let node = session.node("iwsim-hub")?;
     let mut core = HubCore::new(&cfg.lab, cfg.grid.clone(), cfg.params.clone(), cfg.seed, cfg.mode, cfg.tick_limit)?;
+    core.set_max_robots(cfg.max_robots);
 
     let world_svc = session.world(&node, Role::Hub)?;
     let map_svc = session.map(&node, Role::Hub)?;
@@ -253,6 +256,7 @@ pub fn run(cfg: HubConfig) -> Result<HubOutcome, HubError> {
         // Registrations.
         while let Some(req) = register_server.receive().map_err(ipc("receive a registration"))? {
             let r = *req.payload();
+            tracing::debug!("registration request kind {} from pid {} agent {}", r.kind, r.pid, r.agent_id);
             let mut resp =
                 RegisterResponse { hub_pid, tick: core.world().tick() as u32, ..bytemuck::Zeroable::zeroed() };
             match RegisterKind::from_u32(r.kind) {
@@ -310,6 +314,13 @@ pub fn run(cfg: HubConfig) -> Result<HubOutcome, HubError> {
                 }
             }
             req.send_copy(resp).map_err(ipc("answer a registration"))?;
+            tracing::debug!(
+                "answered pid {}: status {} agent {} robot {}",
+                r.pid,
+                resp.status,
+                resp.agent_id,
+                resp.robot_id
+            );
         }
         if core.state() == RunState::Waiting && !cfg.start_on_command {
             if cfg.wait_agents == 0 {

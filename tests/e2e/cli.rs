@@ -1,9 +1,9 @@
-//! The `iwsim` binary run as a user runs it: real processes, real files, exit codes and output.
+//! `iwsim map`, `bench world` and `demo` run as a user runs them: real processes, real files.
 
 use std::path::PathBuf;
 use std::process::{Command, Output};
 
-fn iwsim(args: &[&str]) -> Output {
+pub fn iwsim(args: &[&str]) -> Output {
     Command::new(env!("CARGO_BIN_EXE_iwsim")).args(args).output().expect("iwsim runs")
 }
 

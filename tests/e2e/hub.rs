@@ -1,0 +1,344 @@
+//! The shared-memory hub across real processes: each test runs `iwsim hub` and agents as
+//! separate processes in a session of its own, so tests run in parallel without crossing.
+
+use std::io::Read;
+use std::process::{Child, Command, Output, Stdio};
+use std::sync::atomic::{AtomicU32, Ordering};
+use std::time::{Duration, Instant};
+
+use agent_sdk::{Agent, AgentError, control};
+use hub::map::{NoiseParams, Params, builtin};
+use hub::world::{Action, RobotSpec, World};
+use ipc_types::{Command as Cmd, REG_HAS_POSE, ROBOT_FROZEN, Refusal, RobotRegistration};
+
+fn session(tag: &str) -> String {
+    static N: AtomicU32 = AtomicU32::new(0);
+    format!("e2e-{tag}-{}-{}", std::process::id(), N.fetch_add(1, Ordering::Relaxed))
+}
+
+/// A child process killed if the test fails before it exits.
+struct Proc(Option<Child>);
+
+impl Proc {
+    fn spawn(args: &[&str]) -> Self {
+        let child = Command::new(env!("CARGO_BIN_EXE_iwsim"))
+            .args(args)
+            .env("RUST_LOG", "warn")
+            .stdin(Stdio::null())
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .expect("iwsim starts");
+        Self(Some(child))
+    }
+
+    fn pid(&self) -> u32 {
+        self.0.as_ref().expect("running").id()
+    }
+
+    /// Waits for the process to exit (checking every few milliseconds) and returns its
+    /// output; panics with what it printed if it does not exit in time.
+    fn wait(mut self, timeout: Duration) -> Output {
+        let mut child = self.0.take().expect("running");
+        let start = Instant::now();
+        loop {
+            if child.try_wait().expect("wait works").is_some() {
+                return child.wait_with_output().expect("output");
+            }
+            if start.elapsed() > timeout {
+                let _ = child.kill();
+                let out = child.wait_with_output().expect("output");
+                panic!(
+                    "process did not exit within {timeout:?}\nstdout: {}\nstderr: {}",
+                    String::from_utf8_lossy(&out.stdout),
+                    String::from_utf8_lossy(&out.stderr)
+                );
+            }
+            std::thread::sleep(Duration::from_millis(5));
+        }
+    }
+
+    fn kill9(&mut self) {
+        if let Some(c) = self.0.as_mut() {
+            let _ = c.kill();
+            let _ = c.wait();
+        }
+    }
+
+    fn signal(&self, sig: &str) {
+        let status =
+            Command::new("kill").arg(format!("-{sig}")).arg(self.pid().to_string()).status().expect("kill runs");
+        assert!(status.success());
+    }
+
+    fn stderr_now(&mut self) -> String {
+        let mut s = String::new();
+        if let Some(err) = self.0.as_mut().and_then(|c| c.stderr.as_mut()) {
+            let _ = err.read_to_string(&mut s);
+        }
+        s
+    }
+}
+
+impl Drop for Proc {
+    fn drop(&mut self) {
+        self.kill9();
+    }
+}
+
+fn text(b: &[u8]) -> String {
+    String::from_utf8_lossy(b).into_owned()
+}
+
+/// The value of `"key":` in a one-line JSON object (numbers and strings).
+fn json_field<'a>(json: &'a str, key: &str) -> &'a str {
+    let k = format!("\"{key}\":");
+    let start = json.find(&k).unwrap_or_else(|| panic!("{key} missing in {json}")) + k.len();
+    let rest = &json[start..];
+    let end = rest.find([',', '}', ']']).unwrap_or(rest.len());
+    rest[..end].trim_matches('"')
+}
+
+/// Connects as an observer (an agent without robots) and waits until the hub's world has
+/// reached `tick`.
+fn wait_for_tick(session: &str, tick: u64, timeout: Duration) -> Agent {
+    let mut observer = Agent::connect_within(session, "observer", timeout).expect("hub comes up");
+    let start = Instant::now();
+    loop {
+        let (h, _) = observer.world().expect("world snapshot");
+        if h.tick >= tick {
+            return observer;
+        }
+        assert!(start.elapsed() < timeout, "hub stayed at tick {} (< {tick})", h.tick);
+        std::thread::sleep(Duration::from_millis(5));
+    }
+}
+
+#[test]
+fn an_agent_drives_and_the_hubs_pose_matches_the_world_model() {
+    let s = session("pose");
+    let hub = Proc::spawn(&[
+        "hub",
+        "--session",
+        &s,
+        "--lockstep",
+        "--ticks",
+        "40",
+        "--wait-agents",
+        "1",
+        "--no-noise",
+        "--json",
+    ]);
+    let agent = Proc::spawn(&["agent", "wheelchair", "--session", &s, "--pose", "10,6.1,0", "--powers", "1,0.6"]);
+    let out = hub.wait(Duration::from_secs(30));
+    let json = text(&out.stdout);
+    assert!(out.status.success(), "{json}{}", text(&out.stderr));
+    assert!(agent.wait(Duration::from_secs(10)).status.success());
+
+    // The same robot and actions stepped in this process.
+    let map = builtin::map("liacc").expect("built in");
+    let mut world = World::new(&map.lab, Params { noise: NoiseParams::NONE, ..Params::default() }, 1).expect("valid");
+    let r = world.add_robot(RobotSpec::at(10.0, 6.1, 0.0).named("chair1")).expect("free");
+    for _ in 0..40 {
+        world.step(&[Action::motors(r, 1.0, 0.6)], 0.1);
+    }
+    let pose = world.robot(r).expect("alive").pose;
+    assert_eq!(json_field(&json, "ticks"), "40");
+    assert_eq!(json_field(&json, "x_m").parse::<f64>().expect("number"), pose.x, "{json}");
+    assert_eq!(json_field(&json, "y_m").parse::<f64>().expect("number"), pose.y, "{json}");
+    assert_eq!(json_field(&json, "state_hash"), format!("{:016x}", world.state_hash()));
+}
+
+fn lockstep_hash(seed: u64) -> String {
+    let s = session("det");
+    let hub = Proc::spawn(&[
+        "hub",
+        "--session",
+        &s,
+        "--lockstep",
+        "--ticks",
+        "60",
+        "--wait-agents",
+        "2",
+        "--seed",
+        &seed.to_string(),
+        "--json",
+    ]);
+    let a = Proc::spawn(&["agent", "wheelchair", "--session", &s, "--robots", "2", "--id", "1", "--powers", "0.8,0.5"]);
+    let b = Proc::spawn(&["agent", "wheelchair", "--session", &s, "--robots", "2", "--id", "3", "--powers", "0.3,0.9"]);
+    let out = hub.wait(Duration::from_secs(30));
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    assert!(a.wait(Duration::from_secs(10)).status.success());
+    assert!(b.wait(Duration::from_secs(10)).status.success());
+    let json = text(&out.stdout);
+    assert_eq!(json_field(&json, "ticks"), "60");
+    json_field(&json, "state_hash").to_owned()
+}
+
+#[test]
+fn lockstep_runs_across_processes_are_deterministic_per_seed() {
+    let first = lockstep_hash(7);
+    let second = lockstep_hash(7);
+    let other = lockstep_hash(8);
+    assert_eq!(first, second, "same seed, same final state");
+    assert_ne!(first, other, "another seed, other noise");
+}
+
+#[test]
+fn a_killed_agent_is_frozen_and_flagged_and_the_run_goes_on() {
+    let s = session("kill-agent");
+    let hub =
+        Proc::spawn(&["hub", "--session", &s, "--lockstep", "--wait-agents", "2", "--deadline-ms", "20000", "--json"]);
+    let a = Proc::spawn(&["agent", "wheelchair", "--session", &s, "--id", "1", "--powers", "0.5,0.5"]);
+    let mut b = Proc::spawn(&["agent", "wheelchair", "--session", &s, "--id", "2", "--powers", "0.5,0.5"]);
+    let mut observer = wait_for_tick(&s, 20, Duration::from_secs(20));
+    b.kill9();
+    let (at_kill, _) = observer.world().expect("snapshot");
+    // With a 20 s deadline, a hub that waited for the dead agent would stall for 20 s a tick:
+    // it must notice the death and go on at once.
+    let start = Instant::now();
+    loop {
+        let (h, robots) = observer.world().expect("snapshot");
+        if h.tick >= at_kill.tick + 200 {
+            let frozen = robots.iter().find(|r| r.id == 2).expect("robot 2 stays in the world");
+            assert_ne!(frozen.flags & ROBOT_FROZEN, 0, "robot 2 is flagged frozen");
+            assert_eq!(robots.iter().find(|r| r.id == 1).expect("robot 1").flags & ROBOT_FROZEN, 0);
+            break;
+        }
+        assert!(start.elapsed() < Duration::from_secs(10), "the run stalled at tick {} after the kill", h.tick);
+        std::thread::sleep(Duration::from_millis(5));
+    }
+    drop(observer);
+    assert_eq!(control(&s, Cmd::Stop, 0).expect("hub answers").status, 0);
+    let out = hub.wait(Duration::from_secs(10));
+    let json = text(&out.stdout);
+    assert!(out.status.success(), "{json}{}", text(&out.stderr));
+    assert_eq!(json_field(&json, "agents_died"), "1");
+    assert!(a.wait(Duration::from_secs(10)).status.success());
+}
+
+#[test]
+fn a_killed_hub_makes_its_agents_exit_with_a_message_within_5_s() {
+    let s = session("kill-hub");
+    let mut hub = Proc::spawn(&["hub", "--session", &s, "--cycle-ms", "20"]);
+    let mut agent = Proc::spawn(&["agent", "wheelchair", "--session", &s]);
+    let observer = wait_for_tick(&s, 5, Duration::from_secs(20));
+    drop(observer);
+    hub.kill9();
+    let killed = Instant::now();
+    let out = {
+        let a = std::mem::replace(&mut agent, Proc(None));
+        a.wait(Duration::from_secs(10))
+    };
+    assert!(killed.elapsed() < Duration::from_secs(5), "agent took {:?}", killed.elapsed());
+    assert!(!out.status.success());
+    assert!(text(&out.stderr).contains("has exited"), "{}", text(&out.stderr));
+}
+
+#[test]
+fn two_sessions_side_by_side_do_not_interfere() {
+    let (s1, s2) = (session("side1"), session("side2"));
+    let args = |s: &str| {
+        vec![
+            "hub".to_owned(),
+            "--session".into(),
+            s.into(),
+            "--lockstep".into(),
+            "--ticks".into(),
+            "30".into(),
+            "--wait-agents".into(),
+            "1".into(),
+            "--no-noise".into(),
+            "--json".into(),
+        ]
+    };
+    let a1: Vec<String> = args(&s1);
+    let a2: Vec<String> = args(&s2);
+    let h1 = Proc::spawn(&a1.iter().map(String::as_str).collect::<Vec<_>>());
+    let h2 = Proc::spawn(&a2.iter().map(String::as_str).collect::<Vec<_>>());
+    let g1 = Proc::spawn(&["agent", "wheelchair", "--session", &s1, "--pose", "10,6.1,0", "--powers", "1,1"]);
+    let g2 = Proc::spawn(&["agent", "wheelchair", "--session", &s2, "--pose", "10,6.1,0", "--powers", "-1,-1"]);
+    let (o1, o2) = (h1.wait(Duration::from_secs(30)), h2.wait(Duration::from_secs(30)));
+    let (j1, j2) = (text(&o1.stdout), text(&o2.stdout));
+    assert_eq!((json_field(&j1, "agents_seen"), json_field(&j2, "agents_seen")), ("1", "1"));
+    let (x1, x2): (f64, f64) = (json_field(&j1, "x_m").parse().expect("x"), json_field(&j2, "x_m").parse().expect("x"));
+    assert!(x1 > 10.5 && x2 < 9.9 || x2 < 10.0, "forward in one, backward in the other: {x1} {x2}");
+    assert!(x1 > 10.5, "{j1}");
+    assert!(g1.wait(Duration::from_secs(10)).status.success());
+    assert!(g2.wait(Duration::from_secs(10)).status.success());
+}
+
+#[test]
+fn registration_refusals_come_back_as_typed_errors() {
+    let s = session("refuse");
+    let hub = Proc::spawn(&["hub", "--session", &s, "--start-on-command", "--max-robots", "2"]);
+    let mut agent = Agent::connect_within(&s, "refusals", Duration::from_secs(20)).expect("hub comes up");
+    let mut reg = RobotRegistration::new("one");
+    reg.requested_id = 1;
+    assert_eq!(agent.register(&reg).expect("accepted"), 1);
+    match agent.register(&reg) {
+        Err(AgentError::Refused { reason: Refusal::DuplicateId, .. }) => {}
+        other => panic!("expected a duplicate-id refusal, got {other:?}"),
+    }
+    let mut bad = RobotRegistration::new("bad");
+    bad.com = 1.5;
+    match agent.register(&bad) {
+        Err(AgentError::Refused { reason: Refusal::BadParameters, detail }) => {
+            assert!(detail.contains("com"), "{detail}")
+        }
+        other => panic!("expected a bad-parameters refusal, got {other:?}"),
+    }
+    let mut far = RobotRegistration::new("far");
+    far.requested_id = 50;
+    match agent.register(&far) {
+        Err(AgentError::Refused { reason: Refusal::NoSuchSlot, .. }) => {}
+        other => panic!("expected a no-such-slot refusal, got {other:?}"),
+    }
+    far.flags = REG_HAS_POSE;
+    far.pose = [20.0, 6.1, 0.0];
+    assert_eq!(agent.register(&far).expect("a pose makes any id fine"), 50);
+    match agent.register(&RobotRegistration::new("third")) {
+        Err(AgentError::Refused { reason: Refusal::Capacity, .. }) => {}
+        other => panic!("expected a capacity refusal, got {other:?}"),
+    }
+    let answer = control(&s, Cmd::Stop, 0).expect("hub answers");
+    assert_eq!(answer.status, 0);
+    drop(agent);
+    assert!(hub.wait(Duration::from_secs(10)).status.success());
+}
+
+#[test]
+fn a_restarted_hub_with_the_same_session_needs_no_cleanup() {
+    let s = session("restart");
+    let mut first = Proc::spawn(&["hub", "--session", &s, "--cycle-ms", "20"]);
+    drop(wait_for_tick(&s, 2, Duration::from_secs(20)));
+    first.kill9();
+    let second = Proc::spawn(&["hub", "--session", &s, "--cycle-ms", "5", "--ticks", "5"]);
+    let out = second.wait(Duration::from_secs(20));
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    assert!(text(&out.stdout).contains("tick 5 "), "{}", text(&out.stdout));
+}
+
+#[test]
+fn sigterm_stops_hub_and_agent_cleanly_and_leaves_no_shared_memory() {
+    let s = session("term");
+    let mut hub = Proc::spawn(&["hub", "--session", &s, "--cycle-ms", "10"]);
+    let agent = Proc::spawn(&["agent", "wheelchair", "--session", &s]);
+    let observer = wait_for_tick(&s, 3, Duration::from_secs(20));
+    observer.close();
+    hub.signal("TERM");
+    let out = std::mem::replace(&mut hub, Proc(None));
+    let out = out.wait(Duration::from_secs(10));
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    assert!(text(&out.stdout).contains("stopped by a termination signal"));
+    let a = agent.wait(Duration::from_secs(10));
+    assert!(a.status.success(), "{}", text(&a.stderr));
+    let prefix = format!("iwsim_{s}_");
+    let left: Vec<String> = std::fs::read_dir("/dev/shm")
+        .expect("/dev/shm")
+        .filter_map(|e| e.ok().map(|e| e.file_name().to_string_lossy().into_owned()))
+        .filter(|n| n.starts_with(&prefix))
+        .collect();
+    assert!(left.is_empty(), "left in /dev/shm: {left:?}");
+    let _ = hub.stderr_now();
+}

@@ -1,0 +1,4 @@
+//! End-to-end tests: the `iwsim` binary in real processes, talking over real shared memory.
+
+mod cli;
+mod hub;
