@@ -109,10 +109,13 @@ pub struct WheelchairArgs {
     /// Requested id of the first robot (0: first free grid slot).
     #[arg(long, default_value_t = 0)]
     pub id: u32,
-    /// Start pose of the first robot as X,Y,DIR (metres, degrees); further robots are placed
-    /// 2 m apart along y. Without it, robots take grid slots.
+    /// Start pose of the first robot as X,Y,DIR (metres, degrees); further robots form a
+    /// lattice `--spacing` apart, ten to a row. Without it, robots take grid slots.
     #[arg(long, value_parser = parse_triple, allow_hyphen_values = true)]
     pub pose: Option<[f64; 3]>,
+    /// Distance between robots of the lattice, metres.
+    #[arg(long, default_value_t = 2.0)]
+    pub spacing: f64,
     /// Motor powers LEFT,RIGHT in [-1, 1].
     #[arg(long, value_parser = parse_pair, default_value = "0.5,0.5", allow_hyphen_values = true)]
     pub powers: [f64; 2],
@@ -140,6 +143,9 @@ pub struct WheelchairArgs {
     /// Wait this many seconds for the hub to start serving the session.
     #[arg(long, default_value_t = 5.0)]
     pub connect_timeout: f64,
+    /// At the end, print the hub-publish → agent-has-it latency percentiles as JSON.
+    #[arg(long)]
+    pub report_latency: bool,
 }
 
 fn parse_pair(s: &str) -> Result<[f64; 2], String> {
@@ -170,6 +176,59 @@ pub enum MapCommand {
 pub enum BenchCommand {
     /// World model throughput: ticks per second of tiled LIACC floors with N chairs.
     World(BenchWorldArgs),
+    /// Hub publish -> agent has its sensor block, busy-poll and blocking, against a raw
+    /// iceoryx2 ping-pong measured in the same run.
+    Latency(BenchLatencyArgs),
+    /// End-to-end lock-step ticks per second with agents as separate processes.
+    Lockstep(BenchLockstepArgs),
+    /// The peer process of the raw iceoryx2 ping-pong (started by `bench latency`).
+    #[command(hide = true)]
+    RawPeer(RawPeerArgs),
+}
+
+/// Options of `iwsim bench latency`.
+#[derive(Debug, Args, Clone)]
+pub struct BenchLatencyArgs {
+    /// Samples per measurement (after 100 warm-up ones).
+    #[arg(long, default_value_t = 20_000)]
+    pub samples: u64,
+    /// Print one JSON object instead of text.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// Options of `iwsim bench lockstep`.
+#[derive(Debug, Args, Clone)]
+pub struct BenchLockstepArgs {
+    /// Agent processes.
+    #[arg(long, default_value_t = 1)]
+    pub agents: usize,
+    /// Robots each agent registers.
+    #[arg(long, default_value_t = 100)]
+    pub robots_per_agent: usize,
+    /// Ticks to run.
+    #[arg(long, default_value_t = 5000)]
+    pub ticks: u64,
+    /// Print one JSON object instead of text.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// Options of the hidden raw ping-pong peer.
+#[derive(Debug, Args, Clone)]
+pub struct RawPeerArgs {
+    /// Session (iceoryx2 domain) of the ping-pong.
+    #[arg(long)]
+    pub session: String,
+    /// Pings to answer.
+    #[arg(long)]
+    pub samples: u64,
+    /// Spin instead of sleeping.
+    #[arg(long)]
+    pub busy_poll: bool,
+    /// Sleep on the event (the default).
+    #[arg(long)]
+    pub blocking: bool,
 }
 
 /// Options of `iwsim bench world`.

@@ -69,8 +69,9 @@ pub fn run(args: &HubArgs) -> anyhow::Result<ExitCode> {
             })
             .collect();
         println!(
-            "{{\"ticks\":{},\"state_hash\":\"{:016x}\",\"agents_seen\":{},\"agents_died\":{},\"interrupted\":{},\"robots\":[{}]}}",
+            "{{\"ticks\":{},\"run_s\":{:.6},\"state_hash\":\"{:016x}\",\"agents_seen\":{},\"agents_died\":{},\"interrupted\":{},\"robots\":[{}]}}",
             out.ticks,
+            out.run_s,
             out.state_hash,
             out.agents_seen,
             out.agents_died,

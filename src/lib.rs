@@ -34,6 +34,9 @@ pub fn run(cli: Cli) -> anyhow::Result<ExitCode> {
     match cli.command {
         Command::Map { command: MapCommand::Check { file } } => mapcheck::check(&file),
         Command::Bench { command: BenchCommand::World(args) } => bench::world(&args),
+        Command::Bench { command: BenchCommand::Latency(args) } => bench::latency(&args),
+        Command::Bench { command: BenchCommand::Lockstep(args) } => bench::lockstep(&args),
+        Command::Bench { command: BenchCommand::RawPeer(args) } => bench::raw_peer(&args),
         Command::Demo(args) => demo::run(&args),
         Command::Hub(args) => hubcmd::run(&args),
         Command::Agent { agent: AgentCommand::Wheelchair(args) } => agentcmd::wheelchair(&args),

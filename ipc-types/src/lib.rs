@@ -307,8 +307,24 @@ pub struct TickHeader {
     pub run_state: u32,
     /// Blocks in the slice.
     pub count: u32,
+    /// CLOCK_MONOTONIC nanoseconds when the hub published this tick (for latency figures).
+    pub t_pub_ns: u64,
 }
-const _: () = assert!(core::mem::size_of::<TickHeader>() == 24);
+const _: () = assert!(core::mem::size_of::<TickHeader>() == 32);
+
+/// CLOCK_MONOTONIC in nanoseconds: one clock for every process on the machine, so a
+/// timestamp written by one process can be compared by another.
+#[cfg(target_os = "linux")]
+pub fn monotonic_ns() -> u64 {
+    // std's Instant is this clock but opaque; only a raw reading crosses processes.
+    let mut ts = libc::timespec { tv_sec: 0, tv_nsec: 0 };
+    #[allow(unsafe_code)]
+    // SAFETY: clock_gettime writes the timespec we pass, which lives on our stack.
+    unsafe {
+        libc::clock_gettime(libc::CLOCK_MONOTONIC, &mut ts);
+    }
+    ts.tv_sec as u64 * 1_000_000_000 + ts.tv_nsec as u64
+}
 
 /// `ActionBlock::flags`: set the motor powers.
 pub const ACT_MOTORS: u32 = 1;

@@ -342,3 +342,35 @@ fn sigterm_stops_hub_and_agent_cleanly_and_leaves_no_shared_memory() {
     assert!(left.is_empty(), "left in /dev/shm: {left:?}");
     let _ = hub.stderr_now();
 }
+
+#[test]
+fn a_hung_agent_is_stepped_past_at_the_deadline_and_flagged_lagging() {
+    let s = session("hung");
+    let hub =
+        Proc::spawn(&["hub", "--session", &s, "--lockstep", "--wait-agents", "2", "--deadline-ms", "100", "--json"]);
+    let a = Proc::spawn(&["agent", "wheelchair", "--session", &s, "--id", "1"]);
+    let b = Proc::spawn(&["agent", "wheelchair", "--session", &s, "--id", "2"]);
+    let mut observer = wait_for_tick(&s, 10, Duration::from_secs(20));
+    // A stopped process is alive (its pidfd stays quiet) but never answers.
+    b.signal("STOP");
+    let (at_stop, _) = observer.world().expect("snapshot");
+    let start = Instant::now();
+    loop {
+        let (h, robots) = observer.world().expect("snapshot");
+        let lagging = robots.iter().find(|r| r.id == 2).is_some_and(|r| r.flags & ipc_types::ROBOT_LAGGING != 0);
+        // Ten ticks past the stop: at 100 ms per missed deadline that takes about a second.
+        if h.tick >= at_stop.tick + 10 && lagging {
+            break;
+        }
+        assert!(start.elapsed() < Duration::from_secs(10), "stuck at tick {} (lagging flag {lagging})", h.tick);
+        std::thread::sleep(Duration::from_millis(5));
+    }
+    b.signal("CONT");
+    drop(observer);
+    assert_eq!(control(&s, Cmd::Stop, 0).expect("hub answers").status, 0);
+    let out = hub.wait(Duration::from_secs(10));
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    assert_eq!(json_field(&text(&out.stdout), "agents_died"), "0");
+    assert!(a.wait(Duration::from_secs(10)).status.success());
+    assert!(b.wait(Duration::from_secs(10)).status.success());
+}

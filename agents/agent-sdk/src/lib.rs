@@ -94,6 +94,9 @@ pub struct Tick {
     pub sim_time_s: f64,
     /// The run state.
     pub run_state: RunState,
+    /// Nanoseconds from the hub sending these sensor blocks to this agent having them
+    /// (CLOCK_MONOTONIC, shared by every process on the machine).
+    pub latency_ns: u64,
 }
 
 /// Sends a run-control command to the hub of `session` (start, pause, step, stop, remove a
@@ -155,6 +158,7 @@ pub struct Agent {
     robots: Vec<u32>,
     last_tick: Option<u64>,
     last_header: TickHeader,
+    received_ns: u64,
     world_sub: Option<Subscriber<Svc, [RobotState], WorldHeader>>,
     last_world: Option<(WorldHeader, Vec<RobotState>)>,
     blocks: Vec<SensorBlock>,
@@ -220,6 +224,7 @@ impl Agent {
             robots: Vec::new(),
             last_tick: None,
             last_header: TickHeader::default(),
+            received_ns: 0,
             world_sub: None,
             last_world: None,
             blocks: Vec::new(),
@@ -332,33 +337,36 @@ impl Agent {
         }
         loop {
             if self.take_sensors()? {
-                let h = self.header_of_last();
-                if RunState::from_u32(h.run_state) == Some(RunState::Finished) {
-                    self.finished = true;
-                    return Ok(None);
-                }
-                return Ok(Some(Tick {
-                    tick: h.tick,
-                    sim_time_s: h.sim_time_s,
-                    run_state: RunState::from_u32(h.run_state).unwrap_or(RunState::Running),
-                }));
+                return self.tick_from_last();
             }
-            match wait {
+            // Wait for the next sample; check the hub's liveness only when a wait slice
+            // ends with nothing, so the check's syscalls never sit between a sample's arrival
+            // and its reading.
+            let arrived = match wait {
                 Wait::Blocking => {
-                    self.tick_listener.timed_wait(|_| {}, LIVENESS_SLICE).map_err(ipc("wait for a tick"))?;
-                    self.check()?;
+                    let mut rung = false;
+                    self.tick_listener.timed_wait(|_| rung = true, LIVENESS_SLICE).map_err(ipc("wait for a tick"))?;
+                    rung
                 }
                 Wait::BusyPoll => {
-                    // Check liveness now and then, not on every spin.
+                    // Spin on receive itself, as a bare subscriber would: the sample is read
+                    // the moment it lands.
                     let spin_until = Instant::now() + LIVENESS_SLICE;
-                    while Instant::now() < spin_until {
-                        if self.sensors.as_ref().is_some_and(|s| s.has_samples().unwrap_or(false)) {
-                            break;
+                    let mut spins = 0u32;
+                    loop {
+                        if self.take_sensors()? {
+                            return self.tick_from_last();
+                        }
+                        spins = spins.wrapping_add(1);
+                        if spins.is_multiple_of(1024) && Instant::now() >= spin_until {
+                            break false;
                         }
                         std::hint::spin_loop();
                     }
-                    self.check()?;
                 }
+            };
+            if !arrived {
+                self.check()?;
             }
         }
     }
@@ -369,8 +377,18 @@ impl Agent {
         &self.blocks
     }
 
-    fn header_of_last(&self) -> TickHeader {
-        self.last_header
+    fn tick_from_last(&mut self) -> Result<Option<Tick>, AgentError> {
+        let h = self.last_header;
+        if RunState::from_u32(h.run_state) == Some(RunState::Finished) {
+            self.finished = true;
+            return Ok(None);
+        }
+        Ok(Some(Tick {
+            tick: h.tick,
+            sim_time_s: h.sim_time_s,
+            run_state: RunState::from_u32(h.run_state).unwrap_or(RunState::Running),
+            latency_ns: self.received_ns.saturating_sub(h.t_pub_ns),
+        }))
     }
 
     /// Reads the newest sensor sample if it is for a tick not seen yet.
@@ -378,6 +396,7 @@ impl Agent {
         let Some(sub) = &self.sensors else { return Ok(false) };
         let mut fresh = false;
         while let Some(sample) = sub.receive().map_err(ipc("receive sensor blocks"))? {
+            let received_ns = ipc_types::monotonic_ns();
             let h = *sample.user_header();
             if self.last_tick.is_some_and(|t| h.tick <= t)
                 && RunState::from_u32(h.run_state) != Some(RunState::Finished)
@@ -388,6 +407,7 @@ impl Agent {
             self.blocks.extend_from_slice(sample.payload());
             self.last_tick = Some(h.tick);
             self.last_header = h;
+            self.received_ns = received_ns;
             fresh = true;
         }
         Ok(fresh)

@@ -77,6 +77,8 @@ pub struct HubOutcome {
     pub agents_died: usize,
     /// Stopped by SIGINT/SIGTERM.
     pub interrupted: bool,
+    /// Wall-clock seconds from the first step to the end of the run.
+    pub run_s: f64,
     /// Robots at the end: (id, x, y, heading in degrees, flags).
     pub robots: Vec<(u32, f64, f64, f64, u32)>,
 }
@@ -185,8 +187,16 @@ pub fn run(cfg: HubConfig) -> Result<HubOutcome, HubError> {
 
     let hub_pid = std::process::id();
     let mut agents: BTreeMap<u32, AgentPorts> = BTreeMap::new();
-    let mut outcome =
-        HubOutcome { ticks: 0, state_hash: 0, agents_seen: 0, agents_died: 0, interrupted: false, robots: vec![] };
+    let mut outcome = HubOutcome {
+        ticks: 0,
+        state_hash: 0,
+        agents_seen: 0,
+        agents_died: 0,
+        interrupted: false,
+        run_s: 0.0,
+        robots: vec![],
+    };
+    let mut first_step: Option<Instant> = None;
     let mut states: Vec<RobotState> = Vec::new();
     let mut blocks: Vec<SensorBlock> = Vec::new();
     let cycle = Duration::from_millis(cfg.params.cycle_ms.max(1) as u64);
@@ -379,6 +389,7 @@ pub fn run(cfg: HubConfig) -> Result<HubOutcome, HubError> {
                 }
             };
             if step {
+                first_step.get_or_insert_with(Instant::now);
                 core.step();
                 publish = true;
                 if core.mode() == Mode::RealTime {
@@ -398,6 +409,7 @@ pub fn run(cfg: HubConfig) -> Result<HubOutcome, HubError> {
         let _ = tick_notifier.notify();
     }
     outcome.ticks = core.world().tick();
+    outcome.run_s = first_step.map_or(0.0, |t| t.elapsed().as_secs_f64());
     outcome.state_hash = core.world().state_hash();
     outcome.robots = core.robot_states().map(|s| (s.id, s.x_m, s.y_m, s.heading_deg, s.flags)).collect();
     drop((agents, world_pub, map_pub, actions_sub, register_server, control_server, tick_notifier, doorbell));
@@ -415,10 +427,10 @@ fn publish_tick(
 ) -> Result<(), HubError> {
     states.clear();
     states.extend(core.robot_states());
-    let mut sample = world_pub.loan_slice_uninit(states.len()).map_err(ipc("loan a world snapshot"))?;
-    *sample.user_header_mut() = core.world_header();
-    sample.write_from_slice(states).send().map_err(ipc("send a world snapshot"))?;
     let header = core.world_header();
+    let mut sample = world_pub.loan_slice_uninit(states.len()).map_err(ipc("loan a world snapshot"))?;
+    *sample.user_header_mut() = header;
+    sample.write_from_slice(states).send().map_err(ipc("send a world snapshot"))?;
     for (&id, ports) in agents {
         let robots = core.agent_robots(id);
         if robots.is_empty() {
@@ -432,8 +444,12 @@ fn publish_tick(
             sim_time_s: header.sim_time_s,
             run_state: header.run_state,
             count: blocks.len() as u32,
+            t_pub_ns: 0,
         };
-        sample.write_from_slice(blocks).send().map_err(ipc("send sensor blocks"))?;
+        let mut sample = sample.write_from_slice(blocks);
+        // Stamped last, so the latency figure starts at the send itself.
+        sample.user_header_mut().t_pub_ns = ipc_types::monotonic_ns();
+        sample.send().map_err(ipc("send sensor blocks"))?;
     }
     Ok(())
 }

@@ -792,6 +792,8 @@ impl World {
     }
 }
 
+/// FNV-1a over 64-bit words (not bytes): the hub hashes every tick, and a word at a time is
+/// eight times fewer multiplications for the same sensitivity to any changed bit.
 struct Fnv(u64);
 
 impl Fnv {
@@ -799,13 +801,18 @@ impl Fnv {
         Self(0xcbf2_9ce4_8422_2325)
     }
     fn bytes(&mut self, b: &[u8]) {
-        for &x in b {
-            self.0 ^= x as u64;
-            self.0 = self.0.wrapping_mul(0x0000_0100_0000_01b3);
+        for chunk in b.chunks(8) {
+            let mut w = [0u8; 8];
+            w[..chunk.len()].copy_from_slice(chunk);
+            self.u64(u64::from_le_bytes(w));
         }
+        self.u64(b.len() as u64);
     }
     fn u64(&mut self, v: u64) {
-        self.bytes(&v.to_le_bytes());
+        self.0 ^= v;
+        self.0 = self.0.wrapping_mul(0x0000_0100_0000_01b3);
+        // Fold the high bits down, which FNV's multiply alone never reaches.
+        self.0 ^= self.0 >> 29;
     }
     fn f64(&mut self, v: Real) {
         self.u64(v.to_bits());
