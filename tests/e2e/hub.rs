@@ -372,5 +372,6 @@ fn a_hung_agent_is_stepped_past_at_the_deadline_and_flagged_lagging() {
     assert!(out.status.success(), "{}", text(&out.stderr));
     assert_eq!(json_field(&text(&out.stdout), "agents_died"), "0");
     assert!(a.wait(Duration::from_secs(10)).status.success());
-    assert!(b.wait(Duration::from_secs(10)).status.success());
+    let b_out = b.wait(Duration::from_secs(10));
+    assert!(b_out.status.success(), "{}", text(&b_out.stderr));
 }

@@ -22,7 +22,7 @@ use std::time::{Duration, Instant};
 
 use ipc_services::iceoryx2::node::Node;
 use ipc_services::iceoryx2::port::client::Client;
-use ipc_services::iceoryx2::port::listener::Listener;
+use ipc_services::iceoryx2::port::listener::{Listener, ListenerWaitError};
 use ipc_services::iceoryx2::port::notifier::Notifier;
 use ipc_services::iceoryx2::port::publisher::Publisher;
 use ipc_services::iceoryx2::port::subscriber::Subscriber;
@@ -345,7 +345,14 @@ impl Agent {
             let arrived = match wait {
                 Wait::Blocking => {
                     let mut rung = false;
-                    self.tick_listener.timed_wait(|_| rung = true, LIVENESS_SLICE).map_err(ipc("wait for a tick"))?;
+                    match self.tick_listener.timed_wait(|_| rung = true, LIVENESS_SLICE) {
+                        Ok(_) => {}
+                        // Any signal cuts the wait short (SIGSTOP/SIGCONT, a debugger); a
+                        // termination request is caught by the check below, anything else is
+                        // a spurious wake-up.
+                        Err(ListenerWaitError::InterruptSignal) => {}
+                        Err(e) => return Err(AgentError::Ipc(format!("wait for a tick: {e:?}"))),
+                    }
                     rung
                 }
                 Wait::BusyPoll => {

@@ -327,13 +327,13 @@ impl HubCore {
         ignored
     }
 
-    /// Whether every live, ready agent with robots has answered the current tick.
+    /// Whether every live, ready agent with robots has answered the current tick. With no
+    /// such agent there is nothing to step for: a lock-step hub waits for one instead of
+    /// racing ahead on its own.
     pub fn all_answered(&self) -> bool {
         let t = self.world.tick();
-        self.agents
-            .values()
-            .filter(|a| a.alive && a.ready && !a.robots.is_empty())
-            .all(|a| a.answered.is_some_and(|x| x >= t))
+        let mut waiting_on = self.agents.values().filter(|a| a.alive && a.ready && !a.robots.is_empty()).peekable();
+        waiting_on.peek().is_some() && waiting_on.all(|a| a.answered.is_some_and(|x| x >= t))
     }
 
     /// Marks the agents that have not answered the current tick as lagging (called when the
@@ -639,6 +639,8 @@ mod tests {
         c.step();
         let frozen: Vec<_> = c.robot_states().filter(|s| s.flags & ROBOT_FROZEN != 0).map(|s| s.id).collect();
         assert_eq!(frozen, vec![rb]);
+        assert!(c.agent_died(a));
+        assert!(!c.all_answered(), "with no live agent lock-step waits instead of racing");
     }
 
     #[test]

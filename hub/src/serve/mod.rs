@@ -374,18 +374,19 @@ pub fn run(cfg: HubConfig) -> Result<HubOutcome, HubError> {
             let step = match core.mode() {
                 Mode::RealTime => now >= next_tick_at,
                 Mode::LockStep => {
-                    core.all_answered() || {
-                        let late = now >= deadline_at;
-                        if late {
-                            let n = core.mark_laggards();
-                            tracing::warn!(
-                                "tick {}: {n} agents missed the {:?} deadline",
-                                core.world().tick(),
-                                cfg.deadline
-                            );
+                    core.all_answered()
+                        || core.ready_agents() > 0 && {
+                            let late = now >= deadline_at;
+                            if late {
+                                let n = core.mark_laggards();
+                                tracing::warn!(
+                                    "tick {}: {n} agents missed the {:?} deadline",
+                                    core.world().tick(),
+                                    cfg.deadline
+                                );
+                            }
+                            late
                         }
-                        late
-                    }
                 }
             };
             if step {
