@@ -654,10 +654,62 @@ pub struct ControlResponse {
     pub tick: u64,
 }
 
+/// The run's parameters as the hub has them (the UDP bridge reports them to Ciber-Rato
+/// clients in its registration reply).
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable, ZeroCopySend, Default)]
+#[type_name("iwsim::HubParams.v1")]
+pub struct HubParams {
+    /// Proximity noise, metres.
+    pub noise_proximity_m: f64,
+    /// Beacon noise, degrees.
+    pub noise_beacon_deg: f64,
+    /// Compass noise, degrees.
+    pub noise_compass_deg: f64,
+    /// GPS position noise, metres.
+    pub noise_gps_pos_m: f64,
+    /// GPS heading noise, degrees.
+    pub noise_gps_heading_deg: f64,
+    /// Motor noise, percent.
+    pub noise_motors_pct: f64,
+    /// Beacon aperture (half-angle), radians.
+    pub beacon_aperture_rad: f64,
+    /// Run length in ticks (0: none).
+    pub sim_time_ticks: u64,
+    /// Lock-step deadline, milliseconds.
+    pub deadline_ms: u32,
+    /// 1 when the hub steps in lock-step.
+    pub lockstep: u32,
+    /// `SENSOR_*` bits of the sensors switched on.
+    pub sensors_on: u32,
+    /// `SENSOR_*` bits of the sensors sent only on request.
+    pub requestable: u32,
+    /// Sensor requests honoured per cycle.
+    pub requests_per_cycle: u32,
+    /// Latencies in ticks: proximity, beacon, ground, compass, collision, GPS.
+    pub latency: [u32; 6],
+    /// Padding.
+    pub _reserved: u32,
+}
+const _: () = assert!(core::mem::size_of::<HubParams>() == 112);
+
+/// `HubParams` sensor bit: GPS.
+pub const SENSOR_GPS: u32 = 1;
+/// `HubParams` sensor bit: beacon sensor.
+pub const SENSOR_BEACON: u32 = 1 << 1;
+/// `HubParams` sensor bit: compass.
+pub const SENSOR_COMPASS: u32 = 1 << 2;
+/// `HubParams` sensor bit: proximity (obstacle) sensors.
+pub const SENSOR_OBSTACLE: u32 = 1 << 3;
+/// `HubParams` sensor bit: ground.
+pub const SENSOR_GROUND: u32 = 1 << 4;
+/// `HubParams` sensor bit: collision.
+pub const SENSOR_COLLISION: u32 = 1 << 5;
+
 /// The header of the map.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable, ZeroCopySend, Default)]
-#[type_name("iwsim::MapHeader.v1")]
+#[type_name("iwsim::MapHeader.v2")]
 pub struct MapHeader {
     /// Lab width, metres.
     pub width_m: f64,
@@ -677,8 +729,10 @@ pub struct MapHeader {
     pub cycle_ms: u32,
     /// Lab name.
     pub name: FixedName,
+    /// The run's parameters.
+    pub params: HubParams,
 }
-const _: () = assert!(core::mem::size_of::<MapHeader>() == 72);
+const _: () = assert!(core::mem::size_of::<MapHeader>() == 184);
 
 /// `MapItem::kind`: a wall starts; `a` = height in metres, `index` = wall number. Its corners
 /// follow as `MAP_CORNER` items.

@@ -7,9 +7,10 @@ use std::collections::BTreeMap;
 use bytemuck::Zeroable;
 use ipc_types::{
     ACT_MOTORS, ACT_POSE, ACT_SAY, ActionBlock, COLLISION, Command, FixedName, HAS_COMPASS, HAS_GPS, HAS_GROUND,
-    InboxEntry, MAP_BEACON, MAP_CORNER, MAP_GRID, MAP_TARGET, MAP_WALL, MAX_AGENTS, MAX_INBOX_MESSAGES, MAX_ROBOTS,
-    MapHeader, MapItem, REG_HAS_POSE, ROBOT_COLLISION, ROBOT_FROZEN, ROBOT_LAGGING, Refusal, RobotKind as WireKind,
-    RobotRegistration, RobotState, RunState, SensorBlock, WorldHeader,
+    HubParams, InboxEntry, MAP_BEACON, MAP_CORNER, MAP_GRID, MAP_TARGET, MAP_WALL, MAX_AGENTS, MAX_INBOX_MESSAGES,
+    MAX_ROBOTS, MapHeader, MapItem, REG_HAS_POSE, ROBOT_COLLISION, ROBOT_FROZEN, ROBOT_LAGGING, Refusal,
+    RobotKind as WireKind, RobotRegistration, RobotState, RunState, SENSOR_BEACON, SENSOR_COLLISION, SENSOR_COMPASS,
+    SENSOR_GPS, SENSOR_GROUND, SENSOR_OBSTACLE, SensorBlock, WorldHeader,
 };
 
 use crate::map::{Grid, Lab, Params};
@@ -542,8 +543,48 @@ impl HubCore {
         b
     }
 
-    /// The map as a header and items, for agents and viewers.
-    pub fn map_items(&self, cycle_ms: u32) -> (MapHeader, Vec<MapItem>) {
+    fn hub_params(&self, deadline_ms: u32) -> HubParams {
+        let p = self.world.params();
+        let bit = |on: bool, b: u32| if on { b } else { 0 };
+        let r = &p.requests;
+        HubParams {
+            noise_proximity_m: p.noise.proximity_m,
+            noise_beacon_deg: p.noise.beacon_deg,
+            noise_compass_deg: p.noise.compass_deg,
+            noise_gps_pos_m: p.noise.gps_pos_m,
+            noise_gps_heading_deg: p.noise.gps_heading_deg,
+            noise_motors_pct: p.noise.motor_frac * 100.0,
+            beacon_aperture_rad: p.beacon_aperture_rad,
+            sim_time_ticks: self.tick_limit,
+            deadline_ms,
+            lockstep: (self.mode == Mode::LockStep) as u32,
+            sensors_on: bit(p.sensors.gps, SENSOR_GPS)
+                | bit(p.sensors.beacon, SENSOR_BEACON)
+                | bit(p.sensors.compass, SENSOR_COMPASS)
+                | SENSOR_OBSTACLE
+                | SENSOR_GROUND
+                | SENSOR_COLLISION,
+            requestable: bit(r.obstacle, SENSOR_OBSTACLE)
+                | bit(r.beacon, SENSOR_BEACON)
+                | bit(r.ground, SENSOR_GROUND)
+                | bit(r.compass, SENSOR_COMPASS)
+                | bit(r.collision, SENSOR_COLLISION),
+            requests_per_cycle: r.per_cycle,
+            latency: [
+                p.latency.proximity,
+                p.latency.beacon,
+                p.latency.ground,
+                p.latency.compass,
+                p.latency.collision,
+                p.latency.gps,
+            ],
+            _reserved: 0,
+        }
+    }
+
+    /// The map as a header and items, for agents and viewers; `deadline_ms` is the lock-step
+    /// deadline the process uses.
+    pub fn map_items(&self, cycle_ms: u32, deadline_ms: u32) -> (MapHeader, Vec<MapItem>) {
         let lab = self.world.lab();
         let mut items = Vec::new();
         let item = |kind, index: usize, a, b, c| MapItem { kind, index: index as u32, a, b, c };
@@ -572,6 +613,7 @@ impl HubCore {
             grid_count: self.grid.poses.len() as u32,
             cycle_ms,
             name: FixedName::new(&lab.name).unwrap_or(FixedName::EMPTY),
+            params: self.hub_params(deadline_ms),
         };
         (header, items)
     }
@@ -725,7 +767,7 @@ mod tests {
     #[test]
     fn the_map_lists_every_wall_corner_and_grid_slot() {
         let c = core(Mode::RealTime);
-        let (h, items) = c.map_items(100);
+        let (h, items) = c.map_items(100, 1000);
         assert_eq!((h.wall_count, h.grid_count), (23, 9));
         assert_eq!(items.iter().filter(|i| i.kind == MAP_CORNER).count(), 92);
         assert_eq!(h.item_count as usize, items.len());

@@ -165,7 +165,8 @@ pub fn run(cfg: HubConfig) -> Result<HubOutcome, HubError> {
         .allocation_strategy(SLICE_ALLOCATION)
         .create()
         .map_err(ipc("create the world publisher"))?;
-    let (map_header, items) = core.map_items(cfg.params.cycle_ms);
+    let (map_header, items) =
+        core.map_items(cfg.params.cycle_ms, cfg.deadline.as_millis().min(u32::MAX as u128) as u32);
     let map_pub = map_svc
         .publisher_builder()
         .initial_max_slice_len(items.len().max(1))

@@ -1,0 +1,704 @@
+//! The Ciber-Rato / Intellwheels XML datagrams: pure decode and encode functions, and the one
+//! place the bridge touches quick-xml.
+//!
+//! Facts from `shared/research/ciberrato.md`: one XML document per datagram; clients may end
+//! theirs with a NUL or not; everything we send ends with `\n\0` (the stock Python client drops
+//! the last byte); numbers are printed as C's `%g`; element and attribute order follow the
+//! simulator's `sendSensors` and `toXml`.
+
+use std::fmt::Write as _;
+
+use quick_xml::XmlVersion;
+use quick_xml::events::attributes::AttrError;
+use quick_xml::events::{BytesStart, Event};
+use quick_xml::reader::Reader;
+
+/// Datagrams longer than this are refused unread (the simulator's own buffers are 1 KiB).
+pub const MAX_DATAGRAM: usize = 4096;
+
+/// Why a datagram was not understood. It is counted and dropped; nothing changes.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum DecodeError {
+    /// Longer than [`MAX_DATAGRAM`].
+    #[error("datagram of {0} bytes is longer than {MAX_DATAGRAM}")]
+    TooLong(usize),
+    /// Not UTF-8.
+    #[error("datagram is not UTF-8")]
+    NotUtf8,
+    /// No element at all.
+    #[error("datagram holds no XML element")]
+    Empty,
+    /// Malformed XML.
+    #[error("malformed XML: {0}")]
+    Xml(String),
+    /// An attribute appears twice.
+    #[error("attribute {0} appears twice")]
+    DuplicateAttribute(String),
+    /// The root element is not one this socket takes.
+    #[error("unexpected root element <{0}>")]
+    UnknownRoot(String),
+    /// A child element this message does not allow.
+    #[error("unexpected child <{child}> in <{parent}>")]
+    UnknownChild {
+        /// The parent.
+        parent: &'static str,
+        /// The child.
+        child: String,
+    },
+    /// An attribute that must be a number is not one (NaN and infinities included).
+    #[error("attribute {attr}=\"{value}\" is not a finite number")]
+    BadNumber {
+        /// The attribute.
+        attr: String,
+        /// Its value.
+        value: String,
+    },
+    /// An attribute's value is out of range.
+    #[error("attribute {attr}=\"{value}\" is out of range")]
+    OutOfRange {
+        /// The attribute.
+        attr: String,
+        /// Its value.
+        value: String,
+    },
+}
+
+/// A parsed element: name, attributes, children, text.
+#[derive(Debug, Clone, PartialEq, Default)]
+struct Element {
+    name: String,
+    attrs: Vec<(String, String)>,
+    children: Vec<Element>,
+    text: String,
+}
+
+impl Element {
+    fn attr(&self, name: &str) -> Option<&str> {
+        self.attrs.iter().find(|(k, _)| k == name).map(|(_, v)| v.as_str())
+    }
+
+    /// The first of several spellings that is present.
+    fn attr_any<'n>(&self, names: &[&'n str]) -> Option<(&'n str, &str)> {
+        names.iter().find_map(|n| self.attr(n).map(|v| (*n, v)))
+    }
+
+    fn num(&self, names: &[&str]) -> Result<Option<f64>, DecodeError> {
+        match self.attr_any(names) {
+            None => Ok(None),
+            Some((k, v)) => match v.trim().parse::<f64>() {
+                Ok(x) if x.is_finite() => Ok(Some(x)),
+                _ => Err(DecodeError::BadNumber { attr: k.to_owned(), value: v.to_owned() }),
+            },
+        }
+    }
+}
+
+fn start_element(e: &BytesStart<'_>) -> Result<Element, DecodeError> {
+    let name = e.name().as_ref().to_owned();
+    let mut attrs: Vec<(String, String)> = Vec::new();
+    // Duplicates are checked here, not by quick-xml: the thesis's own registration example
+    // (Fig. 4.13) repeats DIR="0.0", so a repeat with the same value is tolerated; a repeat
+    // with another value is ambiguous and refused.
+    for a in e.attributes().with_checks(false) {
+        let a = a.map_err(|err: AttrError| DecodeError::Xml(err.to_string()))?;
+        let key = a.key.as_ref().to_owned();
+        let value =
+            a.normalized_value(XmlVersion::Implicit1_0).map_err(|e| DecodeError::Xml(e.to_string()))?.into_owned();
+        match attrs.iter().find(|(k, _)| *k == key) {
+            Some((_, v)) if *v == value => {}
+            Some(_) => return Err(DecodeError::DuplicateAttribute(key)),
+            None => attrs.push((key, value)),
+        }
+    }
+    Ok(Element { name, attrs, ..Element::default() })
+}
+
+/// Parses one datagram into a small tree (root, children, grandchildren' text ignored).
+fn parse(datagram: &[u8]) -> Result<Element, DecodeError> {
+    if datagram.len() > MAX_DATAGRAM {
+        return Err(DecodeError::TooLong(datagram.len()));
+    }
+    // Clients may end with NUL (libRobSock, the Viewer) or not (pClient): read up to the first.
+    let end = datagram.iter().position(|&b| b == 0).unwrap_or(datagram.len());
+    let text = std::str::from_utf8(&datagram[..end]).map_err(|_| DecodeError::NotUtf8)?;
+    let mut reader = Reader::from_str(text);
+    reader.config_mut().check_end_names = true;
+    let mut stack: Vec<Element> = Vec::new();
+    let mut root: Option<Element> = None;
+    loop {
+        let ev = reader.read_event().map_err(|e| DecodeError::Xml(e.to_string()))?;
+        match ev {
+            Event::Start(e) => {
+                if root.is_some() {
+                    return Err(DecodeError::Xml("a second root element".into()));
+                }
+                if stack.len() >= 8 {
+                    return Err(DecodeError::Xml("elements nested too deep".into()));
+                }
+                stack.push(start_element(&e)?);
+            }
+            Event::Empty(e) => {
+                let el = start_element(&e)?;
+                match stack.last_mut() {
+                    Some(parent) => parent.children.push(el),
+                    None if root.is_none() => root = Some(el),
+                    None => return Err(DecodeError::Xml("a second root element".into())),
+                }
+            }
+            Event::End(_) => {
+                let el = stack.pop().ok_or_else(|| DecodeError::Xml("closing tag without an open one".into()))?;
+                match stack.last_mut() {
+                    Some(parent) => parent.children.push(el),
+                    None => root = Some(el),
+                }
+            }
+            Event::Text(t) => {
+                if let Some(top) = stack.last_mut() {
+                    let s: &str = &t;
+                    top.text.push_str(s);
+                }
+            }
+            Event::CData(c) => {
+                if let Some(top) = stack.last_mut() {
+                    let s: &str = &c;
+                    top.text.push_str(s);
+                }
+            }
+            Event::GeneralRef(r) => {
+                if let Some(top) = stack.last_mut() {
+                    let name: &str = &r;
+                    let ch = match name {
+                        "lt" => "<",
+                        "gt" => ">",
+                        "amp" => "&",
+                        "apos" => "'",
+                        "quot" => "\"",
+                        _ => "",
+                    };
+                    top.text.push_str(ch);
+                }
+            }
+            Event::Eof => break,
+            _ => {}
+        }
+    }
+    if !stack.is_empty() {
+        return Err(DecodeError::Xml(format!("<{}> is never closed", stack[0].name)));
+    }
+    root.ok_or(DecodeError::Empty)
+}
+
+/// Robot kinds of the Intellwheels `Type` attribute.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum RobotType {
+    /// Moved by the simulator.
+    Simulated,
+    /// A physical chair pushing its pose.
+    Real,
+    /// A door.
+    Door,
+}
+
+/// One `<IRSensor>` at registration.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct IrSensor {
+    /// `Id`.
+    pub id: u32,
+    /// `X` (Intellwheels), metres from the centre of movement.
+    pub x: Option<f64>,
+    /// `Y` (Intellwheels).
+    pub y: Option<f64>,
+    /// `Angle`, degrees.
+    pub angle_deg: f64,
+    /// `Cone` (Intellwheels), degrees.
+    pub cone_deg: Option<f64>,
+}
+
+/// A robot's registration (`<Robot>` or `<RobotBeacon>`), Intellwheels extensions included.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct RobotRegistration {
+    /// `Name`.
+    pub name: String,
+    /// `Id`: 1-based grid slot; 0 = first free.
+    pub id: u32,
+    /// `Width` (along the heading).
+    pub width: Option<f64>,
+    /// `Height` (also `Heigth`).
+    pub height: Option<f64>,
+    /// `COM` (also `COMass`).
+    pub com: Option<f64>,
+    /// `X`.
+    pub x: Option<f64>,
+    /// `Y`.
+    pub y: Option<f64>,
+    /// `Dir` (also `DIR`), degrees.
+    pub dir: Option<f64>,
+    /// `Type`.
+    pub kind: Option<RobotType>,
+    /// `MaxSpeed`.
+    pub max_speed: Option<f64>,
+    /// `AccelerationCurve` (also the thesis's `AccerelationCurve`).
+    pub accel_curve: Option<f64>,
+    /// `<IRSensor>` children.
+    pub sensors: Vec<IrSensor>,
+    /// `Height` of a `<RobotBeacon>`.
+    pub beacon_height: Option<f64>,
+}
+
+/// What arrives on the registration port.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Registration {
+    /// A robot.
+    Robot(RobotRegistration),
+    /// A robot that is also a beacon.
+    RobotBeacon(RobotRegistration),
+    /// A viewer.
+    View,
+    /// A panel.
+    Panel,
+}
+
+fn parse_id(el: &Element) -> Result<u32, DecodeError> {
+    match el.attr("Id") {
+        None => Ok(0),
+        Some(v) => {
+            v.trim().parse::<u32>().map_err(|_| DecodeError::OutOfRange { attr: "Id".into(), value: v.to_owned() })
+        }
+    }
+}
+
+/// Decodes a datagram sent to the registration port.
+pub fn decode_registration(datagram: &[u8]) -> Result<Registration, DecodeError> {
+    let el = parse(datagram)?;
+    match el.name.as_str() {
+        "View" => Ok(Registration::View),
+        "Panel" => Ok(Registration::Panel),
+        "Robot" | "RobotBeacon" => {
+            let mut r = RobotRegistration {
+                name: el.attr("Name").unwrap_or("").to_owned(),
+                id: parse_id(&el)?,
+                width: el.num(&["Width"])?,
+                com: el.num(&["COM", "COMass"])?,
+                x: el.num(&["X"])?,
+                y: el.num(&["Y"])?,
+                dir: el.num(&["Dir", "DIR"])?,
+                max_speed: el.num(&["MaxSpeed"])?,
+                accel_curve: el.num(&["AccelerationCurve", "AccerelationCurve"])?,
+                ..RobotRegistration::default()
+            };
+            if el.name == "RobotBeacon" {
+                r.beacon_height = el.num(&["Height"])?;
+            } else {
+                r.height = el.num(&["Height", "Heigth"])?;
+            }
+            r.kind = match el.attr("Type") {
+                None => None,
+                Some(t) if t.eq_ignore_ascii_case("simulated") => Some(RobotType::Simulated),
+                Some(t) if t.eq_ignore_ascii_case("real") => Some(RobotType::Real),
+                Some(t) if t.eq_ignore_ascii_case("door") => Some(RobotType::Door),
+                Some(t) => return Err(DecodeError::OutOfRange { attr: "Type".into(), value: t.to_owned() }),
+            };
+            for c in &el.children {
+                if c.name != "IRSensor" {
+                    return Err(DecodeError::UnknownChild { parent: "Robot", child: c.name.clone() });
+                }
+                r.sensors.push(IrSensor {
+                    id: parse_id(c)?,
+                    x: c.num(&["X"])?,
+                    y: c.num(&["Y"])?,
+                    angle_deg: c.num(&["Angle"])?.unwrap_or(0.0),
+                    cone_deg: c.num(&["Cone"])?,
+                });
+            }
+            Ok(if el.name == "RobotBeacon" { Registration::RobotBeacon(r) } else { Registration::Robot(r) })
+        }
+        other => Err(DecodeError::UnknownRoot(other.to_owned())),
+    }
+}
+
+/// A robot's `<Actions>`.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct Actions {
+    /// `LeftMotor`, Ciber-Rato power (clamped to ±0.15 by the bridge).
+    pub left: Option<f64>,
+    /// `RightMotor`.
+    pub right: Option<f64>,
+    /// `EndLed`.
+    pub end_led: Option<bool>,
+    /// `ReturningLed`.
+    pub returning_led: Option<bool>,
+    /// `VisitingLed`.
+    pub visiting_led: Option<bool>,
+    /// Pushed pose of a Real robot: `X`, `Y` metres, `Dir`/`DIR` degrees.
+    pub pose: Option<(f64, f64, f64)>,
+    /// Names of the sensors requested (`<SensorRequests Name="Yes"/>`), in order.
+    pub requests: Vec<String>,
+    /// `<Say>` text.
+    pub say: Option<Vec<u8>>,
+    /// `<Sync/>` (pei2015 fork): the robot is done for this tick.
+    pub sync: bool,
+}
+
+/// Decodes a datagram sent to a robot's port.
+pub fn decode_actions(datagram: &[u8]) -> Result<Actions, DecodeError> {
+    let el = parse(datagram)?;
+    if el.name != "Actions" {
+        return Err(DecodeError::UnknownRoot(el.name));
+    }
+    let led = |name: &str| el.attr(name).map(|v| v == "On");
+    let mut a = Actions {
+        left: el.num(&["LeftMotor"])?,
+        right: el.num(&["RightMotor"])?,
+        end_led: led("EndLed"),
+        returning_led: led("ReturningLed"),
+        visiting_led: led("VisitingLed"),
+        ..Actions::default()
+    };
+    if let (Some(x), Some(y)) = (el.num(&["X"])?, el.num(&["Y"])?) {
+        a.pose = Some((x, y, el.num(&["Dir", "DIR"])?.unwrap_or(0.0)));
+    }
+    for c in &el.children {
+        match c.name.as_str() {
+            "SensorRequests" => {
+                a.requests.extend(c.attrs.iter().filter(|(_, v)| v == "Yes").map(|(k, _)| k.clone()));
+            }
+            "Say" => a.say = Some(c.text.clone().into_bytes()),
+            "Sync" => a.sync = true,
+            other => return Err(DecodeError::UnknownChild { parent: "Actions", child: other.to_owned() }),
+        }
+    }
+    Ok(a)
+}
+
+/// A viewer's command.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ViewerCommand {
+    /// Send the lab.
+    LabReq,
+    /// Send the grid.
+    GridReq,
+    /// Start the run.
+    Start,
+    /// Stop (pause) the run.
+    Stop,
+    /// Remove a robot.
+    RemoveRobot(u32),
+    /// Reset (iris): the bridge answers `<Restart/>`; the hub is not reset.
+    Reset,
+}
+
+/// Decodes a datagram sent to a viewer's port.
+pub fn decode_viewer(datagram: &[u8]) -> Result<ViewerCommand, DecodeError> {
+    let el = parse(datagram)?;
+    match el.name.as_str() {
+        "LabReq" => Ok(ViewerCommand::LabReq),
+        "GridReq" => Ok(ViewerCommand::GridReq),
+        "Start" => Ok(ViewerCommand::Start),
+        "Stop" => Ok(ViewerCommand::Stop),
+        "Reset" => Ok(ViewerCommand::Reset),
+        "Robot" if el.attr("Removed") == Some("Yes") => Ok(ViewerCommand::RemoveRobot(parse_id(&el)?)),
+        other => Err(DecodeError::UnknownRoot(other.to_owned())),
+    }
+}
+
+/// C's `%g`: six significant digits, trailing zeros dropped, exponent form outside
+/// [1e-4, 1e6).
+pub fn g(x: f64) -> String {
+    if x.is_nan() {
+        return "nan".into();
+    }
+    if x.is_infinite() {
+        return if x > 0.0 { "inf".into() } else { "-inf".into() };
+    }
+    if x == 0.0 {
+        return "0".into();
+    }
+    let sci = format!("{x:.5e}");
+    let (mant, exp) = sci.split_once('e').unwrap_or((&sci, "0"));
+    let exp: i32 = exp.parse().unwrap_or(0);
+    let trim = |s: &str| -> String {
+        if s.contains('.') { s.trim_end_matches('0').trim_end_matches('.').to_owned() } else { s.to_owned() }
+    };
+    if !(-4..6).contains(&exp) {
+        format!("{}e{}{:02}", trim(mant), if exp < 0 { '-' } else { '+' }, exp.abs())
+    } else {
+        trim(&format!("{:.*}", (5 - exp).max(0) as usize, x))
+    }
+}
+
+fn on(b: bool) -> &'static str {
+    if b { "On" } else { "Off" }
+}
+
+fn finish(mut s: String) -> Vec<u8> {
+    s.push('\n');
+    let mut v = s.into_bytes();
+    v.push(0);
+    v
+}
+
+/// What the registration reply's `<Parameters>` reports.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct ReplyParams {
+    /// `SimTime` (ticks; 0 = no limit).
+    pub sim_time: u64,
+    /// `CycleTime`, ms.
+    pub cycle_ms: u32,
+    /// `CompassNoise`.
+    pub compass_noise: f64,
+    /// `BeaconNoise`.
+    pub beacon_noise: f64,
+    /// `ObstacleNoise`.
+    pub obstacle_noise: f64,
+    /// `MotorsNoise` (%).
+    pub motors_noise: f64,
+    /// `GPS`.
+    pub gps: bool,
+    /// `GPSLinNoise`.
+    pub gps_lin_noise: f64,
+    /// `GPSDirNoise`.
+    pub gps_dir_noise: f64,
+    /// `BeaconSensor`.
+    pub beacon_sensor: bool,
+    /// `CompassSensor`.
+    pub compass_sensor: bool,
+    /// `NBeacons`.
+    pub n_beacons: usize,
+    /// `NRequestsPerCycle`.
+    pub requests_per_cycle: u32,
+    /// Requestable: obstacle, beacon, ground, compass, collision.
+    pub requestable: [bool; 5],
+    /// Latencies: obstacle, beacon, ground, compass, collision.
+    pub latency: [u32; 5],
+    /// `BeaconAperture`, radians.
+    pub beacon_aperture: f64,
+}
+
+/// `<Reply Status="Ok"><Parameters …/></Reply>`: under 1024 bytes, as pClient reads it.
+pub fn encode_reply_ok(p: &ReplyParams) -> Vec<u8> {
+    let [ro, rb, rg, rc, rcol] = p.requestable;
+    let [lo, lb, lg, lc, lcol] = p.latency;
+    let mut s = String::with_capacity(900);
+    let _ = write!(
+        s,
+        "<Reply Status=\"Ok\">\n\t<Parameters SimTime=\"{}\" CycleTime=\"{}\" CompassNoise=\"{}\" BeaconNoise=\"{}\" ObstacleNoise=\"{}\" MotorsNoise=\"{}\" KeyTime=\"{}\" GPS=\"{}\" GPSLinNoise=\"{}\" GPSDirNoise=\"{}\" BeaconSensor=\"{}\" CompassSensor=\"{}\" ScoreSensor=\"Off\" ShowActions=\"False\" NBeacons=\"{}\" NRequestsPerCycle=\"{}\" RequestsPerCycle=\"{}\" ObstacleRequestable=\"{}\" BeaconRequestable=\"{}\" GroundRequestable=\"{}\" CompassRequestable=\"{}\" CollisionRequestable=\"{}\" ObstacleLatency=\"{}\" BeaconLatency=\"{}\" GroundLatency=\"{}\" CompassLatency=\"{}\" CollisionLatency=\"{}\" BeaconAperture=\"{}\"/>\n</Reply>",
+        p.sim_time,
+        p.cycle_ms,
+        g(p.compass_noise),
+        g(p.beacon_noise),
+        g(p.obstacle_noise),
+        g(p.motors_noise),
+        p.sim_time,
+        on(p.gps),
+        g(p.gps_lin_noise),
+        g(p.gps_dir_noise),
+        on(p.beacon_sensor),
+        on(p.compass_sensor),
+        p.n_beacons,
+        p.requests_per_cycle,
+        p.requests_per_cycle,
+        on(ro),
+        on(rb),
+        on(rg),
+        on(rc),
+        on(rcol),
+        lo,
+        lb,
+        lg,
+        lc,
+        lcol,
+        g(p.beacon_aperture),
+    );
+    finish(s)
+}
+
+/// `<Reply Status="Refused"></Reply>`, exactly as the simulator sends it.
+pub fn encode_refused() -> Vec<u8> {
+    finish("<Reply Status=\"Refused\"></Reply>".into())
+}
+
+/// One robot's measures for one tick, as the bridge assembles them.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct MeasuresData {
+    /// `Time`.
+    pub time: u64,
+    /// `Collision` (None: not sent this tick).
+    pub collision: Option<bool>,
+    /// `Compass`, degrees (None: off or not requested).
+    pub compass: Option<f64>,
+    /// `Ground` (None: not sent; Some(−1): no target).
+    pub ground: Option<i32>,
+    /// IR values (already 1/d rounded to 0.1), by sensor id; None = not sent.
+    pub ir: Vec<Option<f64>>,
+    /// Beacon bearings, degrees, by beacon id: Some(None) = NotVisible, None = not sent.
+    pub beacons: Vec<Option<Option<f64>>>,
+    /// GPS X, Y.
+    pub gps: Option<(f64, f64)>,
+    /// Messages heard: (speaker id, text).
+    pub messages: Vec<(u32, Vec<u8>)>,
+    /// End, returning, visiting LEDs.
+    pub leds: [bool; 3],
+    /// `Buttons Start` and `Stop`.
+    pub buttons: (bool, bool),
+}
+
+/// `<Measures>` in the simulator's element and attribute order, under 4096 bytes.
+pub fn encode_measures(m: &MeasuresData) -> Vec<u8> {
+    let mut s = String::with_capacity(512);
+    let _ = write!(s, "<Measures Time=\"{}\">\n\t<Sensors", m.time);
+    if let Some(c) = m.collision {
+        let _ = write!(s, " Collision=\"{}\"", if c { "Yes" } else { "No" });
+    }
+    if let Some(c) = m.compass {
+        let _ = write!(s, " Compass=\"{}\"", g(c));
+    }
+    if let Some(gr) = m.ground {
+        let _ = write!(s, " Ground=\"{gr}\"");
+    }
+    s.push_str(">\n");
+    for (id, v) in m.ir.iter().enumerate() {
+        if let Some(v) = v {
+            let _ = writeln!(s, "\t\t<IRSensor Id=\"{id}\" Value=\"{}\"/>", g(*v));
+        }
+    }
+    for (id, b) in m.beacons.iter().enumerate() {
+        match b {
+            Some(Some(deg)) => {
+                let _ = writeln!(s, "\t\t<BeaconSensor Id=\"{id}\" Value=\"{}\"/>", g(*deg));
+            }
+            Some(None) => {
+                let _ = writeln!(s, "\t\t<BeaconSensor Id=\"{id}\" Value=\"NotVisible\"/>");
+            }
+            None => {}
+        }
+    }
+    if let Some((x, y)) = m.gps {
+        let _ = writeln!(s, "\t\t<GPS X=\"{}\" Y=\"{}\" />", g(x), g(y));
+    }
+    for (from, text) in &m.messages {
+        // CDATA cannot hold "]]>"; such a message is split the standard way.
+        let t = String::from_utf8_lossy(text).replace("]]>", "]]]]><![CDATA[>");
+        let _ = writeln!(s, "\t\t<Message From=\"{from}\"><![CDATA[{t}]]></Message>");
+    }
+    let _ = write!(
+        s,
+        "\t</Sensors>\n\t<Leds EndLed=\"{}\" ReturningLed=\"{}\" VisitingLed=\"{}\"/>\n\t<Buttons Start=\"{}\" Stop=\"{}\"/>\n</Measures>",
+        on(m.leds[0]),
+        on(m.leds[1]),
+        on(m.leds[2]),
+        on(m.buttons.0),
+        on(m.buttons.1)
+    );
+    finish(s)
+}
+
+fn xml_escape(s: &str) -> String {
+    s.replace('&', "&amp;").replace('<', "&lt;").replace('>', "&gt;").replace('"', "&quot;")
+}
+
+/// One robot as viewers see it each tick.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct ViewerRobot {
+    /// `Name`.
+    pub name: String,
+    /// `Id`.
+    pub id: u32,
+    /// `Time`.
+    pub time: u64,
+    /// `Collisions`.
+    pub collisions: u32,
+    /// `Collision`.
+    pub collision: bool,
+    /// `State` (Running, Stopped, Finished, Removed…).
+    pub state: &'static str,
+    /// Intellwheels `Width`.
+    pub width: f64,
+    /// Intellwheels `Height`.
+    pub height: f64,
+    /// Intellwheels `CenterOfMovement`.
+    pub com: f64,
+    /// Intellwheels `Type`.
+    pub kind: &'static str,
+    /// `Position X`, `Y`, `Dir` (degrees).
+    pub pose: (f64, f64, f64),
+}
+
+/// `<Robot …><Position X Y Dir/></Robot>` for viewers (thesis Fig. 6.3 adds the body).
+pub fn encode_viewer_robot(r: &ViewerRobot) -> Vec<u8> {
+    let mut s = String::with_capacity(300);
+    let _ = write!(
+        s,
+        "<Robot Name=\"{}\" Id=\"{}\" Time=\"{}\" Score=\"0\" ArrivalTime=\"0\" ReturningTime=\"0\" Collisions=\"{}\" Collision=\"{}\" VisitedMask=\"\" State=\"{}\" Width=\"{}\" Height=\"{}\" CenterOfMovement=\"{}\" Type=\"{}\">\n\t<Position X=\"{}\" Y=\"{}\" Dir=\"{}\"/>\n</Robot>",
+        xml_escape(&r.name),
+        r.id,
+        r.time,
+        r.collisions,
+        if r.collision { "True" } else { "False" },
+        r.state,
+        g(r.width),
+        g(r.height),
+        g(r.com),
+        r.kind,
+        g(r.pose.0),
+        g(r.pose.1),
+        g(r.pose.2),
+    );
+    finish(s)
+}
+
+/// The lab as a map viewer wants it.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct LabData {
+    /// Name.
+    pub name: String,
+    /// Width, height.
+    pub size: (f64, f64),
+    /// Beacons: x, y, height.
+    pub beacons: Vec<(f64, f64, f64)>,
+    /// Targets: x, y, radius.
+    pub targets: Vec<(f64, f64, f64)>,
+    /// Walls: height and corners.
+    pub walls: Vec<(f64, Vec<(f64, f64)>)>,
+    /// Grid: x, y, dir.
+    pub grid: Vec<(f64, f64, f64)>,
+}
+
+/// `<Lab>` as the simulator sends it to viewers (no border wall, polygons not rows).
+pub fn encode_lab(l: &LabData) -> Vec<u8> {
+    let mut s = String::with_capacity(4096);
+    let _ = writeln!(s, "<Lab Name=\"{}\" Height=\"{}\" Width=\"{}\">", xml_escape(&l.name), g(l.size.1), g(l.size.0));
+    for (x, y, h) in &l.beacons {
+        let _ = writeln!(s, "\t<Beacon X=\"{}\" Y=\"{}\" Height=\"{}\"/>", g(*x), g(*y), g(*h));
+    }
+    for (x, y, r) in &l.targets {
+        let _ = writeln!(s, "\t<Target X=\"{}\" Y=\"{}\" Radius=\"{}\"/>", g(*x), g(*y), g(*r));
+    }
+    for (h, corners) in &l.walls {
+        let _ = writeln!(s, "\t<Wall Height=\"{}\">", g(*h));
+        for (x, y) in corners {
+            let _ = writeln!(s, "\t\t<Corner X=\"{}\" Y=\"{}\"/>", g(*x), g(*y));
+        }
+        s.push_str("\t</Wall>\n");
+    }
+    s.push_str("</Lab>");
+    finish(s)
+}
+
+/// `<Grid>` as the simulator sends it.
+pub fn encode_grid(l: &LabData) -> Vec<u8> {
+    let mut s = String::from("<Grid>\n");
+    for (x, y, d) in &l.grid {
+        let _ = writeln!(s, "\t<Position X=\"{}\" Y=\"{}\" Dir=\"{}\"/>", g(*x), g(*y), g(*d));
+    }
+    s.push_str("</Grid>");
+    finish(s)
+}
+
+/// `<Restart/>`, sent to viewers after a `<Reset/>`.
+pub fn encode_restart() -> Vec<u8> {
+    finish("<Restart/>".into())
+}
+
+#[cfg(test)]
+#[path = "codec_tests.rs"]
+mod tests;

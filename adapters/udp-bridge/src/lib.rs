@@ -1,0 +1,5 @@
+//! The UDP/XML bridge: serves the Ciber-Rato / Intellwheels protocol to remote agents and
+//! viewers, and drives their robots on a hub through the agent SDK.
+#![warn(missing_docs)]
+
+pub mod codec;
