@@ -69,7 +69,8 @@ fn viewers_panels_and_beacon_robots_register() {
 
 #[test]
 fn malformed_registrations_are_refused_with_their_reason() {
-    let cases: &[(&[u8], fn(&DecodeError) -> bool)] = &[
+    type Check = fn(&DecodeError) -> bool;
+    let cases: &[(&[u8], Check)] = &[
         (b"<Hello/>", |e| matches!(e, DecodeError::UnknownRoot(r) if r == "Hello")),
         (b"<Robot Name=\"a\"", |e| matches!(e, DecodeError::Xml(_))),
         (b"<Robot Id=\"-1\"/>", |e| matches!(e, DecodeError::OutOfRange { .. })),
