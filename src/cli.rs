@@ -26,6 +26,8 @@ pub enum Command {
     },
     /// Runs a hub: loads a map and serves its world over shared memory to agents.
     Hub(HubArgs),
+    /// Serves the Ciber-Rato / Intellwheels UDP/XML protocol to remote agents and viewers.
+    Udp(UdpArgs),
     /// Runs an agent process.
     Agent {
         /// Which agent.
@@ -85,6 +87,26 @@ pub struct HubArgs {
     /// Print the end-of-run summary as one JSON object.
     #[arg(long)]
     pub json: bool,
+}
+
+/// Options of `iwsim udp`.
+#[derive(Debug, Args, Clone)]
+pub struct UdpArgs {
+    /// Session of the hub to serve.
+    #[arg(long, default_value = "default")]
+    pub session: String,
+    /// Address to bind: 127.0.0.1 (this machine only) unless the LAN is wanted (0.0.0.0).
+    #[arg(long, default_value = "127.0.0.1")]
+    pub bind: std::net::IpAddr,
+    /// Registration port (Ciber-Rato clients hard-code 6000).
+    #[arg(long, default_value_t = 6000)]
+    pub port: u16,
+    /// Seconds a robot client may stay silent before its robot is removed.
+    #[arg(long, default_value_t = 10.0)]
+    pub client_timeout: f64,
+    /// Seconds to wait for the hub to come up.
+    #[arg(long, default_value_t = 5.0)]
+    pub connect_timeout: f64,
 }
 
 /// `iwsim agent …`

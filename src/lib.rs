@@ -8,6 +8,7 @@ pub mod cli;
 pub mod demo;
 pub mod hubcmd;
 pub mod mapcheck;
+pub mod udpcmd;
 
 use std::process::ExitCode;
 
@@ -39,6 +40,7 @@ pub fn run(cli: Cli) -> anyhow::Result<ExitCode> {
         Command::Bench { command: BenchCommand::RawPeer(args) } => bench::raw_peer(&args),
         Command::Demo(args) => demo::run(&args),
         Command::Hub(args) => hubcmd::run(&args),
+        Command::Udp(args) => udpcmd::run(&args),
         Command::Agent { agent: AgentCommand::Wheelchair(args) } => agentcmd::wheelchair(&args),
     }
 }

@@ -3,3 +3,6 @@
 #![warn(missing_docs)]
 
 pub mod codec;
+pub mod server;
+
+pub use server::{Bridge, BridgeConfig, BridgeError, Counters};

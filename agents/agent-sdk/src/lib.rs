@@ -378,6 +378,40 @@ impl Agent {
         }
     }
 
+    /// The next tick if it has arrived, without waiting; `None` when there is none yet (check
+    /// [`Agent::finished`] to tell the end of the run). For processes that multiplex the hub
+    /// with other inputs, together with [`Agent::tick_fd`].
+    pub fn try_tick(&mut self) -> Result<Option<Tick>, AgentError> {
+        if self.finished {
+            return Ok(None);
+        }
+        let _ = self.tick_listener.try_wait(|_| {});
+        if self.take_sensors()? {
+            return self.tick_from_last();
+        }
+        Ok(None)
+    }
+
+    /// Whether the hub has said the run is over.
+    pub fn finished(&self) -> bool {
+        self.finished
+    }
+
+    /// Checks the hub is alive and no termination signal arrived.
+    pub fn check_alive(&self) -> Result<(), AgentError> {
+        self.check()
+    }
+
+    /// A file descriptor that becomes readable when the hub rings a tick, for `poll(2)`.
+    pub fn tick_fd(&self) -> i32 {
+        use ipc_services::iceoryx2::prelude::FileDescriptorBased;
+        #[allow(unsafe_code)]
+        // SAFETY: reads the fd number of a listener this agent owns for as long as it lives.
+        unsafe {
+            self.tick_listener.file_descriptor().native_handle()
+        }
+    }
+
     /// This agent's robots' sensor blocks of the last tick returned by [`Agent::wait_tick`],
     /// in registration order.
     pub fn sensors(&self) -> &[SensorBlock] {

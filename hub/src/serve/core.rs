@@ -337,6 +337,16 @@ impl HubCore {
         waiting_on.peek().is_some() && waiting_on.all(|a| a.answered.is_some_and(|x| x >= t))
     }
 
+    /// Measures every robot where it stands (before the first step), without noise.
+    pub fn prime_sensors(&mut self) {
+        self.world.refresh_sensors();
+    }
+
+    /// Agents the lock-step barrier waits for: live, ready, with robots.
+    pub fn barrier_size(&self) -> usize {
+        self.agents.values().filter(|a| a.alive && a.ready && !a.robots.is_empty()).count()
+    }
+
     /// Marks the agents that have not answered the current tick as lagging (called when the
     /// lock-step deadline passes); returns how many.
     pub fn mark_laggards(&mut self) -> usize {

@@ -13,6 +13,7 @@ use std::os::fd::{AsRawFd, FromRawFd, OwnedFd};
 use std::time::{Duration, Instant};
 
 use ipc_services::iceoryx2::port::publisher::Publisher;
+use ipc_services::iceoryx2::port::update_connections::UpdateConnections as _;
 use ipc_services::iceoryx2::prelude::FileDescriptorBased;
 use ipc_services::{Role, SLICE_ALLOCATION, ServicesError, Session, Svc, clean_dead_nodes};
 use ipc_types::{
@@ -222,6 +223,9 @@ pub fn run(cfg: HubConfig) -> Result<HubOutcome, HubError> {
             break;
         }
         if publish {
+            if core.world().tick() == 0 {
+                core.prime_sensors();
+            }
             publish_tick(&core, &world_pub, &agents, &mut states, &mut blocks)?;
             tick_notifier.notify().map_err(ipc("ring the tick"))?;
             publish = false;
@@ -252,6 +256,10 @@ pub fn run(cfg: HubConfig) -> Result<HubOutcome, HubError> {
         }
         poll_readable(&fds, timeout, &mut ready);
         let _ = doorbell.try_wait(|_| {});
+        // A new subscriber gets the kept (history) sample only when the publisher next looks
+        // at its connections: the map is sent once, and the world not while paused.
+        let _ = map_pub.update_connections();
+        let _ = world_pub.update_connections();
         dead_agents.clear();
         dead_agents.extend(ready.iter().filter(|&&i| i > 0).map(|&i| fd_agents[i - 1]));
 

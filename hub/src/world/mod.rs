@@ -542,6 +542,36 @@ impl World {
         !self.box_hits_wall(&BodyShape::new(spec).placed(&spec.pose))
     }
 
+    /// Measures every robot where it stands, exactly (no noise, no latency, no random draw), so
+    /// readings exist before the first step; stepping measures as usual afterwards.
+    pub fn refresh_sensors(&mut self) {
+        for (i, slot) in self.slots.iter().enumerate() {
+            let Some(r) = &slot.robot else { continue };
+            let cur = r.shape.placed(&r.pose);
+            let (min, max) = aabb(&cur);
+            self.motion[i] = Motion {
+                alive: true,
+                moving: false,
+                real: r.spec.kind == RobotKind::Real,
+                cur,
+                next: cur,
+                cur_min: min,
+                cur_max: max,
+                next_min: min,
+                next_max: max,
+                next_pose: r.pose,
+                next_cs: (self.geo[i].normals[0].x, self.geo[i].normals[0].y),
+            };
+        }
+        let motion = &self.motion;
+        self.dyn_grid.rebuild(motion.iter().enumerate().filter(|(_, m)| m.alive).map(|(i, m)| {
+            let centre = nalgebra::center(&m.cur_min, &m.cur_max);
+            let half = (m.cur_max.x - m.cur_min.x).max(m.cur_max.y - m.cur_min.y) / 2.0;
+            (i as u32, centre, half)
+        }));
+        self.sense_with(true);
+    }
+
     /// Advances the world by one tick of `dt_s` simulated seconds with this tick's actions.
     pub fn step(&mut self, actions: &[Action], dt_s: Real) -> StepStats {
         let mut stats = StepStats::default();

@@ -46,7 +46,15 @@ impl World {
     /// Measuring reads the neighbours only through `geo` and the grids, so each robot's
     /// readings are written in the same pass.
     pub(super) fn sense(&mut self) {
+        self.sense_with(false);
+    }
+
+    /// Measures every robot; `exact` skips noise and latency and draws nothing from the
+    /// generator (used to prime readings before the first step).
+    pub(super) fn sense_with(&mut self, exact: bool) {
         let World { statics, dyn_grid, geo, lab, params, slots, rng, scratch, tick, .. } = self;
+        let quiet = crate::map::Params { noise: crate::map::NoiseParams::NONE, ..params.clone() };
+        let params: &crate::map::Params = if exact { &quiet } else { params };
         let scene = Scene { statics, dyn_grid, geo, lab, params };
         let mut cands = Candidates { segments: &mut scratch.segments, local: &mut scratch.local };
         let lat = params.latency;
@@ -54,7 +62,7 @@ impl World {
         for (i, slot) in slots.iter_mut().enumerate() {
             let Some(r) = &mut slot.robot else { continue };
             let now = scene.measure(i, r, &mut cands, rng, *tick);
-            if depth == 0 {
+            if depth == 0 || exact {
                 r.readings = now;
                 continue;
             }

@@ -531,3 +531,21 @@ fn a_frozen_robot_stops_at_once_and_stays_an_obstacle() {
     w.step(&[Action::motors(a, -1.0, -1.0)], 0.1);
     assert!(w.robot(a).expect("alive").pose.x < x);
 }
+
+#[test]
+fn readings_exist_before_the_first_step_and_priming_draws_nothing() {
+    let mut w = World::new(&empty_lab(10.0, 8.0), Params::default(), 3).expect("valid");
+    let r = w.add_robot(RobotSpec::at(3.0, 2.0, 0.0)).expect("valid");
+    let before = w.state_hash();
+    w.refresh_sensors();
+    let d = w.robot(r).expect("alive").readings;
+    assert!(close(d.proximity()[2], 1.5, 1e-3), "exact, noise-free: {:?}", d.proximity());
+    assert_eq!(d.compass_deg, Some(0.0));
+    // Same generator state: a primed world and an unprimed one step identically.
+    let mut other = World::new(&empty_lab(10.0, 8.0), Params::default(), 3).expect("valid");
+    let r2 = other.add_robot(RobotSpec::at(3.0, 2.0, 0.0)).expect("valid");
+    w.step(&[Action::motors(r, 1.0, 0.5)], 0.1);
+    other.step(&[Action::motors(r2, 1.0, 0.5)], 0.1);
+    assert_eq!(w.state_hash(), other.state_hash());
+    assert_ne!(before, w.state_hash());
+}

@@ -1,0 +1,633 @@
+//! The bridge process: a UDP registration port, one socket per client, and one agent on the
+//! hub carrying every UDP robot.
+//!
+//! Per Ciber-Rato, a client registers on the port and gets its reply from a new socket of its
+//! own, which carries all later traffic; that socket only accepts datagrams from the address
+//! and port that registered. Each hub tick becomes one `<Measures>` per robot and one
+//! `<Robot>` per robot per viewer. With a lock-step hub the bridge answers the tick once every
+//! UDP robot has sent its `<Actions>` (or `<Sync/>`), or when the hub's deadline is near.
+
+use std::collections::BTreeMap;
+use std::io::ErrorKind;
+use std::net::{IpAddr, SocketAddr, UdpSocket};
+use std::os::fd::AsRawFd;
+use std::time::{Duration, Instant};
+
+use agent_sdk::{Agent, AgentError, MapData, control};
+use ipc_types::{
+    ACT_MOTORS, ACT_POSE, ActionBlock, COLLISION, Command, HAS_COMPASS, HAS_GPS, HAS_GROUND, LED_END, LED_RETURNING,
+    LED_VISITING, MAP_BEACON, MAP_CORNER, MAP_GRID, MAP_TARGET, MAP_WALL, REG_HAS_POSE, RobotKind, RunState,
+    SENSOR_BEACON, SENSOR_COLLISION, SENSOR_COMPASS, SENSOR_GPS, SENSOR_GROUND, SENSOR_OBSTACLE, SensorBlock,
+    SensorSpec,
+};
+
+use crate::codec::{
+    self, Actions, LabData, MeasuresData, Registration, ReplyParams, RobotType, ViewerCommand, ViewerRobot,
+};
+
+/// Ciber-Rato's motor power limit: powers are clamped to ±0.15 and 0.15 means full power.
+pub const MAX_POWER: f64 = 0.15;
+
+/// How to run the bridge.
+#[derive(Debug, Clone)]
+pub struct BridgeConfig {
+    /// The hub's session.
+    pub session: String,
+    /// Address to bind (127.0.0.1 unless the LAN is wanted).
+    pub bind: IpAddr,
+    /// Registration port.
+    pub port: u16,
+    /// A robot client silent this long is unregistered (its robot removed).
+    pub client_timeout: Duration,
+    /// How long to wait for the hub to come up.
+    pub connect_timeout: Duration,
+}
+
+/// Why the bridge stopped.
+#[derive(Debug, thiserror::Error)]
+pub enum BridgeError {
+    /// The hub could not be reached, or went away.
+    #[error(transparent)]
+    Hub(#[from] AgentError),
+    /// A socket could not be set up.
+    #[error("cannot {what}: {source}")]
+    Io {
+        /// What was tried.
+        what: String,
+        /// Why it failed.
+        source: std::io::Error,
+    },
+}
+
+/// Counters of what the bridge refused.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct Counters {
+    /// Datagrams that did not decode.
+    pub malformed: u64,
+    /// Datagrams to a client's port from another address or port.
+    pub foreign: u64,
+    /// Registrations the hub refused.
+    pub refused: u64,
+    /// Clients dropped for silence.
+    pub timed_out: u64,
+}
+
+#[derive(Debug)]
+struct RobotClient {
+    robot_id: u32,
+    /// The client's IR sensor ids, in registration order.
+    ir_ids: Vec<u32>,
+    real: bool,
+    name: String,
+    leds: [bool; 3],
+    motors: [f64; 2],
+    pose: Option<(f64, f64, f64)>,
+    say: Option<Vec<u8>>,
+    requests: Vec<String>,
+    acted: Option<u64>,
+}
+
+#[derive(Debug)]
+enum Kind {
+    Robot(Box<RobotClient>),
+    Viewer,
+    Panel,
+}
+
+#[derive(Debug)]
+struct Client {
+    socket: UdpSocket,
+    peer: SocketAddr,
+    kind: Kind,
+    last_heard: Instant,
+}
+
+fn io(what: impl Into<String>) -> impl FnOnce(std::io::Error) -> BridgeError {
+    let what = what.into();
+    move |source| BridgeError::Io { what, source }
+}
+
+fn send(socket: &UdpSocket, peer: SocketAddr, datagram: &[u8]) {
+    if let Err(e) = socket.send_to(datagram, peer) {
+        tracing::debug!("sending to {peer}: {e}");
+    }
+}
+
+/// The Ciber-Rato obstacle value: 1/d rounded to 0.1, 100 at d ≤ 0.01.
+pub fn ir_value(distance_m: f64) -> f64 {
+    if distance_m > 0.01 { ((1.0 / distance_m) * 10.0).round() / 10.0 } else { 100.0 }
+}
+
+fn lab_data(map: &MapData) -> LabData {
+    let mut l = LabData {
+        name: map.header.name.as_str().unwrap_or("").to_owned(),
+        size: (map.header.width_m, map.header.height_m),
+        ..LabData::default()
+    };
+    for item in &map.items {
+        match item.kind {
+            MAP_WALL => l.walls.push((item.a, Vec::new())),
+            MAP_CORNER => {
+                if let Some(w) = l.walls.last_mut() {
+                    w.1.push((item.a, item.b));
+                }
+            }
+            MAP_BEACON => l.beacons.push((item.a, item.b, item.c)),
+            MAP_TARGET => l.targets.push((item.a, item.b, item.c)),
+            MAP_GRID => l.grid.push((item.a, item.b, item.c)),
+            _ => {}
+        }
+    }
+    l
+}
+
+fn reply_params(map: &MapData) -> ReplyParams {
+    let p = &map.header.params;
+    let req = |bit: u32| p.requestable & bit != 0;
+    ReplyParams {
+        sim_time: p.sim_time_ticks,
+        cycle_ms: map.header.cycle_ms,
+        compass_noise: p.noise_compass_deg,
+        beacon_noise: p.noise_beacon_deg,
+        obstacle_noise: p.noise_proximity_m,
+        motors_noise: p.noise_motors_pct,
+        gps: p.sensors_on & SENSOR_GPS != 0,
+        gps_lin_noise: p.noise_gps_pos_m,
+        gps_dir_noise: p.noise_gps_heading_deg,
+        beacon_sensor: p.sensors_on & SENSOR_BEACON != 0,
+        compass_sensor: p.sensors_on & SENSOR_COMPASS != 0,
+        n_beacons: map.header.beacon_count as usize,
+        requests_per_cycle: p.requests_per_cycle,
+        requestable: [
+            req(SENSOR_OBSTACLE),
+            req(SENSOR_BEACON),
+            req(SENSOR_GROUND),
+            req(SENSOR_COMPASS),
+            req(SENSOR_COLLISION),
+        ],
+        latency: [p.latency[0], p.latency[1], p.latency[2], p.latency[3], p.latency[4]],
+        beacon_aperture: p.beacon_aperture_rad,
+    }
+}
+
+/// The hub registration for a Ciber-Rato / Intellwheels robot.
+pub fn hub_registration(r: &codec::RobotRegistration) -> (ipc_types::RobotRegistration, Vec<u32>) {
+    let mut reg = ipc_types::RobotRegistration::new(&r.name);
+    reg.requested_id = r.id;
+    reg.kind = match r.kind {
+        Some(RobotType::Real) => RobotKind::Real,
+        Some(RobotType::Door) => RobotKind::Door,
+        _ => RobotKind::Simulated,
+    } as u32;
+    if let Some(v) = r.width {
+        reg.width_m = v;
+    }
+    if let Some(v) = r.height {
+        reg.height_m = v;
+    }
+    if let Some(v) = r.com {
+        reg.com = v;
+    }
+    if let Some(v) = r.max_speed {
+        reg.max_speed_mps = v;
+    }
+    if let Some(v) = r.accel_curve {
+        reg.accel_curve = v;
+    }
+    if let (Some(x), Some(y)) = (r.x, r.y) {
+        reg.flags |= REG_HAS_POSE;
+        reg.pose = [x, y, r.dir.unwrap_or(0.0)];
+    }
+    let mut ids = Vec::new();
+    for (k, s) in r.sensors.iter().take(reg.sensors.len()).enumerate() {
+        // Ciber-Rato sensors sit on the rim of a robot of radius 0.5 and look outwards;
+        // Intellwheels ones give their own position and cone.
+        let a = s.angle_deg.to_radians();
+        reg.sensors[k] = SensorSpec {
+            x_m: s.x.unwrap_or(0.5 * a.cos()),
+            y_m: s.y.unwrap_or(0.5 * a.sin()),
+            angle_deg: s.angle_deg,
+            cone_deg: s.cone_deg.unwrap_or(60.0),
+            range_m: 0.0,
+        };
+        ids.push(s.id);
+    }
+    reg.sensor_count = ids.len() as u32;
+    if ids.is_empty() {
+        ids = vec![0, 1, 2, 3];
+    }
+    (reg, ids)
+}
+
+/// Ciber-Rato `Buttons`: Start when the next state is running, Stop when it is stopped.
+fn buttons(state: RunState) -> (bool, bool) {
+    match state {
+        RunState::Running => (true, false),
+        RunState::Waiting | RunState::Paused => (false, true),
+        RunState::Finished => (false, false),
+    }
+}
+
+/// The measures of one robot for one tick.
+pub fn measures(
+    b: &SensorBlock,
+    tick: u64,
+    state: RunState,
+    ir_ids: &[u32],
+    leds: [bool; 3],
+    map: &MapData,
+    requested: &[String],
+) -> MeasuresData {
+    let p = &map.header.params;
+    let allowed = |bit: u32, name: &str| p.requestable & bit == 0 || requested.iter().any(|r| r == name);
+    let mut m = MeasuresData { time: tick, leds, buttons: buttons(state), ..MeasuresData::default() };
+    if allowed(SENSOR_COLLISION, "Collision") {
+        m.collision = Some(b.present & COLLISION != 0);
+    }
+    if b.present & HAS_COMPASS != 0 && allowed(SENSOR_COMPASS, "Compass") {
+        m.compass = Some(b.compass_deg.round());
+    }
+    if allowed(SENSOR_GROUND, "Ground") {
+        m.ground = Some(if b.present & HAS_GROUND != 0 { b.ground as i32 } else { -1 });
+    }
+    let max_id = ir_ids.iter().copied().max().unwrap_or(0) as usize;
+    m.ir = vec![None; max_id + 1];
+    for (k, &id) in ir_ids.iter().enumerate().take(b.proximity_count as usize) {
+        if p.requestable & SENSOR_OBSTACLE == 0 || requested.iter().any(|r| *r == format!("IRSensor{id}")) {
+            m.ir[id as usize] = Some(ir_value(b.proximity_m[k]));
+        }
+    }
+    if p.sensors_on & SENSOR_BEACON != 0 {
+        m.beacons = (0..b.beacon_count as usize)
+            .map(|k| {
+                (p.requestable & SENSOR_BEACON == 0 || requested.iter().any(|r| *r == format!("Beacon{k}")))
+                    .then(|| Some(b.beacons_deg[k]).filter(|v| !v.is_nan()).map(f64::round))
+            })
+            .collect();
+    }
+    if b.present & HAS_GPS != 0 {
+        m.gps = Some((b.gps_x_m, b.gps_y_m));
+    }
+    m.messages = b.messages().map(|(from, bytes)| (from, bytes.to_vec())).collect();
+    m
+}
+
+/// A running bridge.
+#[derive(Debug)]
+pub struct Bridge {
+    cfg: BridgeConfig,
+    agent: Agent,
+    map: MapData,
+    lab: LabData,
+    reg: UdpSocket,
+    clients: Vec<Client>,
+    /// The hub tick the clients' actions answer, and when it arrived.
+    tick: Option<(u64, Instant)>,
+    run_state: RunState,
+    answered: bool,
+    is_ready: bool,
+    /// The latest sensor block of each robot.
+    blocks: BTreeMap<u32, SensorBlock>,
+    /// Counters of refused input.
+    pub counters: Counters,
+}
+
+impl Bridge {
+    /// Connects to the hub and binds the registration port.
+    pub fn start(cfg: BridgeConfig) -> Result<Self, BridgeError> {
+        let agent =
+            Agent::connect_within(&cfg.session, &format!("udp-bridge-{}", std::process::id()), cfg.connect_timeout)?;
+        // Ready only once a UDP robot exists: a bridge with no robots must not count towards
+        // a hub's --wait-agents.
+        let map = agent.map()?;
+        let reg = UdpSocket::bind((cfg.bind, cfg.port)).map_err(io(format!("bind UDP {}:{}", cfg.bind, cfg.port)))?;
+        reg.set_nonblocking(true).map_err(io("make the registration socket non-blocking"))?;
+        Ok(Self {
+            lab: lab_data(&map),
+            cfg,
+            agent,
+            map,
+            reg,
+            clients: Vec::new(),
+            tick: None,
+            run_state: RunState::Waiting,
+            answered: true,
+            is_ready: false,
+            blocks: BTreeMap::new(),
+            counters: Counters::default(),
+        })
+    }
+
+    /// The registration port's address.
+    pub fn local_addr(&self) -> Option<SocketAddr> {
+        self.reg.local_addr().ok()
+    }
+
+    /// Serves until the hub ends the run or goes away.
+    pub fn run(mut self) -> Result<Counters, BridgeError> {
+        let mut fds: Vec<libc::pollfd> = Vec::new();
+        loop {
+            fds.clear();
+            fds.push(libc::pollfd { fd: self.reg.as_raw_fd(), events: libc::POLLIN, revents: 0 });
+            fds.push(libc::pollfd { fd: self.agent.tick_fd(), events: libc::POLLIN, revents: 0 });
+            for c in &self.clients {
+                fds.push(libc::pollfd { fd: c.socket.as_raw_fd(), events: libc::POLLIN, revents: 0 });
+            }
+            let timeout_ms = 20;
+            #[allow(unsafe_code)]
+            // SAFETY: fds is a live array of pollfd for the duration of the call.
+            unsafe {
+                libc::poll(fds.as_mut_ptr(), fds.len() as libc::nfds_t, timeout_ms);
+            }
+            self.agent.check_alive()?;
+            self.serve_registrations()?;
+            let changed = self.serve_clients();
+            if let Some(tick) = self.agent.try_tick()? {
+                self.on_tick(tick.tick, tick.run_state)?;
+            } else if self.agent.finished() {
+                tracing::info!("the hub ended the run");
+                return Ok(self.counters);
+            }
+            self.answer_hub(changed)?;
+            self.drop_silent();
+        }
+    }
+
+    fn serve_registrations(&mut self) -> Result<(), BridgeError> {
+        let mut buf = [0u8; 65536];
+        loop {
+            let (n, peer) = match self.reg.recv_from(&mut buf) {
+                Ok(x) => x,
+                Err(e) if e.kind() == ErrorKind::WouldBlock => return Ok(()),
+                Err(e) => {
+                    tracing::debug!("registration socket: {e}");
+                    return Ok(());
+                }
+            };
+            let registration = match codec::decode_registration(&buf[..n]) {
+                Ok(r) => r,
+                Err(e) => {
+                    // Ciber-Rato sends no reply to what it cannot parse.
+                    self.counters.malformed += 1;
+                    tracing::warn!("registration from {peer} dropped: {e}");
+                    continue;
+                }
+            };
+            let socket = UdpSocket::bind((self.cfg.bind, 0)).map_err(io("bind a client socket"))?;
+            socket.set_nonblocking(true).map_err(io("make a client socket non-blocking"))?;
+            let kind = match registration {
+                Registration::View => Kind::Viewer,
+                Registration::Panel => Kind::Panel,
+                Registration::Robot(r) | Registration::RobotBeacon(r) => {
+                    let (reg, ir_ids) = hub_registration(&r);
+                    match self.agent.register(&reg).and_then(|id| {
+                        if !self.is_ready {
+                            self.agent.ready()?;
+                            self.is_ready = true;
+                        }
+                        Ok(id)
+                    }) {
+                        Ok(robot_id) => Kind::Robot(Box::new(RobotClient {
+                            robot_id,
+                            ir_ids,
+                            real: r.kind == Some(RobotType::Real),
+                            name: r.name.clone(),
+                            leds: [false; 3],
+                            motors: [0.0; 2],
+                            pose: None,
+                            say: None,
+                            requests: Vec::new(),
+                            acted: None,
+                        })),
+                        Err(AgentError::Refused { reason, detail }) => {
+                            self.counters.refused += 1;
+                            tracing::warn!("robot {:?} from {peer} refused: {reason:?}: {detail}", r.name);
+                            // The refusal comes from a fresh port, as the simulator's does.
+                            send(&socket, peer, &codec::encode_refused());
+                            continue;
+                        }
+                        Err(e) => return Err(e.into()),
+                    }
+                }
+            };
+            send(&socket, peer, &codec::encode_reply_ok(&reply_params(&self.map)));
+            tracing::info!("{peer} registered as {kind:?}");
+            self.clients.push(Client { socket, peer, kind, last_heard: Instant::now() });
+        }
+    }
+
+    /// Reads every client's datagrams; returns whether some robot's actions changed.
+    fn serve_clients(&mut self) -> bool {
+        let mut changed = false;
+        let mut buf = [0u8; 65536];
+        let tick = self.tick.map(|t| t.0);
+        let mut commands = Vec::new();
+        for c in &mut self.clients {
+            loop {
+                let (n, from) = match c.socket.recv_from(&mut buf) {
+                    Ok(x) => x,
+                    Err(_) => break,
+                };
+                if from != c.peer {
+                    self.counters.foreign += 1;
+                    tracing::warn!("datagram to {}'s port from {from} dropped", c.peer);
+                    continue;
+                }
+                c.last_heard = Instant::now();
+                match &mut c.kind {
+                    Kind::Robot(r) => match codec::decode_actions(&buf[..n]) {
+                        Ok(a) => {
+                            apply_actions(r, &a, tick);
+                            changed = true;
+                        }
+                        Err(e) => {
+                            self.counters.malformed += 1;
+                            tracing::warn!("actions from {from} dropped: {e}");
+                        }
+                    },
+                    Kind::Viewer | Kind::Panel => match codec::decode_viewer(&buf[..n]) {
+                        Ok(cmd) => commands.push((c.socket.try_clone(), c.peer, cmd)),
+                        Err(e) => {
+                            self.counters.malformed += 1;
+                            tracing::warn!("viewer command from {from} dropped: {e}");
+                        }
+                    },
+                }
+            }
+        }
+        for (socket, peer, cmd) in commands {
+            let Ok(socket) = socket else { continue };
+            self.viewer_command(&socket, peer, cmd);
+        }
+        changed
+    }
+
+    fn viewer_command(&mut self, socket: &UdpSocket, peer: SocketAddr, cmd: ViewerCommand) {
+        let session = self.cfg.session.clone();
+        let run = |c: Command, id: u32| {
+            if let Err(e) = control(&session, c, id) {
+                tracing::warn!("{c:?} for the hub failed: {e}");
+            }
+        };
+        match cmd {
+            ViewerCommand::LabReq => send(socket, peer, &codec::encode_lab(&self.lab)),
+            ViewerCommand::GridReq => send(socket, peer, &codec::encode_grid(&self.lab)),
+            ViewerCommand::Start => run(Command::Start, 0),
+            ViewerCommand::Stop => run(Command::Pause, 0),
+            ViewerCommand::RemoveRobot(id) => {
+                run(Command::RemoveRobot, id);
+                self.clients.retain(|c| !matches!(&c.kind, Kind::Robot(r) if r.robot_id == id));
+            }
+            // A reset of the whole hub is not a viewer's to make: the viewer is told to start
+            // over, which is what it needs.
+            ViewerCommand::Reset => send(socket, peer, &codec::encode_restart()),
+        }
+    }
+
+    fn on_tick(&mut self, tick: u64, state: RunState) -> Result<(), BridgeError> {
+        self.tick = Some((tick, Instant::now()));
+        self.run_state = state;
+        self.answered = false;
+        self.blocks.clear();
+        for b in self.agent.sensors() {
+            self.blocks.insert(b.robot_id, *b);
+        }
+        for c in &mut self.clients {
+            if let Kind::Robot(r) = &mut c.kind
+                && let Some(b) = self.blocks.get(&r.robot_id)
+            {
+                let m = measures(b, tick, state, &r.ir_ids, r.leds, &self.map, &r.requests);
+                r.requests.clear();
+                send(&c.socket, c.peer, &codec::encode_measures(&m));
+            }
+        }
+        if self.clients.iter().any(|c| matches!(c.kind, Kind::Viewer)) {
+            let (_, robots) = self.agent.world()?;
+            let state_name = match state {
+                RunState::Running => "Running",
+                RunState::Finished => "Finished",
+                _ => "Stopped",
+            };
+            let datagrams: Vec<Vec<u8>> = robots
+                .iter()
+                .map(|s| {
+                    codec::encode_viewer_robot(&ViewerRobot {
+                        name: s.name.as_str().unwrap_or("").to_owned(),
+                        id: s.id,
+                        time: tick,
+                        collisions: s.collision_count,
+                        collision: s.flags & ipc_types::ROBOT_COLLISION != 0,
+                        state: state_name,
+                        width: s.width_m as f64,
+                        height: s.height_m as f64,
+                        com: s.com as f64,
+                        kind: match RobotKind::from_u32(s.kind) {
+                            Some(RobotKind::Real) => "Real",
+                            Some(RobotKind::Door) => "Door",
+                            _ => "Simulated",
+                        },
+                        pose: (s.x_m, s.y_m, s.heading_deg),
+                    })
+                })
+                .collect();
+            for c in self.clients.iter().filter(|c| matches!(c.kind, Kind::Viewer)) {
+                for d in &datagrams {
+                    send(&c.socket, c.peer, d);
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// Sends the UDP robots' actions to the hub. In lock-step: once per tick, when every robot
+    /// has acted or the hub's deadline is near (a silent client then lags like any agent). In
+    /// real time: whenever some robot's actions changed.
+    fn answer_hub(&mut self, changed: bool) -> Result<(), BridgeError> {
+        let Some((tick, since)) = self.tick else { return Ok(()) };
+        let p = &self.map.header.params;
+        let robots = || self.clients.iter().filter_map(|c| if let Kind::Robot(r) = &c.kind { Some(r) } else { None });
+        let due = if p.lockstep != 0 {
+            let all = robots().all(|r| r.acted.is_some_and(|t| t >= tick));
+            // Answer a little before the hub's deadline, so the robots that did act still count.
+            let near_deadline = since.elapsed() >= Duration::from_millis(p.deadline_ms as u64 * 9 / 10);
+            !self.answered && (all || near_deadline)
+        } else {
+            changed
+        };
+        if !due {
+            return Ok(());
+        }
+        let blocks: Vec<ActionBlock> = robots()
+            .map(|r| {
+                let mut b = ActionBlock::motors(r.robot_id, r.motors[0], r.motors[1]);
+                if r.real {
+                    b.flags &= !ACT_MOTORS;
+                    if let Some((x, y, d)) = r.pose {
+                        b.flags |= ACT_POSE;
+                        b.pose = [x, y, d];
+                    }
+                }
+                if let Some(say) = &r.say {
+                    b.with_say(say);
+                }
+                b.flags |= (r.leds[0] as u32 * LED_END)
+                    | (r.leds[1] as u32 * LED_RETURNING)
+                    | (r.leds[2] as u32 * LED_VISITING);
+                b
+            })
+            .collect();
+        self.agent.send(tick, &blocks)?;
+        self.answered = true;
+        for c in &mut self.clients {
+            if let Kind::Robot(r) = &mut c.kind {
+                r.say = None;
+            }
+        }
+        Ok(())
+    }
+
+    fn drop_silent(&mut self) {
+        let timeout = self.cfg.client_timeout;
+        let session = self.cfg.session.clone();
+        let mut dropped = 0;
+        // Only robots must talk every tick; viewers send a command now and then.
+        self.clients.retain(|c| {
+            let Kind::Robot(r) = &c.kind else { return true };
+            if c.last_heard.elapsed() < timeout {
+                return true;
+            }
+            let _ = control(&session, Command::RemoveRobot, r.robot_id);
+            tracing::warn!("robot {} ({:?}) silent for {timeout:?}: removed", r.robot_id, r.name);
+            dropped += 1;
+            false
+        });
+        self.counters.timed_out += dropped;
+    }
+}
+
+fn apply_actions(r: &mut RobotClient, a: &Actions, tick: Option<u64>) {
+    let power = |p: f64| p.clamp(-MAX_POWER, MAX_POWER) / MAX_POWER;
+    if let Some(l) = a.left {
+        r.motors[0] = power(l);
+    }
+    if let Some(rt) = a.right {
+        r.motors[1] = power(rt);
+    }
+    for (k, v) in [a.end_led, a.returning_led, a.visiting_led].into_iter().enumerate() {
+        if let Some(on) = v {
+            r.leds[k] = on;
+        }
+    }
+    if a.pose.is_some() {
+        r.pose = a.pose;
+    }
+    if let Some(s) = &a.say
+        && s.len() <= ipc_types::MESSAGE_BYTES
+    {
+        r.say = Some(s.clone());
+    }
+    r.requests.extend(a.requests.iter().cloned());
+    // Every Actions datagram answers the tick in hand (stock clients send exactly one per
+    // Measures; <Sync/> says so explicitly).
+    r.acted = tick.or(r.acted);
+}
