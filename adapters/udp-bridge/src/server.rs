@@ -423,11 +423,7 @@ impl Bridge {
         let tick = self.tick.map(|t| t.0);
         let mut commands = Vec::new();
         for c in &mut self.clients {
-            loop {
-                let (n, from) = match c.socket.recv_from(&mut buf) {
-                    Ok(x) => x,
-                    Err(_) => break,
-                };
+            while let Ok((n, from)) = c.socket.recv_from(&mut buf) {
                 if from != c.peer {
                     self.counters.foreign += 1;
                     tracing::warn!("datagram to {}'s port from {from} dropped", c.peer);
