@@ -1,118 +1,14 @@
 //! The shared-memory hub across real processes: each test runs `iwsim hub` and agents as
 //! separate processes in a session of its own, so tests run in parallel without crossing.
 
-use std::io::Read;
-use std::process::{Child, Command, Output, Stdio};
-use std::sync::atomic::{AtomicU32, Ordering};
 use std::time::{Duration, Instant};
+
+use super::common::{Proc, json_field, session, text, wait_for_tick};
 
 use agent_sdk::{Agent, AgentError, control};
 use hub::map::{NoiseParams, Params, builtin};
 use hub::world::{Action, RobotSpec, World};
 use ipc_types::{Command as Cmd, REG_HAS_POSE, ROBOT_FROZEN, Refusal, RobotRegistration};
-
-fn session(tag: &str) -> String {
-    static N: AtomicU32 = AtomicU32::new(0);
-    format!("e2e-{tag}-{}-{}", std::process::id(), N.fetch_add(1, Ordering::Relaxed))
-}
-
-/// A child process killed if the test fails before it exits.
-struct Proc(Option<Child>);
-
-impl Proc {
-    fn spawn(args: &[&str]) -> Self {
-        let child = Command::new(env!("CARGO_BIN_EXE_iwsim"))
-            .args(args)
-            .env("RUST_LOG", "warn")
-            .stdin(Stdio::null())
-            .stdout(Stdio::piped())
-            .stderr(Stdio::piped())
-            .spawn()
-            .expect("iwsim starts");
-        Self(Some(child))
-    }
-
-    fn pid(&self) -> u32 {
-        self.0.as_ref().expect("running").id()
-    }
-
-    /// Waits for the process to exit (checking every few milliseconds) and returns its
-    /// output; panics with what it printed if it does not exit in time.
-    fn wait(mut self, timeout: Duration) -> Output {
-        let mut child = self.0.take().expect("running");
-        let start = Instant::now();
-        loop {
-            if child.try_wait().expect("wait works").is_some() {
-                return child.wait_with_output().expect("output");
-            }
-            if start.elapsed() > timeout {
-                let _ = child.kill();
-                let out = child.wait_with_output().expect("output");
-                panic!(
-                    "process did not exit within {timeout:?}\nstdout: {}\nstderr: {}",
-                    String::from_utf8_lossy(&out.stdout),
-                    String::from_utf8_lossy(&out.stderr)
-                );
-            }
-            std::thread::sleep(Duration::from_millis(5));
-        }
-    }
-
-    fn kill9(&mut self) {
-        if let Some(c) = self.0.as_mut() {
-            let _ = c.kill();
-            let _ = c.wait();
-        }
-    }
-
-    fn signal(&self, sig: &str) {
-        let status =
-            Command::new("kill").arg(format!("-{sig}")).arg(self.pid().to_string()).status().expect("kill runs");
-        assert!(status.success());
-    }
-
-    fn stderr_now(&mut self) -> String {
-        let mut s = String::new();
-        if let Some(err) = self.0.as_mut().and_then(|c| c.stderr.as_mut()) {
-            let _ = err.read_to_string(&mut s);
-        }
-        s
-    }
-}
-
-impl Drop for Proc {
-    fn drop(&mut self) {
-        self.kill9();
-    }
-}
-
-fn text(b: &[u8]) -> String {
-    String::from_utf8_lossy(b).into_owned()
-}
-
-/// The value of `"key":` in a one-line JSON object (numbers and strings).
-fn json_field<'a>(json: &'a str, key: &str) -> &'a str {
-    let k = format!("\"{key}\":");
-    let start = json.find(&k).unwrap_or_else(|| panic!("{key} missing in {json}")) + k.len();
-    let rest = &json[start..];
-    let end = rest.find([',', '}', ']']).unwrap_or(rest.len());
-    rest[..end].trim_matches('"')
-}
-
-/// Connects as an observer (an agent without robots) and waits until the hub's world has
-/// reached `tick`.
-fn wait_for_tick(session: &str, tick: u64, timeout: Duration) -> Agent {
-    let mut observer = Agent::connect_within(session, "observer", timeout).expect("hub comes up");
-    let start = Instant::now();
-    loop {
-        let (h, _) = observer.world().expect("world snapshot");
-        if h.tick >= tick {
-            return observer;
-        }
-        assert!(start.elapsed() < timeout, "hub stayed at tick {} (< {tick})", h.tick);
-        std::thread::sleep(Duration::from_millis(5));
-    }
-}
 
 #[test]
 fn an_agent_drives_and_the_hubs_pose_matches_the_world_model() {

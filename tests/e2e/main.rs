@@ -1,4 +1,6 @@
 //! End-to-end tests: the `iwsim` binary in real processes, talking over real shared memory.
 
 mod cli;
+mod common;
 mod hub;
+mod udp;

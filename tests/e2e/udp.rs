@@ -1,0 +1,299 @@
+//! The UDP/XML bridge over real sockets on 127.0.0.1: registration, Measures, viewers,
+//! foreign datagrams and malformed input, with a hub and the bridge as real processes.
+
+use std::io::{BufRead, BufReader};
+use std::net::{SocketAddr, UdpSocket};
+use std::sync::mpsc;
+use std::time::{Duration, Instant};
+
+use hub::map::{NoiseParams, Params, builtin};
+use hub::math::Pose;
+use hub::world::{Action, RobotSpec, World};
+
+use super::common::{Proc, session, text};
+
+/// Starts a hub and a bridge on a free port; returns them and the registration address.
+fn hub_and_bridge(s: &str, hub_args: &[&str], bridge_args: &[&str]) -> (Proc, Proc, SocketAddr) {
+    let mut args = vec!["hub", "--session", s];
+    args.extend_from_slice(hub_args);
+    let hub = Proc::spawn(&args);
+    let mut bargs = vec!["udp", "--session", s, "--port", "0"];
+    bargs.extend_from_slice(bridge_args);
+    let mut bridge = Proc::spawn(&bargs);
+    // The bridge says where it listens on its first line.
+    let stderr = bridge.0.as_mut().and_then(|c| c.stderr.take()).expect("piped stderr");
+    let (tx, rx) = mpsc::channel();
+    std::thread::spawn(move || {
+        for line in BufReader::new(stderr).lines().map_while(Result::ok) {
+            let _ = tx.send(line);
+        }
+    });
+    let deadline = Instant::now() + Duration::from_secs(20);
+    loop {
+        let line =
+            rx.recv_timeout(deadline.saturating_duration_since(Instant::now())).expect("bridge announces its port");
+        if let Some(addr) = line.split("registrations on ").nth(1) {
+            return (hub, bridge, addr.trim().parse().expect("address"));
+        }
+    }
+}
+
+struct Client {
+    sock: UdpSocket,
+    server: Option<SocketAddr>,
+}
+
+impl Client {
+    fn new() -> Self {
+        let sock = UdpSocket::bind("127.0.0.1:0").expect("bind");
+        sock.set_read_timeout(Some(Duration::from_secs(5))).expect("timeout");
+        Self { sock, server: None }
+    }
+
+    fn recv(&mut self) -> String {
+        let mut buf = [0u8; 65536];
+        let (n, from) = self.sock.recv_from(&mut buf).expect("a datagram within 5 s");
+        assert!(buf[..n].ends_with(b"\n\0"), "every datagram ends with a newline and a NUL");
+        self.server.get_or_insert(from);
+        String::from_utf8_lossy(&buf[..n - 1]).into_owned()
+    }
+
+    /// Registers at `reg` and returns the reply; later traffic goes to the reply's port.
+    fn register(&mut self, reg: SocketAddr, xml: &str) -> String {
+        self.sock.send_to(xml.as_bytes(), reg).expect("send");
+        self.server = None;
+        self.recv()
+    }
+
+    fn send(&self, xml: &str) {
+        self.sock.send_to(xml.as_bytes(), self.server.expect("registered")).expect("send");
+    }
+
+    /// The next datagram whose root is `root` within `timeout`, if any.
+    fn try_next(&mut self, root: &str, timeout: Duration) -> Option<String> {
+        let end = Instant::now() + timeout;
+        let mut buf = [0u8; 65536];
+        while Instant::now() < end {
+            self.sock
+                .set_read_timeout(Some(end.saturating_duration_since(Instant::now()).max(Duration::from_millis(1))))
+                .ok()?;
+            let Ok((n, _)) = self.sock.recv_from(&mut buf) else { break };
+            let d = String::from_utf8_lossy(&buf[..n.saturating_sub(1)]).into_owned();
+            if d.starts_with(&format!("<{root}")) {
+                self.sock.set_read_timeout(Some(Duration::from_secs(5))).ok()?;
+                return Some(d);
+            }
+        }
+        self.sock.set_read_timeout(Some(Duration::from_secs(5))).ok()?;
+        None
+    }
+
+    /// The next datagram whose root is `root`.
+    fn next(&mut self, root: &str) -> String {
+        loop {
+            let d = self.recv();
+            if d.starts_with(&format!("<{root}")) {
+                return d;
+            }
+        }
+    }
+}
+
+fn attr(xml: &str, element: &str, name: &str) -> Option<f64> {
+    let el = &xml[xml.find(&format!("<{element} "))?..];
+    let key = format!(" {name}=\"");
+    let rest = &el[el.find(&key)? + key.len()..];
+    rest[..rest.find('"')?].parse().ok()
+}
+
+#[test]
+fn an_intellwheels_robot_drives_and_its_gps_track_follows_the_kinematics_within_a_millimetre() {
+    let dir = std::env::temp_dir().join(format!("iwsim-udp-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("temp dir");
+    let param = dir.join("gps.xml");
+    std::fs::write(&param, "<Parameters GPS=\"On\"/>\n").expect("param file");
+    let s = session("udp-gps");
+    let (hub, _bridge, reg) = hub_and_bridge(
+        &s,
+        &["--lockstep", "--wait-agents", "1", "--ticks", "60", "--no-noise", "--param", param.to_str().expect("utf-8")],
+        &[],
+    );
+    let mut c = Client::new();
+    let reply = c.register(
+        reg,
+        r#"<Robot Name="iw" Id="1" Width="1.2" Height="0.7" COM="0.8" X="10" Y="6.1" Dir="0" Type="Simulated" MaxSpeed="0.5" AccelerationCurve="0.6"><IRSensor Id="0" X="0.96" Y="0" Angle="0" Cone="60"/></Robot>"#,
+    );
+    assert!(reply.starts_with("<Reply Status=\"Ok\">") && reply.contains("GPS=\"On\""), "{reply}");
+
+    // The same chair stepped here, from the thesis's equations.
+    let map = builtin::map("liacc").expect("built in");
+    let mut world = World::new(&map.lab, Params { noise: NoiseParams::NONE, ..Params::default() }, 1).expect("valid");
+    let r = world
+        .add_robot(
+            RobotSpec { pose: Pose::from_deg(10.0, 6.1, 0.0), ..RobotSpec::at(0.0, 0.0, 0.0) }
+                .body(1.2, 0.7, 0.8)
+                .motors(0.5, 0.6),
+        )
+        .expect("free");
+    let mut checked = 0;
+    loop {
+        let m = c.next("Measures");
+        let t = attr(&m, "Measures", "Time").expect("Time") as u64;
+        assert_eq!(t, world.tick(), "one Measures per tick, in order");
+        let (x, y) = (attr(&m, "GPS", "X").expect("GPS X"), attr(&m, "GPS", "Y").expect("GPS Y"));
+        let p = world.robot(r).expect("alive").pose;
+        assert!(
+            (x - p.x).abs() < 1e-3 && (y - p.y).abs() < 1e-3,
+            "tick {t}: GPS ({x}, {y}) vs model ({}, {})",
+            p.x,
+            p.y
+        );
+        checked += 1;
+        if t == 40 {
+            break;
+        }
+        // 0.15 is full power; 0.1 is two thirds.
+        c.send(r#"<Actions LeftMotor="0.15" RightMotor="0.1"/>"#);
+        world.step(&[Action::motors(r, 1.0, 0.1 / 0.15)], 0.1);
+    }
+    assert_eq!(checked, 41);
+    assert!(world.robot(r).expect("alive").pose.x > 10.5, "the chair moved");
+    drop(hub);
+}
+
+#[test]
+fn a_viewer_gets_the_lab_the_grid_and_every_robot_each_tick() {
+    let s = session("udp-view");
+    let (_hub, _bridge, reg) = hub_and_bridge(&s, &["--cycle-ms", "20"], &[]);
+    let mut robot = Client::new();
+    assert!(robot.register(reg, r#"<Robot Name="seen" Id="2"/>"#).contains("Status=\"Ok\""));
+    let mut v = Client::new();
+    assert!(v.register(reg, "<View/>").starts_with("<Reply Status=\"Ok\">"));
+    v.send("<LabReq/>");
+    let lab = v.next("Lab");
+    assert!(lab.starts_with("<Lab Name=\"IW_LIACC\" Height=\"17.75\" Width=\"44\">"), "{lab}");
+    assert_eq!(lab.matches("<Wall ").count(), 23);
+    v.send("<GridReq/>");
+    let grid = v.next("Grid");
+    assert!(grid.contains("<Position X=\"10\" Y=\"6.1\" Dir=\"0\"/>"), "{grid}");
+    let r = v.next("Robot");
+    assert!(
+        r.contains("Name=\"seen\" Id=\"2\"")
+            && r.contains("Width=\"1\" Height=\"1\" CenterOfMovement=\"0.5\" Type=\"Simulated\""),
+        "{r}"
+    );
+    assert_eq!(attr(&r, "Position", "X"), Some(14.0), "grid slot 2");
+    let later = v.next("Robot");
+    assert!(attr(&later, "Robot", "Time") > attr(&r, "Robot", "Time"), "a datagram per tick");
+}
+
+#[test]
+fn a_datagram_from_a_foreign_port_changes_nothing() {
+    let s = session("udp-foreign");
+    let (_hub, _bridge, reg) = hub_and_bridge(&s, &["--cycle-ms", "20", "--no-noise"], &[]);
+    let mut c = Client::new();
+    c.register(reg, r#"<Robot Name="still" Id="1"/>"#);
+    let first = c.next("Measures");
+    let port = c.server.expect("reply port");
+    let intruder = UdpSocket::bind("127.0.0.1:0").expect("bind");
+    for _ in 0..20 {
+        intruder.send_to(br#"<Actions LeftMotor="0.15" RightMotor="0.15"/>"#, port).expect("send");
+        // The real client keeps the chair still.
+        c.send(r#"<Actions LeftMotor="0" RightMotor="0"/>"#);
+        c.next("Measures");
+    }
+    let v = {
+        let mut v = Client::new();
+        v.register(reg, "<View/>");
+        v.next("Robot")
+    };
+    assert_eq!(attr(&v, "Position", "X"), Some(10.0), "the intruder's powers were dropped: {v}");
+    assert!(first.contains("<IRSensor Id=\"0\""));
+}
+
+#[test]
+fn malformed_input_is_refused_or_ignored_and_the_bridge_keeps_serving() {
+    let s = session("udp-junk");
+    let (_hub, mut bridge, reg) = hub_and_bridge(&s, &["--cycle-ms", "20", "--no-noise"], &[]);
+    let junk = UdpSocket::bind("127.0.0.1:0").expect("bind");
+    junk.set_read_timeout(Some(Duration::from_millis(150))).expect("timeout");
+    let big = vec![b'<'; 10 * 1024];
+    let registrations: Vec<(&[u8], bool)> = vec![
+        // (datagram, whether the simulator answers it with a refusal)
+        (b"<Robot Name=\"a\"", false),
+        (b"<Hello/>", false),
+        (b"<Robot Id=\"-1\"/>", false),
+        (b"<Robot Id=\"abc\"/>", false),
+        (b"<Robot Width=\"NaN\"/>", false),
+        (b"<Robot Width=\"1\" Width=\"2\"/>", false),
+        (b"<Robot Type=\"Boat\"/>", false),
+        (b"<Robot><Wheel/></Robot>", false),
+        (b"<Robot><IRSensor Id=\"0\">", false),
+        (&big, false),
+        (b"\x00\xff\xfe\x13\x37garbage", false),
+        (b"", false),
+        (b"hello", false),
+        (b"<?xml version=\"1.0\"?>", false),
+        (b"<Robot Id=\"99\"/>", true),
+        (b"<Robot COM=\"1.5\"/>", true),
+        (b"<Robot MaxSpeed=\"-1\"/>", true),
+    ];
+    for (dg, refused) in &registrations {
+        junk.send_to(dg, reg).expect("send");
+        let mut buf = [0u8; 2048];
+        match junk.recv_from(&mut buf) {
+            Ok((n, _)) => {
+                assert!(*refused, "{:?} got an answer", String::from_utf8_lossy(dg));
+                assert_eq!(&buf[..n], b"<Reply Status=\"Refused\"></Reply>\n\0");
+            }
+            Err(_) => assert!(!refused, "{:?} got no refusal", String::from_utf8_lossy(dg)),
+        }
+    }
+    // A robot that behaves, then junk on its own port.
+    let mut c = Client::new();
+    assert!(c.register(reg, r#"<Robot Name="ok" Id="1"/>"#).contains("Status=\"Ok\""));
+    c.next("Measures");
+    for dg in [
+        &br#"<Actions LeftMotor="nan"/>"#[..],
+        br#"<Actions LeftMotor="inf" RightMotor="0.1"/>"#,
+        b"<Actions><Dance/></Actions>",
+        b"<Measures/>",
+        br#"<Actions LeftMotor="0.1""#,
+        br#"<Actions LeftMotor="0.1" LeftMotor="0.2"/>"#,
+        &big,
+        b"\xde\xad\xbe\xef",
+    ] {
+        c.sock.send_to(dg, c.server.expect("port")).expect("send");
+    }
+    // Still served: Measures keep coming and a valid action still drives.
+    for _ in 0..10 {
+        c.send(r#"<Actions LeftMotor="0.15" RightMotor="0.15"/>"#);
+        c.next("Measures");
+    }
+    let mut v = Client::new();
+    v.register(reg, "<View/>");
+    let robot = v.next("Robot");
+    assert!(attr(&robot, "Position", "X").expect("x") > 10.0, "{robot}");
+    let mut again = Client::new();
+    assert!(again.register(reg, r#"<Robot Name="late" Id="3"/>"#).contains("Status=\"Ok\""));
+    assert!(bridge.0.as_mut().expect("running").try_wait().expect("status").is_none(), "the bridge is still up");
+    let _ = text(b"");
+}
+
+#[test]
+fn a_silent_robot_client_is_unregistered() {
+    let s = session("udp-silent");
+    let (_hub, _bridge, reg) = hub_and_bridge(&s, &["--cycle-ms", "20"], &["--client-timeout", "0.3"]);
+    let mut c = Client::new();
+    c.register(reg, r#"<Robot Name="quiet" Id="1"/>"#);
+    let mut v = Client::new();
+    v.register(reg, "<View/>");
+    assert!(v.next("Robot").contains("Name=\"quiet\""));
+    // The robot client says nothing more; soon its robot is gone from the world, and the
+    // viewer hears of it no more.
+    let start = Instant::now();
+    while v.try_next("Robot", Duration::from_millis(200)).is_some_and(|r| r.contains("Name=\"quiet\"")) {
+        assert!(start.elapsed() < Duration::from_secs(5), "the silent robot is still reported");
+    }
+    assert!(v.try_next("Robot", Duration::from_millis(200)).is_none(), "no robot left to report");
+}
