@@ -7,7 +7,7 @@ use hub::tiled::TiledWorld;
 
 use anyhow::Context as _;
 
-use crate::cli::{BenchLatencyArgs, BenchLockstepArgs, BenchWorldArgs, RawPeerArgs};
+use crate::cli::{BenchLatencyArgs, BenchLockstepArgs, BenchWorldArgs, RawPeerArgs, Transport, UdpClientArgs};
 
 /// Result of `iwsim bench world`.
 #[derive(Debug, Clone, PartialEq)]
@@ -388,16 +388,25 @@ pub struct LockstepBench {
 /// A hub in lock-step with `agents` agent processes of `robots_per_agent` robots each, physics
 /// and sensors on, on an open 400 m lab; ticks per second from the first step to the last.
 /// Robots stand in lattices 5 m apart (one per 25 m², about three times the density of the
-/// LIACC floor in `bench world`), driving slow arcs.
-pub fn measure_lockstep(agents: usize, robots_per_agent: usize, ticks: u64) -> anyhow::Result<LockstepBench> {
-    let dir = std::env::temp_dir().join(format!("iwsim-bench-{}", std::process::id()));
+/// LIACC floor in `bench world`), driving slow arcs. Over UDP, each agent is a Ciber-Rato-style
+/// client process (one socket per robot, one `<Actions>` per `<Measures>`) talking to
+/// `iwsim udp`.
+pub fn measure_lockstep(
+    agents: usize,
+    robots_per_agent: usize,
+    ticks: u64,
+    udp: bool,
+) -> anyhow::Result<LockstepBench> {
+    let dir = std::env::temp_dir().join(format!("iwsim-bench-{}-{}", std::process::id(), udp as u8));
     std::fs::create_dir_all(&dir)?;
     let lab = dir.join("lab.xml");
     std::fs::write(
         &lab,
         "<Lab Name=\"bench\" Width=\"400\" Height=\"400\">\n  <Wall Height=\"2\"><Corner X=\"200\" Y=\"0\"/><Corner X=\"201\" Y=\"0\"/><Corner X=\"201\" Y=\"150\"/><Corner X=\"200\" Y=\"150\"/></Wall>\n</Lab>\n",
     )?;
-    let session = format!("bench-ls-{}", std::process::id());
+    let session = format!("bench-ls-{}-{}", std::process::id(), udp as u8);
+    // Over UDP the bridge is the hub's one agent, whatever the number of UDP clients.
+    let hub_agents = if udp { 1 } else { agents };
     let hub = spawn_self(&[
         "hub".into(),
         "--session".into(),
@@ -408,34 +417,68 @@ pub fn measure_lockstep(agents: usize, robots_per_agent: usize, ticks: u64) -> a
         "--ticks".into(),
         ticks.to_string(),
         "--wait-agents".into(),
-        agents.to_string(),
+        hub_agents.to_string(),
         "--json".into(),
     ])?;
     const SPACING: f64 = 5.0;
     let rows = robots_per_agent.div_ceil(10).max(1) as f64 * SPACING + SPACING;
+    let origin = |i: usize| (5.0 + (10.0 * SPACING + SPACING) * (i % 7) as f64, 5.0 + rows * (i / 7) as f64);
     let mut children = Vec::new();
-    for i in 0..agents {
-        let (bx, by) = (5.0 + (10.0 * SPACING + SPACING) * (i % 7) as f64, 5.0 + rows * (i / 7) as f64);
-        children.push(spawn_self(&[
-            "agent".into(),
-            "wheelchair".into(),
+    let mut bridge = None;
+    if udp {
+        let mut b = spawn_self(&[
+            "udp".into(),
             "--session".into(),
             session.clone(),
-            "--robots".into(),
-            robots_per_agent.to_string(),
-            "--pose".into(),
-            format!("{bx},{by},0"),
-            "--spacing".into(),
-            SPACING.to_string(),
-            "--powers".into(),
-            "0.3,0.28".into(),
+            "--port".into(),
+            "0".into(),
             "--connect-timeout".into(),
             "30".into(),
-        ])?);
+        ])?;
+        let server = bridge_address(&mut b)?;
+        bridge = Some(b);
+        // The hub starts when the bridge is ready, i.e. at its first robot: register every
+        // client's robots before the first tick matters, which the clients do at once.
+        for i in 0..agents {
+            let (bx, by) = origin(i);
+            children.push(spawn_self(&[
+                "bench".into(),
+                "udp-client".into(),
+                "--server".into(),
+                server.to_string(),
+                "--robots".into(),
+                robots_per_agent.to_string(),
+                "--pose".into(),
+                format!("{bx},{by}"),
+            ])?);
+        }
+    } else {
+        for i in 0..agents {
+            let (bx, by) = origin(i);
+            children.push(spawn_self(&[
+                "agent".into(),
+                "wheelchair".into(),
+                "--session".into(),
+                session.clone(),
+                "--robots".into(),
+                robots_per_agent.to_string(),
+                "--pose".into(),
+                format!("{bx},{by},0"),
+                "--spacing".into(),
+                SPACING.to_string(),
+                "--powers".into(),
+                "0.3,0.28".into(),
+                "--connect-timeout".into(),
+                "30".into(),
+            ])?);
+        }
     }
     let out = finish(hub, "hub")?;
     for c in children {
         finish(c, "agent")?;
+    }
+    if let Some(b) = bridge {
+        finish(b, "bridge")?;
     }
     let _ = std::fs::remove_dir_all(&dir);
     let field = |k: &str| -> Option<f64> {
@@ -448,19 +491,102 @@ pub fn measure_lockstep(agents: usize, robots_per_agent: usize, ticks: u64) -> a
     Ok(LockstepBench { agents, robots_per_agent, ticks: ticks_done, ticks_per_s: ticks_done as f64 / run_s.max(1e-9) })
 }
 
+/// Reads the bridge's "registrations on ADDR" line from its stderr.
+fn bridge_address(bridge: &mut std::process::Child) -> anyhow::Result<std::net::SocketAddr> {
+    use std::io::BufRead;
+    let stderr = bridge.stderr.take().context("bridge stderr")?;
+    let mut lines = std::io::BufReader::new(stderr).lines();
+    loop {
+        let line = lines.next().context("the bridge exited before announcing its port")??;
+        if let Some(addr) = line.split("registrations on ").nth(1) {
+            // Keep draining stderr so the bridge never blocks on a full pipe.
+            std::thread::spawn(move || for _ in lines.by_ref() {});
+            return addr.trim().parse().context("the bridge's address");
+        }
+    }
+}
+
+/// The UDP bench client: registers robots like a Ciber-Rato client (one socket each) and
+/// answers every `<Measures>` with one `<Actions>`, until the Measures stop.
+pub fn udp_client(args: &UdpClientArgs) -> anyhow::Result<ExitCode> {
+    use std::net::UdpSocket;
+    let mut socks = Vec::new();
+    for k in 0..args.robots {
+        let s = UdpSocket::bind("127.0.0.1:0").context("bind a client socket")?;
+        s.set_read_timeout(Some(Duration::from_secs(10)))?;
+        let (x, y) = (args.pose[0] + 5.0 * (k % 10) as f64, args.pose[1] + 5.0 * (k / 10) as f64);
+        let reg = format!("<Robot Name=\"udp{k}\" X=\"{x}\" Y=\"{y}\" Dir=\"0\"/>");
+        s.send_to(reg.as_bytes(), args.server)?;
+        let mut buf = [0u8; 4096];
+        let (n, from) = s.recv_from(&mut buf).context("no registration reply")?;
+        anyhow::ensure!(
+            buf[..n].starts_with(b"<Reply Status=\"Ok\""),
+            "registration refused: {}",
+            String::from_utf8_lossy(&buf[..n])
+        );
+        s.connect(from)?;
+        socks.push(s);
+    }
+    let mut answered = 0u64;
+    let mut buf = [0u8; 4096];
+    'run: loop {
+        for s in &socks {
+            // After the run the bridge exits and the Measures stop: that is the end.
+            let timeout = if answered == 0 { Duration::from_secs(30) } else { Duration::from_millis(1500) };
+            s.set_read_timeout(Some(timeout))?;
+            match s.recv(&mut buf) {
+                Ok(_) => {
+                    s.send(b"<Actions LeftMotor=\"0.045\" RightMotor=\"0.042\"/>")?;
+                    answered += 1;
+                }
+                Err(_) => break 'run,
+            }
+        }
+    }
+    eprintln!("udp client: answered {answered} Measures");
+    Ok(ExitCode::SUCCESS)
+}
+
 /// `iwsim bench lockstep`.
 pub fn lockstep(args: &BenchLockstepArgs) -> anyhow::Result<ExitCode> {
-    let b = measure_lockstep(args.agents, args.robots_per_agent, args.ticks)?;
+    let runs: Vec<(&str, LockstepBench)> = match args.transport {
+        Transport::Shm => vec![("shm", measure_lockstep(args.agents, args.robots_per_agent, args.ticks, false)?)],
+        Transport::Udp => vec![("udp", measure_lockstep(args.agents, args.robots_per_agent, args.ticks, true)?)],
+        Transport::Both => vec![
+            ("shm", measure_lockstep(args.agents, args.robots_per_agent, args.ticks, false)?),
+            ("udp", measure_lockstep(args.agents, args.robots_per_agent, args.ticks, true)?),
+        ],
+    };
+    let ratio = (runs.len() == 2).then(|| runs[0].1.ticks_per_s / runs[1].1.ticks_per_s.max(1e-9));
     if args.json {
-        println!(
-            "{{\"agents\":{},\"robots_per_agent\":{},\"ticks\":{},\"ticks_per_s\":{:.1}}}",
-            b.agents, b.robots_per_agent, b.ticks, b.ticks_per_s
+        let mut s = format!(
+            "{{\"agents\":{},\"robots_per_agent\":{},\"ticks\":{}",
+            args.agents, args.robots_per_agent, runs[0].1.ticks
         );
+        for (name, b) in &runs {
+            let key = if runs.len() == 1 { "ticks_per_s".to_owned() } else { format!("{name}_ticks_per_s") };
+            s += &format!(",\"transport\":\"{name}\",\"{key}\":{:.1}", b.ticks_per_s);
+            if runs.len() == 1 {
+                break;
+            }
+        }
+        if let Some(r) = ratio {
+            s = format!(
+                "{{\"agents\":{},\"robots_per_agent\":{},\"ticks\":{},\"shm_ticks_per_s\":{:.1},\"udp_ticks_per_s\":{:.1},\"ratio_shm_over_udp\":{:.2}",
+                args.agents, args.robots_per_agent, runs[0].1.ticks, runs[0].1.ticks_per_s, runs[1].1.ticks_per_s, r
+            );
+        }
+        println!("{s}}}");
     } else {
-        println!(
-            "lockstep: {} agent processes x {} robots, physics and sensors on\n  {:.1} ticks/s over {} ticks",
-            b.agents, b.robots_per_agent, b.ticks_per_s, b.ticks
-        );
+        for (name, b) in &runs {
+            println!(
+                "lockstep over {name}: {} agents x {} robots, physics and sensors on: {:.1} ticks/s over {} ticks",
+                b.agents, b.robots_per_agent, b.ticks_per_s, b.ticks
+            );
+        }
+        if let Some(r) = ratio {
+            println!("  shared memory / UDP: {r:.2}x");
+        }
     }
     Ok(ExitCode::SUCCESS)
 }

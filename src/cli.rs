@@ -206,6 +206,9 @@ pub enum BenchCommand {
     /// The peer process of the raw iceoryx2 ping-pong (started by `bench latency`).
     #[command(hide = true)]
     RawPeer(RawPeerArgs),
+    /// A Ciber-Rato-style UDP client answering every Measures (started by `bench lockstep`).
+    #[command(hide = true)]
+    UdpClient(UdpClientArgs),
 }
 
 /// Options of `iwsim bench latency`.
@@ -231,9 +234,38 @@ pub struct BenchLockstepArgs {
     /// Ticks to run.
     #[arg(long, default_value_t = 5000)]
     pub ticks: u64,
+    /// Agents attach over shared memory (shm), over the UDP/XML bridge (udp), or both in
+    /// one run with the ratio (both).
+    #[arg(long, default_value = "shm")]
+    pub transport: Transport,
     /// Print one JSON object instead of text.
     #[arg(long)]
     pub json: bool,
+}
+
+/// How bench agents attach to the hub.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum Transport {
+    /// Agent SDK over iceoryx2 shared memory.
+    Shm,
+    /// Ciber-Rato UDP/XML clients through `iwsim udp`.
+    Udp,
+    /// Both, one after the other, with the ratio.
+    Both,
+}
+
+/// Options of the hidden UDP bench client.
+#[derive(Debug, Args, Clone)]
+pub struct UdpClientArgs {
+    /// The bridge's registration address.
+    #[arg(long)]
+    pub server: std::net::SocketAddr,
+    /// Robots to register (one socket each, as Ciber-Rato clients do).
+    #[arg(long, default_value_t = 1)]
+    pub robots: usize,
+    /// Start pose of the first robot X,Y (a lattice 5 m apart, ten to a row).
+    #[arg(long, value_parser = parse_pair, allow_hyphen_values = true)]
+    pub pose: [f64; 2],
 }
 
 /// Options of the hidden raw ping-pong peer.

@@ -38,6 +38,7 @@ pub fn run(cli: Cli) -> anyhow::Result<ExitCode> {
         Command::Bench { command: BenchCommand::Latency(args) } => bench::latency(&args),
         Command::Bench { command: BenchCommand::Lockstep(args) } => bench::lockstep(&args),
         Command::Bench { command: BenchCommand::RawPeer(args) } => bench::raw_peer(&args),
+        Command::Bench { command: BenchCommand::UdpClient(args) } => bench::udp_client(&args),
         Command::Demo(args) => demo::run(&args),
         Command::Hub(args) => hubcmd::run(&args),
         Command::Udp(args) => udpcmd::run(&args),

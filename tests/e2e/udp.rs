@@ -12,6 +12,28 @@ use hub::world::{Action, RobotSpec, World};
 
 use super::common::{Proc, session, text};
 
+/// Stops the hub the way a user does and checks the hub and the bridge exit cleanly,
+/// leaving nothing of the session in /dev/shm.
+fn stop(s: &str, hub: Proc, bridge: Proc) {
+    assert_eq!(agent_sdk::control(s, ipc_types::Command::Stop, 0).expect("hub answers").status, 0);
+    ends_cleanly(s, hub, bridge);
+}
+
+/// Checks the hub and the bridge exit cleanly and leave nothing in /dev/shm.
+fn ends_cleanly(s: &str, hub: Proc, bridge: Proc) {
+    let h = hub.wait(Duration::from_secs(10));
+    assert!(h.status.success(), "{}", text(&h.stderr));
+    let b = bridge.wait(Duration::from_secs(10));
+    assert!(b.status.success(), "bridge: {}", text(&b.stderr));
+    let prefix = format!("iwsim_{s}_");
+    let left = std::fs::read_dir("/dev/shm")
+        .expect("/dev/shm")
+        .filter_map(Result::ok)
+        .filter(|e| e.file_name().to_string_lossy().starts_with(&prefix))
+        .count();
+    assert_eq!(left, 0, "files of {s} left in /dev/shm");
+}
+
 /// Starts a hub and a bridge on a free port; returns them and the registration address.
 fn hub_and_bridge(s: &str, hub_args: &[&str], bridge_args: &[&str]) -> (Proc, Proc, SocketAddr) {
     let mut args = vec!["hub", "--session", s];
@@ -113,7 +135,7 @@ fn an_intellwheels_robot_drives_and_its_gps_track_follows_the_kinematics_within_
     let param = dir.join("gps.xml");
     std::fs::write(&param, "<Parameters GPS=\"On\"/>\n").expect("param file");
     let s = session("udp-gps");
-    let (hub, _bridge, reg) = hub_and_bridge(
+    let (hub, bridge, reg) = hub_and_bridge(
         &s,
         &["--lockstep", "--wait-agents", "1", "--ticks", "60", "--no-noise", "--param", param.to_str().expect("utf-8")],
         &[],
@@ -158,13 +180,21 @@ fn an_intellwheels_robot_drives_and_its_gps_track_follows_the_kinematics_within_
     }
     assert_eq!(checked, 41);
     assert!(world.robot(r).expect("alive").pose.x > 10.5, "the chair moved");
-    drop(hub);
+    // Answer the rest: the hub stops at its 60-tick limit, and so does the bridge.
+    loop {
+        c.send(r#"<Actions LeftMotor="0" RightMotor="0"/>"#);
+        let m = c.next("Measures");
+        if attr(&m, "Measures", "Time") == Some(60.0) {
+            break;
+        }
+    }
+    ends_cleanly(&s, hub, bridge);
 }
 
 #[test]
 fn a_viewer_gets_the_lab_the_grid_and_every_robot_each_tick() {
     let s = session("udp-view");
-    let (_hub, _bridge, reg) = hub_and_bridge(&s, &["--cycle-ms", "20"], &[]);
+    let (hub, bridge, reg) = hub_and_bridge(&s, &["--cycle-ms", "20"], &[]);
     let mut robot = Client::new();
     assert!(robot.register(reg, r#"<Robot Name="seen" Id="2"/>"#).contains("Status=\"Ok\""));
     let mut v = Client::new();
@@ -185,12 +215,13 @@ fn a_viewer_gets_the_lab_the_grid_and_every_robot_each_tick() {
     assert_eq!(attr(&r, "Position", "X"), Some(14.0), "grid slot 2");
     let later = v.next("Robot");
     assert!(attr(&later, "Robot", "Time") > attr(&r, "Robot", "Time"), "a datagram per tick");
+    stop(&s, hub, bridge);
 }
 
 #[test]
 fn a_datagram_from_a_foreign_port_changes_nothing() {
     let s = session("udp-foreign");
-    let (_hub, _bridge, reg) = hub_and_bridge(&s, &["--cycle-ms", "20", "--no-noise"], &[]);
+    let (hub, bridge, reg) = hub_and_bridge(&s, &["--cycle-ms", "20", "--no-noise"], &[]);
     let mut c = Client::new();
     c.register(reg, r#"<Robot Name="still" Id="1"/>"#);
     let first = c.next("Measures");
@@ -209,12 +240,13 @@ fn a_datagram_from_a_foreign_port_changes_nothing() {
     };
     assert_eq!(attr(&v, "Position", "X"), Some(10.0), "the intruder's powers were dropped: {v}");
     assert!(first.contains("<IRSensor Id=\"0\""));
+    stop(&s, hub, bridge);
 }
 
 #[test]
 fn malformed_input_is_refused_or_ignored_and_the_bridge_keeps_serving() {
     let s = session("udp-junk");
-    let (_hub, mut bridge, reg) = hub_and_bridge(&s, &["--cycle-ms", "20", "--no-noise"], &[]);
+    let (hub, mut bridge, reg) = hub_and_bridge(&s, &["--cycle-ms", "20", "--no-noise"], &[]);
     let junk = UdpSocket::bind("127.0.0.1:0").expect("bind");
     junk.set_read_timeout(Some(Duration::from_millis(150))).expect("timeout");
     let big = vec![b'<'; 10 * 1024];
@@ -277,13 +309,13 @@ fn malformed_input_is_refused_or_ignored_and_the_bridge_keeps_serving() {
     let mut again = Client::new();
     assert!(again.register(reg, r#"<Robot Name="late" Id="3"/>"#).contains("Status=\"Ok\""));
     assert!(bridge.0.as_mut().expect("running").try_wait().expect("status").is_none(), "the bridge is still up");
-    let _ = text(b"");
+    stop(&s, hub, bridge);
 }
 
 #[test]
 fn a_silent_robot_client_is_unregistered() {
     let s = session("udp-silent");
-    let (_hub, _bridge, reg) = hub_and_bridge(&s, &["--cycle-ms", "20"], &["--client-timeout", "0.3"]);
+    let (hub, bridge, reg) = hub_and_bridge(&s, &["--cycle-ms", "20"], &["--client-timeout", "0.3"]);
     let mut c = Client::new();
     c.register(reg, r#"<Robot Name="quiet" Id="1"/>"#);
     let mut v = Client::new();
@@ -296,4 +328,5 @@ fn a_silent_robot_client_is_unregistered() {
         assert!(start.elapsed() < Duration::from_secs(5), "the silent robot is still reported");
     }
     assert!(v.try_next("Robot", Duration::from_millis(200)).is_none(), "no robot left to report");
+    stop(&s, hub, bridge);
 }

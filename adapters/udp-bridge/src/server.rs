@@ -85,6 +85,8 @@ struct RobotClient {
     say: Option<Vec<u8>>,
     requests: Vec<String>,
     acted: Option<u64>,
+    /// The last tick this robot was sent Measures for: only those robots are waited for.
+    measured: Option<u64>,
 }
 
 #[derive(Debug)]
@@ -344,9 +346,13 @@ impl Bridge {
             let changed = self.serve_clients();
             if let Some(tick) = self.agent.try_tick()? {
                 self.on_tick(tick.tick, tick.run_state)?;
-            } else if self.agent.finished() {
+            }
+            if self.agent.finished() {
                 tracing::info!("the hub ended the run");
-                return Ok(self.counters);
+                let Bridge { agent, counters, .. } = self;
+                // The last process of a session removes its files.
+                agent.close();
+                return Ok(counters);
             }
             self.answer_hub(changed)?;
             self.drop_silent();
@@ -398,6 +404,7 @@ impl Bridge {
                             say: None,
                             requests: Vec::new(),
                             acted: None,
+                            measured: None,
                         })),
                         Err(AgentError::Refused { reason, detail }) => {
                             self.counters.refused += 1;
@@ -494,6 +501,7 @@ impl Bridge {
             {
                 let m = measures(b, tick, state, &r.ir_ids, r.leds, &self.map, &r.requests);
                 r.requests.clear();
+                r.measured = Some(tick);
                 send(&c.socket, c.peer, &codec::encode_measures(&m));
             }
         }
@@ -543,7 +551,8 @@ impl Bridge {
         let p = &self.map.header.params;
         let robots = || self.clients.iter().filter_map(|c| if let Kind::Robot(r) = &c.kind { Some(r) } else { None });
         let due = if p.lockstep != 0 {
-            let all = robots().all(|r| r.acted.is_some_and(|t| t >= tick));
+            // A robot that joined after this tick's Measures went out has nothing to answer.
+            let all = robots().filter(|r| r.measured == Some(tick)).all(|r| r.acted.is_some_and(|t| t >= tick));
             // Answer a little before the hub's deadline, so the robots that did act still count.
             let near_deadline = since.elapsed() >= Duration::from_millis(p.deadline_ms as u64 * 9 / 10);
             !self.answered && (all || near_deadline)

@@ -378,8 +378,9 @@ impl Agent {
         }
     }
 
-    /// The next tick if it has arrived, without waiting; `None` when there is none yet (check
-    /// [`Agent::finished`] to tell the end of the run). For processes that multiplex the hub
+    /// The next tick if it has arrived, without waiting; `None` when there is none yet. The
+    /// last tick of a run comes once with `run_state` Finished (its sensor blocks are the final
+    /// readings); after it, [`Agent::finished`] is true. For processes that multiplex the hub
     /// with other inputs, together with [`Agent::tick_fd`].
     pub fn try_tick(&mut self) -> Result<Option<Tick>, AgentError> {
         if self.finished {
@@ -387,6 +388,16 @@ impl Agent {
         }
         let _ = self.tick_listener.try_wait(|_| {});
         if self.take_sensors()? {
+            let h = self.last_header;
+            if RunState::from_u32(h.run_state) == Some(RunState::Finished) {
+                self.finished = true;
+                return Ok(Some(Tick {
+                    tick: h.tick,
+                    sim_time_s: h.sim_time_s,
+                    run_state: RunState::Finished,
+                    latency_ns: self.received_ns.saturating_sub(h.t_pub_ns),
+                }));
+            }
             return self.tick_from_last();
         }
         Ok(None)

@@ -441,9 +441,11 @@ fn publish_tick(
     let mut sample = world_pub.loan_slice_uninit(states.len()).map_err(ipc("loan a world snapshot"))?;
     *sample.user_header_mut() = header;
     sample.write_from_slice(states).send().map_err(ipc("send a world snapshot"))?;
+    let finished = header.run_state == RunState::Finished as u32;
     for (&id, ports) in agents {
         let robots = core.agent_robots(id);
-        if robots.is_empty() {
+        // Agents without robots get nothing per tick, but every agent hears the end.
+        if robots.is_empty() && !finished {
             continue;
         }
         blocks.clear();
