@@ -223,8 +223,9 @@ impl Session {
         finish!(self, b, role, service::MAP)
     }
 
-    /// Actions: a publisher per agent (and bridge), one subscriber (the hub). A buffer of 4
-    /// lets a fast agent in real-time mode send a few per tick; the oldest are dropped.
+    /// Actions: a publisher per agent (and bridge), one subscriber (the hub). Agents send one
+    /// sample per tick holding all their robots; a buffer of 16 lets a fast agent in real-time
+    /// mode send several per tick before the oldest are dropped.
     pub fn actions(&self, node: &Node<Svc>, role: Role) -> Result<ActionService, ServicesError> {
         let b = node
             .service_builder(&self.iox_name(service::ACTIONS)?)
@@ -234,7 +235,7 @@ impl Session {
             .max_subscribers(1)
             .max_nodes(MAX_NODES)
             .history_size(0)
-            .subscriber_max_buffer_size(4)
+            .subscriber_max_buffer_size(16)
             .subscriber_max_borrowed_samples(2)
             .enable_safe_overflow(true);
         finish!(self, b, role, service::ACTIONS)

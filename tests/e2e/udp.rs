@@ -269,6 +269,8 @@ fn malformed_input_is_refused_or_ignored_and_the_bridge_keeps_serving() {
         (b"<Robot Id=\"99\"/>", true),
         (b"<Robot COM=\"1.5\"/>", true),
         (b"<Robot MaxSpeed=\"-1\"/>", true),
+        (b"<Robot Name=\"x\"><IRSensor Id=\"4000000000\"/></Robot>", true),
+        (b"<Robot Name=\"x\"><IRSensor Id=\"1\"/><IRSensor Id=\"1\"/></Robot>", true),
     ];
     for (dg, refused) in &registrations {
         junk.send_to(dg, reg).expect("send");
@@ -329,4 +331,45 @@ fn a_silent_robot_client_is_unregistered() {
     }
     assert!(v.try_next("Robot", Duration::from_millis(200)).is_none(), "no robot left to report");
     stop(&s, hub, bridge);
+}
+
+#[test]
+fn measures_keep_coming_while_the_run_is_paused_and_the_client_stays() {
+    let s = session("udp-paused");
+    let (hub, bridge, reg) =
+        hub_and_bridge(&s, &["--cycle-ms", "20", "--start-on-command"], &["--client-timeout", "0.3"]);
+    let mut c = Client::new();
+    c.register(reg, r#"<Robot Name="patient" Id="1"/>"#);
+    // The run waits for a Start: Measures still come every cycle, with Stop pressed, and the
+    // client (which answers nothing) is not timed out.
+    let start = Instant::now();
+    let mut n = 0;
+    while start.elapsed() < Duration::from_millis(800) {
+        let m = c.next("Measures");
+        assert!(m.contains("<Buttons Start=\"Off\" Stop=\"On\"/>"), "{m}");
+        n += 1;
+    }
+    assert!(n >= 10, "only {n} Measures in 0.8 s");
+    assert_eq!(agent_sdk::control(&s, ipc_types::Command::Start, 0).expect("hub answers").status, 0);
+    let running = loop {
+        let m = c.next("Measures");
+        if m.contains("Start=\"On\"") {
+            break m;
+        }
+    };
+    assert!(running.contains("<Measures Time="));
+    stop(&s, hub, bridge);
+}
+
+#[test]
+fn a_viewer_sees_robots_driven_over_shared_memory() {
+    let s = session("udp-shmview");
+    let (hub, bridge, reg) = hub_and_bridge(&s, &["--cycle-ms", "20"], &[]);
+    let agent = Proc::spawn(&["agent", "wheelchair", "--session", &s, "--name", "shm", "--pose", "12,6.1,0"]);
+    let mut v = Client::new();
+    v.register(reg, "<View/>");
+    let r = v.next("Robot");
+    assert!(r.contains("Name=\"shm1\""), "{r}");
+    stop(&s, hub, bridge);
+    assert!(agent.wait(Duration::from_secs(10)).status.success());
 }

@@ -13,7 +13,7 @@ use std::net::{IpAddr, SocketAddr, UdpSocket};
 use std::os::fd::AsRawFd;
 use std::time::{Duration, Instant};
 
-use agent_sdk::{Agent, AgentError, MapData, control};
+use agent_sdk::{Agent, AgentError, MapData};
 use ipc_types::{
     ACT_MOTORS, ACT_POSE, ActionBlock, COLLISION, Command, HAS_COMPASS, HAS_GPS, HAS_GROUND, LED_END, LED_RETURNING,
     LED_VISITING, MAP_BEACON, MAP_CORNER, MAP_GRID, MAP_TARGET, MAP_WALL, REG_HAS_POSE, RobotKind, RunState,
@@ -84,9 +84,13 @@ struct RobotClient {
     pose: Option<(f64, f64, f64)>,
     say: Option<Vec<u8>>,
     requests: Vec<String>,
-    acted: Option<u64>,
-    /// The last tick this robot was sent Measures for: only those robots are waited for.
-    measured: Option<u64>,
+    /// Measures sent and Actions received: a robot has answered the tick in hand when it has
+    /// sent as many Actions as it was sent Measures (a late reply to an older tick does not
+    /// count for the newer one).
+    measures_sent: u64,
+    actions_received: u64,
+    /// The last Measures sent, re-sent every cycle while the run waits or is paused.
+    last_measures: Option<Vec<u8>>,
 }
 
 #[derive(Debug)]
@@ -172,8 +176,12 @@ fn reply_params(map: &MapData) -> ReplyParams {
     }
 }
 
-/// The hub registration for a Ciber-Rato / Intellwheels robot.
-pub fn hub_registration(r: &codec::RobotRegistration) -> (ipc_types::RobotRegistration, Vec<u32>) {
+/// Ciber-Rato's default IR sensor angles (`irSensorDefaultAngles`), on the rim.
+const CIBER_RATO_IR_ANGLES: [f64; 4] = [0.0, 60.0, -60.0, 180.0];
+
+/// The hub registration for a Ciber-Rato / Intellwheels robot, and the client's IR sensor
+/// ids in order; or why it cannot be registered.
+pub fn hub_registration(r: &codec::RobotRegistration) -> Result<(ipc_types::RobotRegistration, Vec<u32>), String> {
     let mut reg = ipc_types::RobotRegistration::new(&r.name);
     reg.requested_id = r.id;
     reg.kind = match r.kind {
@@ -181,6 +189,7 @@ pub fn hub_registration(r: &codec::RobotRegistration) -> (ipc_types::RobotRegist
         Some(RobotType::Door) => RobotKind::Door,
         _ => RobotKind::Simulated,
     } as u32;
+    let intellwheels = r.width.is_some() || r.height.is_some() || r.com.is_some() || r.kind.is_some();
     if let Some(v) = r.width {
         reg.width_m = v;
     }
@@ -200,8 +209,25 @@ pub fn hub_registration(r: &codec::RobotRegistration) -> (ipc_types::RobotRegist
         reg.flags |= REG_HAS_POSE;
         reg.pose = [x, y, r.dir.unwrap_or(0.0)];
     }
+    // Without <IRSensor> children a Ciber-Rato robot has four sensors at 0, 60, −60 and 180°
+    // on its rim; an Intellwheels one (it gave a body) gets thesis Table 4.5's, from the hub.
+    let sensors: Vec<codec::IrSensor> = if r.sensors.is_empty() && !intellwheels {
+        CIBER_RATO_IR_ANGLES
+            .iter()
+            .enumerate()
+            .map(|(k, &a)| codec::IrSensor { id: k as u32, x: None, y: None, angle_deg: a, cone_deg: None })
+            .collect()
+    } else {
+        r.sensors.clone()
+    };
+    if sensors.len() > reg.sensors.len() {
+        return Err(format!("{} IR sensors; at most {}", sensors.len(), reg.sensors.len()));
+    }
     let mut ids = Vec::new();
-    for (k, s) in r.sensors.iter().take(reg.sensors.len()).enumerate() {
+    for (k, s) in sensors.iter().enumerate() {
+        if s.id as usize >= reg.sensors.len() || ids.contains(&s.id) {
+            return Err(format!("IR sensor id {} is repeated or not in 0..{}", s.id, reg.sensors.len()));
+        }
         // Ciber-Rato sensors sit on the rim of a robot of radius 0.5 and look outwards;
         // Intellwheels ones give their own position and cone.
         let a = s.angle_deg.to_radians();
@@ -218,7 +244,7 @@ pub fn hub_registration(r: &codec::RobotRegistration) -> (ipc_types::RobotRegist
     if ids.is_empty() {
         ids = vec![0, 1, 2, 3];
     }
-    (reg, ids)
+    Ok((reg, ids))
 }
 
 /// Ciber-Rato `Buttons`: Start when the next state is running, Stop when it is stopped.
@@ -228,6 +254,12 @@ fn buttons(state: RunState) -> (bool, bool) {
         RunState::Waiting | RunState::Paused => (false, true),
         RunState::Finished => (false, false),
     }
+}
+
+/// The sensors a robot's requests unlock this tick: the first `limit` requests, each using a
+/// slot even when its sensor is not requestable (research §6).
+fn honoured(requested: &[String], limit: u32) -> &[String] {
+    &requested[..requested.len().min(limit as usize)]
 }
 
 /// The measures of one robot for one tick.
@@ -241,7 +273,9 @@ pub fn measures(
     requested: &[String],
 ) -> MeasuresData {
     let p = &map.header.params;
-    let allowed = |bit: u32, name: &str| p.requestable & bit == 0 || requested.iter().any(|r| r == name);
+    let requested = honoured(requested, p.requests_per_cycle);
+    let asked = |name: &str| requested.iter().any(|r| r == name);
+    let allowed = |bit: u32, name: &str| p.requestable & bit == 0 || asked(name);
     let mut m = MeasuresData { time: tick, leds, buttons: buttons(state), ..MeasuresData::default() };
     if allowed(SENSOR_COLLISION, "Collision") {
         m.collision = Some(b.present & COLLISION != 0);
@@ -252,18 +286,21 @@ pub fn measures(
     if allowed(SENSOR_GROUND, "Ground") {
         m.ground = Some(if b.present & HAS_GROUND != 0 { b.ground as i32 } else { -1 });
     }
-    let max_id = ir_ids.iter().copied().max().unwrap_or(0) as usize;
+    // Ids were checked at registration to lie in 0..8.
+    let max_id = ir_ids.iter().copied().max().unwrap_or(0).min(7) as usize;
     m.ir = vec![None; max_id + 1];
     for (k, &id) in ir_ids.iter().enumerate().take(b.proximity_count as usize) {
-        if p.requestable & SENSOR_OBSTACLE == 0 || requested.iter().any(|r| *r == format!("IRSensor{id}")) {
-            m.ir[id as usize] = Some(ir_value(b.proximity_m[k]));
+        if let (Some(slot), Some(&d)) = (m.ir.get_mut(id as usize), b.proximity_m.get(k))
+            && (p.requestable & SENSOR_OBSTACLE == 0 || asked(&format!("IRSensor{id}")))
+        {
+            *slot = Some(ir_value(d));
         }
     }
     if p.sensors_on & SENSOR_BEACON != 0 {
-        m.beacons = (0..b.beacon_count as usize)
+        m.beacons = (0..(b.beacon_count as usize).min(b.beacons_deg.len()))
             .map(|k| {
-                (p.requestable & SENSOR_BEACON == 0 || requested.iter().any(|r| *r == format!("Beacon{k}")))
-                    .then(|| Some(b.beacons_deg[k]).filter(|v| !v.is_nan()).map(f64::round))
+                (p.requestable & SENSOR_BEACON == 0 || asked(&format!("Beacon{k}")))
+                    .then(|| b.beacons_deg.get(k).copied().filter(|v| !v.is_nan()).map(f64::round))
             })
             .collect();
     }
@@ -290,6 +327,10 @@ pub struct Bridge {
     is_ready: bool,
     /// The latest sensor block of each robot.
     blocks: BTreeMap<u32, SensorBlock>,
+    control: Option<agent_sdk::ControlClient>,
+    /// When Measures were last sent: while the run waits or is paused they are re-sent every
+    /// cycle, as the simulator does (pClient quits after 2 s without them).
+    last_sent: Instant,
     /// Counters of refused input.
     pub counters: Counters,
 }
@@ -316,6 +357,8 @@ impl Bridge {
             answered: true,
             is_ready: false,
             blocks: BTreeMap::new(),
+            control: None,
+            last_sent: Instant::now(),
             counters: Counters::default(),
         })
     }
@@ -341,19 +384,23 @@ impl Bridge {
             unsafe {
                 libc::poll(fds.as_mut_ptr(), fds.len() as libc::nfds_t, timeout_ms);
             }
-            self.agent.check_alive()?;
             self.serve_registrations()?;
             let changed = self.serve_clients();
+            // Read the hub before judging its liveness: its last tick may be waiting.
             if let Some(tick) = self.agent.try_tick()? {
-                self.on_tick(tick.tick, tick.run_state)?;
+                self.on_tick(tick.tick, tick.run_state);
             }
             if self.agent.finished() {
                 tracing::info!("the hub ended the run");
-                let Bridge { agent, counters, .. } = self;
-                // The last process of a session removes its files.
+                let Bridge { agent, counters, control, .. } = self;
+                // The last process of a session removes its files: close every node first.
+                drop(control);
                 agent.close();
                 return Ok(counters);
             }
+            self.agent.check_alive()?;
+            self.serve_viewers()?;
+            self.resend_while_stopped();
             self.answer_hub(changed)?;
             self.drop_silent();
         }
@@ -361,7 +408,8 @@ impl Bridge {
 
     fn serve_registrations(&mut self) -> Result<(), BridgeError> {
         let mut buf = [0u8; 65536];
-        loop {
+        // Bounded, so a flood on the port cannot keep the loop from serving everyone else.
+        for _ in 0..MAX_READS_PER_SOCKET {
             let (n, peer) = match self.reg.recv_from(&mut buf) {
                 Ok(x) => x,
                 Err(e) if e.kind() == ErrorKind::WouldBlock => return Ok(()),
@@ -379,21 +427,47 @@ impl Bridge {
                     continue;
                 }
             };
-            let socket = UdpSocket::bind((self.cfg.bind, 0)).map_err(io("bind a client socket"))?;
-            socket.set_nonblocking(true).map_err(io("make a client socket non-blocking"))?;
+            // A viewer or panel registering again from the same address gets its old socket's
+            // reply again instead of a new socket each time.
+            if matches!(registration, Registration::View | Registration::Panel)
+                && let Some(c) = self.clients.iter().find(|c| c.peer == peer && !matches!(c.kind, Kind::Robot(_)))
+            {
+                send(&c.socket, peer, &codec::encode_reply_ok(&reply_params(&self.map)));
+                continue;
+            }
+            if self.clients.len() >= MAX_CLIENTS {
+                self.counters.refused += 1;
+                tracing::warn!("registration from {peer} refused: the bridge serves at most {MAX_CLIENTS} clients");
+                send(&self.reg, peer, &codec::encode_refused());
+                continue;
+            }
+            let socket = match UdpSocket::bind((self.cfg.bind, 0)).and_then(|s| s.set_nonblocking(true).map(|_| s)) {
+                Ok(s) => s,
+                Err(e) => {
+                    tracing::warn!("registration from {peer} dropped: cannot open its socket: {e}");
+                    continue;
+                }
+            };
             let kind = match registration {
                 Registration::View => Kind::Viewer,
                 Registration::Panel => Kind::Panel,
                 Registration::Robot(r) | Registration::RobotBeacon(r) => {
-                    let (reg, ir_ids) = hub_registration(&r);
-                    match self.agent.register(&reg).and_then(|id| {
-                        if !self.is_ready {
-                            self.agent.ready()?;
-                            self.is_ready = true;
-                        }
-                        Ok(id)
-                    }) {
-                        Ok(robot_id) => Kind::Robot(Box::new(RobotClient {
+                    let hub_reg = hub_registration(&r);
+                    let result = match &hub_reg {
+                        Ok((reg, _)) => self.agent.register(reg).and_then(|id| {
+                            if !self.is_ready {
+                                self.agent.ready()?;
+                                self.is_ready = true;
+                            }
+                            Ok(id)
+                        }),
+                        Err(detail) => Err(AgentError::Refused {
+                            reason: ipc_types::Refusal::BadParameters,
+                            detail: detail.clone(),
+                        }),
+                    };
+                    match (result, hub_reg) {
+                        (Ok(robot_id), Ok((_, ir_ids))) => Kind::Robot(Box::new(RobotClient {
                             robot_id,
                             ir_ids,
                             real: r.kind == Some(RobotType::Real),
@@ -403,17 +477,19 @@ impl Bridge {
                             pose: None,
                             say: None,
                             requests: Vec::new(),
-                            acted: None,
-                            measured: None,
+                            measures_sent: 0,
+                            actions_received: 0,
+                            last_measures: None,
                         })),
-                        Err(AgentError::Refused { reason, detail }) => {
+                        (Err(AgentError::Refused { reason, detail }), _) => {
                             self.counters.refused += 1;
                             tracing::warn!("robot {:?} from {peer} refused: {reason:?}: {detail}", r.name);
                             // The refusal comes from a fresh port, as the simulator's does.
                             send(&socket, peer, &codec::encode_refused());
                             continue;
                         }
-                        Err(e) => return Err(e.into()),
+                        (Err(e), _) => return Err(e.into()),
+                        (Ok(_), Err(_)) => continue,
                     }
                 }
             };
@@ -421,16 +497,17 @@ impl Bridge {
             tracing::info!("{peer} registered as {kind:?}");
             self.clients.push(Client { socket, peer, kind, last_heard: Instant::now() });
         }
+        Ok(())
     }
 
     /// Reads every client's datagrams; returns whether some robot's actions changed.
     fn serve_clients(&mut self) -> bool {
         let mut changed = false;
         let mut buf = [0u8; 65536];
-        let tick = self.tick.map(|t| t.0);
         let mut commands = Vec::new();
         for c in &mut self.clients {
-            while let Ok((n, from)) = c.socket.recv_from(&mut buf) {
+            for _ in 0..MAX_READS_PER_SOCKET {
+                let Ok((n, from)) = c.socket.recv_from(&mut buf) else { break };
                 if from != c.peer {
                     self.counters.foreign += 1;
                     tracing::warn!("datagram to {}'s port from {from} dropped", c.peer);
@@ -440,7 +517,7 @@ impl Bridge {
                 match &mut c.kind {
                     Kind::Robot(r) => match codec::decode_actions(&buf[..n]) {
                         Ok(a) => {
-                            apply_actions(r, &a, tick);
+                            apply_actions(r, &a);
                             changed = true;
                         }
                         Err(e) => {
@@ -465,20 +542,32 @@ impl Bridge {
         changed
     }
 
-    fn viewer_command(&mut self, socket: &UdpSocket, peer: SocketAddr, cmd: ViewerCommand) {
-        let session = self.cfg.session.clone();
-        let run = |c: Command, id: u32| {
-            if let Err(e) = control(&session, c, id) {
-                tracing::warn!("{c:?} for the hub failed: {e}");
+    /// Sends a run-control command without waiting for the hub's answer.
+    fn command(&mut self, command: Command, robot_id: u32) {
+        if self.control.is_none() {
+            match agent_sdk::ControlClient::connect(&self.cfg.session) {
+                Ok(c) => self.control = Some(c),
+                Err(e) => {
+                    tracing::warn!("{command:?} for the hub failed: {e}");
+                    return;
+                }
             }
-        };
+        }
+        if let Some(c) = self.control.as_mut()
+            && let Err(e) = c.send(command, robot_id)
+        {
+            tracing::warn!("{command:?} for the hub failed: {e}");
+        }
+    }
+
+    fn viewer_command(&mut self, socket: &UdpSocket, peer: SocketAddr, cmd: ViewerCommand) {
         match cmd {
             ViewerCommand::LabReq => send(socket, peer, &codec::encode_lab(&self.lab)),
             ViewerCommand::GridReq => send(socket, peer, &codec::encode_grid(&self.lab)),
-            ViewerCommand::Start => run(Command::Start, 0),
-            ViewerCommand::Stop => run(Command::Pause, 0),
+            ViewerCommand::Start => self.command(Command::Start, 0),
+            ViewerCommand::Stop => self.command(Command::Pause, 0),
             ViewerCommand::RemoveRobot(id) => {
-                run(Command::RemoveRobot, id);
+                self.command(Command::RemoveRobot, id);
                 self.clients.retain(|c| !matches!(&c.kind, Kind::Robot(r) if r.robot_id == id));
             }
             // A reset of the whole hub is not a viewer's to make: the viewer is told to start
@@ -487,10 +576,12 @@ impl Bridge {
         }
     }
 
-    fn on_tick(&mut self, tick: u64, state: RunState) -> Result<(), BridgeError> {
-        self.tick = Some((tick, Instant::now()));
+    fn on_tick(&mut self, tick: u64, state: RunState) {
+        if self.tick.map(|t| t.0) != Some(tick) {
+            self.tick = Some((tick, Instant::now()));
+            self.answered = false;
+        }
         self.run_state = state;
-        self.answered = false;
         self.blocks.clear();
         for b in self.agent.sensors() {
             self.blocks.insert(b.robot_id, *b);
@@ -501,58 +592,88 @@ impl Bridge {
             {
                 let m = measures(b, tick, state, &r.ir_ids, r.leds, &self.map, &r.requests);
                 r.requests.clear();
-                r.measured = Some(tick);
-                send(&c.socket, c.peer, &codec::encode_measures(&m));
+                let datagram = codec::encode_measures(&m);
+                send(&c.socket, c.peer, &datagram);
+                r.last_measures = Some(datagram);
+                r.measures_sent += 1;
+                // A client that is behind never owes more than the tick in hand.
+                r.actions_received = r.actions_received.max(r.measures_sent.saturating_sub(1));
             }
         }
-        if self.clients.iter().any(|c| matches!(c.kind, Kind::Viewer)) {
-            let (_, robots) = self.agent.world()?;
-            let state_name = match state {
-                RunState::Running => "Running",
-                RunState::Finished => "Finished",
-                _ => "Stopped",
-            };
-            let datagrams: Vec<Vec<u8>> = robots
-                .iter()
-                .map(|s| {
-                    codec::encode_viewer_robot(&ViewerRobot {
-                        name: s.name.as_str().unwrap_or("").to_owned(),
-                        id: s.id,
-                        time: tick,
-                        collisions: s.collision_count,
-                        collision: s.flags & ipc_types::ROBOT_COLLISION != 0,
-                        state: state_name,
-                        width: s.width_m as f64,
-                        height: s.height_m as f64,
-                        com: s.com as f64,
-                        kind: match RobotKind::from_u32(s.kind) {
-                            Some(RobotKind::Real) => "Real",
-                            Some(RobotKind::Door) => "Door",
-                            _ => "Simulated",
-                        },
-                        pose: (s.x_m, s.y_m, s.heading_deg),
-                    })
+        self.last_sent = Instant::now();
+    }
+
+    /// Viewers get one `<Robot>` per robot for every world snapshot, whoever drives the robots.
+    fn serve_viewers(&mut self) -> Result<(), BridgeError> {
+        let viewers = self.clients.iter().any(|c| matches!(c.kind, Kind::Viewer));
+        let Some((h, robots)) = self.agent.try_world()? else { return Ok(()) };
+        if !viewers {
+            return Ok(());
+        }
+        let state_name = match RunState::from_u32(h.run_state) {
+            Some(RunState::Running) => "Running",
+            Some(RunState::Finished) => "Finished",
+            _ => "Stopped",
+        };
+        let datagrams: Vec<Vec<u8>> = robots
+            .iter()
+            .map(|s| {
+                codec::encode_viewer_robot(&ViewerRobot {
+                    name: s.name.as_str().unwrap_or("").to_owned(),
+                    id: s.id,
+                    time: h.tick,
+                    collisions: s.collision_count,
+                    collision: s.flags & ipc_types::ROBOT_COLLISION != 0,
+                    state: state_name,
+                    width: s.width_m as f64,
+                    height: s.height_m as f64,
+                    com: s.com as f64,
+                    kind: match RobotKind::from_u32(s.kind) {
+                        Some(RobotKind::Real) => "Real",
+                        Some(RobotKind::Door) => "Door",
+                        _ => "Simulated",
+                    },
+                    pose: (s.x_m, s.y_m, s.heading_deg),
                 })
-                .collect();
-            for c in self.clients.iter().filter(|c| matches!(c.kind, Kind::Viewer)) {
-                for d in &datagrams {
-                    send(&c.socket, c.peer, d);
-                }
+            })
+            .collect();
+        for c in self.clients.iter().filter(|c| matches!(c.kind, Kind::Viewer)) {
+            for d in &datagrams {
+                send(&c.socket, c.peer, d);
             }
         }
         Ok(())
     }
 
+    /// While the run waits or is paused no tick comes, but the simulator keeps sending
+    /// Measures every cycle (stock clients quit after 2 s without them): re-send the last ones.
+    fn resend_while_stopped(&mut self) {
+        if self.run_state == RunState::Running {
+            return;
+        }
+        let cycle = Duration::from_millis(self.map.header.cycle_ms.max(10) as u64);
+        if self.last_sent.elapsed() < cycle {
+            return;
+        }
+        self.last_sent = Instant::now();
+        for c in &self.clients {
+            if let Kind::Robot(r) = &c.kind
+                && let Some(m) = &r.last_measures
+            {
+                send(&c.socket, c.peer, m);
+            }
+        }
+    }
+
     /// Sends the UDP robots' actions to the hub. In lock-step: once per tick, when every robot
-    /// has acted or the hub's deadline is near (a silent client then lags like any agent). In
-    /// real time: whenever some robot's actions changed.
+    /// sent this tick's Measures has answered, or the hub's deadline is near (a silent client
+    /// then lags like any agent). In real time: whenever some robot's actions changed.
     fn answer_hub(&mut self, changed: bool) -> Result<(), BridgeError> {
         let Some((tick, since)) = self.tick else { return Ok(()) };
         let p = &self.map.header.params;
         let robots = || self.clients.iter().filter_map(|c| if let Kind::Robot(r) = &c.kind { Some(r) } else { None });
         let due = if p.lockstep != 0 {
-            // A robot that joined after this tick's Measures went out has nothing to answer.
-            let all = robots().filter(|r| r.measured == Some(tick)).all(|r| r.acted.is_some_and(|t| t >= tick));
+            let all = robots().all(|r| r.actions_received >= r.measures_sent);
             // Answer a little before the hub's deadline, so the robots that did act still count.
             let near_deadline = since.elapsed() >= Duration::from_millis(p.deadline_ms as u64 * 9 / 10);
             !self.answered && (all || near_deadline)
@@ -592,25 +713,41 @@ impl Bridge {
     }
 
     fn drop_silent(&mut self) {
+        // Only robots must talk every tick, and only while the run is going; viewers send a
+        // command now and then.
+        if self.run_state != RunState::Running {
+            for c in &mut self.clients {
+                c.last_heard = Instant::now();
+            }
+            return;
+        }
         let timeout = self.cfg.client_timeout;
-        let session = self.cfg.session.clone();
-        let mut dropped = 0;
-        // Only robots must talk every tick; viewers send a command now and then.
+        let mut gone = Vec::new();
         self.clients.retain(|c| {
             let Kind::Robot(r) = &c.kind else { return true };
             if c.last_heard.elapsed() < timeout {
                 return true;
             }
-            let _ = control(&session, Command::RemoveRobot, r.robot_id);
             tracing::warn!("robot {} ({:?}) silent for {timeout:?}: removed", r.robot_id, r.name);
-            dropped += 1;
+            gone.push(r.robot_id);
             false
         });
-        self.counters.timed_out += dropped;
+        self.counters.timed_out += gone.len() as u64;
+        for id in gone {
+            self.command(Command::RemoveRobot, id);
+        }
     }
 }
 
-fn apply_actions(r: &mut RobotClient, a: &Actions, tick: Option<u64>) {
+/// Datagrams read from one socket per loop: enough for any honest client, and a flood on one
+/// port cannot starve the others.
+const MAX_READS_PER_SOCKET: usize = 64;
+/// Clients one bridge serves (each has a socket).
+const MAX_CLIENTS: usize = 512;
+/// Sensor requests kept per robot between ticks.
+const MAX_REQUESTS: usize = 64;
+
+fn apply_actions(r: &mut RobotClient, a: &Actions) {
     let power = |p: f64| p.clamp(-MAX_POWER, MAX_POWER) / MAX_POWER;
     if let Some(l) = a.left {
         r.motors[0] = power(l);
@@ -631,8 +768,9 @@ fn apply_actions(r: &mut RobotClient, a: &Actions, tick: Option<u64>) {
     {
         r.say = Some(s.clone());
     }
-    r.requests.extend(a.requests.iter().cloned());
-    // Every Actions datagram answers the tick in hand (stock clients send exactly one per
-    // Measures; <Sync/> says so explicitly).
-    r.acted = tick.or(r.acted);
+    let room = MAX_REQUESTS.saturating_sub(r.requests.len());
+    r.requests.extend(a.requests.iter().take(room).cloned());
+    // Stock clients send exactly one <Actions> per <Measures> (<Sync/> says so explicitly):
+    // count them, never beyond the Measures sent.
+    r.actions_received = (r.actions_received + 1).min(r.measures_sent);
 }

@@ -135,6 +135,61 @@ pub fn control(
     }
 }
 
+/// A run-control client kept for a process's lifetime: commands are sent without waiting,
+/// so a process serving other inputs (the UDP bridge) never stalls on them.
+pub struct ControlClient {
+    client: Client<Svc, ipc_types::ControlRequest, (), ipc_types::ControlResponse, ()>,
+    doorbell: Notifier<Svc>,
+    _node: Node<Svc>,
+    pending: Vec<
+        ipc_services::iceoryx2::pending_response::PendingResponse<
+            Svc,
+            ipc_types::ControlRequest,
+            (),
+            ipc_types::ControlResponse,
+            (),
+        >,
+    >,
+}
+
+impl std::fmt::Debug for ControlClient {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("ControlClient").field("pending", &self.pending.len()).finish()
+    }
+}
+
+impl ControlClient {
+    /// Opens the control service of the hub serving `session`.
+    pub fn connect(session: &str) -> Result<Self, AgentError> {
+        let session = Session::new(session)?;
+        let node = session.node(&format!("iwsim-control-{}", std::process::id()))?;
+        let svc = session.control(&node, Role::Client)?;
+        let doorbell = session
+            .hub_event(&node, Role::Client)?
+            .notifier_builder()
+            .create()
+            .map_err(ipc("create the hub doorbell"))?;
+        let client = svc.client_builder().create().map_err(ipc("create a control client"))?;
+        Ok(Self { client, doorbell, _node: node, pending: Vec::new() })
+    }
+
+    /// Sends a command and returns at once; answers are collected and dropped later.
+    pub fn send(&mut self, command: ipc_types::Command, robot_id: u32) -> Result<(), AgentError> {
+        // Forget answered requests; keep at most a few outstanding (the service allows 4).
+        self.pending.retain(|p| p.receive().ok().flatten().is_none() && p.is_connected());
+        if self.pending.len() >= 3 {
+            self.pending.remove(0);
+        }
+        let p = self
+            .client
+            .send_copy(ipc_types::ControlRequest { command: command as u32, robot_id })
+            .map_err(ipc("send a command"))?;
+        self.pending.push(p);
+        let _ = self.doorbell.notify();
+        Ok(())
+    }
+}
+
 /// The map as the hub published it.
 #[derive(Debug, Clone)]
 pub struct MapData {
@@ -372,8 +427,12 @@ impl Agent {
                     }
                 }
             };
-            if !arrived {
-                self.check()?;
+            if !arrived && let Err(e) = self.check() {
+                // The hub may have published its last tick just before going: read it first.
+                if self.take_sensors()? {
+                    return self.tick_from_last();
+                }
+                return Err(e);
             }
         }
     }
@@ -401,6 +460,23 @@ impl Agent {
             return self.tick_from_last();
         }
         Ok(None)
+    }
+
+    /// The newest world snapshot if one arrived since the last call, without waiting.
+    pub fn try_world(&mut self) -> Result<Option<(WorldHeader, Vec<RobotState>)>, AgentError> {
+        if self.world_sub.is_none() {
+            let svc = self.session.world(&self.node, Role::Client)?;
+            self.world_sub = Some(svc.subscriber_builder().create().map_err(ipc("create a world subscriber"))?);
+        }
+        let sub = self.world_sub.as_ref().ok_or_else(|| AgentError::Ipc("world subscriber".into()))?;
+        let mut newest = None;
+        while let Some(s) = sub.receive().map_err(ipc("receive the world"))? {
+            newest = Some((*s.user_header(), s.payload().to_vec()));
+        }
+        if let Some(latest) = &newest {
+            self.last_world = Some(latest.clone());
+        }
+        Ok(newest)
     }
 
     /// Whether the hub has said the run is over.

@@ -303,8 +303,15 @@ impl HubCore {
     /// Takes an agent's actions for `tick`. Actions for robots it does not own are ignored;
     /// returns how many were.
     pub fn actions(&mut self, agent_id: u32, tick: u64, blocks: &[ActionBlock]) -> usize {
+        let now = self.world.tick();
         let Some(agent) = self.agents.get_mut(&agent_id).filter(|a| a.alive) else { return blocks.len() };
-        agent.answered = Some(agent.answered.map_or(tick, |t| t.max(tick)));
+        // Only an answer to the tick in hand counts for the barrier: a tick from the future
+        // (a buggy or hostile agent) must not excuse it from later ticks. Late answers still
+        // set the robots' inputs for the next step.
+        if tick == now {
+            agent.answered = Some(now);
+            agent.lagging = false;
+        }
         let mut ignored = 0;
         for b in blocks {
             let Some(r) = self.robots.get_mut(&b.robot_id).filter(|r| r.agent_id == agent_id) else {
@@ -693,6 +700,27 @@ mod tests {
         assert_eq!(frozen, vec![rb]);
         assert!(c.agent_died(a));
         assert!(!c.all_answered(), "with no live agent lock-step waits instead of racing");
+    }
+
+    #[test]
+    fn only_an_answer_to_the_tick_in_hand_counts_and_clears_lagging() {
+        let mut c = core(Mode::LockStep);
+        let a = c.hello(1).expect("room");
+        let ra = c.register(a, &RobotRegistration::new("a")).expect("ok").0;
+        c.ready(a).expect("known");
+        c.command(Command::Start, 0);
+        // A future tick excuses nothing.
+        c.actions(a, u64::MAX, &[ActionBlock::motors(ra, 1.0, 1.0)]);
+        assert!(!c.all_answered());
+        assert_eq!(c.mark_laggards(), 1);
+        assert_ne!(c.robot_states().next().expect("robot").flags & ipc_types::ROBOT_LAGGING, 0);
+        c.actions(a, 0, &[ActionBlock::motors(ra, 1.0, 1.0)]);
+        assert!(c.all_answered());
+        assert_eq!(
+            c.robot_states().next().expect("robot").flags & ipc_types::ROBOT_LAGGING,
+            0,
+            "answering clears the flag"
+        );
     }
 
     #[test]

@@ -209,6 +209,7 @@ pub fn run(cfg: HubConfig) -> Result<HubOutcome, HubError> {
     let mut ready = Vec::new();
     let mut dead_agents: Vec<u32> = Vec::new();
     let mut publish = true;
+    let mut last_published: Option<u64> = None;
 
     tracing::info!(
         "hub serving session {} ({:?}, lab {:?}, {} grid slots)",
@@ -229,7 +230,12 @@ pub fn run(cfg: HubConfig) -> Result<HubOutcome, HubError> {
             publish_tick(&core, &world_pub, &agents, &mut states, &mut blocks)?;
             tick_notifier.notify().map_err(ipc("ring the tick"))?;
             publish = false;
-            deadline_at = Instant::now() + cfg.deadline;
+            // The deadline runs from the tick's first publication: re-publishing the same tick
+            // (a command, an agent joining) must not push it back, or lock-step could hang.
+            if last_published != Some(core.world().tick()) {
+                last_published = Some(core.world().tick());
+                deadline_at = Instant::now() + cfg.deadline;
+            }
             if core.state() == RunState::Finished {
                 break;
             }
@@ -281,20 +287,38 @@ pub fn run(cfg: HubConfig) -> Result<HubOutcome, HubError> {
             match RegisterKind::from_u32(r.kind) {
                 Some(RegisterKind::Hello) => match core.hello(r.pid) {
                     Ok(id) => {
-                        let service = session.agent_sensors(&node, id, Role::Hub)?;
-                        let publisher = service
-                            .publisher_builder()
-                            .initial_max_slice_len(4)
-                            .allocation_strategy(SLICE_ALLOCATION)
-                            .create()
-                            .map_err(ipc("create an agent's sensor publisher"))?;
-                        let pidfd = PidFd::open(r.pid);
-                        if pidfd.is_none() {
-                            tracing::warn!("agent {id}: pid {} cannot be watched; only the deadline guards it", r.pid);
+                        let ports = session.agent_sensors(&node, id, Role::Hub).map_err(|e| e.to_string()).and_then(
+                            |service| {
+                                let publisher = service
+                                    .publisher_builder()
+                                    .initial_max_slice_len(4)
+                                    .allocation_strategy(SLICE_ALLOCATION)
+                                    .create()
+                                    .map_err(|e| format!("{e:?}"))?;
+                                Ok((service, publisher))
+                            },
+                        );
+                        match ports {
+                            Ok((service, publisher)) => {
+                                let pidfd = PidFd::open(r.pid);
+                                if pidfd.is_none() {
+                                    tracing::warn!(
+                                        "agent {id}: pid {} cannot be watched; only the deadline guards it",
+                                        r.pid
+                                    );
+                                }
+                                agents.insert(id, AgentPorts { publisher, _service: service, pidfd });
+                                outcome.agents_seen += 1;
+                                resp.agent_id = id;
+                            }
+                            Err(e) => {
+                                // Out of shared memory or file descriptors: refuse this agent, serve the rest.
+                                tracing::warn!("agent {id}: cannot create its sensor service: {e}");
+                                core.bye(id);
+                                resp.status = Refusal::Capacity as u32;
+                                resp.set_detail("the hub cannot create this agent's sensor service");
+                            }
                         }
-                        agents.insert(id, AgentPorts { publisher, _service: service, pidfd });
-                        outcome.agents_seen += 1;
-                        resp.agent_id = id;
                     }
                     Err(refused) => {
                         resp.status = refused.reason as u32;
@@ -307,6 +331,8 @@ pub fn run(cfg: HubConfig) -> Result<HubOutcome, HubError> {
                         Ok((robot_id, sensors)) => {
                             resp.robot_id = robot_id;
                             resp.sensor_count = sensors;
+                            // Its agent gets the new robot's readings without waiting a tick.
+                            publish = true;
                         }
                         Err(refused) => {
                             resp.status = refused.reason as u32;
@@ -417,6 +443,18 @@ pub fn run(cfg: HubConfig) -> Result<HubOutcome, HubError> {
         core.command(Command::Stop, 0);
         let _ = publish_tick(&core, &world_pub, &agents, &mut states, &mut blocks);
         let _ = tick_notifier.notify();
+    }
+    // An agent reads the final tick from the hub's shared memory, which goes when the hub does:
+    // give every agent process up to 2 s to read it and leave.
+    let linger_until = Instant::now() + Duration::from_secs(2);
+    let mut waiting: Vec<i32> = agents.values().filter_map(|a| a.pidfd.as_ref().map(|p| p.0.as_raw_fd())).collect();
+    while !waiting.is_empty() && Instant::now() < linger_until {
+        poll_readable(&waiting, linger_until.saturating_duration_since(Instant::now()), &mut ready);
+        if ready.is_empty() {
+            break;
+        }
+        let done: Vec<i32> = ready.iter().map(|&i| waiting[i]).collect();
+        waiting.retain(|fd| !done.contains(fd));
     }
     outcome.ticks = core.world().tick();
     outcome.run_s = first_step.map_or(0.0, |t| t.elapsed().as_secs_f64());
