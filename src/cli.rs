@@ -28,6 +28,8 @@ pub enum Command {
     Hub(HubArgs),
     /// Serves the Ciber-Rato / Intellwheels UDP/XML protocol to remote agents and viewers.
     Udp(UdpArgs),
+    /// Serves a live view of a session to browsers (2D top view).
+    View(ViewArgs),
     /// Runs an agent process.
     Agent {
         /// Which agent.
@@ -104,6 +106,23 @@ pub struct UdpArgs {
     /// Seconds a robot client may stay silent before its robot is removed.
     #[arg(long, default_value_t = 10.0)]
     pub client_timeout: f64,
+    /// Seconds to wait for the hub to come up.
+    #[arg(long, default_value_t = 5.0)]
+    pub connect_timeout: f64,
+}
+
+/// Options of `iwsim view`.
+#[derive(Debug, Args, Clone)]
+pub struct ViewArgs {
+    /// Session of the hub to show.
+    #[arg(long, default_value = "default")]
+    pub session: String,
+    /// Address to serve the page on: loopback unless the LAN is wanted (0.0.0.0:8080).
+    #[arg(long, default_value = "127.0.0.1:8080")]
+    pub http: std::net::SocketAddr,
+    /// Let pages start, pause, step and stop the run.
+    #[arg(long)]
+    pub allow_control: bool,
     /// Seconds to wait for the hub to come up.
     #[arg(long, default_value_t = 5.0)]
     pub connect_timeout: f64,

@@ -9,6 +9,7 @@ pub mod demo;
 pub mod hubcmd;
 pub mod mapcheck;
 pub mod udpcmd;
+pub mod viewcmd;
 
 use std::process::ExitCode;
 
@@ -42,6 +43,7 @@ pub fn run(cli: Cli) -> anyhow::Result<ExitCode> {
         Command::Demo(args) => demo::run(&args),
         Command::Hub(args) => hubcmd::run(&args),
         Command::Udp(args) => udpcmd::run(&args),
+        Command::View(args) => viewcmd::run(&args),
         Command::Agent { agent: AgentCommand::Wheelchair(args) } => agentcmd::wheelchair(&args),
     }
 }

@@ -135,6 +135,79 @@ pub fn control(
     }
 }
 
+/// A read-only view of a session: world snapshots and the map, with no hello and no robots,
+/// so the hub does not count it as an agent (viewers, loggers).
+pub struct Observer {
+    session: Session,
+    _node: Node<Svc>,
+    world: Subscriber<Svc, [RobotState], WorldHeader>,
+    map_svc: ipc_services::MapService,
+}
+
+impl std::fmt::Debug for Observer {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Observer").field("session", &self.session.name()).finish()
+    }
+}
+
+impl Observer {
+    /// Attaches to the hub serving `session`, waiting up to `timeout` for it to come up.
+    pub fn connect_within(session: &str, name: &str, timeout: Duration) -> Result<Self, AgentError> {
+        let session = Session::new(session)?;
+        let node = session.node(name)?;
+        let start = Instant::now();
+        let (world_svc, map_svc) = loop {
+            match (session.world(&node, Role::Client), session.map(&node, Role::Client)) {
+                (Ok(w), Ok(m)) => break (w, m),
+                (Err(ServicesError::NotRunning { .. }), _) | (_, Err(ServicesError::NotRunning { .. }))
+                    if start.elapsed() < timeout =>
+                {
+                    std::thread::sleep(Duration::from_millis(10));
+                }
+                (Err(e), _) | (_, Err(e)) => return Err(e.into()),
+            }
+        };
+        let world = world_svc.subscriber_builder().create().map_err(ipc("create a world subscriber"))?;
+        Ok(Self { session, _node: node, world, map_svc })
+    }
+
+    /// The newest world snapshot if one arrived since the last call.
+    pub fn try_world(&self) -> Result<Option<(WorldHeader, Vec<RobotState>)>, AgentError> {
+        let mut newest = None;
+        while let Some(s) = self.world.receive().map_err(ipc("receive the world"))? {
+            newest = Some((*s.user_header(), s.payload().to_vec()));
+        }
+        Ok(newest)
+    }
+
+    /// The map (waits up to 5 s for the hub's kept sample).
+    pub fn map(&self) -> Result<MapData, AgentError> {
+        let sub = self.map_svc.subscriber_builder().create().map_err(ipc("create a map subscriber"))?;
+        let start = Instant::now();
+        loop {
+            if let Some(s) = sub.receive().map_err(ipc("receive the map"))? {
+                return Ok(MapData { header: *s.user_header(), items: s.payload().to_vec() });
+            }
+            if start.elapsed() > ANSWER_TIMEOUT {
+                return Err(AgentError::NoAnswer(self.session.name().to_owned()));
+            }
+            std::thread::sleep(Duration::from_millis(1));
+        }
+    }
+
+    /// The session.
+    pub fn session(&self) -> &str {
+        self.session.name()
+    }
+
+    /// Detaches, and removes the session's last file if this was the last process in it.
+    pub fn close(self) {
+        let session = self.session.clone();
+        drop(self);
+        session.release_if_unused();
+    }
+}
+
 /// A run-control client kept for a process's lifetime: commands are sent without waiting,
 /// so a process serving other inputs (the UDP bridge) never stalls on them.
 pub struct ControlClient {
