@@ -68,6 +68,28 @@ impl Proc {
         assert!(status.success());
     }
 
+    /// Waits until the process prints a stderr line containing `marker` and returns what
+    /// follows it on that line; stderr keeps being drained afterwards.
+    pub fn announced(&mut self, marker: &str, timeout: Duration) -> String {
+        use std::io::BufRead;
+        let stderr = self.0.as_mut().and_then(|c| c.stderr.take()).expect("piped stderr");
+        let (tx, rx) = std::sync::mpsc::channel();
+        std::thread::spawn(move || {
+            for line in std::io::BufReader::new(stderr).lines().map_while(Result::ok) {
+                let _ = tx.send(line);
+            }
+        });
+        let deadline = Instant::now() + timeout;
+        loop {
+            let line = rx
+                .recv_timeout(deadline.saturating_duration_since(Instant::now()))
+                .unwrap_or_else(|_| panic!("no line with {marker:?} within {timeout:?}"));
+            if let Some(rest) = line.split(marker).nth(1) {
+                return rest.trim().to_owned();
+            }
+        }
+    }
+
     pub fn stderr_now(&mut self) -> String {
         let mut s = String::new();
         if let Some(err) = self.0.as_mut().and_then(|c| c.stderr.as_mut()) {

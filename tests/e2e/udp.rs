@@ -1,9 +1,7 @@
 //! The UDP/XML bridge over real sockets on 127.0.0.1: registration, Measures, viewers,
 //! foreign datagrams and malformed input, with a hub and the bridge as real processes.
 
-use std::io::{BufRead, BufReader};
 use std::net::{SocketAddr, UdpSocket};
-use std::sync::mpsc;
 use std::time::{Duration, Instant};
 
 use hub::map::{NoiseParams, Params, builtin};
@@ -43,21 +41,8 @@ fn hub_and_bridge(s: &str, hub_args: &[&str], bridge_args: &[&str]) -> (Proc, Pr
     bargs.extend_from_slice(bridge_args);
     let mut bridge = Proc::spawn(&bargs);
     // The bridge says where it listens on its first line.
-    let stderr = bridge.0.as_mut().and_then(|c| c.stderr.take()).expect("piped stderr");
-    let (tx, rx) = mpsc::channel();
-    std::thread::spawn(move || {
-        for line in BufReader::new(stderr).lines().map_while(Result::ok) {
-            let _ = tx.send(line);
-        }
-    });
-    let deadline = Instant::now() + Duration::from_secs(20);
-    loop {
-        let line =
-            rx.recv_timeout(deadline.saturating_duration_since(Instant::now())).expect("bridge announces its port");
-        if let Some(addr) = line.split("registrations on ").nth(1) {
-            return (hub, bridge, addr.trim().parse().expect("address"));
-        }
-    }
+    let addr = bridge.announced("registrations on ", Duration::from_secs(20)).parse().expect("address");
+    (hub, bridge, addr)
 }
 
 struct Client {

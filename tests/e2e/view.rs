@@ -1,9 +1,8 @@
 //! The viewer process over real HTTP and WebSocket on 127.0.0.1, with a hub and an agent as
 //! real processes.
 
-use std::io::{BufRead, BufReader, Read, Write};
+use std::io::{Read, Write};
 use std::net::{SocketAddr, TcpStream};
-use std::sync::mpsc;
 use std::time::{Duration, Instant};
 
 use tungstenite::Message;
@@ -28,21 +27,8 @@ fn start(s: &str, view_args: &[&str]) -> (Proc, Proc, Proc, SocketAddr) {
     let mut args = vec!["view", "--session", s, "--http", "127.0.0.1:0"];
     args.extend_from_slice(view_args);
     let mut view = Proc::spawn(&args);
-    let stderr = view.0.as_mut().and_then(|c| c.stderr.take()).expect("piped");
-    let (tx, rx) = mpsc::channel();
-    std::thread::spawn(move || {
-        for line in BufReader::new(stderr).lines().map_while(Result::ok) {
-            let _ = tx.send(line);
-        }
-    });
-    let deadline = Instant::now() + Duration::from_secs(20);
-    loop {
-        let line =
-            rx.recv_timeout(deadline.saturating_duration_since(Instant::now())).expect("viewer announces its URL");
-        if let Some(url) = line.split("open http://").nth(1) {
-            return (hub, agent, view, url.trim_end_matches('/').parse().expect("address"));
-        }
-    }
+    let url = view.announced("open http://", Duration::from_secs(20));
+    (hub, agent, view, url.trim_end_matches('/').parse().expect("address"))
 }
 
 fn get(addr: SocketAddr, path: &str) -> String {
