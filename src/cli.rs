@@ -89,6 +89,13 @@ pub struct HubArgs {
     /// Print the end-of-run summary as one JSON object.
     #[arg(long)]
     pub json: bool,
+    /// A scenario obstacle: a static box X0,Y0,X1,Y1 (metres) of height H (default 1.0 m),
+    /// sensed and collided with like a wall. Repeatable.
+    #[arg(long, value_name = "X0,Y0,X1,Y1[,H]", allow_hyphen_values = true)]
+    pub obstacle: Vec<String>,
+    /// A scenario checkpoint X,Y with radius R (default 0.5 m), shown by viewers. Repeatable.
+    #[arg(long, value_name = "X,Y[,R]", allow_hyphen_values = true)]
+    pub checkpoint: Vec<String>,
 }
 
 /// Options of `iwsim udp`.

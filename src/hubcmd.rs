@@ -6,7 +6,7 @@ use std::time::Duration;
 use anyhow::Context as _;
 use hub::map::builtin::{self, PREFIX};
 use hub::map::xml::{parse_params, read_text};
-use hub::map::{Grid, NoiseParams};
+use hub::map::{Grid, NoiseParams, Wall};
 use hub::serve::HubConfig;
 use hub::serve::core::Mode;
 
@@ -14,7 +14,30 @@ use crate::cli::HubArgs;
 
 /// Builds the hub's configuration from the command line.
 pub fn config(args: &HubArgs) -> anyhow::Result<HubConfig> {
-    let lab = builtin::load_lab_spec(&args.lab).map_err(|e| anyhow::anyhow!("{}:{e}", args.lab))?;
+    let mut lab = builtin::load_lab_spec(&args.lab).map_err(|e| anyhow::anyhow!("{}:{e}", args.lab))?;
+    let obstacle_from = lab.walls.len();
+    for spec in &args.obstacle {
+        let v = numbers(spec, "--obstacle", 4, 5)?;
+        let (x0, y0, x1, y1, h) = (v[0], v[1], v[2], v[3], v.get(4).copied().unwrap_or(1.0));
+        anyhow::ensure!(
+            x0 < x1 && y0 < y1 && h > 0.0,
+            "--obstacle {spec}: want X0 < X1, Y0 < Y1 and a positive height"
+        );
+        anyhow::ensure!(
+            x0 >= 0.0 && y0 >= 0.0 && x1 <= lab.width_m && y1 <= lab.height_m,
+            "--obstacle {spec}: outside the {} x {} m lab",
+            lab.width_m,
+            lab.height_m
+        );
+        lab.walls.push(Wall::rectangle(x0, y0, x1, y1, h));
+    }
+    let mut checkpoints = Vec::new();
+    for spec in &args.checkpoint {
+        let v = numbers(spec, "--checkpoint", 2, 3)?;
+        let r = v.get(2).copied().unwrap_or(0.5);
+        anyhow::ensure!(r > 0.0, "--checkpoint {spec}: the radius must be positive");
+        checkpoints.push([v[0], v[1], r]);
+    }
     let grid = match (&args.grid, args.lab.strip_prefix(PREFIX)) {
         (Some(g), _) => builtin::load_grid_spec(g).map_err(|e| anyhow::anyhow!("{g}:{e}"))?,
         (None, Some(name)) => builtin::map(name).map(|m| m.grid).unwrap_or_default(),
@@ -46,7 +69,20 @@ pub fn config(args: &HubArgs) -> anyhow::Result<HubConfig> {
         start_on_command: args.start_on_command,
         tick_limit,
         max_robots: args.max_robots,
+        obstacle_from,
+        checkpoints,
     })
+}
+
+/// Parses `min..=max` comma-separated finite numbers, naming the option in the error.
+fn numbers(spec: &str, option: &str, min: usize, max: usize) -> anyhow::Result<Vec<f64>> {
+    let v: Vec<f64> = spec
+        .split(',')
+        .map(|t| t.trim().parse::<f64>().ok().filter(|x| x.is_finite()))
+        .collect::<Option<_>>()
+        .ok_or_else(|| anyhow::anyhow!("{option} {spec}: not a list of numbers"))?;
+    anyhow::ensure!((min..=max).contains(&v.len()), "{option} {spec}: want {min} to {max} numbers, got {}", v.len());
+    Ok(v)
 }
 
 /// `iwsim hub`.

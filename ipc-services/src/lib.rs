@@ -24,7 +24,7 @@ use iceoryx2::service::ipc;
 use iceoryx2::service::port_factory::{event, publish_subscribe, request_response};
 use ipc_types::{
     ActionBlock, ActionHeader, ControlRequest, ControlResponse, MAX_AGENTS, MapHeader, MapItem, RegisterRequest,
-    RegisterResponse, RobotState, SensorBlock, TickHeader, WorldHeader, service,
+    RegisterResponse, RobotSensors, RobotState, SensorBlock, TickHeader, WorldHeader, service,
 };
 
 pub use iceoryx2;
@@ -35,6 +35,8 @@ pub type Svc = ipc::Service;
 pub type WorldService = publish_subscribe::PortFactory<Svc, [RobotState], WorldHeader>;
 /// The map.
 pub type MapService = publish_subscribe::PortFactory<Svc, [MapItem], MapHeader>;
+/// Every robot's sensor geometry.
+pub type RobotSensorsService = publish_subscribe::PortFactory<Svc, [RobotSensors], ()>;
 /// Actions from the agents.
 pub type ActionService = publish_subscribe::PortFactory<Svc, [ActionBlock], ActionHeader>;
 /// One agent's sensor blocks.
@@ -221,6 +223,22 @@ impl Session {
             .subscriber_max_borrowed_samples(1)
             .enable_safe_overflow(true);
         finish!(self, b, role, service::MAP)
+    }
+
+    /// Sensor geometry of every robot: republished with history when the robots change, so
+    /// viewers can draw cones without the world snapshot carrying them every tick.
+    pub fn robot_sensors(&self, node: &Node<Svc>, role: Role) -> Result<RobotSensorsService, ServicesError> {
+        let b = node
+            .service_builder(&self.iox_name(service::ROBOT_SENSORS)?)
+            .publish_subscribe::<[RobotSensors]>()
+            .max_publishers(1)
+            .max_subscribers(MAX_AGENTS + MAX_OBSERVERS)
+            .max_nodes(MAX_NODES)
+            .history_size(1)
+            .subscriber_max_buffer_size(1)
+            .subscriber_max_borrowed_samples(1)
+            .enable_safe_overflow(true);
+        finish!(self, b, role, service::ROBOT_SENSORS)
     }
 
     /// Actions: a publisher per agent (and bridge), one subscriber (the hub). Agents send one

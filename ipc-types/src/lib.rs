@@ -56,6 +56,9 @@ pub mod service {
     /// Per-agent sensor blocks: `agent/<id>/sensors` (pub/sub, slice of
     /// [`crate::SensorBlock`] with a [`crate::TickHeader`]).
     pub const AGENT_SENSORS_PREFIX: &str = "agent";
+    /// Every robot's proximity-sensor geometry (pub/sub with history, slice of
+    /// [`crate::RobotSensors`]), republished when the set of robots changes.
+    pub const ROBOT_SENSORS: &str = "robot-sensors";
 }
 
 /// A name in a fixed buffer: UTF-8, zero-padded, at most `NAME_BYTES − 1` bytes.
@@ -185,7 +188,7 @@ pub const ROBOT_LAGGING: u32 = 1 << 2;
 /// One robot in a world snapshot.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable, ZeroCopySend)]
-#[type_name("iwsim::RobotState.v1")]
+#[type_name("iwsim::RobotState.v2")]
 pub struct RobotState {
     /// Robot id (1-based, unique in the run).
     pub id: u32,
@@ -213,8 +216,43 @@ pub struct RobotState {
     pub motor_out: [f32; 2],
     /// Name.
     pub name: FixedName,
+    /// The proximity readings the robot's agent got this tick, metres (noise included);
+    /// NaN past the robot's sensor count. Viewers draw the cones with these.
+    pub proximity_m: [f32; MAX_PROXIMITY],
 }
-const _: () = assert!(core::mem::size_of::<RobotState>() == 96);
+const _: () = assert!(core::mem::size_of::<RobotState>() == 128);
+
+/// One proximity sensor's geometry, as viewers draw it.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable, ZeroCopySend, Default)]
+#[type_name("iwsim::SensorGeometry.v1")]
+pub struct SensorGeometry {
+    /// Position along the heading from the centre of movement, metres.
+    pub x_m: f32,
+    /// Position across the heading (left positive), metres.
+    pub y_m: f32,
+    /// Direction relative to the heading, degrees.
+    pub angle_deg: f32,
+    /// Full opening, degrees.
+    pub cone_deg: f32,
+    /// Readings are capped at this distance, metres.
+    pub range_m: f32,
+}
+
+/// A robot's proximity sensors. The hub publishes every robot's, with history, whenever the
+/// set of robots changes, so the world snapshot stays small.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable, ZeroCopySend)]
+#[type_name("iwsim::RobotSensors.v1")]
+pub struct RobotSensors {
+    /// Robot id.
+    pub robot_id: u32,
+    /// Sensors in use.
+    pub count: u32,
+    /// The sensors, in the robot's order (its readings follow it).
+    pub sensors: [SensorGeometry; MAX_PROXIMITY],
+}
+const _: () = assert!(core::mem::size_of::<RobotSensors>() == 168);
 
 /// `SensorBlock::present`: compass reading present.
 pub const HAS_COMPASS: u32 = 1;
@@ -734,8 +772,9 @@ pub struct MapHeader {
 }
 const _: () = assert!(core::mem::size_of::<MapHeader>() == 184);
 
-/// `MapItem::kind`: a wall starts; `a` = height in metres, `index` = wall number. Its corners
-/// follow as `MAP_CORNER` items.
+/// `MapItem::kind`: a wall starts; `a` = height in metres, `b` = corner count, `c` = 1 for a
+/// scenario's obstacle (a static body placed by the run, not part of the map file), else 0;
+/// `index` = wall number. Its corners follow as `MAP_CORNER` items.
 pub const MAP_WALL: u32 = 1;
 /// `MapItem::kind`: a wall corner; `a`, `b` = x, y metres.
 pub const MAP_CORNER: u32 = 2;
@@ -745,6 +784,9 @@ pub const MAP_BEACON: u32 = 3;
 pub const MAP_TARGET: u32 = 4;
 /// `MapItem::kind`: a grid start pose; `a`, `b` = x, y metres, `c` = heading degrees.
 pub const MAP_GRID: u32 = 5;
+/// `MapItem::kind`: a scenario checkpoint; `a`, `b` = x, y, `c` = radius, metres. Checkpoints
+/// are drawn and logged; unlike targets they are not seen by the ground sensor.
+pub const MAP_CHECKPOINT: u32 = 6;
 
 /// One item of the map, so agents and viewers never parse map files.
 #[repr(C)]
@@ -782,7 +824,8 @@ mod tests {
     #[test]
     fn every_payload_has_a_versioned_type_name() {
         assert_eq!(type_name_of::<WorldHeader>(), "iwsim::WorldHeader.v1");
-        assert_eq!(type_name_of::<RobotState>(), "iwsim::RobotState.v1");
+        assert_eq!(type_name_of::<RobotState>(), "iwsim::RobotState.v2");
+        assert_eq!(type_name_of::<RobotSensors>(), "iwsim::RobotSensors.v1");
         assert_eq!(type_name_of::<SensorBlock>(), "iwsim::SensorBlock.v1");
         assert_eq!(type_name_of::<ActionBlock>(), "iwsim::ActionBlock.v1");
         assert_eq!(type_name_of::<RegisterRequest>(), "iwsim::RegisterRequest.v1");

@@ -60,10 +60,14 @@ fn the_page_and_the_stream_show_the_map_and_every_robot() {
     let (hub, agent, view, addr) = start(&s, &[]);
     let page = get(addr, "/");
     assert!(
-        page.starts_with("HTTP/1.1 200 OK") && page.contains("<canvas id=\"view\">") && page.contains("app.js"),
+        page.starts_with("HTTP/1.1 200 OK") && page.contains("<canvas id=\"view2d\">") && page.contains("app.js"),
         "{page}"
     );
     assert!(get(addr, "/app.js").contains("function decodeFrame"));
+    assert!(get(addr, "/view3d.js").contains("export function createView3D"));
+    let three = get(addr, "/three-LICENSE.txt");
+    assert!(three.starts_with("HTTP/1.1 200 OK") && three.contains("MIT"), "{three}");
+    assert!(get(addr, "/index.html?view=3d").starts_with("HTTP/1.1 200 OK"));
     assert!(get(addr, "/nope").starts_with("HTTP/1.1 404"));
 
     let mut w = ws(addr);
@@ -82,7 +86,7 @@ fn the_page_and_the_stream_show_the_map_and_every_robot() {
     let first = next_frame(&mut w);
     assert_eq!(first.robots.len(), 2);
     assert!(first.robots.iter().all(|r| r.body == [1.0, 1.0, 0.5]));
-    // Robots drive: later frames move them forward, and frames come at most ~30 a second
+    // Robots drive: later frames move them forward, and frames come at most 60 a second
     // although the hub ticks 100 times a second.
     let start = Instant::now();
     let mut n = 0;
@@ -91,7 +95,7 @@ fn the_page_and_the_stream_show_the_map_and_every_robot() {
         last = next_frame(&mut w);
         n += 1;
     }
-    assert!(n <= 34, "{n} frames in 1 s");
+    assert!(n <= 63, "{n} frames in 1 s");
     assert!(n >= 10, "only {n} frames in 1 s");
     assert!(last.tick > first.tick + 30);
     assert!(last.robots[0].pose[0] > first.robots[0].pose[0], "chair1 moves");
@@ -154,6 +158,7 @@ fn the_pages_decoder_reads_what_the_viewer_encodes() {
         agent_id: 1,
         motor_out: [0.0; 2],
         name: ipc_types::FixedName::new("c").expect("fits"),
+        proximity_m: [0.5, 1.25, f32::NAN, f32::NAN, f32::NAN, f32::NAN, f32::NAN, f32::NAN],
     }];
     let bytes = frame::encode(&h, &robots);
     let dir = std::env::temp_dir().join(format!("iwsim-view-{}", std::process::id()));
@@ -163,7 +168,7 @@ fn the_pages_decoder_reads_what_the_viewer_encodes() {
     let script = format!(
         "const {{decodeFrame, corners}} = require({:?}); const b = require('fs').readFileSync({:?}); \
          const f = decodeFrame(b.buffer.slice(b.byteOffset, b.byteOffset + b.length)); \
-         const r = f.robots[0]; console.log(JSON.stringify([f.tick, f.simTime, f.runState, r.id, r.flags, r.x, r.y, r.heading, r.width, r.height, r.com, r.collisions, corners(r)[0]]));",
+         const r = f.robots[0]; console.log(JSON.stringify([f.tick, f.simTime, f.runState, r.id, r.flags, r.x, r.y, r.heading, r.width, r.height, r.com, r.collisions, r.proximity[0], r.proximity[1], r.proximity[2] === null ? -1 : 0, corners(r)[0]]));",
         concat!(env!("CARGO_MANIFEST_DIR"), "/viewer/static/app.js"),
         bin.to_str().expect("utf-8")
     );
@@ -188,6 +193,9 @@ fn the_pages_decoder_reads_what_the_viewer_encodes() {
         r.body[1] as f64,
         r.body[2] as f64,
         2.0,
+        0.5,
+        1.25,
+        -1.0,
     ];
     let nums: Vec<f64> = got
         .trim()
@@ -198,6 +206,6 @@ fn the_pages_decoder_reads_what_the_viewer_encodes() {
     for (k, w) in want.iter().enumerate() {
         assert!((nums[k] - w).abs() < 1e-6, "field {k}: {} vs {w} in {got}", nums[k]);
     }
-    assert!((nums[12] - fr.0).abs() < 1e-4 && (nums[13] - fr.1).abs() < 1e-4, "corner {got} vs {fr:?}");
+    assert!((nums[15] - fr.0).abs() < 1e-4 && (nums[16] - fr.1).abs() < 1e-4, "corner {got} vs {fr:?}");
     let _ = std::fs::remove_dir_all(dir);
 }

@@ -1,25 +1,32 @@
 //! The viewer's wire formats: the map as one JSON text message when a page connects, then
 //! compact little-endian binary frames of the world at display rate.
 //!
-//! Frame layout (all little-endian): `"IWVF"`, version u16 (1), run state u8, reserved u8,
-//! tick u64, sim time f64 (s), robot count u32, then per robot 40 bytes: id u32, kind u8,
+//! Frame layout (all little-endian): `"IWVF"`, version u16 (2), run state u8, reserved u8,
+//! tick u64, sim time f64 (s), robot count u32, then per robot 52 bytes: id u32, kind u8,
 //! flags u8, reserved u16, x f32 (m), y f32 (m), heading f32 (deg), width f32, height f32,
-//! com f32, collisions u32 (36 bytes). Names travel in the roster, a JSON text message sent
-//! when the set of robots changes.
+//! com f32, collisions u32, then 8 proximity readings as u16 millimetres (`NO_READING` past
+//! the robot's sensors). f32 positions keep 4 µm over a 100 m lab, far below a pixel; u16
+//! millimetres reach 65 m, past any sensor's range. Names and sensor geometry travel in the
+//! roster, a JSON text message sent when the set of robots changes.
 
 use std::fmt::Write as _;
 
 use agent_sdk::MapData;
-use ipc_types::{MAP_BEACON, MAP_CORNER, MAP_GRID, MAP_TARGET, MAP_WALL, RobotState, WorldHeader};
+use ipc_types::{
+    MAP_BEACON, MAP_CHECKPOINT, MAP_CORNER, MAP_GRID, MAP_TARGET, MAP_WALL, MAX_PROXIMITY, RobotSensors, RobotState,
+    WorldHeader,
+};
 
 /// Frame magic.
 pub const MAGIC: &[u8; 4] = b"IWVF";
 /// Frame version.
-pub const VERSION: u16 = 1;
+pub const VERSION: u16 = 2;
 /// Bytes of the frame header.
 pub const HEADER_BYTES: usize = 28;
 /// Bytes per robot.
-pub const ROBOT_BYTES: usize = 36;
+pub const ROBOT_BYTES: usize = 52;
+/// A proximity slot with no sensor (or no finite reading).
+pub const NO_READING: u16 = u16::MAX;
 
 /// One robot as a frame carries it.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -36,6 +43,13 @@ pub struct FrameRobot {
     pub body: [f32; 3],
     /// Contacts so far.
     pub collisions: u32,
+    /// Proximity readings, millimetres; `NO_READING` past the robot's sensors.
+    pub proximity_mm: [u16; MAX_PROXIMITY],
+}
+
+/// A reading in millimetres as a frame carries it.
+pub fn reading_mm(m: f32) -> u16 {
+    if m.is_finite() && m >= 0.0 { (m * 1000.0).round().min((NO_READING - 1) as f32) as u16 } else { NO_READING }
 }
 
 /// A decoded frame.
@@ -70,6 +84,9 @@ pub fn encode(h: &WorldHeader, robots: &[RobotState]) -> Vec<u8> {
             v.extend_from_slice(&f.to_le_bytes());
         }
         v.extend_from_slice(&r.collision_count.to_le_bytes());
+        for p in r.proximity_m {
+            v.extend_from_slice(&reading_mm(p).to_le_bytes());
+        }
     }
     v
 }
@@ -77,6 +94,7 @@ pub fn encode(h: &WorldHeader, robots: &[RobotState]) -> Vec<u8> {
 /// Decodes a frame; `None` when it is not one.
 pub fn decode(b: &[u8]) -> Option<Frame> {
     let u32_at = |i: usize| Some(u32::from_le_bytes(b.get(i..i + 4)?.try_into().ok()?));
+    let u16_at = |i: usize| Some(u16::from_le_bytes(b.get(i..i + 2)?.try_into().ok()?));
     let f32_at = |i: usize| Some(f32::from_le_bytes(b.get(i..i + 4)?.try_into().ok()?));
     if b.get(..4)? != MAGIC || u16::from_le_bytes(b.get(4..6)?.try_into().ok()?) != VERSION {
         return None;
@@ -95,6 +113,13 @@ pub fn decode(b: &[u8]) -> Option<Frame> {
                 pose: [f32_at(o + 8)?, f32_at(o + 12)?, f32_at(o + 16)?],
                 body: [f32_at(o + 20)?, f32_at(o + 24)?, f32_at(o + 28)?],
                 collisions: u32_at(o + 32)?,
+                proximity_mm: {
+                    let mut p = [NO_READING; MAX_PROXIMITY];
+                    for (k, v) in p.iter_mut().enumerate() {
+                        *v = u16_at(o + 36 + 2 * k)?;
+                    }
+                    p
+                },
             })
         })
         .collect::<Option<Vec<_>>>()?;
@@ -106,7 +131,8 @@ pub fn decode(b: &[u8]) -> Option<Frame> {
     })
 }
 
-fn json_str(s: &str) -> String {
+/// `s` as a JSON string literal.
+pub fn json_str(s: &str) -> String {
     let mut o = String::from("\"");
     for c in s.chars() {
         match c {
@@ -125,16 +151,19 @@ fn json_str(s: &str) -> String {
 /// The map as the JSON text message a page gets first.
 pub fn map_json(map: &MapData) -> String {
     let h = &map.header;
-    let mut walls: Vec<(f64, Vec<(f64, f64)>)> = Vec::new();
-    let (mut beacons, mut targets, mut grid) = (Vec::new(), Vec::new(), Vec::new());
+    /// Height, whether a scenario obstacle, corners.
+    type WallItems = (f64, bool, Vec<(f64, f64)>);
+    let mut walls: Vec<WallItems> = Vec::new();
+    let (mut beacons, mut targets, mut grid, mut checkpoints) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
     for i in &map.items {
         match i.kind {
-            MAP_WALL => walls.push((i.a, Vec::new())),
+            MAP_WALL => walls.push((i.a, i.c == 1.0, Vec::new())),
             MAP_CORNER => {
                 if let Some(w) = walls.last_mut() {
-                    w.1.push((i.a, i.b));
+                    w.2.push((i.a, i.b));
                 }
             }
+            MAP_CHECKPOINT => checkpoints.push(format!("[{},{},{}]", i.a, i.b, i.c)),
             MAP_BEACON => beacons.push(format!("[{},{},{}]", i.a, i.b, i.c)),
             MAP_TARGET => targets.push(format!("[{},{},{}]", i.a, i.b, i.c)),
             MAP_GRID => grid.push(format!("[{},{},{}]", i.a, i.b, i.c)),
@@ -143,28 +172,50 @@ pub fn map_json(map: &MapData) -> String {
     }
     let walls: Vec<String> = walls
         .iter()
-        .map(|(height, c)| {
+        .map(|(height, obstacle, c)| {
             let pts: Vec<String> = c.iter().map(|(x, y)| format!("[{x},{y}]")).collect();
-            format!("{{\"height\":{height},\"corners\":[{}]}}", pts.join(","))
+            format!("{{\"height\":{height},\"obstacle\":{obstacle},\"corners\":[{}]}}", pts.join(","))
         })
         .collect();
     format!(
-        "{{\"type\":\"map\",\"name\":{},\"width\":{},\"height\":{},\"walls\":[{}],\"beacons\":[{}],\"targets\":[{}],\"grid\":[{}]}}",
+        "{{\"type\":\"map\",\"name\":{},\"width\":{},\"height\":{},\"walls\":[{}],\"beacons\":[{}],\"targets\":[{}],\"checkpoints\":[{}],\"grid\":[{}]}}",
         json_str(h.name.as_str().unwrap_or("")),
         h.width_m,
         h.height_m,
         walls.join(","),
         beacons.join(","),
         targets.join(","),
+        checkpoints.join(","),
         grid.join(",")
     )
 }
 
-/// The robots' names as a JSON text message, sent when the set of robots changes.
-pub fn roster_json(robots: &[RobotState]) -> String {
-    let names: Vec<String> =
-        robots.iter().map(|r| format!("[{},{}]", r.id, json_str(r.name.as_str().unwrap_or("")))).collect();
-    format!("{{\"type\":\"roster\",\"names\":[{}]}}", names.join(","))
+/// The robots' names and proximity-sensor geometry as a JSON text message, sent when the set
+/// of robots changes: `{"type":"roster","robots":[{"id","name","sensors":[[x,y,angle,cone,range]…]}]}`
+/// (metres and degrees, in the body frame of the centre of movement).
+pub fn roster_json(robots: &[RobotState], sensors: &[RobotSensors]) -> String {
+    let entries: Vec<String> = robots
+        .iter()
+        .map(|r| {
+            let geometry: Vec<String> = sensors
+                .iter()
+                .find(|s| s.robot_id == r.id)
+                .map(|s| {
+                    s.sensors[..(s.count as usize).min(MAX_PROXIMITY)]
+                        .iter()
+                        .map(|g| format!("[{},{},{},{},{}]", g.x_m, g.y_m, g.angle_deg, g.cone_deg, g.range_m))
+                        .collect()
+                })
+                .unwrap_or_default();
+            format!(
+                "{{\"id\":{},\"name\":{},\"sensors\":[{}]}}",
+                r.id,
+                json_str(r.name.as_str().unwrap_or("")),
+                geometry.join(",")
+            )
+        })
+        .collect();
+    format!("{{\"type\":\"roster\",\"robots\":[{}]}}", entries.join(","))
 }
 
 #[cfg(test)]
@@ -187,6 +238,7 @@ mod tests {
             agent_id: 1,
             motor_out: [0.0; 2],
             name: FixedName::new("door \"A\"").expect("fits"),
+            proximity_m: [0.25, 1.0005, 80.0, f32::NAN, f32::NAN, f32::NAN, f32::NAN, f32::NAN],
         }
     }
 
@@ -199,7 +251,16 @@ mod tests {
         assert_eq!(f.robots.len(), 2);
         assert_eq!(
             f.robots[1],
-            FrameRobot { id: 7, kind: 2, flags: 1, pose: [20.25, 6.1, -45.0], body: [1.0, 0.1, 0.99], collisions: 3 }
+            FrameRobot {
+                id: 7,
+                kind: 2,
+                flags: 1,
+                pose: [20.25, 6.1, -45.0],
+                body: [1.0, 0.1, 0.99],
+                collisions: 3,
+                // Millimetres, rounded; beyond u16 saturates below the no-reading mark.
+                proximity_mm: [250, 1001, 65534, NO_READING, NO_READING, NO_READING, NO_READING, NO_READING],
+            }
         );
     }
 
@@ -214,7 +275,14 @@ mod tests {
     }
 
     #[test]
-    fn names_are_escaped_in_the_roster() {
-        assert_eq!(roster_json(&[robot(1, 0.0)]), "{\"type\":\"roster\",\"names\":[[1,\"door \\\"A\\\"\"]]}");
+    fn the_roster_escapes_names_and_carries_sensor_geometry() {
+        let mut s = RobotSensors { robot_id: 1, count: 2, sensors: [ipc_types::SensorGeometry::default(); 8] };
+        s.sensors[0] = ipc_types::SensorGeometry { x_m: 0.5, y_m: 0.0, angle_deg: 0.0, cone_deg: 60.0, range_m: 4.0 };
+        s.sensors[1] = ipc_types::SensorGeometry { x_m: 0.0, y_m: 0.25, angle_deg: 90.0, cone_deg: 30.0, range_m: 2.5 };
+        assert_eq!(
+            roster_json(&[robot(1, 0.0), robot(2, 0.0)], &[s]),
+            "{\"type\":\"roster\",\"robots\":[{\"id\":1,\"name\":\"door \\\"A\\\"\",\"sensors\":[[0.5,0,0,60,4],[0,0.25,90,30,2.5]]},\
+             {\"id\":2,\"name\":\"door \\\"A\\\"\",\"sensors\":[]}]}"
+        );
     }
 }

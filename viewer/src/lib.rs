@@ -2,6 +2,7 @@
 //! page and a WebSocket stream of it to browsers on this machine or the LAN.
 #![warn(missing_docs)]
 
+pub mod browser;
 pub mod frame;
 pub mod server;
 

@@ -17,10 +17,18 @@ use tungstenite::Message;
 use crate::frame;
 
 /// At most this many frames per second go to a page.
-pub const MAX_FPS: u32 = 30;
+pub const MAX_FPS: u32 = 60;
 
-const INDEX_HTML: &str = include_str!("../static/index.html");
-const APP_JS: &str = include_str!("../static/app.js");
+/// The page's files, built into the binary so `iwsim view` needs nothing beside it.
+const STATIC_FILES: &[(&str, &str, &str)] = &[
+    ("/", "text/html; charset=utf-8", include_str!("../static/index.html")),
+    ("/index.html", "text/html; charset=utf-8", include_str!("../static/index.html")),
+    ("/app.js", "text/javascript; charset=utf-8", include_str!("../static/app.js")),
+    ("/view3d.js", "text/javascript; charset=utf-8", include_str!("../static/view3d.js")),
+    ("/three.module.min.js", "text/javascript; charset=utf-8", include_str!("../static/three.module.min.js")),
+    ("/three.core.min.js", "text/javascript; charset=utf-8", include_str!("../static/three.core.min.js")),
+    ("/three-LICENSE.txt", "text/plain; charset=utf-8", include_str!("../static/three-LICENSE.txt")),
+];
 
 /// How to run the viewer.
 #[derive(Debug, Clone)]
@@ -107,11 +115,20 @@ impl Viewer {
             });
         }
         let mut ids: Vec<u32> = Vec::new();
+        let mut sensors: Vec<ipc_types::RobotSensors> = Vec::new();
+        let mut roster_dirty = false;
         loop {
+            // The hub republishes sensor geometry when robots come or go; it may land apart
+            // from the snapshot that shows them, so either change re-sends the roster.
+            if let Some(s) = self.observer.try_robot_sensors()? {
+                sensors = s;
+                roster_dirty = true;
+            }
             match self.observer.try_world()? {
                 Some((h, robots)) => {
                     let now_ids: Vec<u32> = robots.iter().map(|r| r.id).collect();
-                    let roster = (now_ids != ids).then(|| frame::roster_json(&robots));
+                    let roster = (now_ids != ids || roster_dirty).then(|| frame::roster_json(&robots, &sensors));
+                    roster_dirty = false;
                     ids = now_ids;
                     let bytes = frame::encode(&h, &robots);
                     let (lock, cv) = &*shared;
@@ -173,10 +190,11 @@ fn serve_connection(
         }
         req.extend_from_slice(&buf[..n]);
     }
-    let (status, ctype, body) = match path.as_str() {
-        "/" | "/index.html" => ("200 OK", "text/html; charset=utf-8", INDEX_HTML),
-        "/app.js" => ("200 OK", "text/javascript; charset=utf-8", APP_JS),
-        _ => ("404 Not Found", "text/plain", "not found\n"),
+    // The query string only tunes the page (view, camera, chair); the file is the path.
+    let file = path.split('?').next().unwrap_or("/");
+    let (status, ctype, body) = match STATIC_FILES.iter().find(|(p, _, _)| *p == file) {
+        Some((_, ctype, body)) => ("200 OK", *ctype, *body),
+        None => ("404 Not Found", "text/plain", "not found\n"),
     };
     write!(
         stream,
@@ -184,6 +202,17 @@ fn serve_connection(
         body.len()
     )?;
     stream.write_all(body.as_bytes())
+}
+
+/// A page's command: `start`, `pause`, `step`, `stop` or `remove:<robot id>`.
+fn parse_command(text: &str) -> Option<(Command, u32)> {
+    match text {
+        "start" => Some((Command::Start, 0)),
+        "pause" => Some((Command::Pause, 0)),
+        "step" => Some((Command::Step, 0)),
+        "stop" => Some((Command::Stop, 0)),
+        _ => Some((Command::RemoveRobot, text.strip_prefix("remove:")?.parse().ok()?)),
+    }
 }
 
 fn serve_websocket(
@@ -225,18 +254,19 @@ fn serve_websocket(
         }
         match ws.read() {
             Ok(Message::Text(cmd)) => {
-                let command = match cmd.as_str() {
-                    "start" => Some(Command::Start),
-                    "pause" => Some(Command::Pause),
-                    "step" => Some(Command::Step),
-                    "stop" => Some(Command::Stop),
-                    _ => None,
-                };
-                let reply = match (command, allow_control) {
-                    (Some(c), true) => match agent_sdk::control(session, c, 0) {
-                        Ok(_) => format!("{{\"type\":\"ack\",\"command\":\"{}\"}}", cmd.as_str()),
-                        Err(e) => format!("{{\"type\":\"error\",\"message\":\"{e}\"}}"),
-                    },
+                let reply = match (parse_command(cmd.as_str()), allow_control) {
+                    (Some((c, robot)), true) => {
+                        let refused =
+                            |why: &str| format!("{{\"type\":\"error\",\"message\":{}}}", frame::json_str(why));
+                        match agent_sdk::control(session, c, robot) {
+                            Ok(r) if r.status == 0 => {
+                                format!("{{\"type\":\"ack\",\"command\":{}}}", frame::json_str(cmd.as_str()))
+                            }
+                            Ok(r) if r.status == 2 => refused(&format!("{cmd}: no robot {robot}")),
+                            Ok(_) => refused(&format!("{cmd}: not possible now")),
+                            Err(e) => refused(&e.to_string()),
+                        }
+                    }
                     (Some(_), false) => {
                         "{\"type\":\"error\",\"message\":\"control is off: start iwsim view with --allow-control\"}"
                             .to_owned()

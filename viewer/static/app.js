@@ -1,113 +1,262 @@
-// iwsim viewer page: decodes the viewer's frames (see viewer/src/frame.rs) and draws the
-// world top-down. Wheel zooms, drag pans, a click on a chair follows it.
+// iwsim viewer page: decodes the viewer's frames (see viewer/src/frame.rs), draws the world
+// top-down on a canvas, and hands the same data to the 3D view (view3d.js, loaded only when
+// the 3D view is first shown, so a browser without WebGL still gets the 2D view).
+//
+// 2D: wheel zooms, drag pans, a click on a chair follows it. The URL can preset the page:
+// ?view=3d&camera=first|third|free&chair=ID&grid=0&labels=0&cones=0.
 "use strict";
 
-const HEADER_BYTES = 28, ROBOT_BYTES = 36;
+const HEADER_BYTES = 28, ROBOT_BYTES = 52, MAX_PROXIMITY = 8, NO_READING = 0xffff;
 
 // Decodes one binary frame; null when it is not one. Kept free of the DOM so tests can run it.
 function decodeFrame(buf) {
   const v = new DataView(buf);
   if (buf.byteLength < HEADER_BYTES) return null;
   if (String.fromCharCode(v.getUint8(0), v.getUint8(1), v.getUint8(2), v.getUint8(3)) !== "IWVF") return null;
-  if (v.getUint16(4, true) !== 1) return null;
+  if (v.getUint16(4, true) !== 2) return null;
   const n = v.getUint32(24, true);
   if (buf.byteLength !== HEADER_BYTES + n * ROBOT_BYTES) return null;
-  const robots = [];
+  const robots = new Array(n);
   for (let k = 0; k < n; k++) {
     const o = HEADER_BYTES + k * ROBOT_BYTES;
-    robots.push({
+    const proximity = [];
+    for (let s = 0; s < MAX_PROXIMITY; s++) {
+      const mm = v.getUint16(o + 36 + 2 * s, true);
+      proximity.push(mm === NO_READING ? null : mm / 1000);
+    }
+    robots[k] = {
       id: v.getUint32(o, true), kind: v.getUint8(o + 4), flags: v.getUint8(o + 5),
       x: v.getFloat32(o + 8, true), y: v.getFloat32(o + 12, true), heading: v.getFloat32(o + 16, true),
       width: v.getFloat32(o + 20, true), height: v.getFloat32(o + 24, true), com: v.getFloat32(o + 28, true),
-      collisions: v.getUint32(o + 32, true),
-    });
+      collisions: v.getUint32(o + 32, true), proximity,
+    };
   }
   return { runState: v.getUint8(6), tick: Number(v.getBigUint64(8, true)), simTime: v.getFloat64(16, true), robots };
 }
 
-// Body corners in the world, counter-clockwise from front-right (thesis Table 4.1).
-function corners(r) {
+// A body-frame point (along, across the heading from the centre of movement) in the lab frame.
+function toLab(r, x, y) {
   const a = r.heading * Math.PI / 180, c = Math.cos(a), s = Math.sin(a);
-  const f = r.com * r.width, b = -(1 - r.com) * r.width, h = r.height / 2;
-  return [[f, -h], [f, h], [b, h], [b, -h]].map(([x, y]) => [r.x + c * x - s * y, r.y + s * x + c * y]);
+  return [r.x + c * x - s * y, r.y + s * x + c * y];
 }
 
-if (typeof module !== "undefined") module.exports = { decodeFrame, corners };
+// Body corners in the lab frame, counter-clockwise from front-right (thesis Table 4.1).
+function corners(r) {
+  const f = r.com * r.width, b = -(1 - r.com) * r.width, h = r.height / 2;
+  return [[f, -h], [f, h], [b, h], [b, -h]].map(([x, y]) => toLab(r, x, y));
+}
+
+// A proximity cone as a lab-frame polygon: apex at the sensor, radius = the reading (capped
+// at the sensor's range), arc sampled every ~5 degrees. `sensor` = [x, y, angle, cone, range].
+function sensorCone(r, sensor, reading) {
+  const [sx, sy, angle, cone, range] = sensor;
+  const apex = toLab(r, sx, sy), d = Math.min(reading, range);
+  const mid = (r.heading + angle) * Math.PI / 180, half = cone * Math.PI / 360;
+  const steps = Math.max(2, Math.ceil(cone / 5)), pts = [apex];
+  for (let i = 0; i <= steps; i++) {
+    const a = mid - half + (2 * half * i) / steps;
+    pts.push([apex[0] + d * Math.cos(a), apex[1] + d * Math.sin(a)]);
+  }
+  return pts;
+}
+
+if (typeof module !== "undefined") module.exports = { decodeFrame, corners, sensorCone };
 
 if (typeof document !== "undefined") {
-  const canvas = document.getElementById("view"), ctx = canvas.getContext("2d"), hud = document.getElementById("hud");
-  let map = null, frame = null, names = new Map(), follow = null, fps = 0, frames = 0, fpsAt = performance.now();
-  let view = { scale: 20, ox: 0, oy: 0, fitted: false };
+  const params = new URLSearchParams(location.search);
+  const flag = (name, dflt) => (params.has(name) ? params.get(name) !== "0" : dflt);
+  const $ = (id) => document.getElementById(id);
+  const canvas = $("view2d"), ctx = canvas.getContext("2d"), canvas3d = $("view3d"), hud = $("hud"), status = $("status");
   const STATES = ["waiting", "running", "paused", "finished"];
+  const COLORS = {
+    outside: "#f4f4f0", floor: "#ffffff", grid: "#e4e4e4", wall: "#20407a", obstacle: "#d07020",
+    chair: "#20a040", real: "#2070d0", door: "#8a5a2b", collision: "#e02020",
+    target: "rgba(40,160,60,0.25)", checkpoint: "rgba(200,0,200,0.35)", beacon: "#e0a000",
+    cone: "rgba(255,150,0,0.22)", coneNear: "rgba(230,30,30,0.3)",
+  };
+  const page = {
+    map: null, frame: null, roster: new Map(), names: new Map(),
+    follow: null, chair: params.has("chair") ? Number(params.get("chair")) : null,
+    mode: params.get("view") === "3d" ? "3d" : "2d", camera: params.get("camera") || "first",
+    grid: flag("grid", true), labels: flag("labels", true), cones: flag("cones", true),
+    view3d: null, view3dError: null, draws: 0, drawFps: 0, frames: 0, frameFps: 0, tickRate: 0,
+  };
+  window.iwsim = page;
+  let view = { scale: 20, ox: 0, oy: 0, fitted: false };
+  let ticks = [], drawsAt = performance.now(), drawsSeen = 0, framesSeen = 0;
 
   function fit() {
-    if (!map) return;
     const w = canvas.width, h = canvas.height;
-    view.scale = Math.min(w / (map.width + 2), h / (map.height + 2));
-    view.ox = (w - map.width * view.scale) / 2;
-    view.oy = (h + map.height * view.scale) / 2;
+    view.scale = Math.min(w / (page.map.width + 2), h / (page.map.height + 2));
+    view.ox = (w - page.map.width * view.scale) / 2;
+    view.oy = (h + page.map.height * view.scale) / 2;
     view.fitted = true;
   }
-  function toScreen([x, y]) { return [view.ox + x * view.scale, view.oy - y * view.scale]; }
-  function poly(pts) { ctx.beginPath(); pts.map(toScreen).forEach(([x, y], i) => i ? ctx.lineTo(x, y) : ctx.moveTo(x, y)); ctx.closePath(); }
+  const toScreen = ([x, y]) => [view.ox + x * view.scale, view.oy - y * view.scale];
+  function poly(pts) {
+    ctx.beginPath();
+    pts.forEach((p, i) => { const [x, y] = toScreen(p); i ? ctx.lineTo(x, y) : ctx.moveTo(x, y); });
+    ctx.closePath();
+  }
+  function disc(x, y, radiusPx) { const [sx, sy] = toScreen([x, y]); ctx.beginPath(); ctx.arc(sx, sy, radiusPx, 0, 2 * Math.PI); }
 
-  function draw() {
-    canvas.width = canvas.clientWidth; canvas.height = canvas.clientHeight;
-    if (map && !view.fitted) fit();
-    if (follow !== null && frame) {
-      const r = frame.robots.find(r => r.id === follow);
-      if (r) { view.ox = canvas.width / 2 - r.x * view.scale; view.oy = canvas.height / 2 + r.y * view.scale; }
+  function draw2d() {
+    const m = page.map, f = page.frame, W = canvas.width, H = canvas.height;
+    if (m && !view.fitted) fit();
+    if (page.follow !== null && f) {
+      const r = f.robots.find((r) => r.id === page.follow);
+      if (r) { view.ox = W / 2 - r.x * view.scale; view.oy = H / 2 + r.y * view.scale; }
     }
-    ctx.fillStyle = "#f4f4f0"; ctx.fillRect(0, 0, canvas.width, canvas.height);
-    if (map) {
-      ctx.fillStyle = "#ffffff"; poly([[0, 0], [map.width, 0], [map.width, map.height], [0, map.height]]); ctx.fill();
-      ctx.strokeStyle = "#e4e4e4"; ctx.lineWidth = 1;
-      for (let x = 0; x <= map.width; x++) { ctx.beginPath(); ctx.moveTo(...toScreen([x, 0])); ctx.lineTo(...toScreen([x, map.height])); ctx.stroke(); }
-      for (let y = 0; y <= map.height; y++) { ctx.beginPath(); ctx.moveTo(...toScreen([0, y])); ctx.lineTo(...toScreen([map.width, y])); ctx.stroke(); }
-      ctx.fillStyle = "#20407a";
-      for (const w of map.walls) { poly(w.corners); ctx.fill(); }
-      ctx.strokeStyle = "#202020"; ctx.lineWidth = 2; poly([[0, 0], [map.width, 0], [map.width, map.height], [0, map.height]]); ctx.stroke();
-      ctx.fillStyle = "rgba(40,160,60,0.25)";
-      for (const [x, y, r] of map.targets) { const [sx, sy] = toScreen([x, y]); ctx.beginPath(); ctx.arc(sx, sy, r * view.scale, 0, 2 * Math.PI); ctx.fill(); }
-      ctx.fillStyle = "#e0a000";
-      for (const [x, y] of map.beacons) { const [sx, sy] = toScreen([x, y]); ctx.beginPath(); ctx.arc(sx, sy, 5, 0, 2 * Math.PI); ctx.fill(); }
+    ctx.fillStyle = COLORS.outside; ctx.fillRect(0, 0, W, H);
+    if (!m) return;
+    const lab = [[0, 0], [m.width, 0], [m.width, m.height], [0, m.height]];
+    ctx.fillStyle = COLORS.floor; poly(lab); ctx.fill();
+    if (page.grid) {
+      ctx.strokeStyle = COLORS.grid; ctx.lineWidth = 1; ctx.beginPath();
+      for (let x = 0; x <= m.width; x++) { ctx.moveTo(...toScreen([x, 0])); ctx.lineTo(...toScreen([x, m.height])); }
+      for (let y = 0; y <= m.height; y++) { ctx.moveTo(...toScreen([0, y])); ctx.lineTo(...toScreen([m.width, y])); }
+      ctx.stroke();
     }
-    if (frame) {
-      for (const r of frame.robots) {
-        const colliding = (r.flags & 1) !== 0;
-        ctx.fillStyle = colliding ? "#e02020" : (r.kind === 2 ? "#8a5a2b" : "#20a040");
-        poly(corners(r)); ctx.fill();
-        ctx.strokeStyle = "#000"; ctx.lineWidth = 1; ctx.stroke();
-        const [sx, sy] = toScreen([r.x, r.y]);
-        ctx.fillStyle = "#000"; ctx.fillText(names.get(r.id) || ("#" + r.id), sx + 6, sy - 6);
+    ctx.fillStyle = COLORS.target;
+    for (const [x, y, r] of m.targets) { disc(x, y, r * view.scale); ctx.fill(); }
+    ctx.fillStyle = COLORS.checkpoint;
+    m.checkpoints.forEach(([x, y, r], i) => {
+      disc(x, y, r * view.scale); ctx.fill();
+      const [sx, sy] = toScreen([x, y]); ctx.fillStyle = "#800080"; ctx.fillText(`checkpoint ${i + 1}`, sx + 4, sy + 14);
+      ctx.fillStyle = COLORS.checkpoint;
+    });
+    for (const w of m.walls) { ctx.fillStyle = w.obstacle ? COLORS.obstacle : COLORS.wall; poly(w.corners); ctx.fill(); }
+    ctx.strokeStyle = "#202020"; ctx.lineWidth = 2; poly(lab); ctx.stroke();
+    ctx.fillStyle = COLORS.beacon;
+    for (const [x, y] of m.beacons) { disc(x, y, 5); ctx.fill(); }
+    if (!f) return;
+    // Only what is on screen is drawn: with thousands of chairs most are off it when zoomed.
+    const margin = 2 * view.scale;
+    const visible = f.robots.filter((r) => {
+      const [sx, sy] = toScreen([r.x, r.y]);
+      return sx > -margin && sx < W + margin && sy > -margin && sy < H + margin;
+    });
+    if (page.cones && visible.length <= 2000) {
+      for (const r of visible) {
+        const sensors = page.roster.get(r.id)?.sensors || [];
+        sensors.forEach((s, k) => {
+          const d = r.proximity[k];
+          if (d === null || d === undefined) return;
+          ctx.fillStyle = d < 0.5 ? COLORS.coneNear : COLORS.cone;
+          poly(sensorCone(r, s, d)); ctx.fill();
+        });
       }
-      const collisions = frame.robots.reduce((a, r) => a + r.collisions, 0);
-      hud.textContent = `${map ? map.name : ""}  tick ${frame.tick}  t ${frame.simTime.toFixed(1)} s  ${STATES[frame.runState] || ""}  ` +
-        `${frame.robots.length} robots  ${collisions} contacts  ${fps} fps`;
     }
-    requestAnimationFrame(draw);
+    ctx.lineWidth = 1; ctx.strokeStyle = "#000";
+    for (const r of visible) {
+      const colliding = (r.flags & 1) !== 0;
+      ctx.fillStyle = colliding ? COLORS.collision : r.kind === 2 ? COLORS.door : r.kind === 1 ? COLORS.real : COLORS.chair;
+      poly(corners(r)); ctx.fill(); ctx.stroke();
+      // A line from the centre of movement to the front shows the heading.
+      ctx.beginPath(); ctx.moveTo(...toScreen([r.x, r.y])); ctx.lineTo(...toScreen(toLab(r, r.com * r.width, 0))); ctx.stroke();
+      if (r.id === page.follow || r.id === page.chair) { ctx.lineWidth = 3; ctx.strokeStyle = "#ffd000"; poly(corners(r)); ctx.stroke(); ctx.lineWidth = 1; ctx.strokeStyle = "#000"; }
+    }
+    if (page.labels && visible.length <= 300) {
+      ctx.fillStyle = "#000";
+      for (const r of visible) { const [sx, sy] = toScreen([r.x, r.y]); ctx.fillText(page.names.get(r.id) || `#${r.id}`, sx + 8, sy - 8); }
+    }
+  }
+
+  function drawHud() {
+    const f = page.frame;
+    if (!f) return;
+    const contacts = f.robots.reduce((a, r) => a + r.collisions, 0), colliding = f.robots.filter((r) => r.flags & 1).length;
+    hud.textContent = `${page.map ? page.map.name : ""} · tick ${f.tick} · t ${f.simTime.toFixed(1)} s · ${STATES[f.runState] || "?"} · ` +
+      `${page.tickRate.toFixed(0)} ticks/s · ${f.robots.length} robots · ${contacts} contacts (${colliding} now) · ${page.drawFps} fps`;
+  }
+
+  async function ensure3d() {
+    if (page.view3d || page.view3dError) return;
+    try {
+      const { createView3D } = await import("./view3d.js");
+      page.view3d = createView3D(canvas3d);
+      if (page.map) page.view3d.setMap(page.map);
+      page.view3d.setShowGrid(page.grid); page.view3d.setShowLabels(page.labels);
+      page.view3d.setCamera(page.camera, page.chair);
+      if (page.frame) page.view3d.update(page.frame, page.names);
+    } catch (e) {
+      page.view3dError = String(e); status.textContent = `3D view unavailable: ${e}`;
+    }
+  }
+
+  function setMode(mode) {
+    page.mode = mode;
+    canvas.style.display = mode === "2d" ? "block" : "none";
+    canvas3d.style.display = mode === "3d" ? "block" : "none";
+    $("camera").disabled = mode !== "3d";
+    if (mode === "3d") ensure3d();
+  }
+
+  function frameLoop(now) {
+    page.draws++;
+    if (now - drawsAt >= 1000) {
+      page.drawFps = Math.round(((page.draws - drawsSeen) * 1000) / (now - drawsAt));
+      page.frameFps = Math.round(((page.frames - framesSeen) * 1000) / (now - drawsAt));
+      drawsSeen = page.draws; framesSeen = page.frames; drawsAt = now;
+    }
+    if (page.mode === "2d") {
+      if (canvas.width !== canvas.clientWidth || canvas.height !== canvas.clientHeight) {
+        canvas.width = canvas.clientWidth; canvas.height = canvas.clientHeight; view.fitted = false;
+      }
+      draw2d();
+    } else if (page.view3d) {
+      page.view3d.render();
+    }
+    drawHud();
+    requestAnimationFrame(frameLoop);
+  }
+
+  function fillChairs() {
+    const sel = $("chair"), keep = page.chair;
+    sel.replaceChildren(new Option("(first chair)", ""));
+    for (const [id, e] of page.roster) sel.add(new Option(`${e.name || "#" + id} (${id})`, String(id)));
+    sel.value = keep === null ? "" : String(keep);
+  }
+
+  function onMessage(e) {
+    if (typeof e.data === "string") {
+      const m = JSON.parse(e.data);
+      if (m.type === "map") {
+        page.map = m; view.fitted = false;
+        if (page.view3d) page.view3d.setMap(m);
+      } else if (m.type === "roster") {
+        page.roster = new Map(m.robots.map((r) => [r.id, r]));
+        page.names = new Map(m.robots.map((r) => [r.id, r.name]));
+        fillChairs();
+      } else if (m.type === "ack") {
+        status.textContent = `${m.command}: done`;
+      } else if (m.type === "error") {
+        status.textContent = m.message;
+      }
+      return;
+    }
+    const f = decodeFrame(e.data);
+    if (!f) return;
+    page.frame = f; page.frames++;
+    const now = performance.now();
+    ticks.push([now, f.tick]);
+    while (ticks.length > 2 && now - ticks[0][0] > 1000) ticks.shift();
+    if (ticks.length > 1) {
+      const [t0, k0] = ticks[0], [t1, k1] = ticks[ticks.length - 1];
+      page.tickRate = t1 > t0 ? ((k1 - k0) * 1000) / (t1 - t0) : 0;
+    }
+    if (page.view3d) page.view3d.update(f, page.names);
   }
 
   function connect() {
     const ws = new WebSocket(`ws://${location.host}/ws`);
     ws.binaryType = "arraybuffer";
-    window.iwsimSocket = ws;
-    ws.onmessage = (e) => {
-      if (typeof e.data === "string") {
-        const m = JSON.parse(e.data);
-        if (m.type === "map") { map = m; view.fitted = false; }
-        else if (m.type === "roster") names = new Map(m.names);
-        else if (m.type === "error") hud.textContent = m.message;
-        return;
-      }
-      const f = decodeFrame(e.data);
-      if (f) { frame = f; frames++; window.iwsimFrame = f; }
-      const now = performance.now();
-      if (now - fpsAt > 1000) { fps = frames; frames = 0; fpsAt = now; }
-    };
-    ws.onclose = () => setTimeout(connect, 1000);
+    page.socket = ws;
+    ws.onmessage = onMessage;
+    ws.onclose = () => { status.textContent = "disconnected: retrying"; setTimeout(connect, 1000); };
   }
 
+  // 2D mouse: wheel zooms about the pointer, drag pans, a click selects and follows a chair.
   let drag = null;
   canvas.addEventListener("wheel", (e) => {
     e.preventDefault();
@@ -118,19 +267,40 @@ if (typeof document !== "undefined") {
   canvas.addEventListener("mousemove", (e) => {
     if (!drag) return;
     view.ox = drag[2] + e.offsetX - drag[0]; view.oy = drag[3] + e.offsetY - drag[1];
-    if (Math.abs(e.offsetX - drag[0]) + Math.abs(e.offsetY - drag[1]) > 3) { drag[4] = true; follow = null; }
+    if (Math.abs(e.offsetX - drag[0]) + Math.abs(e.offsetY - drag[1]) > 3) { drag[4] = true; page.follow = null; }
   });
   canvas.addEventListener("mouseup", (e) => {
-    if (drag && !drag[4] && frame) {
+    if (drag && !drag[4] && page.frame) {
       const x = (e.offsetX - view.ox) / view.scale, y = (view.oy - e.offsetY) / view.scale;
-      const hit = frame.robots.find(r => Math.hypot(r.x - x, r.y - y) < Math.max(r.width, r.height));
-      follow = hit ? hit.id : null;
+      const hit = page.frame.robots.find((r) => Math.hypot(r.x - x, r.y - y) < Math.max(r.width, r.height));
+      page.follow = hit ? hit.id : null;
+      if (hit) { page.chair = hit.id; $("chair").value = String(hit.id); if (page.view3d) page.view3d.setCamera(page.camera, hit.id); }
     }
     drag = null;
   });
   for (const b of document.querySelectorAll("button[data-cmd]")) {
-    b.addEventListener("click", () => window.iwsimSocket && window.iwsimSocket.send(b.dataset.cmd));
+    b.addEventListener("click", () => {
+      if (!page.socket || page.socket.readyState !== 1) return;
+      const cmd = b.dataset.cmd === "remove" ? `remove:${page.chair ?? ""}` : b.dataset.cmd;
+      page.socket.send(cmd);
+    });
   }
+  for (const b of document.querySelectorAll("button[data-view]")) b.addEventListener("click", () => setMode(b.dataset.view));
+  $("camera").value = page.camera;
+  $("camera").addEventListener("change", (e) => { page.camera = e.target.value; if (page.view3d) page.view3d.setCamera(page.camera, page.chair); });
+  $("chair").addEventListener("change", (e) => {
+    page.chair = e.target.value === "" ? null : Number(e.target.value);
+    page.follow = page.chair;
+    if (page.view3d) page.view3d.setCamera(page.camera, page.chair);
+  });
+  for (const [id, key] of [["grid", "grid"], ["labels", "labels"], ["cones", "cones"]]) {
+    $(id).checked = page[key];
+    $(id).addEventListener("change", (e) => {
+      page[key] = e.target.checked;
+      if (page.view3d) { page.view3d.setShowGrid(page.grid); page.view3d.setShowLabels(page.labels); }
+    });
+  }
+  setMode(page.mode);
   connect();
-  requestAnimationFrame(draw);
+  requestAnimationFrame(frameLoop);
 }

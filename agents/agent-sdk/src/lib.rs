@@ -30,7 +30,7 @@ use ipc_services::iceoryx2::prelude::PortFactory as _;
 use ipc_services::{Role, SLICE_ALLOCATION, ServicesError, Session, Svc};
 use ipc_types::{
     ActionBlock, ActionHeader, MapHeader, MapItem, Refusal, RegisterKind, RegisterRequest, RegisterResponse,
-    RobotRegistration, RobotState, RunState, SensorBlock, TickHeader, WorldHeader,
+    RobotRegistration, RobotSensors, RobotState, RunState, SensorBlock, TickHeader, WorldHeader,
 };
 
 /// How long an agent waits for a tick before it checks the hub is still alive.
@@ -141,6 +141,7 @@ pub struct Observer {
     session: Session,
     _node: Node<Svc>,
     world: Subscriber<Svc, [RobotState], WorldHeader>,
+    sensors: Subscriber<Svc, [RobotSensors], ()>,
     map_svc: ipc_services::MapService,
 }
 
@@ -156,19 +157,25 @@ impl Observer {
         let session = Session::new(session)?;
         let node = session.node(name)?;
         let start = Instant::now();
-        let (world_svc, map_svc) = loop {
-            match (session.world(&node, Role::Client), session.map(&node, Role::Client)) {
-                (Ok(w), Ok(m)) => break (w, m),
-                (Err(ServicesError::NotRunning { .. }), _) | (_, Err(ServicesError::NotRunning { .. }))
-                    if start.elapsed() < timeout =>
-                {
+        let (world_svc, map_svc, sensors_svc) = loop {
+            let opened = (|| {
+                Ok((
+                    session.world(&node, Role::Client)?,
+                    session.map(&node, Role::Client)?,
+                    session.robot_sensors(&node, Role::Client)?,
+                ))
+            })();
+            match opened {
+                Ok(services) => break services,
+                Err(ServicesError::NotRunning { .. }) if start.elapsed() < timeout => {
                     std::thread::sleep(Duration::from_millis(10));
                 }
-                (Err(e), _) | (_, Err(e)) => return Err(e.into()),
+                Err(e) => return Err(e.into()),
             }
         };
         let world = world_svc.subscriber_builder().create().map_err(ipc("create a world subscriber"))?;
-        Ok(Self { session, _node: node, world, map_svc })
+        let sensors = sensors_svc.subscriber_builder().create().map_err(ipc("create a robot-sensors subscriber"))?;
+        Ok(Self { session, _node: node, world, sensors, map_svc })
     }
 
     /// The newest world snapshot if one arrived since the last call.
@@ -176,6 +183,16 @@ impl Observer {
         let mut newest = None;
         while let Some(s) = self.world.receive().map_err(ipc("receive the world"))? {
             newest = Some((*s.user_header(), s.payload().to_vec()));
+        }
+        Ok(newest)
+    }
+
+    /// Every robot's proximity-sensor geometry, if the hub republished it since the last call
+    /// (it does when the set of robots changes).
+    pub fn try_robot_sensors(&self) -> Result<Option<Vec<RobotSensors>>, AgentError> {
+        let mut newest = None;
+        while let Some(s) = self.sensors.receive().map_err(ipc("receive robot sensors"))? {
+            newest = Some(s.payload().to_vec());
         }
         Ok(newest)
     }

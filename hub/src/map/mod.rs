@@ -45,6 +45,16 @@ pub struct Wall {
     pub corners: Vec<Point2<f64>>,
 }
 
+impl Wall {
+    /// An axis-aligned rectangle, corners counter-clockwise from the lower left.
+    pub fn rectangle(x0: f64, y0: f64, x1: f64, y1: f64, height_m: f64) -> Self {
+        Self {
+            height_m,
+            corners: vec![Point2::new(x0, y0), Point2::new(x1, y0), Point2::new(x1, y1), Point2::new(x0, y1)],
+        }
+    }
+}
+
 /// A beacon the beacon sensor can take bearings to.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Beacon {

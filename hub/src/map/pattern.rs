@@ -15,8 +15,6 @@
 //! For a 28 m × 14 m lab (14 × 7 cells) the rows run from `Pos="0"` to `Pos="12"` and the
 //! patterns are 41 characters long.
 
-use nalgebra::Point2;
-
 use super::Wall;
 
 /// Side of one maze cell, metres (Ciber-Rato's `PATHCUBESIZE`).
@@ -73,9 +71,8 @@ pub fn expand_row(pos: i64, pattern: &str, height_m: f64) -> Vec<Wall> {
     walls
 }
 
-/// An axis-aligned rectangle as a wall, corners counter-clockwise from the lower left.
 fn rectangle(x0: f64, y0: f64, x1: f64, y1: f64, height_m: f64) -> Wall {
-    Wall { height_m, corners: vec![Point2::new(x0, y0), Point2::new(x1, y0), Point2::new(x1, y1), Point2::new(x0, y1)] }
+    Wall::rectangle(x0, y0, x1, y1, height_m)
 }
 
 #[cfg(test)]

@@ -7,10 +7,11 @@ use std::collections::BTreeMap;
 use bytemuck::Zeroable;
 use ipc_types::{
     ACT_MOTORS, ACT_POSE, ACT_SAY, ActionBlock, COLLISION, Command, FixedName, HAS_COMPASS, HAS_GPS, HAS_GROUND,
-    HubParams, InboxEntry, MAP_BEACON, MAP_CORNER, MAP_GRID, MAP_TARGET, MAP_WALL, MAX_AGENTS, MAX_INBOX_MESSAGES,
-    MAX_ROBOTS, MapHeader, MapItem, REG_HAS_POSE, ROBOT_COLLISION, ROBOT_FROZEN, ROBOT_LAGGING, Refusal,
-    RobotKind as WireKind, RobotRegistration, RobotState, RunState, SENSOR_BEACON, SENSOR_COLLISION, SENSOR_COMPASS,
-    SENSOR_GPS, SENSOR_GROUND, SENSOR_OBSTACLE, SensorBlock, WorldHeader,
+    HubParams, InboxEntry, MAP_BEACON, MAP_CHECKPOINT, MAP_CORNER, MAP_GRID, MAP_TARGET, MAP_WALL, MAX_AGENTS,
+    MAX_INBOX_MESSAGES, MAX_PROXIMITY, MAX_ROBOTS, MapHeader, MapItem, REG_HAS_POSE, ROBOT_COLLISION, ROBOT_FROZEN,
+    ROBOT_LAGGING, Refusal, RobotKind as WireKind, RobotRegistration, RobotSensors, RobotState, RunState,
+    SENSOR_BEACON, SENSOR_COLLISION, SENSOR_COMPASS, SENSOR_GPS, SENSOR_GROUND, SENSOR_OBSTACLE, SensorBlock,
+    SensorGeometry, WorldHeader,
 };
 
 use crate::map::{Grid, Lab, Params};
@@ -79,6 +80,10 @@ pub struct HubCore {
     pending: Vec<Action>,
     /// Steps left to take while paused (from `Step` commands).
     single_steps: u32,
+    /// Walls from this index on are a scenario's obstacles (the map's walls come first).
+    obstacle_from: usize,
+    /// A scenario's checkpoints: x, y, radius in metres.
+    checkpoints: Vec<[f64; 3]>,
 }
 
 impl HubCore {
@@ -110,12 +115,21 @@ impl HubCore {
             max_robots: MAX_ROBOTS,
             pending: Vec::new(),
             single_steps: 0,
+            obstacle_from: lab.walls.len(),
+            checkpoints: Vec::new(),
         })
     }
 
     /// Lowers how many robots the hub accepts (never above `MAX_ROBOTS`).
     pub fn set_max_robots(&mut self, max: usize) {
         self.max_robots = max.min(MAX_ROBOTS);
+    }
+
+    /// Marks the lab's walls from `obstacle_from` on as a scenario's obstacles and sets its
+    /// checkpoints; both are only published in the map (the walls are already in the world).
+    pub fn set_scenario(&mut self, obstacle_from: usize, checkpoints: Vec<[f64; 3]>) {
+        self.obstacle_from = obstacle_from;
+        self.checkpoints = checkpoints;
     }
 
     /// The world.
@@ -504,7 +518,35 @@ impl HubCore {
                 agent_id: e.agent_id,
                 motor_out: [r.motor_out[0] as f32, r.motor_out[1] as f32],
                 name: FixedName::new(&r.spec.name).unwrap_or(FixedName::EMPTY),
+                proximity_m: {
+                    let mut p = [f32::NAN; MAX_PROXIMITY];
+                    for (o, v) in p.iter_mut().zip(r.readings.proximity()) {
+                        *o = *v as f32;
+                    }
+                    p
+                },
             })
+        })
+    }
+
+    /// Every robot's proximity-sensor geometry, in id order.
+    pub fn robot_sensors(&self) -> impl Iterator<Item = RobotSensors> + '_ {
+        let default_range = self.world.params().proximity_range_m;
+        self.robots.iter().filter_map(move |(&id, e)| {
+            let r = self.world.robot(e.handle)?;
+            let specs = if r.spec.sensors.is_empty() { r.spec.default_sensors() } else { r.spec.sensors.clone() };
+            let mut out = RobotSensors { robot_id: id, count: 0, sensors: [SensorGeometry::default(); MAX_PROXIMITY] };
+            for (o, s) in out.sensors.iter_mut().zip(&specs) {
+                *o = SensorGeometry {
+                    x_m: s.x_m as f32,
+                    y_m: s.y_m as f32,
+                    angle_deg: s.angle_rad.to_degrees() as f32,
+                    cone_deg: s.cone_rad.to_degrees() as f32,
+                    range_m: s.range_m.unwrap_or(default_range) as f32,
+                };
+                out.count += 1;
+            }
+            Some(out)
         })
     }
 
@@ -606,7 +648,8 @@ impl HubCore {
         let mut items = Vec::new();
         let item = |kind, index: usize, a, b, c| MapItem { kind, index: index as u32, a, b, c };
         for (i, w) in lab.walls.iter().enumerate() {
-            items.push(item(MAP_WALL, i, w.height_m, w.corners.len() as f64, 0.0));
+            let obstacle = if i >= self.obstacle_from { 1.0 } else { 0.0 };
+            items.push(item(MAP_WALL, i, w.height_m, w.corners.len() as f64, obstacle));
             for c in &w.corners {
                 items.push(item(MAP_CORNER, i, c.x, c.y, 0.0));
             }
@@ -619,6 +662,9 @@ impl HubCore {
         }
         for (i, p) in self.grid.poses.iter().enumerate() {
             items.push(item(MAP_GRID, i, p.pos.x, p.pos.y, p.heading_deg));
+        }
+        for (i, [x, y, r]) in self.checkpoints.iter().enumerate() {
+            items.push(item(MAP_CHECKPOINT, i, *x, *y, *r));
         }
         let header = MapHeader {
             width_m: lab.width_m,

@@ -17,7 +17,8 @@ use ipc_services::iceoryx2::port::update_connections::UpdateConnections as _;
 use ipc_services::iceoryx2::prelude::FileDescriptorBased;
 use ipc_services::{Role, SLICE_ALLOCATION, ServicesError, Session, Svc, clean_dead_nodes};
 use ipc_types::{
-    Command, ControlResponse, Refusal, RegisterKind, RegisterResponse, RobotState, RunState, SensorBlock, TickHeader,
+    Command, ControlResponse, Refusal, RegisterKind, RegisterResponse, RobotSensors, RobotState, RunState, SensorBlock,
+    TickHeader,
 };
 
 use self::core::{HubCore, Mode};
@@ -49,6 +50,10 @@ pub struct HubConfig {
     pub tick_limit: u64,
     /// Robots the hub accepts (at most `ipc_types::MAX_ROBOTS`).
     pub max_robots: usize,
+    /// The lab's walls from this index on are a scenario's obstacles (`lab.walls.len()`: none).
+    pub obstacle_from: usize,
+    /// A scenario's checkpoints, x, y, radius in metres, published in the map for viewers.
+    pub checkpoints: Vec<[f64; 3]>,
 }
 
 /// Why the hub stopped with an error.
@@ -151,9 +156,11 @@ pub fn run(cfg: HubConfig) -> Result<HubOutcome, HubError> {
     let node = session.node("iwsim-hub")?;
     let mut core = HubCore::new(&cfg.lab, cfg.grid.clone(), cfg.params.clone(), cfg.seed, cfg.mode, cfg.tick_limit)?;
     core.set_max_robots(cfg.max_robots);
+    core.set_scenario(cfg.obstacle_from, cfg.checkpoints.clone());
 
     let world_svc = session.world(&node, Role::Hub)?;
     let map_svc = session.map(&node, Role::Hub)?;
+    let sensors_svc = session.robot_sensors(&node, Role::Hub)?;
     let actions_svc = session.actions(&node, Role::Hub)?;
     let register_svc = session.register(&node, Role::Hub)?;
     let control_svc = session.control(&node, Role::Hub)?;
@@ -166,6 +173,13 @@ pub fn run(cfg: HubConfig) -> Result<HubOutcome, HubError> {
         .allocation_strategy(SLICE_ALLOCATION)
         .create()
         .map_err(ipc("create the world publisher"))?;
+    let sensors_pub = sensors_svc
+        .publisher_builder()
+        .initial_max_slice_len(64)
+        .allocation_strategy(SLICE_ALLOCATION)
+        .create()
+        .map_err(ipc("create the robot-sensors publisher"))?;
+    let mut roster = Roster { publisher: sensors_pub, ids: None, scratch: Vec::new() };
     let (map_header, items) =
         core.map_items(cfg.params.cycle_ms, cfg.deadline.as_millis().min(u32::MAX as u128) as u32);
     let map_pub = map_svc
@@ -228,6 +242,7 @@ pub fn run(cfg: HubConfig) -> Result<HubOutcome, HubError> {
                 core.prime_sensors();
             }
             publish_tick(&core, &world_pub, &agents, &mut states, &mut blocks)?;
+            roster.publish_if_changed(&core, &states)?;
             tick_notifier.notify().map_err(ipc("ring the tick"))?;
             publish = false;
             // The deadline runs from the tick's first publication: re-publishing the same tick
@@ -266,6 +281,7 @@ pub fn run(cfg: HubConfig) -> Result<HubOutcome, HubError> {
         // at its connections: the map is sent once, and the world not while paused.
         let _ = map_pub.update_connections();
         let _ = world_pub.update_connections();
+        let _ = roster.publisher.update_connections();
         dead_agents.clear();
         dead_agents.extend(ready.iter().filter(|&&i| i > 0).map(|&i| fd_agents[i - 1]));
 
@@ -460,10 +476,33 @@ pub fn run(cfg: HubConfig) -> Result<HubOutcome, HubError> {
     outcome.run_s = first_step.map_or(0.0, |t| t.elapsed().as_secs_f64());
     outcome.state_hash = core.world().state_hash();
     outcome.robots = core.robot_states().map(|s| (s.id, s.x_m, s.y_m, s.heading_deg, s.flags)).collect();
-    drop((agents, world_pub, map_pub, actions_sub, register_server, control_server, tick_notifier, doorbell));
-    drop((world_svc, map_svc, actions_svc, register_svc, control_svc, tick_svc, doorbell_svc, node));
+    drop((agents, world_pub, map_pub, roster, actions_sub, register_server, control_server, tick_notifier, doorbell));
+    drop((world_svc, map_svc, sensors_svc, actions_svc, register_svc, control_svc, tick_svc, doorbell_svc, node));
     session.release_if_unused();
     Ok(outcome)
+}
+
+/// The robot-sensors publisher and the robot ids it last published for.
+struct Roster {
+    publisher: Publisher<Svc, [RobotSensors], ()>,
+    ids: Option<Vec<u32>>,
+    scratch: Vec<RobotSensors>,
+}
+
+impl Roster {
+    /// Republishes every robot's sensor geometry when the set of robots has changed since the
+    /// last time (a robot's sensors are fixed at registration, so ids are enough).
+    fn publish_if_changed(&mut self, core: &HubCore, states: &[RobotState]) -> Result<(), HubError> {
+        if self.ids.as_ref().is_some_and(|ids| ids.iter().copied().eq(states.iter().map(|r| r.id))) {
+            return Ok(());
+        }
+        self.ids = Some(states.iter().map(|r| r.id).collect());
+        self.scratch.clear();
+        self.scratch.extend(core.robot_sensors());
+        let sample = self.publisher.loan_slice_uninit(self.scratch.len()).map_err(ipc("loan robot sensors"))?;
+        sample.write_from_slice(&self.scratch).send().map_err(ipc("send robot sensors"))?;
+        Ok(())
+    }
 }
 
 fn publish_tick(
