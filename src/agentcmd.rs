@@ -1,49 +1,211 @@
-//! `iwsim agent …`: agents built on the agent SDK.
+//! `iwsim agent wheelchair`: the thesis's "Wheelchair Robotic Agent" — several chairs in one
+//! process, each with its body, motors, sensors, start pose and a script (constant powers or
+//! waypoints), on the agent SDK.
 
+use std::path::Path;
 use std::process::ExitCode;
 
+use agent_sdk::log::RobotLog;
 use agent_sdk::{Agent, Wait};
-use ipc_types::{ActionBlock, REG_HAS_POSE, RobotRegistration};
+use anyhow::Context as _;
+use ipc_types::{ActionBlock, MAX_PROXIMITY, REG_HAS_POSE, RobotRegistration, SensorSpec};
+use serde::Deserialize;
 
 use crate::cli::WheelchairArgs;
 
-/// `iwsim agent wheelchair`: registers robots and drives them with constant powers.
+/// One chair of a `--config` file.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ChairConfig {
+    /// Name (also its log's file name).
+    pub name: String,
+    /// Requested id (0: any).
+    #[serde(default)]
+    pub id: u32,
+    /// Start pose x, y metres, heading degrees (default: a grid slot).
+    #[serde(default)]
+    pub pose: Option<[f64; 3]>,
+    /// Length, width (wheel track), centre of movement.
+    #[serde(default = "default_body")]
+    pub body: [f64; 3],
+    /// Speed at full power, m/s.
+    #[serde(default = "default_speed")]
+    pub max_speed: f64,
+    /// Motor filter (thesis chapter 4).
+    #[serde(default = "default_curve")]
+    pub accel_curve: f64,
+    /// Proximity sensors: x, y, angle, cone, range (empty: thesis Table 4.5's four).
+    #[serde(default)]
+    pub sensors: Vec<[f64; 5]>,
+    /// Script: constant powers.
+    #[serde(default)]
+    pub powers: Option<[f64; 2]>,
+    /// Script: points to drive to in turn, then stop.
+    #[serde(default)]
+    pub waypoints: Vec<[f64; 2]>,
+    /// Power on the way to waypoints.
+    #[serde(default = "default_cruise")]
+    pub speed: f64,
+    /// Seconds to stand still before the script starts.
+    #[serde(default)]
+    pub start_s: f64,
+}
+
+fn default_body() -> [f64; 3] {
+    [1.0, 1.0, 0.5]
+}
+fn default_speed() -> f64 {
+    0.5
+}
+fn default_curve() -> f64 {
+    0.5
+}
+fn default_cruise() -> f64 {
+    0.5
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct ConfigFile {
+    chairs: Vec<ChairConfig>,
+}
+
+/// Reads a `--config` file.
+pub fn read_config(path: &Path) -> anyhow::Result<Vec<ChairConfig>> {
+    let text = std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+    let cfg: ConfigFile = toml::from_str(&text).map_err(|e| anyhow::anyhow!("{}: {}", path.display(), e))?;
+    anyhow::ensure!(!cfg.chairs.is_empty(), "{}: no [[chairs]]", path.display());
+    for c in &cfg.chairs {
+        anyhow::ensure!(c.sensors.len() <= MAX_PROXIMITY, "{}: chair {}: at most 8 sensors", path.display(), c.name);
+        anyhow::ensure!(
+            c.powers.is_none() || c.waypoints.is_empty(),
+            "{}: chair {}: give powers or waypoints, not both",
+            path.display(),
+            c.name
+        );
+    }
+    Ok(cfg.chairs)
+}
+
+/// The chairs the command line describes.
+fn chairs_from_args(args: &WheelchairArgs) -> Vec<ChairConfig> {
+    (0..args.robots)
+        .map(|k| ChairConfig {
+            name: format!("{}{}", args.name, k + 1),
+            id: if args.id > 0 { args.id + k as u32 } else { 0 },
+            pose: args.pose.map(|[x, y, dir]| {
+                [x + args.spacing * (k % 10) as f64, y + args.spacing * (k / 10) as f64, dir]
+            }),
+            body: [args.width, args.height, args.com],
+            max_speed: args.max_speed,
+            accel_curve: args.accel_curve,
+            sensors: Vec::new(),
+            powers: Some(args.powers),
+            waypoints: Vec::new(),
+            speed: default_cruise(),
+            start_s: 0.0,
+        })
+        .collect()
+}
+
+fn registration(c: &ChairConfig) -> RobotRegistration {
+    let mut reg = RobotRegistration::new(&c.name);
+    reg.requested_id = c.id;
+    [reg.width_m, reg.height_m, reg.com] = c.body;
+    reg.max_speed_mps = c.max_speed;
+    reg.accel_curve = c.accel_curve;
+    if let Some(p) = c.pose {
+        reg.flags |= REG_HAS_POSE;
+        reg.pose = p;
+    }
+    for (k, [x_m, y_m, angle_deg, cone_deg, range_m]) in c.sensors.iter().copied().enumerate() {
+        reg.sensors[k] = SensorSpec { x_m, y_m, angle_deg, cone_deg, range_m };
+    }
+    reg.sensor_count = c.sensors.len() as u32;
+    reg
+}
+
+/// Powers that steer a chair at `pose` to `goal`: turn on the spot when far off course,
+/// otherwise drive with a proportional correction. `None` once within 0.15 m.
+pub fn toward(pose: [f64; 3], goal: [f64; 2], speed: f64) -> Option<[f64; 2]> {
+    let (dx, dy) = (goal[0] - pose[0], goal[1] - pose[1]);
+    if dx.hypot(dy) < 0.15 {
+        return None;
+    }
+    let mut err = dy.atan2(dx) - pose[2].to_radians();
+    err = (err + std::f64::consts::PI).rem_euclid(std::f64::consts::TAU) - std::f64::consts::PI;
+    if err.abs() > 0.6 {
+        let t = 0.3 * err.signum();
+        return Some([-t, t]);
+    }
+    let turn = (0.8 * err).clamp(-0.3, 0.3);
+    Some([(speed - turn).clamp(-1.0, 1.0), (speed + turn).clamp(-1.0, 1.0)])
+}
+
+/// `iwsim agent wheelchair`.
 pub fn wheelchair(args: &WheelchairArgs) -> anyhow::Result<ExitCode> {
+    let chairs = match &args.config {
+        Some(path) => read_config(path)?,
+        None => chairs_from_args(args),
+    };
     let timeout = std::time::Duration::from_secs_f64(args.connect_timeout.max(0.0));
     let mut agent = Agent::connect_within(&args.session, &format!("wheelchair-{}", std::process::id()), timeout)?;
     // Close the agent on every path, errors included: the last process of a session removes
     // its files, even when the hub died first.
-    let result = drive(&mut agent, args);
+    let result = drive(&mut agent, args, &chairs);
     agent.close();
     result
 }
 
-fn drive(agent: &mut Agent, args: &WheelchairArgs) -> anyhow::Result<ExitCode> {
+fn drive(agent: &mut Agent, args: &WheelchairArgs, chairs: &[ChairConfig]) -> anyhow::Result<ExitCode> {
     let mut ids = Vec::new();
-    for k in 0..args.robots {
-        let mut reg = RobotRegistration::new(&format!("{}{}", args.name, k + 1));
-        reg.requested_id = if args.id > 0 { args.id + k as u32 } else { 0 };
-        reg.width_m = args.width;
-        reg.height_m = args.height;
-        reg.com = args.com;
-        reg.max_speed_mps = args.max_speed;
-        reg.accel_curve = args.accel_curve;
-        if let Some([x, y, dir]) = args.pose {
-            reg.flags |= REG_HAS_POSE;
-            reg.pose = [x + args.spacing * (k % 10) as f64, y + args.spacing * (k / 10) as f64, dir];
-        }
-        ids.push(agent.register(&reg)?);
+    for c in chairs {
+        ids.push(agent.register(&registration(c)).with_context(|| format!("registering {}", c.name))?);
     }
     agent.ready()?;
     eprintln!("iwsim agent wheelchair: agent {} drives robots {:?} in session {:?}", agent.id(), ids, args.session);
-    let actions: Vec<ActionBlock> =
-        ids.iter().map(|&id| ActionBlock::motors(id, args.powers[0], args.powers[1])).collect();
+    // Logs are opened at the first tick, when the sensor blocks say how many sensors each
+    // chair has.
+    let mut logs: Vec<Option<RobotLog>> = chairs.iter().map(|_| None).collect();
     let wait = if args.busy_poll { Wait::BusyPoll } else { Wait::Blocking };
+    let mut next_waypoint = vec![0usize; chairs.len()];
+    let mut actions: Vec<ActionBlock> = Vec::with_capacity(chairs.len());
     let mut answered = 0u64;
     let mut latencies_ns = Vec::new();
     while let Some(tick) = agent.wait_tick(wait)? {
-        let t = tick.tick;
-        agent.send(t, &actions)?;
+        actions.clear();
+        for (k, (c, &id)) in chairs.iter().zip(&ids).enumerate() {
+            let Some(b) = agent.sensors().get(k) else { continue };
+            let powers = if tick.sim_time_s < c.start_s {
+                [0.0, 0.0]
+            } else if let Some(p) = c.powers {
+                p
+            } else {
+                loop {
+                    let Some(&goal) = c.waypoints.get(next_waypoint[k]) else { break [0.0, 0.0] };
+                    match toward(b.pose, goal, c.speed) {
+                        Some(p) => break p,
+                        None => {
+                            eprintln!("iwsim agent wheelchair: {} reached waypoint {:?} at t {:.1} s", c.name, goal, tick.sim_time_s);
+                            next_waypoint[k] += 1;
+                        }
+                    }
+                }
+            };
+            if let Some(dir) = &args.log {
+                if logs[k].is_none() {
+                    logs[k] = Some(
+                        RobotLog::create(dir, &c.name, b.proximity_count as usize)
+                            .with_context(|| format!("creating a log in {}", dir.display()))?,
+                    );
+                }
+                if let Some(log) = logs[k].as_mut() {
+                    log.row(b, tick.sim_time_s, powers)?;
+                }
+            }
+            actions.push(ActionBlock::motors(id, powers[0], powers[1]));
+        }
+        agent.send(tick.tick, &actions)?;
         if args.report_latency {
             latencies_ns.push(tick.latency_ns);
         }
@@ -52,6 +214,9 @@ fn drive(agent: &mut Agent, args: &WheelchairArgs) -> anyhow::Result<ExitCode> {
             break;
         }
     }
+    for log in logs.iter_mut().flatten() {
+        log.flush()?;
+    }
     eprintln!("iwsim agent wheelchair: answered {answered} ticks");
     if args.report_latency {
         // The first ticks include connection set-up; they are not the steady state.
@@ -59,4 +224,35 @@ fn drive(agent: &mut Agent, args: &WheelchairArgs) -> anyhow::Result<ExitCode> {
         println!("{}", crate::bench::Percentiles::of_ns(steady).json());
     }
     Ok(ExitCode::SUCCESS)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn waypoint_steering_turns_first_then_drives() {
+        // Facing +x, goal behind: turn on the spot (left wheel back, right forward for +).
+        assert_eq!(toward([0.0, 0.0, 0.0], [-5.0, 0.1], 0.5).map(|p| p[0] < 0.0 && p[1] > 0.0), Some(true));
+        // Facing the goal: both wheels forward at the cruise power.
+        assert_eq!(toward([0.0, 0.0, 0.0], [5.0, 0.0], 0.5), Some([0.5, 0.5]));
+        // Arrived.
+        assert_eq!(toward([5.0, 0.05, 0.0], [5.0, 0.0], 0.5), None);
+    }
+
+    #[test]
+    fn config_files_are_checked() {
+        let dir = std::env::temp_dir().join(format!("iwsim-wcfg-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).expect("dir");
+        let p = dir.join("c.toml");
+        std::fs::write(&p, "[[chairs]]\nname = \"a\"\npowers = [1, 1]\nwaypoints = [[1, 2]]\n").expect("write");
+        assert!(read_config(&p).expect_err("both").to_string().contains("not both"));
+        std::fs::write(&p, "[[chairs]]\nname = \"a\"\nbody = [1, 2]\n").expect("write");
+        let e = read_config(&p).expect_err("short body").to_string();
+        assert!(e.contains("c.toml") && e.contains("line 3"), "{e}");
+        std::fs::write(&p, "[[chairs]]\nname = \"a\"\npose = [10, 6.1, 0]\nwaypoints = [[12, 6.1]]\n").expect("write");
+        let c = read_config(&p).expect("good");
+        assert_eq!((c[0].pose, c[0].waypoints.len(), c[0].body), (Some([10.0, 6.1, 0.0]), 1, [1.0, 1.0, 0.5]));
+        let _ = std::fs::remove_dir_all(dir);
+    }
 }

@@ -139,7 +139,7 @@ fn iwsim_exe() -> anyhow::Result<std::path::PathBuf> {
     std::env::current_exe().context("finding the iwsim executable")
 }
 
-fn spawn_self(args: &[String]) -> anyhow::Result<std::process::Child> {
+pub(crate) fn spawn_self(args: &[String]) -> anyhow::Result<std::process::Child> {
     std::process::Command::new(iwsim_exe()?)
         .args(args)
         .stdin(std::process::Stdio::null())
@@ -149,7 +149,7 @@ fn spawn_self(args: &[String]) -> anyhow::Result<std::process::Child> {
         .context("starting an iwsim process")
 }
 
-fn finish(child: std::process::Child, what: &str) -> anyhow::Result<String> {
+pub(crate) fn finish(child: std::process::Child, what: &str) -> anyhow::Result<String> {
     let out = child.wait_with_output().with_context(|| format!("waiting for the {what}"))?;
     let stdout = String::from_utf8_lossy(&out.stdout).into_owned();
     if !out.status.success() {

@@ -28,8 +28,14 @@ pub enum Command {
     Hub(HubArgs),
     /// Serves the Ciber-Rato / Intellwheels UDP/XML protocol to remote agents and viewers.
     Udp(UdpArgs),
-    /// Serves a live view of a session to browsers (2D top view).
+    /// Serves a live view of a session to browsers (2D top view and 3D).
     View(ViewArgs),
+    /// Draws a run log's trajectory over the map and its speed over time as SVG.
+    Plot(plot::PlotArgs),
+    /// Runs a scenario (a TOML file or builtin:NAME): the hub, its agents and the viewer as
+    /// processes, then a summary from the robots' logs. Exit code 0 when the expected outcome
+    /// holds. Built in: dynamics, slalom, door, corridor-swap, demo.
+    Run(RunArgs),
     /// Runs an agent process.
     Agent {
         /// Which agent.
@@ -98,6 +104,38 @@ pub struct HubArgs {
     pub checkpoint: Vec<String>,
 }
 
+/// Options of `iwsim run`.
+#[derive(Debug, Args, Clone)]
+pub struct RunArgs {
+    /// The scenario: a TOML file, or builtin:dynamics, builtin:slalom, builtin:door,
+    /// builtin:corridor-swap, builtin:demo.
+    pub scenario: String,
+    /// Step as fast as the agents allow (deterministic) instead of in real time.
+    #[arg(long)]
+    pub lockstep: bool,
+    /// No viewer.
+    #[arg(long)]
+    pub headless: bool,
+    /// Seed (default: the scenario's).
+    #[arg(long, conflicts_with = "seeds")]
+    pub seed: Option<u64>,
+    /// A batch of runs, one per seed, A..B inclusive (headless), with a table at the end.
+    #[arg(long, value_name = "A..B")]
+    pub seeds: Option<String>,
+    /// Where logs and summary.json go (default runs/<scenario>; a batch uses seed-N/ below it).
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    /// Where the viewer serves (use 0.0.0.0:8080 to watch from another machine).
+    #[arg(long, default_value = "127.0.0.1:8080")]
+    pub http: std::net::SocketAddr,
+    /// Let the viewer's page start, pause, step and stop the run.
+    #[arg(long)]
+    pub allow_control: bool,
+    /// Print only the summary.
+    #[arg(long)]
+    pub quiet: bool,
+}
+
 /// Options of `iwsim udp`.
 #[derive(Debug, Args, Clone)]
 pub struct UdpArgs {
@@ -140,14 +178,47 @@ pub struct ViewArgs {
 pub enum AgentCommand {
     /// One or more wheelchairs driven with constant powers (a first user of the agent SDK).
     Wheelchair(WheelchairArgs),
+    /// Autonomous driving through checkpoints: a route planned on the hub's map, obstacles
+    /// avoided with the proximity sensors.
+    Navigator(navigator::NavigatorArgs),
+    /// Drive a chair from the terminal with the arrow keys or WASD.
+    Teleop(teleop::TeleopArgs),
+    /// Normal, sliding and rotating doors that open for what their sensors see or when a
+    /// robot asks.
+    Door(door::DoorArgs),
 }
 
 /// Options of `iwsim agent wheelchair`.
 #[derive(Debug, Args, Clone)]
+#[command(long_about = "Registers one or more wheelchairs and drives each by a script: constant motor \
+powers, or a list of waypoints it drives to in turn (steering on the hub's pose: this is a scripted \
+test agent, not a navigator) before it stops.
+
+With --config FILE the chairs come from a TOML file, one [[chairs]] table each:
+
+  [[chairs]]
+  name = \"chair1\"
+  pose = [12.5, 6.0, 180.0]      # x, y metres, heading degrees
+  body = [1.1, 0.65, 0.8]        # length, width (wheel track), centre of movement
+  max_speed = 0.49               # m/s at full power
+  accel_curve = 0.83             # motor filter, thesis chapter 4
+  sensors = [[0.88, 0.0, 0.0, 60.0, 3.0]]   # x, y, angle, cone, range (default: thesis Table 4.5)
+  powers = [1.0, 1.0]            # script: constant powers, or
+  waypoints = [[7.0, 6.0]]       # script: drive to each point in turn, then stop
+  speed = 0.5                    # power used on the way to waypoints
+  start_s = 0.0                  # wait this long before moving
+
+Without --config, the options below describe --robots identical chairs.")]
 pub struct WheelchairArgs {
     /// Session of the hub to join.
     #[arg(long, default_value = "default")]
     pub session: String,
+    /// Chairs from a TOML file (see above); the body and script options below are ignored.
+    #[arg(long)]
+    pub config: Option<PathBuf>,
+    /// Write one CSV log per chair into this directory.
+    #[arg(long)]
+    pub log: Option<PathBuf>,
     /// Robots to register.
     #[arg(long, default_value_t = 1)]
     pub robots: usize,
@@ -229,6 +300,9 @@ pub enum BenchCommand {
     Latency(BenchLatencyArgs),
     /// End-to-end lock-step ticks per second with agents as separate processes.
     Lockstep(BenchLockstepArgs),
+    /// The viewer page's frame rates with many chairs in a real headless Chromium, and the
+    /// hub's lock-step rate with and without a viewer attached.
+    Viewer(BenchViewerArgs),
     /// The peer process of the raw iceoryx2 ping-pong (started by `bench latency`).
     #[command(hide = true)]
     RawPeer(RawPeerArgs),
@@ -243,6 +317,23 @@ pub struct BenchLatencyArgs {
     /// Samples per measurement (after 100 warm-up ones).
     #[arg(long, default_value_t = 20_000)]
     pub samples: u64,
+    /// Print one JSON object instead of text.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// Options of `iwsim bench viewer`.
+#[derive(Debug, Args, Clone)]
+pub struct BenchViewerArgs {
+    /// Chairs on the floor.
+    #[arg(long, default_value_t = 1000)]
+    pub robots: usize,
+    /// Seconds to count the page's frames in each view.
+    #[arg(long, default_value_t = 5.0)]
+    pub seconds: f64,
+    /// Lock-step ticks for the hub-cost runs.
+    #[arg(long, default_value_t = 2000)]
+    pub ticks: u64,
     /// Print one JSON object instead of text.
     #[arg(long)]
     pub json: bool,

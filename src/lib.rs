@@ -4,10 +4,13 @@
 
 pub mod agentcmd;
 pub mod bench;
+pub mod benchview;
 pub mod cli;
 pub mod demo;
 pub mod hubcmd;
 pub mod mapcheck;
+pub mod run;
+pub mod scenario;
 pub mod udpcmd;
 pub mod viewcmd;
 
@@ -38,6 +41,7 @@ pub fn run(cli: Cli) -> anyhow::Result<ExitCode> {
         Command::Bench { command: BenchCommand::World(args) } => bench::world(&args),
         Command::Bench { command: BenchCommand::Latency(args) } => bench::latency(&args),
         Command::Bench { command: BenchCommand::Lockstep(args) } => bench::lockstep(&args),
+        Command::Bench { command: BenchCommand::Viewer(args) } => benchview::run(&args),
         Command::Bench { command: BenchCommand::RawPeer(args) } => bench::raw_peer(&args),
         Command::Bench { command: BenchCommand::UdpClient(args) } => bench::udp_client(&args),
         Command::Demo(args) => demo::run(&args),
@@ -45,5 +49,10 @@ pub fn run(cli: Cli) -> anyhow::Result<ExitCode> {
         Command::Udp(args) => udpcmd::run(&args),
         Command::View(args) => viewcmd::run(&args),
         Command::Agent { agent: AgentCommand::Wheelchair(args) } => agentcmd::wheelchair(&args),
+        Command::Agent { agent: AgentCommand::Navigator(args) } => navigator::run(&args),
+        Command::Agent { agent: AgentCommand::Teleop(args) } => teleop::run(&args),
+        Command::Agent { agent: AgentCommand::Door(args) } => door::run(&args),
+        Command::Plot(args) => plot::run(&args),
+        Command::Run(args) => run::run(&args),
     }
 }

@@ -696,7 +696,7 @@ pub struct ControlResponse {
 /// clients in its registration reply).
 #[repr(C)]
 #[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable, ZeroCopySend, Default)]
-#[type_name("iwsim::HubParams.v1")]
+#[type_name("iwsim::HubParams.v2")]
 pub struct HubParams {
     /// Proximity noise, metres.
     pub noise_proximity_m: f64,
@@ -728,8 +728,11 @@ pub struct HubParams {
     pub latency: [u32; 6],
     /// Padding.
     pub _reserved: u32,
+    /// Wheel-encoder ticks per metre of wheel travel (odometry needs it with the track, which
+    /// is the robot's `height_m`).
+    pub encoder_ticks_per_m: f64,
 }
-const _: () = assert!(core::mem::size_of::<HubParams>() == 112);
+const _: () = assert!(core::mem::size_of::<HubParams>() == 120);
 
 /// `HubParams` sensor bit: GPS.
 pub const SENSOR_GPS: u32 = 1;
@@ -747,7 +750,7 @@ pub const SENSOR_COLLISION: u32 = 1 << 5;
 /// The header of the map.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable, ZeroCopySend, Default)]
-#[type_name("iwsim::MapHeader.v2")]
+#[type_name("iwsim::MapHeader.v3")]
 pub struct MapHeader {
     /// Lab width, metres.
     pub width_m: f64,
@@ -770,7 +773,7 @@ pub struct MapHeader {
     /// The run's parameters.
     pub params: HubParams,
 }
-const _: () = assert!(core::mem::size_of::<MapHeader>() == 184);
+const _: () = assert!(core::mem::size_of::<MapHeader>() == 192);
 
 /// `MapItem::kind`: a wall starts; `a` = height in metres, `b` = corner count, `c` = 1 for a
 /// scenario's obstacle (a static body placed by the run, not part of the map file), else 0;

@@ -4,5 +4,6 @@ mod browser;
 mod cli;
 mod common;
 mod hub;
+mod teleop;
 mod udp;
 mod view;

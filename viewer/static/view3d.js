@@ -1,16 +1,30 @@
 // iwsim 3D view. Draws the map and the robots of app.js's frames with three.js.
 // Lab coordinates are used unchanged: x right, y up (north), z = height above the floor,
-// metres; the camera's up vector is +z. Robots are drawn with two InstancedMeshes (all
-// boxes, all wheels) so a thousand chairs cost two draw calls.
+// metres; the camera's up vector is +z. Nearby robots are drawn with one InstancedMesh per
+// part kind (boxes, wheels); far chairs are merged into a single mesh rebuilt on the CPU,
+// because software WebGL (SwiftShader) charges ~13 us per instance but ~1 us per triangle.
 import * as THREE from "./three.module.min.js";
 
 const DEG = Math.PI / 180;
 const CHAIR_COLOR = new THREE.Color(0x20a040), HIT_COLOR = new THREE.Color(0xe02020);
-const DOOR_COLOR = new THREE.Color(0x8a5a2b);
+const DOOR_COLOR = new THREE.Color(0x8a5a2b), TYRE_COLOR = new THREE.Color(0x2a2a2a);
 const DOOR_HEIGHT = 2.0, CHAIR_TOP = 1.0, EYE_HEIGHT = 1.2;
-const BOXES_PER_ROBOT = 3, WHEELS_PER_ROBOT = 4;          // seat, backrest, footrest; 2 wheels, 2 casters
-const LABEL_ALL_LIMIT = 200, LABEL_NEAREST = 50, LABEL_PX = 18;
+const DETAILED_NEAREST = 16, DETAIL_RANGE = 25;   // chairs, metres
+// Each label is its own sprite draw call (~0.2 ms each in software WebGL), hence the cap.
+const LABEL_MAX = 30, LABEL_PX = 18;
 const FOV = { first: 75, third: 60, free: 50 };
+
+// Far-away chair: a unit block whose top slopes from the backrest (rear, x < 0) down to the
+// seat front, so the heading still reads; the bottom face is dropped. 10 triangles, where the
+// full model has about 140. BoxGeometry lists its faces +x,-x,+y,-y,+z,-z, 4 vertices each.
+const FAR = (() => {
+  const g = new THREE.BoxGeometry(1, 1, 1).translate(0, 0, 0.5), p = g.attributes.position;
+  for (let i = 0; i < p.count; i++) if (p.getZ(i) > 0.5) p.setZ(i, p.getX(i) < 0 ? CHAIR_TOP : 0.55);
+  g.computeVertexNormals();   // every face has its own vertices, so normals stay flat
+  const far = { pos: p.array.slice(0, 60), nor: g.attributes.normal.array.slice(0, 60), index: g.index.array.slice(0, 30) };
+  g.dispose();
+  return far;
+})();
 
 export function createView3D(canvas) {
   const renderer = new THREE.WebGLRenderer({ canvas, antialias: true, preserveDrawingBuffer: true });
@@ -39,11 +53,10 @@ export function createView3D(canvas) {
     checkpoint: new THREE.MeshBasicMaterial({ color: 0xd020d0, transparent: true, opacity: 0.45, depthWrite: false }),
     beacon: new THREE.MeshLambertMaterial({ color: 0xe0a000 }),
     body: new THREE.MeshLambertMaterial({ color: 0xffffff }),   // tinted per instance
-    wheel: new THREE.MeshLambertMaterial({ color: 0x2a2a2a }),
   };
   const geos = {
     box: new THREE.BoxGeometry(1, 1, 1),
-    wheel: new THREE.CylinderGeometry(1, 1, 1, 14),            // axis along local y = across the chair
+    wheel: new THREE.CylinderGeometry(1, 1, 1, 10),            // axis along local y = across the chair
     disc: new THREE.CircleGeometry(1, 40),
     pole: new THREE.CylinderGeometry(0.03, 0.03, 1, 8).rotateX(Math.PI / 2).translate(0, 0, 0.5),
     ball: new THREE.SphereGeometry(0.1, 12, 8),
@@ -122,69 +135,113 @@ export function createView3D(canvas) {
   }
 
   // ---- robots -------------------------------------------------------------------------
-  let boxes = null, wheels = null, capacity = 0;
+  // Buffers are reallocated with room to spare when the robot count outgrows them.
+  let parts = null, capacity = 0;
+  const farMesh = new THREE.Mesh(new THREE.BufferGeometry(), new THREE.MeshLambertMaterial({ vertexColors: true }));
+  farMesh.frustumCulled = false;   // spans the whole crowd; culled per robot in layoutRobots
+  scene.add(farMesh);
 
-  function instanced(geo, mat, n, colored) {
+  function instanced(geo, mat, n) {
     const m = new THREE.InstancedMesh(geo, mat, n);
     m.instanceMatrix.setUsage(THREE.DynamicDrawUsage);
-    if (colored) m.instanceColor = new THREE.InstancedBufferAttribute(new Float32Array(n * 3), 3).setUsage(THREE.DynamicDrawUsage);
+    m.instanceColor = new THREE.InstancedBufferAttribute(new Float32Array(n * 3), 3).setUsage(THREE.DynamicDrawUsage);
     m.count = 0;
-    m.frustumCulled = false;   // its cached bounding sphere would go stale as robots move
+    m.frustumCulled = false;   // culled per robot in layoutRobots; its cached bounding sphere would go stale
     scene.add(m);
     return m;
   }
 
   function ensureCapacity(n) {
-    if (n <= capacity && boxes) return;
+    if (n <= capacity && parts) return;
     capacity = Math.max(64, 2 ** Math.ceil(Math.log2(Math.max(n, 1))));
-    for (const m of [boxes, wheels]) if (m) { scene.remove(m); m.dispose(); }
-    boxes = instanced(geos.box, mats.body, capacity * BOXES_PER_ROBOT, true);
-    wheels = instanced(geos.wheel, mats.wheel, capacity * WHEELS_PER_ROBOT, false);
+    if (parts) for (const m of Object.values(parts)) { scene.remove(m); m.dispose(); }
+    parts = {
+      box: instanced(geos.box, mats.body, capacity * 5),       // seat, backrest, footrest, 2 casters; doors
+      wheel: instanced(geos.wheel, mats.body, capacity * 2),
+    };
+    const nv = FAR.pos.length / 3, ni = FAR.index.length, index = new Uint32Array(capacity * ni);
+    for (let k = 0; k < capacity; k++) for (let j = 0; j < ni; j++) index[k * ni + j] = FAR.index[j] + k * nv;
+    const g = new THREE.BufferGeometry().setIndex(new THREE.BufferAttribute(index, 1));
+    for (const name of ["position", "normal", "color"]) {
+      g.setAttribute(name, new THREE.BufferAttribute(new Float32Array(capacity * nv * 3), 3).setUsage(THREE.DynamicDrawUsage));
+    }
+    farMesh.geometry.dispose();
+    farMesh.geometry = g;
   }
 
-  // Writes T(x,y) * Rz(heading) * T(px,py,pz) * S(sx,sy,sz) straight into the instance buffer;
+  // Writes T(x,y) * Rz(heading) * T(px,py,pz) * S(sx,sy,sz) straight into an instance buffer;
   // composing matrices through Object3D would cost several times more per part.
-  function put(arr, i, x, y, c, s, px, py, pz, sx, sy, sz) {
-    const o = i * 16;
+  function put(mesh, x, y, c, s, px, py, pz, sx, sy, sz, col) {
+    const i = mesh.count++, arr = mesh.instanceMatrix.array, o = i * 16;
     arr[o] = c * sx; arr[o + 1] = s * sx; arr[o + 2] = 0; arr[o + 3] = 0;
     arr[o + 4] = -s * sy; arr[o + 5] = c * sy; arr[o + 6] = 0; arr[o + 7] = 0;
     arr[o + 8] = 0; arr[o + 9] = 0; arr[o + 10] = sz; arr[o + 11] = 0;
     arr[o + 12] = x + c * px - s * py; arr[o + 13] = y + s * px + c * py; arr[o + 14] = pz; arr[o + 15] = 1;
+    const ca = mesh.instanceColor.array;
+    ca[i * 3] = col.r; ca[i * 3 + 1] = col.g; ca[i * 3 + 2] = col.b;
   }
 
-  function layoutRobots() {
+  // Appends far chair k to the merged mesh: the template block scaled to the footprint
+  // (normals by the inverse scale), turned to the heading and moved to (x, y).
+  function putFar(k, x, y, c, s, mid, w, h, col) {
+    const g = farMesh.geometry, P = g.attributes.position.array, N = g.attributes.normal.array, C = g.attributes.color.array;
+    const n = FAR.pos.length, o = k * n;
+    for (let j = 0; j < n; j += 3) {
+      const lx = FAR.pos[j] * w + mid, ly = FAR.pos[j + 1] * h;
+      P[o + j] = x + c * lx - s * ly; P[o + j + 1] = y + s * lx + c * ly; P[o + j + 2] = FAR.pos[j + 2];
+      let nx = FAR.nor[j] / w, ny = FAR.nor[j + 1] / h, nz = FAR.nor[j + 2];
+      const len = Math.hypot(nx, ny, nz); nx /= len; ny /= len;
+      N[o + j] = c * nx - s * ny; N[o + j + 1] = s * nx + c * ny; N[o + j + 2] = nz / len;
+      C[o + j] = col.r; C[o + j + 1] = col.g; C[o + j + 2] = col.b;
+    }
+  }
+
+  const frustum = new THREE.Frustum(), sphere = new THREE.Sphere(), projView = new THREE.Matrix4();
+
+  // Runs at render time because culling and level of detail depend on the camera. Software
+  // WebGL (SwiftShader, ~1 us per triangle here) pays per triangle, so once many chairs are
+  // visible only the nearest ones within DETAIL_RANGE get the full model.
+  function layoutRobots(hidden) {
     const robots = (frame && frame.robots) || [];
     ensureCapacity(robots.length);
-    const hidden = mode === "first" ? followed() : null;
-    const B = boxes.instanceMatrix.array, Wm = wheels.instanceMatrix.array, C = boxes.instanceColor.array;
-    let nb = 0, nw = 0;
-    const box = (x, y, c, s, px, py, pz, sx, sy, sz, col) => {
-      put(B, nb, x, y, c, s, px, py, pz, sx, sy, sz);
-      C[nb * 3] = col.r; C[nb * 3 + 1] = col.g; C[nb * 3 + 2] = col.b;
-      nb++;
-    };
+    for (const m of Object.values(parts)) m.count = 0;
+    let nFar = 0;
+    frustum.setFromProjectionMatrix(projView.multiplyMatrices(camera.projectionMatrix, camera.matrixWorldInverse));
+    const vis = [];
     for (const r of robots) {
       if (r === hidden || !(r.width > 0 && r.height > 0)) continue;
+      sphere.center.set(r.x, r.y, 0.5); sphere.radius = 0.5 * Math.hypot(r.width, r.height) + 1;
+      if (frustum.intersectsSphere(sphere)) vis.push(r);
+    }
+    let near = Infinity;   // squared distance up to which chairs are drawn in full
+    const p = camera.position, d2 = (r) => (r.x - p.x) ** 2 + (r.y - p.y) ** 2;
+    if (vis.length > DETAILED_NEAREST) near = Math.min(DETAIL_RANGE ** 2, Float64Array.from(vis, d2).sort()[DETAILED_NEAREST - 1]);
+
+    for (const r of vis) {
       const a = r.heading * DEG, c = Math.cos(a), s = Math.sin(a), x = r.x, y = r.y;
       const w = r.width, h = r.height, front = r.com * w, back = front - w, mid = (front + back) / 2;
       const col = r.flags & 1 ? HIT_COLOR : r.kind === 2 ? DOOR_COLOR : CHAIR_COLOR;
-      if (r.kind === 2) { box(x, y, c, s, mid, 0, DOOR_HEIGHT / 2, w, h, DOOR_HEIGHT, col); continue; }
-      // Chair: proportions follow the footprint; the drive wheels sit on the pose point
+      if (r.kind === 2) { put(parts.box, x, y, c, s, mid, 0, DOOR_HEIGHT / 2, w, h, DOOR_HEIGHT, col); continue; }
+      if (d2(r) > near) { putFar(nFar++, x, y, c, s, mid, w, h, col); continue; }
+      // Full chair. Proportions follow the footprint; the drive wheels sit on the pose point
       // (centre of movement) unless that would push them out of the footprint.
       const R = Math.min(0.3, 0.3 * w, 0.45 * h), t = Math.min(0.05, 0.1 * h);
       const wx = Math.min(Math.max(0, back + R), front - R), inner = h - 2 * t;
-      box(x, y, c, s, back + 0.4 * w, 0, 0.5, 0.6 * w, inner, 0.1, col);                          // seat
-      box(x, y, c, s, back + 0.08 * w, 0, 0.5 * (0.55 + CHAIR_TOP), 0.08 * w, inner, CHAIR_TOP - 0.55, col); // backrest
-      box(x, y, c, s, front - 0.08 * w, 0, 0.12, 0.16 * w, 0.6 * h, 0.04, col);                   // footrest
-      const rc = Math.min(0.08, 0.1 * w), cx = front - 0.25 * w;
-      put(Wm, nw++, x, y, c, s, wx, h / 2 - t / 2, R, R, t, R);
-      put(Wm, nw++, x, y, c, s, wx, -h / 2 + t / 2, R, R, t, R);
-      put(Wm, nw++, x, y, c, s, cx, 0.3 * h, rc, rc, 0.04, rc);
-      put(Wm, nw++, x, y, c, s, cx, -0.3 * h, rc, rc, 0.04, rc);
+      put(parts.box, x, y, c, s, back + 0.4 * w, 0, 0.5, 0.6 * w, inner, 0.1, col);                                 // seat
+      put(parts.box, x, y, c, s, back + 0.08 * w, 0, (0.55 + CHAIR_TOP) / 2, 0.08 * w, inner, CHAIR_TOP - 0.55, col); // backrest
+      put(parts.box, x, y, c, s, front - 0.08 * w, 0, 0.12, 0.16 * w, 0.6 * h, 0.04, col);                          // footrest
+      put(parts.wheel, x, y, c, s, wx, h / 2 - t / 2, R, R, t, R, TYRE_COLOR);
+      put(parts.wheel, x, y, c, s, wx, -h / 2 + t / 2, R, R, t, R, TYRE_COLOR);
+      const rc = Math.min(0.08, 0.1 * w), cx = front - 0.25 * w;   // casters: small dark blocks
+      put(parts.box, x, y, c, s, cx, 0.3 * h, rc, 2 * rc, 0.04, 2 * rc, TYRE_COLOR);
+      put(parts.box, x, y, c, s, cx, -0.3 * h, rc, 2 * rc, 0.04, 2 * rc, TYRE_COLOR);
     }
-    boxes.count = nb; wheels.count = nw;
-    boxes.instanceMatrix.needsUpdate = true; boxes.instanceColor.needsUpdate = true;
-    wheels.instanceMatrix.needsUpdate = true;
+    // Upload only the used part of each buffer: they are sized for the peak robot count.
+    const dirty = (attr, n) => { if (n > 0) { attr.clearUpdateRanges(); attr.addUpdateRange(0, n); attr.needsUpdate = true; } };
+    for (const m of Object.values(parts)) { dirty(m.instanceMatrix, m.count * 16); dirty(m.instanceColor, m.count * 3); }
+    const fg = farMesh.geometry;
+    for (const name of ["position", "normal", "color"]) dirty(fg.attributes[name], nFar * FAR.pos.length);
+    fg.setDrawRange(0, nFar * FAR.index.length);
   }
 
   // The robot the first/third-person camera rides; null when absent (free camera then).
@@ -221,12 +278,12 @@ export function createView3D(canvas) {
     let shown = 0;
     if (showLabels && frame && frame.robots) {
       let list = frame.robots.filter(r => r !== hidden);
-      if (list.length > LABEL_ALL_LIMIT) {
-        // Only the nearest ones in front of the camera: texture creation and one draw call
-        // per sprite would otherwise dominate the frame.
+      if (list.length > LABEL_MAX) {
+        // Only the nearest ones in front of the camera: one draw call per sprite (and a
+        // texture per new name) would otherwise dominate the frame.
         const p = camera.position, d = camera.getWorldDirection(new THREE.Vector3());
         list = list.map(r => [r, (r.x - p.x) ** 2 + (r.y - p.y) ** 2 + p.z ** 2, (r.x - p.x) * d.x + (r.y - p.y) * d.y - p.z * d.z])
-          .filter(e => e[2] > 0).sort((a, b) => a[1] - b[1]).slice(0, LABEL_NEAREST).map(e => e[0]);
+          .filter(e => e[2] > 0).sort((a, b) => a[1] - b[1]).slice(0, LABEL_MAX).map(e => e[0]);
       }
       const sy = LABEL_PX / Math.max(height, 1) * 2 * Math.tan(camera.fov * DEG / 2);
       for (const r of list) {
@@ -309,7 +366,9 @@ export function createView3D(canvas) {
   const onWheel = (e) => {
     if (!usingFree) return;
     e.preventDefault();
-    orbit.dist = Math.min(Math.max(orbit.dist * Math.exp(Math.sign(e.deltaY) * 0.12), 0.5), 1000);
+    // Proportional to the wheel delta (lines count as ~33 px) so trackpads zoom smoothly.
+    const dy = e.deltaMode === 1 ? e.deltaY * 33 : e.deltaY;
+    orbit.dist = Math.min(Math.max(orbit.dist * Math.exp(Math.max(-1, Math.min(1, dy / 100)) * 0.12), 0.5), 1000);
   };
   const onMenu = (e) => { if (usingFree) e.preventDefault(); };
   canvas.addEventListener("pointerdown", onDown);
@@ -331,7 +390,10 @@ export function createView3D(canvas) {
     const r = mode === "free" ? null : followed();
     usingFree = !r;
     placeCamera(r);
-    layoutLabels(mode === "first" ? r : null);
+    camera.updateMatrixWorld();
+    const hidden = mode === "first" ? r : null;   // the rider's own chair would fill the view
+    layoutRobots(hidden);
+    layoutLabels(hidden);
     renderer.render(scene, camera);
   }
 
@@ -339,14 +401,13 @@ export function createView3D(canvas) {
   return {
     setMap,
     update(f, n) {
+      // Only stored: instances are laid out in render(), which knows the camera.
       frame = f && Array.isArray(f.robots) ? f : null;
       if (n instanceof Map) names = n;
-      layoutRobots();
     },
     setCamera(m, id) {
       mode = m === "first" || m === "third" ? m : "free";
       robotId = id ?? null;
-      layoutRobots();   // the first-person chair is hidden, so the instances change
     },
     setShowGrid(on) { showGrid = !!on; if (grid) grid.visible = showGrid; },
     setShowLabels(on) { showLabels = !!on; },
@@ -359,7 +420,8 @@ export function createView3D(canvas) {
       canvas.removeEventListener("wheel", onWheel);
       canvas.removeEventListener("contextmenu", onMenu);
       clearMap();
-      for (const m of [boxes, wheels]) if (m) m.dispose();
+      for (const m of Object.values(parts)) m.dispose();
+      farMesh.geometry.dispose(); farMesh.material.dispose();
       for (const m of labelMats.values()) { m.map.dispose(); m.dispose(); }
       labelMats.clear();
       for (const g of Object.values(geos)) g.dispose();

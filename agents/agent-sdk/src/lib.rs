@@ -18,6 +18,8 @@
 //! Agents depend on `ipc-types` and `ipc-services` only, never on the hub.
 #![warn(missing_docs)]
 
+pub mod log;
+
 use std::time::{Duration, Instant};
 
 use ipc_services::iceoryx2::node::Node;

@@ -638,6 +638,7 @@ impl HubCore {
                 p.latency.gps,
             ],
             _reserved: 0,
+            encoder_ticks_per_m: p.encoder_ticks_per_rev as f64 / (std::f64::consts::TAU * p.wheel_radius_m),
         }
     }
 

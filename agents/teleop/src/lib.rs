@@ -1,0 +1,536 @@
+//! The teleop agent: drive one chair from a terminal with the arrow keys (or WASD) and watch
+//! its sensor readings.
+//!
+//! The logic is [`Teleop`], fed with key bytes and ticks, which tests drive without a hub or a
+//! terminal:
+//!
+//! ```
+//! use teleop::Teleop;
+//! use agent_sdk::Tick;
+//! use ipc_types::RunState;
+//!
+//! let mut t = Teleop::new(7);
+//! // Three Up presses (one arrow split across two reads) and a left turn.
+//! assert!(!t.on_keys(b"w\x1b[").quit);
+//! assert!(!t.on_keys(b"Aw\x1bOD").quit);
+//! let tick = Tick { tick: 1, sim_time_s: 0.1, run_state: RunState::Running, latency_ns: 0 };
+//! let action = t.on_tick(tick, &[]).expect("a running tick is answered");
+//! assert_eq!((action.robot_id, action.motors), (7, [0.2, 0.4]));
+//! assert!(t.on_keys(b" q").quit);
+//! ```
+//!
+//! [`run`] is the process: it registers the chair through the agent SDK, switches a terminal
+//! on stdin to raw input (restored on every way out, panics included, by [`term::RawMode`]),
+//! then `poll(2)`s stdin and the hub's tick doorbell, answering every tick with the current
+//! powers and redrawing the status at most ten times a second.
+#![warn(missing_docs)]
+
+pub mod drive;
+pub mod keys;
+pub mod pty;
+pub mod term;
+pub mod view;
+
+use std::io::Write as _;
+use std::os::fd::AsRawFd as _;
+use std::path::PathBuf;
+use std::process::ExitCode;
+use std::time::{Duration, Instant};
+
+use agent_sdk::log::RobotLog;
+use agent_sdk::{Agent, AgentError, Tick};
+use anyhow::Context as _;
+use ipc_types::{ActionBlock, REG_HAS_POSE, RobotRegistration, RunState, SensorBlock};
+
+use crate::drive::Drive;
+use crate::keys::{Key, KeyParser};
+use crate::view::{Screen, Status};
+
+/// The help text after the options. (The one-line about comes from the subcommand's doc comment
+/// in the root `cli.rs`, which also overrides a long about set here, so the details go after.)
+const AFTER_HELP: &str = "\
+Registers one chair with the hub of --session and answers every tick with the powers chosen
+from the keyboard, while a status block shows the tick, the run state, the speed, turn and wheel
+powers, the pose, GPS and compass (when the hub provides them), every proximity reading with a
+bar, and the collision flag. Plain ANSI only: works in any terminal and under tmux or screen.
+
+Keys:
+  Up    or w    faster: +1 step of speed (full power is 1.0)
+  Down  or s    slower, then reverse: -1 step (down to -1.0)
+  Left  or a    steer left: +1 step of turn (right wheel up, left wheel down)
+  Right or d    steer right: -1 step of turn
+  space         stop: speed and turn to 0
+  + / -         larger / smaller step (0.01 … 0.5; starts at 0.1)
+  q or Ctrl-C   quit (the chair leaves the world)
+
+Wheel powers are speed - turn (left) and speed + turn (right), each clamped to [-1, 1].
+
+When stdin is not a terminal (a pipe, a script) the same keys are read from it as bytes and
+end of input quits; when stdout is not a terminal, a status line is printed per change instead
+of the redrawn block.";
+
+/// Options of `iwsim agent teleop`.
+#[derive(Debug, clap::Args, Clone)]
+#[command(after_help = AFTER_HELP)]
+pub struct TeleopArgs {
+    /// Session of the hub to join.
+    #[arg(long, default_value = "default")]
+    pub session: String,
+    /// Name of the chair.
+    #[arg(long, default_value = "chair1")]
+    pub name: String,
+    /// Requested id, the 1-based grid slot (0: the first free one).
+    #[arg(long, default_value_t = 0)]
+    pub id: u32,
+    /// Start pose as X,Y,DIR (metres, degrees); without it the chair takes its grid slot.
+    #[arg(long, value_name = "X,Y,DIR", value_parser = parse_pose, allow_hyphen_values = true)]
+    pub pose: Option<[f64; 3]>,
+    /// Length along the heading, metres.
+    #[arg(long, default_value_t = 1.0)]
+    pub width: f64,
+    /// Size across the heading, metres.
+    #[arg(long, default_value_t = 1.0)]
+    pub height: f64,
+    /// Centre of movement, (0, 1).
+    #[arg(long, default_value_t = 0.5)]
+    pub com: f64,
+    /// Top speed at full power, m/s.
+    #[arg(long, default_value_t = 0.49)]
+    pub max_speed: f64,
+    /// Acceleration curve: the motor filter's memory per tick, [0, 1) (higher is smoother).
+    #[arg(long, default_value_t = 0.83)]
+    pub accel_curve: f64,
+    /// Write the chair's log (one CSV line per tick: sensors, pose, powers) into this folder.
+    #[arg(long, value_name = "DIR")]
+    pub log: Option<PathBuf>,
+    /// Seconds to wait for the hub to start serving the session.
+    #[arg(long, default_value_t = 5.0)]
+    pub connect_timeout: f64,
+}
+
+fn parse_pose(s: &str) -> Result<[f64; 3], String> {
+    let v: Vec<f64> =
+        s.split(',').map(|x| x.trim().parse::<f64>().map_err(|e| format!("{x:?}: {e}"))).collect::<Result<_, _>>()?;
+    let pose = <[f64; 3]>::try_from(v).map_err(|_| format!("expected three numbers X,Y,DIR, got {s:?}"))?;
+    if pose.iter().all(|v| v.is_finite()) { Ok(pose) } else { Err(format!("{s:?} is not three finite numbers")) }
+}
+
+/// What a batch of key bytes did.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct KeysOutcome {
+    /// The speed, turn or step changed.
+    pub changed: bool,
+    /// The driver asked to leave; keys after the quit key were not applied.
+    pub quit: bool,
+}
+
+/// The teleop without I/O: key bytes in, motor actions out.
+#[derive(Debug, Clone)]
+pub struct Teleop {
+    robot_id: u32,
+    drive: Drive,
+    parser: KeyParser,
+    keys: Vec<Key>,
+    tick: Option<Tick>,
+    block: Option<SensorBlock>,
+}
+
+impl Teleop {
+    /// A stopped chair with robot id `robot_id`.
+    pub fn new(robot_id: u32) -> Self {
+        Self { robot_id, drive: Drive::new(), parser: KeyParser::new(), keys: Vec::new(), tick: None, block: None }
+    }
+
+    /// Applies the keys in `bytes` (a read from the keyboard; sequences may be split across
+    /// reads).
+    pub fn on_keys(&mut self, bytes: &[u8]) -> KeysOutcome {
+        let mut out = KeysOutcome::default();
+        self.keys.clear();
+        self.parser.feed(bytes, &mut self.keys);
+        for &k in &self.keys {
+            if k == Key::Quit {
+                out.quit = true;
+                break;
+            }
+            out.changed |= self.drive.apply(k);
+        }
+        out
+    }
+
+    /// Drops a half-typed escape sequence (a lone ESC the terminal sent long ago).
+    pub fn on_idle_keyboard(&mut self) {
+        self.parser.reset();
+    }
+
+    /// Whether an escape sequence is half read.
+    pub fn keys_pending(&self) -> bool {
+        self.parser.pending()
+    }
+
+    /// Takes a tick and this agent's sensor blocks; the answer to send, or `None` when the
+    /// run has finished (nothing to answer).
+    pub fn on_tick(&mut self, tick: Tick, blocks: &[SensorBlock]) -> Option<ActionBlock> {
+        self.tick = Some(tick);
+        if let Some(b) = blocks.iter().find(|b| b.robot_id == self.robot_id) {
+            self.block = Some(*b);
+        }
+        if tick.run_state == RunState::Finished {
+            return None;
+        }
+        let [l, r] = self.drive.powers();
+        Some(ActionBlock::motors(self.robot_id, l, r))
+    }
+
+    /// The driver's command.
+    pub fn drive(&self) -> &Drive {
+        &self.drive
+    }
+
+    /// The last tick.
+    pub fn tick(&self) -> Option<Tick> {
+        self.tick
+    }
+
+    /// The chair's last sensor block.
+    pub fn block(&self) -> Option<&SensorBlock> {
+        self.block.as_ref()
+    }
+
+    /// What the display shows.
+    pub fn status<'a>(&'a self, name: &'a str, session: &'a str) -> Status<'a> {
+        Status {
+            name,
+            robot_id: self.robot_id,
+            session,
+            tick: self.tick,
+            block: self.block.as_ref(),
+            drive: &self.drive,
+        }
+    }
+}
+
+/// Why the drive loop ended.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum End {
+    /// `q` or Ctrl-C.
+    Quit,
+    /// The hub ended the run.
+    RunOver,
+    /// SIGINT or SIGTERM.
+    Interrupted,
+    /// End of input on stdin (a pipe closed, a terminal hung up).
+    InputClosed,
+}
+
+impl End {
+    fn message(self) -> &'static str {
+        match self {
+            End::Quit => "left by the driver",
+            End::RunOver => "the hub ended the run",
+            End::Interrupted => "stopped by a termination signal",
+            End::InputClosed => "end of keyboard input",
+        }
+    }
+}
+
+/// Redraws at most this often on a terminal.
+const FRAME_INTERVAL: Duration = Duration::from_millis(100);
+/// Prints a status line at most this often when stdout is not a terminal (key presses print
+/// at once).
+const LINE_INTERVAL: Duration = Duration::from_secs(1);
+/// Longest wait in `poll` when nothing is due: the hub's liveness is checked this often.
+const IDLE_WAIT: Duration = Duration::from_millis(100);
+/// An escape byte with nothing after it for this long was a lone ESC key.
+const ESC_TIMEOUT: Duration = Duration::from_millis(100);
+
+/// The status output: a block redrawn in place on a terminal, lines otherwise.
+struct Display {
+    screen: Option<Screen>,
+    last_draw: Option<Instant>,
+    dirty: bool,
+    urgent: bool,
+    last_line_key: String,
+}
+
+impl Display {
+    fn new(terminal: bool) -> Self {
+        Self {
+            screen: terminal.then(Screen::default),
+            last_draw: None,
+            dirty: true,
+            urgent: false,
+            last_line_key: String::new(),
+        }
+    }
+
+    fn interval(&self) -> Duration {
+        if self.screen.is_some() { FRAME_INTERVAL } else { LINE_INTERVAL }
+    }
+
+    /// How long until a pending redraw is due (`IDLE_WAIT` if none is pending).
+    fn wait_hint(&self, now: Instant) -> Duration {
+        if !self.dirty {
+            return IDLE_WAIT;
+        }
+        if self.urgent && self.screen.is_none() {
+            return Duration::ZERO;
+        }
+        match self.last_draw {
+            None => Duration::ZERO,
+            Some(t) => (t + self.interval()).saturating_duration_since(now).min(IDLE_WAIT),
+        }
+    }
+
+    /// Draws if something changed and the rate allows (or `force`).
+    fn draw(&mut self, s: &Status, now: Instant, force: bool) {
+        if !force && (!self.dirty || self.wait_hint(now) > Duration::ZERO) {
+            return;
+        }
+        let text = match &mut self.screen {
+            Some(screen) => screen.frame(&view::screen_lines(s)),
+            None => {
+                // Print a line only when something besides the clock changed.
+                let timeless =
+                    Status { tick: s.tick.map(|t| Tick { tick: 0, sim_time_s: 0.0, latency_ns: 0, ..t }), ..*s };
+                let key = view::status_line(&timeless);
+                if key == self.last_line_key && !force {
+                    self.dirty = false;
+                    return;
+                }
+                self.last_line_key = key;
+                view::status_line(s) + "\n"
+            }
+        };
+        // A display that cannot be written (a closed pipe) must not stop the driving.
+        let mut out = std::io::stdout().lock();
+        let _ = out.write_all(text.as_bytes()).and_then(|()| out.flush());
+        self.last_draw = Some(now);
+        self.dirty = false;
+        self.urgent = false;
+    }
+
+    /// Leaves the terminal as it was found (cursor shown, below the block) and says why the
+    /// teleop ended.
+    fn close(&mut self, message: &str) {
+        let tail = self.screen.as_mut().map_or("", Screen::finish);
+        let mut out = std::io::stdout().lock();
+        let _ = write!(out, "{tail}iwsim agent teleop: {message}\r\n").and_then(|()| out.flush());
+    }
+}
+
+impl Drop for Display {
+    fn drop(&mut self) {
+        // On an error or a panic, at least give the cursor back.
+        if let Some(tail) = self.screen.as_mut().map(Screen::finish)
+            && !tail.is_empty()
+        {
+            let mut out = std::io::stdout().lock();
+            let _ = out.write_all(tail.as_bytes()).and_then(|()| out.flush());
+        }
+    }
+}
+
+/// Runs the agent until the driver quits, the run ends or the hub goes away (an error).
+pub fn run(args: &TeleopArgs) -> anyhow::Result<ExitCode> {
+    let timeout = Duration::try_from_secs_f64(args.connect_timeout.max(0.0)).unwrap_or(Duration::MAX);
+    let mut agent = Agent::connect_within(&args.session, &format!("teleop-{}", std::process::id()), timeout)
+        .with_context(|| format!("cannot join session {:?}", args.session))?;
+    // Close the agent on every path, errors included: the last process of a session removes
+    // its files, even when the hub died first.
+    let result = drive(&mut agent, args);
+    agent.close();
+    result
+}
+
+fn registration(args: &TeleopArgs) -> RobotRegistration {
+    let mut reg = RobotRegistration::new(&args.name);
+    reg.requested_id = args.id;
+    reg.width_m = args.width;
+    reg.height_m = args.height;
+    reg.com = args.com;
+    reg.max_speed_mps = args.max_speed;
+    reg.accel_curve = args.accel_curve;
+    if let Some(pose) = args.pose {
+        reg.flags |= REG_HAS_POSE;
+        reg.pose = pose;
+    }
+    reg
+}
+
+fn drive(agent: &mut Agent, args: &TeleopArgs) -> anyhow::Result<ExitCode> {
+    let id = agent.register(&registration(args)).context("the hub did not take the chair")?;
+    agent.ready().context("the hub did not take the ready message")?;
+
+    let stdin = std::io::stdin();
+    let stdin_fd = stdin.as_raw_fd();
+    // Declared before the display, so it is dropped after it: the last frame and the cursor
+    // go out while the terminal is still raw, then the original mode comes back.
+    let _raw = if term::is_tty(&stdin) {
+        Some(term::RawMode::enter(&stdin).context("cannot switch the terminal to raw input")?)
+    } else {
+        None
+    };
+    let mut display = Display::new(term::is_tty(&std::io::stdout()));
+    let mut teleop = Teleop::new(id);
+    let mut log: Option<RobotLog> = None;
+
+    let end = drive_loop(agent, args, stdin_fd, &mut teleop, &mut display, &mut log);
+    if let Some(log) = &mut log {
+        log.flush().context("cannot write the log")?;
+    }
+    let end = end?;
+    display.draw(&teleop.status(&args.name, &args.session), Instant::now(), true);
+    display.close(end.message());
+    Ok(ExitCode::SUCCESS)
+}
+
+fn drive_loop(
+    agent: &mut Agent,
+    args: &TeleopArgs,
+    stdin_fd: i32,
+    teleop: &mut Teleop,
+    display: &mut Display,
+    log: &mut Option<RobotLog>,
+) -> anyhow::Result<End> {
+    let mut keyboard = Some(stdin_fd);
+    let mut buf = [0u8; 256];
+    let mut last_input = Instant::now();
+    loop {
+        let now = Instant::now();
+        let ready = term::poll_readable(keyboard, agent.tick_fd(), display.wait_hint(now))
+            .context("cannot wait for the keyboard and the hub")?;
+        if ready.first_invalid {
+            // No stdin at all: drive on without a keyboard until the run ends.
+            keyboard = None;
+        }
+        if ready.first {
+            match term::read_some(stdin_fd, &mut buf) {
+                Ok(0) => return Ok(End::InputClosed),
+                Ok(n) => {
+                    last_input = Instant::now();
+                    let keys = teleop.on_keys(&buf[..n]);
+                    if keys.quit {
+                        return Ok(End::Quit);
+                    }
+                    if keys.changed {
+                        display.dirty = true;
+                        display.urgent = true;
+                    }
+                }
+                Err(e) if matches!(e.kind(), std::io::ErrorKind::Interrupted | std::io::ErrorKind::WouldBlock) => {}
+                // A terminal that hung up reads as EIO.
+                Err(_) => return Ok(End::InputClosed),
+            }
+        } else if teleop.keys_pending() && last_input.elapsed() >= ESC_TIMEOUT {
+            teleop.on_idle_keyboard();
+        }
+
+        // Read the hub before judging its liveness: its last tick may be waiting.
+        match agent.try_tick() {
+            Ok(Some(tick)) => {
+                let action = teleop.on_tick(tick, agent.sensors());
+                if let Some(action) = action {
+                    agent.send(tick.tick, &[action]).context("cannot send the powers to the hub")?;
+                }
+                write_log(log, args, teleop)?;
+                display.dirty = true;
+            }
+            Ok(None) => {}
+            Err(AgentError::Interrupted) => return Ok(End::Interrupted),
+            Err(e) => return Err(e).context("the teleop lost its hub"),
+        }
+        if agent.finished() {
+            return Ok(End::RunOver);
+        }
+        match agent.check_alive() {
+            Ok(()) => {}
+            Err(AgentError::Interrupted) => return Ok(End::Interrupted),
+            Err(e) => return Err(e).context("the teleop lost its hub"),
+        }
+        display.draw(&teleop.status(&args.name, &args.session), Instant::now(), false);
+    }
+}
+
+fn write_log(log: &mut Option<RobotLog>, args: &TeleopArgs, teleop: &Teleop) -> anyhow::Result<()> {
+    let (Some(dir), Some(block), Some(tick)) = (&args.log, teleop.block(), teleop.tick()) else { return Ok(()) };
+    if log.is_none() {
+        let created = RobotLog::create(dir, &args.name, block.proximity_count as usize)
+            .with_context(|| format!("cannot create a log in {}", dir.display()))?;
+        *log = Some(created);
+    }
+    if let Some(log) = log {
+        log.row(block, tick.sim_time_s, teleop.drive().powers()).context("cannot write the log")?;
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn tick(n: u64, run_state: RunState) -> Tick {
+        Tick { tick: n, sim_time_s: n as f64 * 0.02, run_state, latency_ns: 0 }
+    }
+
+    #[test]
+    fn every_running_tick_is_answered_with_the_current_powers() {
+        let mut t = Teleop::new(4);
+        assert_eq!(t.on_tick(tick(1, RunState::Running), &[]), Some(ActionBlock::motors(4, 0.0, 0.0)));
+        assert_eq!(t.on_keys(b"\x1b[A\x1b[A"), KeysOutcome { changed: true, quit: false });
+        assert_eq!(t.on_tick(tick(2, RunState::Running), &[]), Some(ActionBlock::motors(4, 0.2, 0.2)));
+        t.on_keys(b"\x1b[C");
+        assert_eq!(t.on_tick(tick(3, RunState::Paused), &[]), Some(ActionBlock::motors(4, 0.3, 0.1)));
+        t.on_keys(b" ");
+        assert_eq!(t.on_tick(tick(4, RunState::Running), &[]), Some(ActionBlock::motors(4, 0.0, 0.0)));
+    }
+
+    #[test]
+    fn the_finished_tick_is_not_answered() {
+        let mut t = Teleop::new(4);
+        t.on_keys(b"w");
+        assert_eq!(t.on_tick(tick(9, RunState::Finished), &[]), None);
+        assert_eq!(t.tick().map(|t| t.run_state), Some(RunState::Finished));
+    }
+
+    #[test]
+    fn keys_after_quit_are_not_applied() {
+        let mut t = Teleop::new(1);
+        assert_eq!(t.on_keys(b"wqw"), KeysOutcome { changed: true, quit: true });
+        assert_eq!(t.drive().speed(), 0.1);
+        assert_eq!(t.on_keys(b"\x03"), KeysOutcome { changed: false, quit: true });
+    }
+
+    #[test]
+    fn unknown_bytes_change_nothing() {
+        let mut t = Teleop::new(1);
+        assert_eq!(t.on_keys(b"xyz\x1b[H\r"), KeysOutcome::default());
+    }
+
+    #[test]
+    fn poses_parse_with_negative_numbers_and_refuse_junk() {
+        assert_eq!(parse_pose("10,6.1,0"), Ok([10.0, 6.1, 0.0]));
+        assert_eq!(parse_pose("-1.5, 2 ,-90"), Ok([-1.5, 2.0, -90.0]));
+        assert!(parse_pose("1,2").is_err());
+        assert!(parse_pose("1,2,x").is_err());
+        assert!(parse_pose("1,2,inf").is_err());
+    }
+
+    #[test]
+    fn the_registration_carries_every_option() {
+        use clap::Parser as _;
+        #[derive(clap::Parser)]
+        struct Cli {
+            #[command(flatten)]
+            args: TeleopArgs,
+        }
+        let cli = Cli::parse_from(["teleop", "--name", "bob", "--id", "3", "--pose", "-2,6.1,90", "--width", "0.8"]);
+        let reg = registration(&cli.args);
+        assert_eq!(reg.name.as_str(), Some("bob"));
+        assert_eq!((reg.requested_id, reg.flags & REG_HAS_POSE, reg.pose), (3, REG_HAS_POSE, [-2.0, 6.1, 90.0]));
+        assert_eq!((reg.width_m, reg.height_m, reg.com), (0.8, 1.0, 0.5));
+        assert_eq!((reg.max_speed_mps, reg.accel_curve), (0.49, 0.83));
+        let plain = registration(&Cli::parse_from(["teleop"]).args);
+        assert_eq!((plain.flags & REG_HAS_POSE, plain.requested_id), (0, 0));
+        assert_eq!(plain.name.as_str(), Some("chair1"));
+    }
+}

@@ -1,0 +1,415 @@
+//! Reading a run log: the per-robot CSV the agents write, one row per tick, with the thesis's
+//! Annex C columns in clear units (`tick,time_s,encoder_left_ticks,encoder_right_ticks,
+//! proximity0_m,…,heading_deg,x_m,y_m,collision,contacts,power_left,power_right`).
+//!
+//! Columns are found by name, so logs with fewer proximity sensors, extra columns, or without
+//! the `contacts`/`power_*` columns of older writers all read. Every known column must hold a
+//! number (`NaN` is a number here: a sensor that saw nothing); the pose and the clock must be
+//! finite. Anything else is an error naming the file, the line and the column.
+
+use std::path::{Path, PathBuf};
+
+/// Columns a log must have: the plot cannot be drawn without them.
+pub const REQUIRED_COLUMNS: [&str; 4] = ["tick", "time_s", "x_m", "y_m"];
+
+/// Columns that hold numbers when present (the proximity columns `proximityK_m` too).
+const NUMERIC_COLUMNS: [&str; 11] = [
+    "tick",
+    "time_s",
+    "encoder_left_ticks",
+    "encoder_right_ticks",
+    "heading_deg",
+    "x_m",
+    "y_m",
+    "collision",
+    "contacts",
+    "power_left",
+    "power_right",
+];
+
+/// One row of a log, the columns the plot uses.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Sample {
+    /// Simulation tick.
+    pub tick: u64,
+    /// Simulated time, seconds.
+    pub time_s: f64,
+    /// Position of the centre of movement, metres.
+    pub x_m: f64,
+    /// Position of the centre of movement, metres.
+    pub y_m: f64,
+    /// Heading in degrees; NaN when the log has no `heading_deg` column.
+    pub heading_deg: f64,
+    /// The collision sensor was on at this tick (`collision` = 1); false without the column.
+    pub collision: bool,
+}
+
+/// A log read into memory.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RunLog {
+    /// Column names from the header, in file order.
+    pub columns: Vec<String>,
+    /// The rows, in file order.
+    pub samples: Vec<Sample>,
+}
+
+/// Why a log could not be read. Line numbers count from 1 (the header); columns from 1.
+#[derive(Debug, thiserror::Error)]
+pub enum LogReadError {
+    /// The file could not be opened or read.
+    #[error("{}: cannot read the log: {source}", .path.display())]
+    Io {
+        /// The log file.
+        path: PathBuf,
+        /// What the system said.
+        source: std::io::Error,
+    },
+    /// The file holds nothing, not even a header.
+    #[error("{}: the log is empty: expected a header line `tick,time_s,…,x_m,y_m,…`", .path.display())]
+    Empty {
+        /// The log file.
+        path: PathBuf,
+    },
+    /// The first line holds data, not column names.
+    #[error("{}:{line}: no header: expected column names `tick,time_s,…,x_m,y_m,…`, found `{found}`", .path.display())]
+    NoHeader {
+        /// The log file.
+        path: PathBuf,
+        /// The line that should have been the header.
+        line: usize,
+        /// Its start, as found.
+        found: String,
+    },
+    /// The header lacks a column the plot needs.
+    #[error("{}:{line}: the header has no column `{column}` (it needs tick, time_s, x_m and y_m)", .path.display())]
+    MissingColumn {
+        /// The log file.
+        path: PathBuf,
+        /// The header's line.
+        line: usize,
+        /// The missing column.
+        column: &'static str,
+    },
+    /// The header names a column twice.
+    #[error("{}:{line}: the header names column `{column}` twice", .path.display())]
+    DuplicateColumn {
+        /// The log file.
+        path: PathBuf,
+        /// The header's line.
+        line: usize,
+        /// The repeated name.
+        column: String,
+    },
+    /// A row has more or fewer fields than the header has columns.
+    #[error("{}:{line}: {found} fields, expected {expected} as in the header", .path.display())]
+    FieldCount {
+        /// The log file.
+        path: PathBuf,
+        /// The row's line.
+        line: usize,
+        /// Columns in the header.
+        expected: usize,
+        /// Fields in this row.
+        found: usize,
+    },
+    /// A field of a numeric column does not parse.
+    #[error("{}:{line}: column {column} ({name}): `{text}` is not {expected}", .path.display())]
+    BadNumber {
+        /// The log file.
+        path: PathBuf,
+        /// The row's line.
+        line: usize,
+        /// The column, counting from 1.
+        column: usize,
+        /// The column's name.
+        name: String,
+        /// The field as found.
+        text: String,
+        /// What was expected ("a number", "a whole number", "a finite number").
+        expected: &'static str,
+    },
+    /// The header is there but no row follows.
+    #[error("{}: the log has a header but no rows", .path.display())]
+    NoRows {
+        /// The log file.
+        path: PathBuf,
+    },
+}
+
+impl RunLog {
+    /// Reads and parses the log at `path`.
+    pub fn read(path: &Path) -> Result<Self, LogReadError> {
+        let text = std::fs::read_to_string(path).map_err(|source| LogReadError::Io { path: path.into(), source })?;
+        Self::parse(&text, path)
+    }
+
+    /// Parses the text of a log; `path` only names the file in errors.
+    pub fn parse(text: &str, path: &Path) -> Result<Self, LogReadError> {
+        // Blank lines (a trailing newline, an editor's empty last line) are skipped but counted.
+        let mut lines = text.lines().enumerate().map(|(k, l)| (k + 1, l.trim_end_matches('\r')));
+        let (header_line, header) = lines
+            .by_ref()
+            .find(|(_, l)| !l.trim().is_empty())
+            .ok_or_else(|| LogReadError::Empty { path: path.into() })?;
+        let columns: Vec<String> = header.split(',').map(|c| c.trim().to_owned()).collect();
+        if columns.first().is_some_and(|c| c.parse::<f64>().is_ok()) {
+            let found: String = header.chars().take(40).collect();
+            return Err(LogReadError::NoHeader { path: path.into(), line: header_line, found });
+        }
+        for (k, c) in columns.iter().enumerate() {
+            if columns[..k].contains(c) {
+                return Err(LogReadError::DuplicateColumn { path: path.into(), line: header_line, column: c.clone() });
+            }
+        }
+        let index = |name: &str| columns.iter().position(|c| c == name);
+        let mut required = [0; REQUIRED_COLUMNS.len()];
+        for (slot, name) in required.iter_mut().zip(REQUIRED_COLUMNS) {
+            *slot = index(name).ok_or(LogReadError::MissingColumn {
+                path: path.into(),
+                line: header_line,
+                column: name,
+            })?;
+        }
+        let [tick_col, time_col, x_col, y_col] = required;
+        let heading_col = index("heading_deg");
+        let collision_col = index("collision");
+        let numeric: Vec<bool> = columns.iter().map(|c| is_numeric_column(c)).collect();
+
+        let mut samples = Vec::new();
+        let mut values = vec![0.0; columns.len()];
+        for (line, row) in lines {
+            if row.trim().is_empty() {
+                continue;
+            }
+            let fields: Vec<&str> = row.split(',').map(str::trim).collect();
+            if fields.len() != columns.len() {
+                return Err(LogReadError::FieldCount {
+                    path: path.into(),
+                    line,
+                    expected: columns.len(),
+                    found: fields.len(),
+                });
+            }
+            let bad = |column: usize, expected: &'static str| LogReadError::BadNumber {
+                path: path.into(),
+                line,
+                column: column + 1,
+                name: columns[column].clone(),
+                text: fields[column].to_owned(),
+                expected,
+            };
+            for (k, field) in fields.iter().enumerate() {
+                if numeric[k] {
+                    values[k] = field.parse::<f64>().map_err(|_| bad(k, "a number"))?;
+                }
+            }
+            let tick = fields[tick_col].parse::<u64>().map_err(|_| bad(tick_col, "a whole number"))?;
+            for col in [time_col, x_col, y_col] {
+                if !values[col].is_finite() {
+                    return Err(bad(col, "a finite number"));
+                }
+            }
+            samples.push(Sample {
+                tick,
+                time_s: values[time_col],
+                x_m: values[x_col],
+                y_m: values[y_col],
+                heading_deg: heading_col.map_or(f64::NAN, |c| values[c]),
+                collision: collision_col.is_some_and(|c| values[c] != 0.0 && !values[c].is_nan()),
+            });
+        }
+        if samples.is_empty() {
+            return Err(LogReadError::NoRows { path: path.into() });
+        }
+        Ok(Self { columns, samples })
+    }
+
+    /// Distance driven along the logged positions, metres.
+    pub fn distance_m(&self) -> f64 {
+        self.samples.windows(2).map(|w| (w[1].x_m - w[0].x_m).hypot(w[1].y_m - w[0].y_m)).sum()
+    }
+
+    /// How many rows have the collision sensor on.
+    pub fn collision_rows(&self) -> usize {
+        self.samples.iter().filter(|s| s.collision).count()
+    }
+}
+
+/// Whether a column of this name holds numbers (the log's own columns; unknown extras do not
+/// have to).
+fn is_numeric_column(name: &str) -> bool {
+    NUMERIC_COLUMNS.contains(&name)
+        || name
+            .strip_prefix("proximity")
+            .and_then(|rest| rest.strip_suffix("_m"))
+            .is_some_and(|k| !k.is_empty() && k.bytes().all(|b| b.is_ascii_digit()))
+}
+
+/// The speed over one interval between two logged ticks.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SpeedPoint {
+    /// Time at the end of the interval, seconds.
+    pub time_s: f64,
+    /// Distance over the interval divided by its length, m/s.
+    pub speed_m_s: f64,
+    /// Index of the sample that ends the interval.
+    pub sample: usize,
+}
+
+/// Speeds from successive positions, each over the true interval between two logged rows.
+///
+/// A row whose tick is not after the previous one (a re-published tick) is skipped, and so is
+/// a row whose time does not advance; the next interval is then measured from the last row
+/// kept, so no distance is lost.
+pub fn speeds(samples: &[Sample]) -> Vec<SpeedPoint> {
+    let mut out = Vec::with_capacity(samples.len().saturating_sub(1));
+    let mut prev: Option<&Sample> = None;
+    for (k, s) in samples.iter().enumerate() {
+        match prev {
+            None => prev = Some(s),
+            Some(p) => {
+                let dt = s.time_s - p.time_s;
+                if s.tick <= p.tick || dt <= 0.0 {
+                    continue;
+                }
+                let d = (s.x_m - p.x_m).hypot(s.y_m - p.y_m);
+                out.push(SpeedPoint { time_s: s.time_s, speed_m_s: d / dt, sample: k });
+                prev = Some(s);
+            }
+        }
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const HEADER: &str = "tick,time_s,encoder_left_ticks,encoder_right_ticks,proximity0_m,proximity1_m,heading_deg,x_m,y_m,collision,contacts,power_left,power_right";
+
+    fn parse(text: &str) -> Result<RunLog, LogReadError> {
+        RunLog::parse(text, Path::new("runs/chair1.csv"))
+    }
+
+    #[test]
+    fn a_good_log_reads_by_column_name() {
+        let text = format!(
+            "{HEADER}\n1,0.100,0,0,1.5000,NaN,0.000,10.0000,6.1000,0,0,0.500,0.500\n\
+             2,0.200,3,3,1.4000,NaN,2.000,10.0500,6.1000,1,1,0.500,0.500\n\n"
+        );
+        let log = parse(&text).expect("reads");
+        assert_eq!(log.columns.len(), 13);
+        assert_eq!(log.samples.len(), 2);
+        assert_eq!(
+            log.samples[1],
+            Sample { tick: 2, time_s: 0.2, x_m: 10.05, y_m: 6.1, heading_deg: 2.0, collision: true }
+        );
+        assert!(!log.samples[0].collision);
+        assert_eq!(log.collision_rows(), 1);
+        assert!((log.distance_m() - 0.05).abs() < 1e-12);
+    }
+
+    #[test]
+    fn old_logs_without_power_and_with_extra_columns_read() {
+        let text = "tick,time_s,x_m,y_m,note,collision\r\n5,0.5,1,2,hello,0\r\n6,0.6,1.1,2,,0\r\n";
+        let log = parse(text).expect("reads");
+        assert_eq!(log.samples.len(), 2);
+        assert!(log.samples[0].heading_deg.is_nan());
+    }
+
+    #[test]
+    fn an_empty_file_is_reported() {
+        assert!(matches!(parse("\n\n"), Err(LogReadError::Empty { .. })));
+    }
+
+    #[test]
+    fn a_log_without_header_is_reported_at_line_1() {
+        let err = parse("1,0.1,10,6.1\n").expect_err("no header");
+        assert!(matches!(err, LogReadError::NoHeader { line: 1, .. }), "{err:?}");
+        assert!(err.to_string().starts_with("runs/chair1.csv:1: no header"), "{err}");
+    }
+
+    #[test]
+    fn a_missing_position_column_is_named() {
+        let err = parse("tick,time_s,x_m\n1,0.1,3\n").expect_err("no y_m");
+        assert!(matches!(err, LogReadError::MissingColumn { column: "y_m", line: 1, .. }), "{err:?}");
+    }
+
+    #[test]
+    fn a_repeated_column_is_named() {
+        let err = parse("tick,time_s,x_m,y_m,x_m\n").expect_err("x_m twice");
+        assert!(matches!(&err, LogReadError::DuplicateColumn { column, .. } if column == "x_m"), "{err:?}");
+    }
+
+    #[test]
+    fn a_short_row_gives_its_line_and_the_counts() {
+        let err = parse("tick,time_s,x_m,y_m\n1,0.1,3,4\n\n2,0.2,3\n").expect_err("short row");
+        assert!(matches!(err, LogReadError::FieldCount { line: 4, expected: 4, found: 3, .. }), "{err:?}");
+        assert_eq!(err.to_string(), "runs/chair1.csv:4: 3 fields, expected 4 as in the header");
+    }
+
+    #[test]
+    fn a_non_number_gives_its_line_and_column() {
+        let err = parse("tick,time_s,x_m,y_m,proximity0_m\n1,0.1,3,4,0.5\n2,0.2,3,4,far\n").expect_err("far");
+        assert!(
+            matches!(&err, LogReadError::BadNumber { line: 3, column: 5, name, text, expected: "a number", .. }
+            if name == "proximity0_m" && text == "far"),
+            "{err:?}"
+        );
+        assert_eq!(err.to_string(), "runs/chair1.csv:3: column 5 (proximity0_m): `far` is not a number");
+    }
+
+    #[test]
+    fn a_fractional_tick_and_a_nan_position_are_refused() {
+        let err = parse("tick,time_s,x_m,y_m\n1.5,0.1,3,4\n").expect_err("tick 1.5");
+        assert!(matches!(err, LogReadError::BadNumber { line: 2, column: 1, expected: "a whole number", .. }));
+        let err = parse("tick,time_s,x_m,y_m\n1,0.1,3,NaN\n").expect_err("NaN y");
+        assert!(matches!(err, LogReadError::BadNumber { line: 2, column: 4, expected: "a finite number", .. }));
+    }
+
+    #[test]
+    fn a_header_alone_is_reported() {
+        assert!(matches!(parse("tick,time_s,x_m,y_m\n"), Err(LogReadError::NoRows { .. })));
+    }
+
+    #[test]
+    fn a_missing_file_names_the_file() {
+        let err = RunLog::read(Path::new("/nonexistent/iwsim/chair1.csv")).expect_err("missing");
+        assert!(matches!(err, LogReadError::Io { .. }));
+        assert!(err.to_string().starts_with("/nonexistent/iwsim/chair1.csv: cannot read the log"), "{err}");
+    }
+
+    fn sample(tick: u64, time_s: f64, x_m: f64, y_m: f64) -> Sample {
+        Sample { tick, time_s, x_m, y_m, heading_deg: 0.0, collision: false }
+    }
+
+    #[test]
+    fn a_straight_run_at_constant_speed_gives_that_speed() {
+        // 0.8 m/s along a diagonal, logged every 0.1 s.
+        let (vx, vy) = (0.8 * 0.6, 0.8 * 0.8);
+        let samples: Vec<Sample> =
+            (0..50).map(|k| sample(k, 0.1 * k as f64, 10.0 + vx * 0.1 * k as f64, 6.0 + vy * 0.1 * k as f64)).collect();
+        let v = speeds(&samples);
+        assert_eq!(v.len(), 49);
+        for (k, p) in v.iter().enumerate() {
+            assert!((p.speed_m_s - 0.8).abs() < 1e-9, "{p:?}");
+            assert_eq!(p.sample, k + 1);
+            assert!((p.time_s - 0.1 * (k + 1) as f64).abs() < 1e-12);
+        }
+    }
+
+    #[test]
+    fn speed_uses_the_true_interval_and_skips_repeated_ticks() {
+        let samples = [
+            sample(1, 0.1, 0.0, 0.0),
+            sample(2, 0.2, 0.1, 0.0),
+            sample(2, 0.2, 0.1, 0.0), // re-published tick
+            sample(4, 0.4, 0.5, 0.0), // a tick missed: 0.4 m over 0.2 s
+            sample(5, 0.4, 0.9, 0.0), // clock did not advance: skipped
+            sample(6, 0.6, 0.9, 0.0),
+        ];
+        let v: Vec<(f64, usize)> =
+            speeds(&samples).iter().map(|p| ((p.speed_m_s * 1e6).round() / 1e6, p.sample)).collect();
+        assert_eq!(v, [(1.0, 1), (2.0, 3), (2.0, 5)]);
+    }
+}

@@ -1,0 +1,262 @@
+//! `iwsim plot` end to end through the library: a log and a summary.json on disk in, an SVG
+//! file out, read back with quick-xml.
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+use plot::PlotArgs;
+use plot::draw::{CHECKPOINT_RGB, TRAJECTORY_RGB};
+use quick_xml::events::Event;
+
+/// A fresh directory for one test, removed when dropped.
+struct TempDir(PathBuf);
+
+impl TempDir {
+    fn new(name: &str) -> Self {
+        let dir = std::env::temp_dir().join(format!("iwsim-plot-{}-{name}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).expect("temp dir");
+        Self(dir)
+    }
+}
+
+impl Drop for TempDir {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(&self.0);
+    }
+}
+
+/// Positions of a synthetic run: 0.5 m/s east from (10, 6.1) to (12, 6.1), a quarter turn
+/// left about (12, 7.1), then north to (13, 8.6); one row every 0.1 s.
+fn run_positions() -> Vec<(f64, f64)> {
+    let mut p: Vec<(f64, f64)> = (0..=40).map(|k| (10.0 + 0.05 * f64::from(k), 6.1)).collect();
+    // Arc length π/2 m at 0.05 m a row: 31 steps.
+    for k in 1..=31 {
+        let a = -std::f64::consts::FRAC_PI_2 + std::f64::consts::FRAC_PI_2 * f64::from(k) / 31.0;
+        p.push((12.0 + a.cos(), 7.1 + a.sin()));
+    }
+    p.extend((1..=30).map(|k| (13.0, 7.1 + 0.05 * f64::from(k))));
+    p
+}
+
+const HEADER: &str = "tick,time_s,encoder_left_ticks,encoder_right_ticks,proximity0_m,proximity1_m,heading_deg,x_m,y_m,collision,contacts,power_left,power_right";
+
+fn write_run(dir: &Path) -> (PathBuf, Vec<(f64, f64)>) {
+    let positions = run_positions();
+    let mut text = format!("{HEADER}\n");
+    for (k, (x, y)) in positions.iter().enumerate() {
+        let collision = u8::from(k == 60);
+        text += &format!(
+            "{},{:.3},{},{},1.5000,NaN,0.000,{x:.4},{y:.4},{collision},{collision},0.500,0.500\n",
+            k + 1,
+            0.1 * (k + 1) as f64,
+            k * 3,
+            k * 3
+        );
+    }
+    let log = dir.join("chair1.csv");
+    std::fs::write(&log, text).expect("log written");
+    let summary = r#"{"scenario":"turn","lab":"builtin:liacc","obstacles":[[13.6,6.0,14.2,6.6,1.0]],
+        "checkpoints":[[11,6.1,0.5],[13,8.0,0.5]],"seed":1,"robots":[{"name":"chair1","log":"chair1.csv"}]}"#;
+    std::fs::write(dir.join("summary.json"), summary).expect("summary written");
+    (log, positions)
+}
+
+fn args(log: &Path) -> PlotArgs {
+    PlotArgs { log: log.into(), out: None, lab: None, obstacle: vec![], checkpoint: vec![], no_summary: false }
+}
+
+/// One SVG element: its name, attributes and the text directly inside it.
+#[derive(Debug)]
+struct Element {
+    name: String,
+    attrs: BTreeMap<String, String>,
+    text: String,
+}
+
+impl Element {
+    fn attr(&self, key: &str) -> &str {
+        self.attrs.get(key).map_or("", String::as_str)
+    }
+
+    fn num(&self, key: &str) -> f64 {
+        self.attr(key).parse().unwrap_or(f64::NAN)
+    }
+
+    fn points(&self) -> Vec<(f64, f64)> {
+        self.attr("points")
+            .split_whitespace()
+            .map(|p| {
+                let (x, y) = p.split_once(',').expect("x,y pair");
+                (x.parse().expect("x"), y.parse().expect("y"))
+            })
+            .collect()
+    }
+}
+
+/// Parses the SVG with quick-xml, failing on malformed XML, and lists its elements.
+fn parse_svg(svg: &str) -> Vec<Element> {
+    let mut reader = quick_xml::Reader::from_str(svg);
+    let mut elements: Vec<Element> = Vec::new();
+    let (mut depth, mut roots, mut open) = (0usize, 0usize, Vec::new());
+    loop {
+        let event =
+            reader.read_event().unwrap_or_else(|e| panic!("malformed SVG at {}: {e}", reader.buffer_position()));
+        match event {
+            Event::Start(ref e) | Event::Empty(ref e) => {
+                if depth == 0 {
+                    roots += 1;
+                }
+                let attrs = e
+                    .attributes()
+                    .map(|a| {
+                        let a = a.expect("well-formed attribute");
+                        let value = a.normalized_value(quick_xml::XmlVersion::Implicit1_0).expect("attribute value");
+                        let key: &str = a.key.as_ref();
+                        (key.to_owned(), value.into_owned())
+                    })
+                    .collect();
+                let qname = e.name();
+                let name: &str = qname.as_ref();
+                let name = name.to_owned();
+                elements.push(Element { name, attrs, text: String::new() });
+                if matches!(event, Event::Start(_)) {
+                    depth += 1;
+                    open.push(elements.len() - 1);
+                }
+            }
+            Event::End(_) => {
+                depth = depth.checked_sub(1).expect("an end tag with nothing open");
+                open.pop();
+            }
+            Event::Text(t) => {
+                if let Some(&k) = open.last() {
+                    elements[k].text += t.xml10_content().trim();
+                }
+            }
+            Event::Eof => break,
+            _ => {}
+        }
+    }
+    assert_eq!(depth, 0, "elements left open at the end");
+    assert_eq!(roots, 1, "one root element");
+    assert_eq!(elements.first().map(|e| e.name.as_str()), Some("svg"));
+    elements
+}
+
+fn hex((r, g, b): (u8, u8, u8)) -> String {
+    format!("#{r:02X}{g:02X}{b:02X}")
+}
+
+#[test]
+fn the_svg_is_well_formed_and_draws_the_trajectory_through_the_checkpoints() {
+    let dir = TempDir::new("trajectory");
+    let (log, positions) = write_run(&dir.0);
+    let out = plot::plot(&args(&log)).expect("plotted");
+    assert_eq!(out, dir.0.join("chair1.svg"), "default output beside the log");
+    let svg = std::fs::read_to_string(&out).expect("SVG written");
+    let elements = parse_svg(&svg);
+
+    // The checkpoint circles (the legend's sample ring is smaller) give the metres → pixels map.
+    let rings: Vec<&Element> = elements
+        .iter()
+        .filter(|e| e.name == "circle" && e.attr("stroke") == hex(CHECKPOINT_RGB) && e.num("r") > 10.0)
+        .collect();
+    assert_eq!(rings.len(), 2, "two checkpoint circles: {rings:?}");
+    let (c1, c2) = ((rings[0].num("cx"), rings[0].num("cy")), (rings[1].num("cx"), rings[1].num("cy")));
+    let sx = (c2.0 - c1.0) / (13.0 - 11.0);
+    let sy = (c2.1 - c1.1) / (8.0 - 6.1);
+    assert!(sx > 10.0 && sy < -10.0, "x to the right, y up: {sx} {sy}");
+    assert!((sx + sy).abs() / sx < 0.02, "equal scales on both axes: {sx} px/m vs {sy}");
+    assert!((rings[0].num("r") - 0.5 * sx).abs() <= 1.0, "radius 0.5 m drawn to scale");
+    let project = |(x, y): (f64, f64)| (c1.0 + sx * (x - 11.0), c1.1 + sy * (y - 6.1));
+
+    let trajectory: Vec<&Element> = elements
+        .iter()
+        .filter(|e| e.name == "polyline" && e.attr("stroke") == hex(TRAJECTORY_RGB))
+        .filter(|e| e.points().len() == positions.len())
+        .collect();
+    assert_eq!(trajectory.len(), 1, "one polyline with a point per row");
+    let points = trajectory[0].points();
+    for (k, row) in [(0, positions[0]), (positions.len() - 1, positions[positions.len() - 1]), (60, positions[60])] {
+        let (px, py) = project(row);
+        let (ax, ay) = points[k];
+        assert!(
+            (ax - px).abs() <= 2.0 && (ay - py).abs() <= 2.0,
+            "row {k} at {row:?}: drawn at {:?}, expected {:?}",
+            (ax, ay),
+            (px, py)
+        );
+    }
+
+    let texts: Vec<&str> = elements.iter().filter(|e| e.name == "text").map(|e| e.text.as_str()).collect();
+    for want in ["chair1.csv", "1", "2", "A", "start", "end", "x (m)", "y (m)", "time (s)", "speed (m/s)"] {
+        assert!(texts.contains(&want), "text {want:?} missing from {texts:?}");
+    }
+    assert!(texts.iter().any(|t| t.starts_with("top speed 0.5")), "top speed in the legend: {texts:?}");
+    // The speed line: one point per interval.
+    assert!(
+        elements.iter().any(|e| e.name == "polyline" && e.points().len() == positions.len() - 1),
+        "a speed polyline with one point per interval"
+    );
+    // The collision row is marked red at its place.
+    let (cx, cy) = project(positions[60]);
+    assert!(
+        elements.iter().any(|e| e.name == "circle"
+            && e.attr("fill") == "#D7191E"
+            && (e.num("cx") - cx).abs() <= 2.0
+            && (e.num("cy") - cy).abs() <= 2.0),
+        "collision mark at {cx},{cy}"
+    );
+}
+
+#[test]
+fn the_same_log_gives_the_same_bytes() {
+    let dir = TempDir::new("determinism");
+    let (log, _) = write_run(&dir.0);
+    let mut a = args(&log);
+    a.out = Some(dir.0.join("one.svg"));
+    let mut b = args(&log);
+    b.out = Some(dir.0.join("two.svg"));
+    plot::plot(&a).expect("first");
+    plot::plot(&b).expect("second");
+    let one = std::fs::read(dir.0.join("one.svg")).expect("one");
+    let two = std::fs::read(dir.0.join("two.svg")).expect("two");
+    assert!(one.len() > 1000);
+    assert!(one == two, "two plots of one log differ");
+}
+
+#[test]
+fn the_command_line_overrides_the_summary() {
+    let dir = TempDir::new("override");
+    let (log, _) = write_run(&dir.0);
+    let mut a = args(&log);
+    a.checkpoint = vec!["12,6.1,1.0".into()];
+    let svg = std::fs::read_to_string(plot::plot(&a).expect("plotted")).expect("SVG");
+    let rings = parse_svg(&svg)
+        .into_iter()
+        .filter(|e| e.name == "circle" && e.attr("stroke") == hex(CHECKPOINT_RGB) && e.num("r") > 10.0)
+        .count();
+    assert_eq!(rings, 1, "the one --checkpoint replaces the summary's two");
+
+    a.checkpoint.clear();
+    a.no_summary = true;
+    let svg = std::fs::read_to_string(plot::plot(&a).expect("plotted")).expect("SVG");
+    let elements = parse_svg(&svg);
+    assert!(!elements.iter().any(|e| e.name == "circle" && e.attr("stroke") == hex(CHECKPOINT_RGB)));
+    assert!(elements.iter().any(|e| e.name == "text" && e.text.starts_with("no map")), "no lab without the summary");
+}
+
+#[test]
+fn a_bad_log_is_an_error_naming_file_line_and_column() {
+    let dir = TempDir::new("bad");
+    let log = dir.0.join("broken.csv");
+    std::fs::write(&log, "tick,time_s,x_m,y_m\n1,0.1,10,6\n2,0.2,ten,6\n").expect("written");
+    let err = plot::plot(&args(&log)).expect_err("bad number");
+    let text = format!("{err:#}");
+    assert!(text.contains("broken.csv:3: column 3 (x_m): `ten` is not a number"), "{text}");
+    assert!(!dir.0.join("broken.svg").exists(), "no SVG for a bad log");
+
+    let err = plot::plot(&args(&dir.0.join("missing.csv"))).expect_err("missing");
+    assert!(format!("{err:#}").contains("missing.csv: cannot read the log"), "{err:#}");
+}

@@ -1,0 +1,432 @@
+//! Scenarios: one TOML file says what a run is — the map, the obstacles and checkpoints, the
+//! agents to start and what must come out. `iwsim run` reads them; the thesis's experiments
+//! are built in (`builtin:NAME`).
+//!
+//! ```toml
+//! name = "slalom"
+//! lab = "builtin:liacc"          # or a lab file, relative to this file
+//! seconds = 90                   # simulated time limit
+//! cycle_ms = 100                 # tick (default 100)
+//! noise = true                   # Ciber-Rato noise (default true)
+//!
+//! [[checkpoints]]                # numbered from 1 in file order
+//! x = 10.0
+//! y = 6.1
+//! radius = 0.5                   # default 0.5 m
+//!
+//! [[obstacles]]                  # static boxes, sensed and collided with like walls
+//! name = "A"
+//! x0 = 17.0
+//! y0 = 6.1
+//! x1 = 17.6
+//! y1 = 6.4
+//! height = 1.0                   # default 1.0 m
+//!
+//! [[agents]]                     # each one an `iwsim agent KIND` process
+//! kind = "navigator"
+//! options = { name = "chair1", pose = [10.0, 6.1, 0.0], checkpoint = [[10.0, 6.1], [20.0, 6.1]] }
+//! # `config` (a table) is written to a file and passed as `--config FILE`.
+//!
+//! [routes]                       # checkpoints each robot must reach, in order
+//! chair1 = [1, 2]
+//!
+//! [expect]
+//! max_collisions = 0             # for every robot
+//! [expect.robots.chair1]
+//! route = true                   # reaches every checkpoint of its route
+//! top_speed_mps = [0.4851, 0.4949]
+//! ```
+//!
+//! Options become command-line flags: `key = value` gives `--key value`, `true` gives `--key`,
+//! an array of numbers `--key a,b,c`, and an array of arrays or strings one flag per element.
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+use serde::Deserialize;
+
+/// The built-in scenarios, by name.
+pub const BUILTINS: &[(&str, &str)] = &[
+    ("dynamics", include_str!("../scenarios/dynamics.toml")),
+    ("slalom", include_str!("../scenarios/slalom.toml")),
+    ("door", include_str!("../scenarios/door.toml")),
+    ("corridor-swap", include_str!("../scenarios/corridor-swap.toml")),
+    ("demo", include_str!("../scenarios/demo.toml")),
+];
+
+/// A scenario file.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Scenario {
+    /// Name, for summaries.
+    pub name: String,
+    /// One line about it.
+    #[serde(default)]
+    pub description: String,
+    /// Lab: `builtin:NAME` or a file (relative to the scenario file).
+    #[serde(default = "default_lab")]
+    pub lab: String,
+    /// Grid file, if not the built-in lab's own.
+    #[serde(default)]
+    pub grid: Option<String>,
+    /// Tick, milliseconds.
+    #[serde(default = "default_cycle")]
+    pub cycle_ms: u32,
+    /// Simulated time limit, seconds.
+    pub seconds: f64,
+    /// Ciber-Rato noise on (true) or every noise off.
+    #[serde(default = "yes")]
+    pub noise: bool,
+    /// Seed, unless the command line gives one.
+    #[serde(default = "one")]
+    pub seed: u64,
+    /// Checkpoints, numbered from 1.
+    #[serde(default)]
+    pub checkpoints: Vec<Checkpoint>,
+    /// Static obstacles.
+    #[serde(default)]
+    pub obstacles: Vec<Obstacle>,
+    /// Agent processes.
+    pub agents: Vec<AgentSpec>,
+    /// Checkpoint numbers each robot must reach, in order.
+    #[serde(default)]
+    pub routes: BTreeMap<String, Vec<usize>>,
+    /// What must hold at the end.
+    #[serde(default)]
+    pub expect: Expect,
+    /// The directory relative paths are read from (not in the file).
+    #[serde(skip)]
+    pub base: PathBuf,
+}
+
+fn default_lab() -> String {
+    "builtin:liacc".into()
+}
+fn default_cycle() -> u32 {
+    100
+}
+fn yes() -> bool {
+    true
+}
+fn one() -> u64 {
+    1
+}
+fn half() -> f64 {
+    0.5
+}
+fn metre() -> f64 {
+    1.0
+}
+
+/// A checkpoint.
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Checkpoint {
+    /// Centre x, metres.
+    pub x: f64,
+    /// Centre y, metres.
+    pub y: f64,
+    /// Reached within this distance of the centre of movement, metres.
+    #[serde(default = "half")]
+    pub radius: f64,
+}
+
+/// A static box.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Obstacle {
+    /// Label.
+    #[serde(default)]
+    pub name: String,
+    /// Lower-left x.
+    pub x0: f64,
+    /// Lower-left y.
+    pub y0: f64,
+    /// Upper-right x.
+    pub x1: f64,
+    /// Upper-right y.
+    pub y1: f64,
+    /// Height, metres.
+    #[serde(default = "metre")]
+    pub height: f64,
+}
+
+/// One agent process.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct AgentSpec {
+    /// `iwsim agent KIND`.
+    pub kind: String,
+    /// Command-line options.
+    #[serde(default)]
+    pub options: toml::Table,
+    /// A configuration passed as `--config FILE`.
+    #[serde(default)]
+    pub config: Option<toml::Table>,
+}
+
+/// What must hold at the end of a run.
+#[derive(Debug, Clone, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Expect {
+    /// Contacts allowed per robot.
+    #[serde(default)]
+    pub max_collisions: Option<u64>,
+    /// Per-robot expectations.
+    #[serde(default)]
+    pub robots: BTreeMap<String, RobotExpect>,
+}
+
+/// What must hold for one robot.
+#[derive(Debug, Clone, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RobotExpect {
+    /// Reaches every checkpoint of its route.
+    #[serde(default)]
+    pub route: bool,
+    /// Top speed within [min, max], m/s.
+    #[serde(default)]
+    pub top_speed_mps: Option<[f64; 2]>,
+    /// 10–90 % rise time within [min, max], s.
+    #[serde(default)]
+    pub rise_time_s: Option<[f64; 2]>,
+    /// Final heading within [min, max], degrees.
+    #[serde(default)]
+    pub final_heading_deg: Option<[f64; 2]>,
+    /// Final x within [min, max], metres.
+    #[serde(default)]
+    pub final_x_m: Option<[f64; 2]>,
+}
+
+/// Why a scenario could not be loaded.
+#[derive(Debug, thiserror::Error)]
+pub enum ScenarioError {
+    /// No such built-in.
+    #[error("no built-in scenario {name:?}; built in: {known}")]
+    UnknownBuiltin {
+        /// Asked for.
+        name: String,
+        /// Known names.
+        known: String,
+    },
+    /// The file could not be read.
+    #[error("{path}: {source}")]
+    Io {
+        /// File.
+        path: String,
+        /// Why.
+        source: std::io::Error,
+    },
+    /// Bad TOML, or a field of the wrong type (the message carries line and column).
+    #[error("{path}: {message}")]
+    Toml {
+        /// File.
+        path: String,
+        /// What the parser said.
+        message: String,
+    },
+    /// The scenario is well-formed but does not make sense.
+    #[error("{path}: {message}")]
+    Invalid {
+        /// File.
+        path: String,
+        /// What is wrong.
+        message: String,
+    },
+}
+
+impl Scenario {
+    /// Loads `builtin:NAME` or a file.
+    pub fn load(spec: &str) -> Result<Self, ScenarioError> {
+        match spec.strip_prefix("builtin:") {
+            Some(name) => {
+                let text = BUILTINS.iter().find(|(n, _)| *n == name).map(|(_, t)| *t).ok_or_else(|| {
+                    ScenarioError::UnknownBuiltin {
+                        name: name.into(),
+                        known: BUILTINS.iter().map(|(n, _)| *n).collect::<Vec<_>>().join(", "),
+                    }
+                })?;
+                Self::parse(text, spec, Path::new("."))
+            }
+            None => {
+                let text = std::fs::read_to_string(spec)
+                    .map_err(|source| ScenarioError::Io { path: spec.into(), source })?;
+                let base = Path::new(spec).parent().map(Path::to_path_buf).unwrap_or_else(|| PathBuf::from("."));
+                Self::parse(&text, spec, &base)
+            }
+        }
+    }
+
+    /// Parses and checks scenario text; `path` names it in errors.
+    pub fn parse(text: &str, path: &str, base: &Path) -> Result<Self, ScenarioError> {
+        let mut s: Scenario = toml::from_str(text)
+            .map_err(|e| ScenarioError::Toml { path: path.into(), message: e.to_string().trim_end().to_owned() })?;
+        s.base = base.to_path_buf();
+        let bad = |message: String| ScenarioError::Invalid { path: path.into(), message };
+        if !(s.seconds.is_finite() && s.seconds > 0.0) {
+            return Err(bad(format!("seconds = {} must be a positive number", s.seconds)));
+        }
+        if s.cycle_ms == 0 {
+            return Err(bad("cycle_ms must be at least 1".into()));
+        }
+        if s.agents.is_empty() {
+            return Err(bad("no [[agents]]: a run needs at least one".into()));
+        }
+        for (k, c) in s.checkpoints.iter().enumerate() {
+            if ![c.x, c.y, c.radius].iter().all(|v| v.is_finite()) || c.radius <= 0.0 {
+                return Err(bad(format!("checkpoint {}: x, y must be numbers and radius positive", k + 1)));
+            }
+        }
+        for (k, o) in s.obstacles.iter().enumerate() {
+            if !(o.x0 < o.x1 && o.y0 < o.y1 && o.height > 0.0) {
+                return Err(bad(format!(
+                    "obstacle {} ({}): want x0 < x1, y0 < y1 and a positive height",
+                    k + 1,
+                    o.name
+                )));
+            }
+        }
+        for (robot, route) in &s.routes {
+            if let Some(n) = route.iter().find(|&&n| n == 0 || n > s.checkpoints.len()) {
+                return Err(bad(format!(
+                    "route of {robot}: checkpoint {n} does not exist (there are {})",
+                    s.checkpoints.len()
+                )));
+            }
+        }
+        for robot in s.expect.robots.keys() {
+            if s.expect.robots[robot].route && !s.routes.contains_key(robot) {
+                return Err(bad(format!("expect.robots.{robot}.route: {robot} has no entry in [routes]")));
+            }
+        }
+        for a in &s.agents {
+            if !["navigator", "wheelchair", "door", "teleop"].contains(&a.kind.as_str()) {
+                return Err(bad(format!(
+                    "agent kind {:?}: expected navigator, wheelchair, door or teleop",
+                    a.kind
+                )));
+            }
+        }
+        Ok(s)
+    }
+
+    /// The lab as the hub takes it (`builtin:NAME`, or a path made relative to the file).
+    pub fn lab_spec(&self) -> String {
+        self.resolve(&self.lab)
+    }
+
+    /// The grid, likewise.
+    pub fn grid_spec(&self) -> Option<String> {
+        self.grid.as_ref().map(|g| self.resolve(g))
+    }
+
+    fn resolve(&self, spec: &str) -> String {
+        if spec.starts_with("builtin:") || Path::new(spec).is_absolute() {
+            spec.to_owned()
+        } else {
+            self.base.join(spec).display().to_string()
+        }
+    }
+
+    /// Ticks in the run.
+    pub fn ticks(&self) -> u64 {
+        (self.seconds * 1000.0 / self.cycle_ms as f64).round().max(1.0) as u64
+    }
+}
+
+/// Turns an agent's options into command-line flags (see the module documentation).
+pub fn option_flags(options: &toml::Table) -> Result<Vec<String>, String> {
+    fn scalar(v: &toml::Value) -> Option<String> {
+        match v {
+            toml::Value::String(s) => Some(s.clone()),
+            toml::Value::Integer(i) => Some(i.to_string()),
+            toml::Value::Float(f) => Some(f.to_string()),
+            _ => None,
+        }
+    }
+    let mut out = Vec::new();
+    for (k, v) in options {
+        let flag = format!("--{k}");
+        match v {
+            toml::Value::Boolean(true) => out.push(flag),
+            toml::Value::Boolean(false) => {}
+            toml::Value::Array(items) if items.iter().all(|i| matches!(i, toml::Value::Array(_))) => {
+                for item in items {
+                    let toml::Value::Array(inner) = item else { continue };
+                    let parts: Option<Vec<String>> = inner.iter().map(scalar).collect();
+                    let parts = parts.ok_or_else(|| format!("option {k}: nested arrays must hold numbers"))?;
+                    out.extend([flag.clone(), parts.join(",")]);
+                }
+            }
+            toml::Value::Array(items) if items.iter().all(|i| matches!(i, toml::Value::String(_))) => {
+                for item in items {
+                    out.extend([flag.clone(), scalar(item).unwrap_or_default()]);
+                }
+            }
+            toml::Value::Array(items) => {
+                let parts: Option<Vec<String>> = items.iter().map(scalar).collect();
+                let parts = parts.ok_or_else(|| format!("option {k}: an array must hold numbers or strings"))?;
+                out.extend([flag, parts.join(",")]);
+            }
+            other => out.extend([flag, scalar(other).ok_or_else(|| format!("option {k}: unsupported value"))?]),
+        }
+    }
+    Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_builtin_scenario_loads() {
+        for (name, _) in BUILTINS {
+            let s = Scenario::load(&format!("builtin:{name}")).unwrap_or_else(|e| panic!("{name}: {e}"));
+            assert_eq!(&s.name, name);
+        }
+    }
+
+    #[test]
+    fn options_become_flags() {
+        let t: toml::Table = toml::from_str(
+            "name = \"chair1\"\npose = [10.0, 6.1, 0.0]\ncheckpoint = [[10.0, 6.1], [20, 6.1]]\nfast = true\nslow = false\ncruise = 0.8",
+        )
+        .expect("toml");
+        let flags = option_flags(&t).expect("flags");
+        assert_eq!(
+            flags,
+            [
+                "--checkpoint",
+                "10,6.1",
+                "--checkpoint",
+                "20,6.1",
+                "--cruise",
+                "0.8",
+                "--fast",
+                "--name",
+                "chair1",
+                "--pose",
+                "10,6.1,0"
+            ]
+        );
+    }
+
+    #[test]
+    fn mistakes_are_named_with_their_place() {
+        let err = Scenario::parse("name = \"x\"\nseconds = \"ten\"\n", "x.toml", Path::new(".")).expect_err("type");
+        let msg = err.to_string();
+        assert!(msg.starts_with("x.toml: ") && msg.contains("line 2"), "{msg}");
+        let err = Scenario::parse(
+            "name = \"x\"\nseconds = 1\n[[agents]]\nkind = \"navigator\"\n[routes]\nc = [3]\n",
+            "x.toml",
+            Path::new("."),
+        )
+        .expect_err("bad route");
+        assert_eq!(err.to_string(), "x.toml: route of c: checkpoint 3 does not exist (there are 0)");
+        let err = Scenario::parse("name = \"x\"\nseconds = 1\nspeed = 2\n", "x.toml", Path::new(".")).expect_err("unknown");
+        assert!(err.to_string().contains("unknown field"), "{err}");
+        let err = Scenario::parse("name = \"x\"\nseconds = 1\n[[agents]]\nkind = \"robot\"\n", "x.toml", Path::new("."))
+            .expect_err("kind");
+        assert!(err.to_string().contains("agent kind \"robot\""), "{err}");
+    }
+}
