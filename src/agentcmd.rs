@@ -93,9 +93,9 @@ fn chairs_from_args(args: &WheelchairArgs) -> Vec<ChairConfig> {
         .map(|k| ChairConfig {
             name: format!("{}{}", args.name, k + 1),
             id: if args.id > 0 { args.id + k as u32 } else { 0 },
-            pose: args.pose.map(|[x, y, dir]| {
-                [x + args.spacing * (k % 10) as f64, y + args.spacing * (k / 10) as f64, dir]
-            }),
+            pose: args
+                .pose
+                .map(|[x, y, dir]| [x + args.spacing * (k % 10) as f64, y + args.spacing * (k / 10) as f64, dir]),
             body: [args.width, args.height, args.com],
             max_speed: args.max_speed,
             accel_curve: args.accel_curve,
@@ -186,7 +186,10 @@ fn drive(agent: &mut Agent, args: &WheelchairArgs, chairs: &[ChairConfig]) -> an
                     match toward(b.pose, goal, c.speed) {
                         Some(p) => break p,
                         None => {
-                            eprintln!("iwsim agent wheelchair: {} reached waypoint {:?} at t {:.1} s", c.name, goal, tick.sim_time_s);
+                            eprintln!(
+                                "iwsim agent wheelchair: {} reached waypoint {:?} at t {:.1} s",
+                                c.name, goal, tick.sim_time_s
+                            );
                             next_waypoint[k] += 1;
                         }
                     }

@@ -69,8 +69,15 @@ fn chairs(session: &str, robots: usize) -> anyhow::Result<Child> {
 /// Starts `iwsim view` on a free port and returns it with its address.
 fn viewer_process(session: &str) -> anyhow::Result<(Child, String)> {
     use std::io::BufRead;
-    let mut v =
-        spawn_self(&[s("view"), s("--session"), s(session), s("--http"), s("127.0.0.1:0"), s("--connect-timeout"), s("30")])?;
+    let mut v = spawn_self(&[
+        s("view"),
+        s("--session"),
+        s(session),
+        s("--http"),
+        s("127.0.0.1:0"),
+        s("--connect-timeout"),
+        s("30"),
+    ])?;
     let err = v.stderr.take().context("viewer stderr")?;
     let (tx, rx) = std::sync::mpsc::channel();
     std::thread::spawn(move || {
@@ -128,7 +135,8 @@ pub fn measure_page_rates(robots: usize, seconds: f64) -> anyhow::Result<Vec<Pag
     let rates = (|| {
         let mut b = Browser::launch(1280, 720)?;
         let mut out = Vec::new();
-        for (name, query) in [("2d", "?view=2d"), ("3d free", "?view=3d&camera=free"), ("3d first", "?view=3d&camera=first")]
+        for (name, query) in
+            [("2d", "?view=2d"), ("3d free", "?view=3d&camera=free"), ("3d first", "?view=3d&camera=first")]
         {
             open_page(&mut b, &format!("{url}{query}"), robots)?;
             out.push(measure_page(&mut b, name, seconds)?);
@@ -277,14 +285,8 @@ pub fn run(args: &BenchViewerArgs) -> anyhow::Result<ExitCode> {
         }
         println!("hub lock-step, 1 agent x {} chairs, {} ticks:", args.robots, args.ticks);
         println!("  no viewer                               {bare:7.0} ticks/s");
-        println!(
-            "  viewer streaming every frame to a client {viewed:7.0} ticks/s ({:.3}x)",
-            viewed / bare.max(1e-9)
-        );
-        println!(
-            "  viewer and Chromium on the same 2 cores  {browsed:7.0} ticks/s ({:.3}x)",
-            browsed / bare.max(1e-9)
-        );
+        println!("  viewer streaming every frame to a client {viewed:7.0} ticks/s ({:.3}x)", viewed / bare.max(1e-9));
+        println!("  viewer and Chromium on the same 2 cores  {browsed:7.0} ticks/s ({:.3}x)", browsed / bare.max(1e-9));
     }
     Ok(ExitCode::SUCCESS)
 }

@@ -16,7 +16,8 @@ pub struct Cli {
 /// Subcommands.
 #[derive(Debug, Subcommand)]
 pub enum Command {
-    /// Runs the demo: chairs driving on the LIACC floor (headless for now), with a summary.
+    /// Runs the demo: the slalom and the automatic door on the LIACC floor in real time, with
+    /// the viewer (its address is printed) and a summary.
     Demo(DemoArgs),
     /// Map files: check a lab, grid or parameters file.
     Map {
@@ -427,13 +428,25 @@ pub struct BenchWorldArgs {
 /// Options of `iwsim demo`.
 #[derive(Debug, Args, Clone)]
 pub struct DemoArgs {
-    /// Simulated seconds to run.
-    #[arg(long, default_value_t = 120.0)]
-    pub seconds: f64,
+    /// Simulated seconds to run (default: the whole demo, 75 s).
+    #[arg(long)]
+    pub seconds: Option<f64>,
     /// Seed for the world's noise.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
-    /// Write a CSV log per chair into this directory.
+    /// Where the logs and summary.json go.
+    #[arg(long, default_value = "runs/demo")]
+    pub out: PathBuf,
+    /// No viewer.
     #[arg(long)]
-    pub out: Option<PathBuf>,
+    pub headless: bool,
+    /// As fast as the agents allow instead of real time (implies --headless makes sense).
+    #[arg(long)]
+    pub lockstep: bool,
+    /// Where the viewer serves (0.0.0.0:8080 to watch from another machine).
+    #[arg(long, default_value = "127.0.0.1:8080")]
+    pub http: std::net::SocketAddr,
+    /// Let the viewer's page start, pause, step and stop the run.
+    #[arg(long)]
+    pub allow_control: bool,
 }

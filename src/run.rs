@@ -324,11 +324,13 @@ pub fn run_once(scenario: &Scenario, seed: u64, out: &Path, opts: &RunOptions) -
     }
     drop(tx);
     // Progress: every few seconds on long runs, from the world the hub publishes.
+    let (stop_progress, stopped) = std::sync::mpsc::channel::<()>();
     let progress = opts.verbose.then(|| {
         let session = session.clone();
-        std::thread::spawn(move || progress_loop(&session, ticks))
+        std::thread::spawn(move || progress_loop(&session, ticks, &stopped))
     });
     let hub_out = hub.wait(Duration::from_secs(24 * 3600));
+    drop(stop_progress);
     let agent_results: Vec<anyhow::Result<String>> =
         agents.into_iter().map(|a| a.wait(Duration::from_secs(20))).collect();
     if let Some(v) = viewer {
@@ -338,7 +340,8 @@ pub fn run_once(scenario: &Scenario, seed: u64, out: &Path, opts: &RunOptions) -
         let _ = p.join();
     }
     let messages: Vec<String> = rx.try_iter().collect();
-    let hub_out = hub_out.with_context(|| format!("the run failed; what the processes said:\n{}", messages.join("\n")))?;
+    let hub_out =
+        hub_out.with_context(|| format!("the run failed; what the processes said:\n{}", messages.join("\n")))?;
     for r in agent_results {
         r.with_context(|| format!("what the processes said:\n{}", messages.join("\n")))?;
     }
@@ -380,7 +383,9 @@ pub fn unique() -> u32 {
     N.fetch_add(1, Ordering::Relaxed)
 }
 
-fn progress_loop(session: &str, ticks: u64) {
+/// Prints how far the run is every two seconds until the hub ends it or `stop` is dropped
+/// (a fast lock-step run may end before the observer sees its last snapshot).
+fn progress_loop(session: &str, ticks: u64, stop: &std::sync::mpsc::Receiver<()>) {
     let Ok(obs) = agent_sdk::Observer::connect_within(session, "iwsim-run-progress", Duration::from_secs(30)) else {
         return;
     };
@@ -407,7 +412,9 @@ fn progress_loop(session: &str, ticks: u64) {
             }
             last_print = Instant::now();
         }
-        std::thread::sleep(Duration::from_millis(50));
+        if let Err(std::sync::mpsc::RecvTimeoutError::Disconnected) = stop.recv_timeout(Duration::from_millis(50)) {
+            break;
+        }
     }
     if tty {
         eprint!("\r{:40}\r", "");
@@ -466,7 +473,8 @@ pub fn summary_json(scenario: &Scenario, s: &RunSummary) -> String {
     )
 }
 
-fn print_summary(s: &RunSummary, out: &Path) {
+/// Prints a run's summary table.
+pub fn print_summary(s: &RunSummary, out: &Path) {
     println!(
         "scenario {} seed {}: {} ticks, state hash {}, {:.1} s wall clock",
         s.scenario, s.seed, s.ticks, s.state_hash, s.wall_s
@@ -501,7 +509,8 @@ fn print_summary(s: &RunSummary, out: &Path) {
 pub fn parse_seeds(text: &str) -> Result<std::ops::RangeInclusive<u64>, String> {
     let (a, b) = text.split_once("..").ok_or_else(|| format!("--seeds {text}: expected A..B, e.g. 1..20"))?;
     let a: u64 = a.trim().parse().map_err(|_| format!("--seeds {text}: {a:?} is not a number"))?;
-    let b: u64 = b.trim().trim_start_matches('=').parse().map_err(|_| format!("--seeds {text}: {b:?} is not a number"))?;
+    let b: u64 =
+        b.trim().trim_start_matches('=').parse().map_err(|_| format!("--seeds {text}: {b:?} is not a number"))?;
     if a > b {
         return Err(format!("--seeds {text}: the first seed is after the last"));
     }
@@ -535,7 +544,11 @@ pub fn run(args: &RunArgs) -> anyhow::Result<ExitCode> {
     let seeds = parse_seeds(seeds).map_err(anyhow::Error::msg)?;
     let mut table = String::new();
     let mut all = Vec::new();
-    let _ = writeln!(table, "  {:>6} {:>6} {:>11} {:>10} {:>9}  state hash", "seed", "pass", "checkpoints", "contacts", "time s");
+    let _ = writeln!(
+        table,
+        "  {:>6} {:>6} {:>11} {:>10} {:>9}  state hash",
+        "seed", "pass", "checkpoints", "contacts", "time s"
+    );
     for seed in seeds {
         let dir = out.join(format!("seed-{seed}"));
         let s = run_once(&scenario, seed, &dir, &RunOptions { verbose: false, ..opts.clone() })?;
@@ -563,7 +576,12 @@ pub fn run(args: &RunArgs) -> anyhow::Result<ExitCode> {
     let times: Vec<f64> =
         all.iter().flat_map(|s| s.robots.iter().filter_map(|r| r.reached_at_s.last().copied())).collect();
     let contacts: u64 = all.iter().flat_map(|s| s.robots.iter().map(|r| r.collisions)).sum();
-    println!("scenario {}: {} runs, {}", scenario.name, all.len(), if opts.lockstep { "lock-step" } else { "real time" });
+    println!(
+        "scenario {}: {} runs, {}",
+        scenario.name,
+        all.len(),
+        if opts.lockstep { "lock-step" } else { "real time" }
+    );
     print!("{table}");
     println!(
         "  success rate {passed}/{} ({:.0} %), mean time {}, collisions {contacts} in all",

@@ -249,8 +249,8 @@ impl Scenario {
                 Self::parse(text, spec, Path::new("."))
             }
             None => {
-                let text = std::fs::read_to_string(spec)
-                    .map_err(|source| ScenarioError::Io { path: spec.into(), source })?;
+                let text =
+                    std::fs::read_to_string(spec).map_err(|source| ScenarioError::Io { path: spec.into(), source })?;
                 let base = Path::new(spec).parent().map(Path::to_path_buf).unwrap_or_else(|| PathBuf::from("."));
                 Self::parse(&text, spec, &base)
             }
@@ -301,10 +301,7 @@ impl Scenario {
         }
         for a in &s.agents {
             if !["navigator", "wheelchair", "door", "teleop"].contains(&a.kind.as_str()) {
-                return Err(bad(format!(
-                    "agent kind {:?}: expected navigator, wheelchair, door or teleop",
-                    a.kind
-                )));
+                return Err(bad(format!("agent kind {:?}: expected navigator, wheelchair, door or teleop", a.kind)));
             }
         }
         Ok(s)
@@ -423,10 +420,12 @@ mod tests {
         )
         .expect_err("bad route");
         assert_eq!(err.to_string(), "x.toml: route of c: checkpoint 3 does not exist (there are 0)");
-        let err = Scenario::parse("name = \"x\"\nseconds = 1\nspeed = 2\n", "x.toml", Path::new(".")).expect_err("unknown");
+        let err =
+            Scenario::parse("name = \"x\"\nseconds = 1\nspeed = 2\n", "x.toml", Path::new(".")).expect_err("unknown");
         assert!(err.to_string().contains("unknown field"), "{err}");
-        let err = Scenario::parse("name = \"x\"\nseconds = 1\n[[agents]]\nkind = \"robot\"\n", "x.toml", Path::new("."))
-            .expect_err("kind");
+        let err =
+            Scenario::parse("name = \"x\"\nseconds = 1\n[[agents]]\nkind = \"robot\"\n", "x.toml", Path::new("."))
+                .expect_err("kind");
         assert!(err.to_string().contains("agent kind \"robot\""), "{err}");
     }
 }

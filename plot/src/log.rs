@@ -226,7 +226,8 @@ impl RunLog {
 
     /// Distance driven along the logged positions, metres.
     pub fn distance_m(&self) -> f64 {
-        self.samples.windows(2).map(|w| (w[1].x_m - w[0].x_m).hypot(w[1].y_m - w[0].y_m)).sum()
+        // A fold from +0.0: an empty float `sum` is -0.0, which would print as "-0.0 m".
+        self.samples.windows(2).map(|w| (w[1].x_m - w[0].x_m).hypot(w[1].y_m - w[0].y_m)).fold(0.0, |a, d| a + d)
     }
 
     /// How many rows have the collision sensor on.
@@ -365,6 +366,12 @@ mod tests {
         assert!(matches!(err, LogReadError::BadNumber { line: 2, column: 1, expected: "a whole number", .. }));
         let err = parse("tick,time_s,x_m,y_m\n1,0.1,3,NaN\n").expect_err("NaN y");
         assert!(matches!(err, LogReadError::BadNumber { line: 2, column: 4, expected: "a finite number", .. }));
+    }
+
+    #[test]
+    fn one_row_drove_zero_metres() {
+        let log = parse("tick,time_s,x_m,y_m\n1,0.1,3,4\n").expect("reads");
+        assert_eq!(format!("{:.1}", log.distance_m()), "0.0");
     }
 
     #[test]

@@ -4,6 +4,7 @@ mod browser;
 mod cli;
 mod common;
 mod hub;
+mod scenarios;
 mod teleop;
 mod udp;
 mod view;

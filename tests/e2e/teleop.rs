@@ -106,11 +106,7 @@ fn teleop_drives_a_chair_from_a_pseudo_terminal_and_restores_the_terminal_on_qui
     let hub = Proc::spawn(&["hub", "--session", &s, "--cycle-ms", "20", "--no-noise"]);
 
     let pty = Pty::open().expect("a pseudo-terminal");
-    let mut cmd = Command::new(env!("CARGO_BIN_EXE_iwsim"));
-    cmd.args(["agent", "teleop", "--session", &s, "--pose", "10,6.1,0", "--connect-timeout", "20"])
-        .env("RUST_LOG", "warn");
-    pty.attach(&mut cmd).expect("stdio on the slave");
-    let teleop = Proc(Some(cmd.spawn().expect("iwsim starts")));
+    let teleop = spawn_teleop(&s, &pty);
     let screen = Terminal::read(&pty);
     let mut master = pty.master().expect("master");
     let mut press = |keys: &[u8]| master.write_all(keys).expect("keys reach the terminal");
@@ -167,6 +163,44 @@ fn teleop_drives_a_chair_from_a_pseudo_terminal_and_restores_the_terminal_on_qui
     assert_eq!(control(&s, Cmd::Stop, 0).expect("hub answers").status, 0);
     let out = hub.wait(Duration::from_secs(10));
     assert!(out.status.success(), "{}", text(&out.stderr));
+    assert_no_shared_memory_left(&s);
+}
+
+#[test]
+fn teleop_exits_with_a_message_and_a_restored_terminal_when_its_hub_is_killed() {
+    let s = session("teleop-hub-dies");
+    let mut hub = Proc::spawn(&["hub", "--session", &s, "--cycle-ms", "20"]);
+    let pty = Pty::open().expect("a pseudo-terminal");
+    let teleop = spawn_teleop(&s, &pty);
+    let screen = Terminal::read(&pty);
+    screen.wait_for("a running tick", Duration::from_secs(20), |f| f.contains("run running"));
+    assert!(!local_modes(pty.slave()).expect("termios").canonical, "raw while running");
+
+    hub.kill9();
+    let out = teleop.wait(Duration::from_secs(10));
+    assert!(!out.status.success(), "a lost hub is an error");
+    let all = screen.text();
+    assert!(all.contains("lost its hub") && all.contains("has exited"), "{all}");
+    let restored = local_modes(pty.slave()).expect("termios");
+    assert!(restored.canonical && restored.echo, "terminal left in raw mode: {restored:?}");
+
+    // A killed hub leaves its files; a new hub in the session clears them and removes its own.
+    let again = Proc::spawn(&["hub", "--session", &s, "--cycle-ms", "5", "--ticks", "2"]);
+    assert!(again.wait(Duration::from_secs(20)).status.success());
+    assert_no_shared_memory_left(&s);
+}
+
+/// Starts `iwsim agent teleop` in session `s` on the slave side of `pty`, as its controlling
+/// terminal.
+fn spawn_teleop(s: &str, pty: &Pty) -> Proc {
+    let mut cmd = Command::new(env!("CARGO_BIN_EXE_iwsim"));
+    cmd.args(["agent", "teleop", "--session", s, "--pose", "10,6.1,0", "--connect-timeout", "20"])
+        .env("RUST_LOG", "warn");
+    pty.attach(&mut cmd).expect("stdio on the slave");
+    Proc(Some(cmd.spawn().expect("iwsim starts")))
+}
+
+fn assert_no_shared_memory_left(s: &str) {
     let prefix = format!("iwsim_{s}_");
     let left: Vec<String> = std::fs::read_dir("/dev/shm")
         .expect("/dev/shm")

@@ -139,6 +139,7 @@ export function createView3D(canvas) {
   let parts = null, capacity = 0;
   const farMesh = new THREE.Mesh(new THREE.BufferGeometry(), new THREE.MeshLambertMaterial({ vertexColors: true }));
   farMesh.frustumCulled = false;   // spans the whole crowd; culled per robot in layoutRobots
+  farMesh.renderOrder = -1;
   scene.add(farMesh);
 
   function instanced(geo, mat, n) {
@@ -147,6 +148,7 @@ export function createView3D(canvas) {
     m.instanceColor = new THREE.InstancedBufferAttribute(new Float32Array(n * 3), 3).setUsage(THREE.DynamicDrawUsage);
     m.count = 0;
     m.frustumCulled = false;   // culled per robot in layoutRobots; its cached bounding sphere would go stale
+    m.renderOrder = -2;        // see layoutRobots
     scene.add(m);
     return m;
   }
@@ -213,16 +215,19 @@ export function createView3D(canvas) {
       sphere.center.set(r.x, r.y, 0.5); sphere.radius = 0.5 * Math.hypot(r.width, r.height) + 1;
       if (frustum.intersectsSphere(sphere)) vis.push(r);
     }
-    let near = Infinity;   // squared distance up to which chairs are drawn in full
+    // Nearest first: with the robots drawn before the map (renderOrder), hidden fragments then
+    // fail the depth test early, which matters in software rendering when a crowd fills the view.
     const p = camera.position, d2 = (r) => (r.x - p.x) ** 2 + (r.y - p.y) ** 2;
-    if (vis.length > DETAILED_NEAREST) near = Math.min(DETAIL_RANGE ** 2, Float64Array.from(vis, d2).sort()[DETAILED_NEAREST - 1]);
+    const order = vis.map(d2), idx = Array.from(vis.keys()).sort((i, j) => order[i] - order[j]);
+    const near = vis.length > DETAILED_NEAREST ? Math.min(DETAIL_RANGE ** 2, order[idx[DETAILED_NEAREST - 1]]) : Infinity;
 
-    for (const r of vis) {
+    for (const i of idx) {
+      const r = vis[i];
       const a = r.heading * DEG, c = Math.cos(a), s = Math.sin(a), x = r.x, y = r.y;
       const w = r.width, h = r.height, front = r.com * w, back = front - w, mid = (front + back) / 2;
       const col = r.flags & 1 ? HIT_COLOR : r.kind === 2 ? DOOR_COLOR : CHAIR_COLOR;
       if (r.kind === 2) { put(parts.box, x, y, c, s, mid, 0, DOOR_HEIGHT / 2, w, h, DOOR_HEIGHT, col); continue; }
-      if (d2(r) > near) { putFar(nFar++, x, y, c, s, mid, w, h, col); continue; }
+      if (order[i] > near) { putFar(nFar++, x, y, c, s, mid, w, h, col); continue; }
       // Full chair. Proportions follow the footprint; the drive wheels sit on the pose point
       // (centre of movement) unless that would push them out of the footprint.
       const R = Math.min(0.3, 0.3 * w, 0.45 * h), t = Math.min(0.05, 0.1 * h);

@@ -312,9 +312,10 @@ impl Display {
     /// Leaves the terminal as it was found (cursor shown, below the block) and says why the
     /// teleop ended.
     fn close(&mut self, message: &str) {
-        let tail = self.screen.as_mut().map_or("", Screen::finish);
+        // A raw terminal may not translate "\n"; a pipe or a file wants no "\r".
+        let (tail, newline) = self.screen.as_mut().map_or(("", "\n"), |s| (s.finish(), "\r\n"));
         let mut out = std::io::stdout().lock();
-        let _ = write!(out, "{tail}iwsim agent teleop: {message}\r\n").and_then(|()| out.flush());
+        let _ = write!(out, "{tail}iwsim agent teleop: {message}{newline}").and_then(|()| out.flush());
     }
 }
 

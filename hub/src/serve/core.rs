@@ -416,9 +416,11 @@ impl HubCore {
         0
     }
 
-    /// Rebuilds the world with its robots added in id order: registrations arrive in whatever
-    /// order the agents' processes run, and the world's slot order fixes the order of every
-    /// random draw, so without this two runs with one seed could differ.
+    /// Rebuilds the world with its robots added in name order (id order among equal names):
+    /// registrations arrive in whatever order the agents' processes run, and the world's slot
+    /// order fixes the order of every random draw, so without this two runs with one seed
+    /// could differ. Names, not ids, because ids given out on request (id 0) also follow the
+    /// order in which agents happened to register.
     fn settle_slots(&mut self) {
         let mut world = match World::new(self.world.lab(), self.world.params().clone(), self.seed) {
             Ok(w) => w,
@@ -426,7 +428,14 @@ impl HubCore {
         };
         world.set_capacity(MAX_ROBOTS);
         self.id_by_slot.clear();
-        for (&id, entry) in self.robots.iter_mut() {
+        let mut order: Vec<(String, u32)> = self
+            .robots
+            .iter()
+            .filter_map(|(&id, e)| Some((self.world.robot(e.handle)?.spec.name.clone(), id)))
+            .collect();
+        order.sort();
+        for (_, id) in order {
+            let Some(entry) = self.robots.get_mut(&id) else { continue };
             let Some(r) = self.world.robot(entry.handle) else { continue };
             let spec = RobotSpec { pose: r.pose, ..r.spec.clone() };
             let frozen = r.frozen;

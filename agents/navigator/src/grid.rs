@@ -1,0 +1,525 @@
+//! Grids over the lab: the known walls rasterised (with a distance field), and the layer of
+//! obstacles found by the proximity sensors (occupancy evidence, so single noisy readings
+//! neither create nor erase an obstacle).
+
+use crate::geom::{Cone, Footprint, Pose, V2, point_segment_distance};
+use crate::map::NavMap;
+
+/// A uniform grid over `[0, nx·cell] × [0, ny·cell]`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct GridSpec {
+    /// Cell side, metres.
+    pub cell: f64,
+    /// Cells along x.
+    pub nx: usize,
+    /// Cells along y.
+    pub ny: usize,
+}
+
+impl GridSpec {
+    /// The grid of `cell`-sized cells that covers a `width` × `height` lab.
+    pub fn covering(width: f64, height: f64, cell: f64) -> Self {
+        Self { cell, nx: (width / cell).ceil().max(1.0) as usize, ny: (height / cell).ceil().max(1.0) as usize }
+    }
+
+    /// Number of cells.
+    pub fn len(&self) -> usize {
+        self.nx * self.ny
+    }
+
+    /// Whether the grid has no cells (never, by construction).
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// The cell holding `p`, if inside the grid.
+    pub fn cell_of(&self, p: V2) -> Option<(usize, usize)> {
+        let (fx, fy) = (p.x / self.cell, p.y / self.cell);
+        if !(fx >= 0.0 && fy >= 0.0) {
+            return None;
+        }
+        let (ix, iy) = (fx as usize, fy as usize);
+        (ix < self.nx && iy < self.ny).then_some((ix, iy))
+    }
+
+    /// The cell nearest to `p` (clamped into the grid).
+    pub fn clamp_cell(&self, p: V2) -> (usize, usize) {
+        let clamp = |v: f64, n: usize| {
+            if v.is_finite() { (v / self.cell).floor().clamp(0.0, (n - 1) as f64) as usize } else { 0 }
+        };
+        (clamp(p.x, self.nx), clamp(p.y, self.ny))
+    }
+
+    /// The centre of a cell.
+    pub fn center(&self, ix: usize, iy: usize) -> V2 {
+        V2::new((ix as f64 + 0.5) * self.cell, (iy as f64 + 0.5) * self.cell)
+    }
+
+    /// The linear index of a cell.
+    pub fn index(&self, ix: usize, iy: usize) -> usize {
+        iy * self.nx + ix
+    }
+
+    /// The cell of a linear index.
+    pub fn coords(&self, i: usize) -> (usize, usize) {
+        (i % self.nx, i / self.nx)
+    }
+
+    /// The cells whose centres may lie in the box `lo`–`hi` (inclusive ranges, clamped).
+    pub fn range(&self, lo: V2, hi: V2) -> (std::ops::RangeInclusive<usize>, std::ops::RangeInclusive<usize>) {
+        let (x0, y0) = self.clamp_cell(lo);
+        let (x1, y1) = self.clamp_cell(hi);
+        (x0..=x1, y0..=y1)
+    }
+}
+
+/// The known walls and the lab's border, rasterised: a cell is occupied when a wall covers its
+/// centre or an outline passes through it. Built once per map.
+#[derive(Debug, Clone)]
+pub struct StaticRaster {
+    /// The grid.
+    pub spec: GridSpec,
+    occ: Vec<bool>,
+    /// Distance from each cell's centre to the nearest occupied cell's centre, metres.
+    dist: Vec<f32>,
+}
+
+impl StaticRaster {
+    /// Rasterises the map's known walls (scenario obstacles are left out).
+    pub fn new(map: &NavMap, cell: f64) -> Self {
+        let spec = GridSpec::covering(map.width_m, map.height_m, cell);
+        let mut occ = vec![false; spec.len()];
+        let touch = cell * std::f64::consts::FRAC_1_SQRT_2;
+        for wall in map.known_walls() {
+            let (mut lo, mut hi) = (V2::new(f64::INFINITY, f64::INFINITY), V2::new(f64::NEG_INFINITY, f64::NEG_INFINITY));
+            for c in &wall.corners {
+                lo = V2::new(lo.x.min(c.x), lo.y.min(c.y));
+                hi = V2::new(hi.x.max(c.x), hi.y.max(c.y));
+            }
+            let (xs, ys) = spec.range(lo - V2::new(cell, cell), hi + V2::new(cell, cell));
+            for iy in ys {
+                for ix in xs.clone() {
+                    let p = spec.center(ix, iy);
+                    if wall.contains(p) || wall.segments().any(|s| point_segment_distance(p, s.a, s.b) <= touch) {
+                        occ[spec.index(ix, iy)] = true;
+                    }
+                }
+            }
+        }
+        // The border: every cell whose centre is within a cell of the lab's edge.
+        for iy in 0..spec.ny {
+            for ix in 0..spec.nx {
+                let p = spec.center(ix, iy);
+                if p.x < cell || p.y < cell || p.x > map.width_m - cell || p.y > map.height_m - cell {
+                    occ[spec.index(ix, iy)] = true;
+                }
+            }
+        }
+        let dist = distance_field(&spec, &occ);
+        Self { spec, occ, dist }
+    }
+
+    /// Whether a cell is occupied.
+    pub fn occupied(&self, i: usize) -> bool {
+        self.occ[i]
+    }
+
+    /// Whether the cell holding `p` is occupied (outside the lab counts as occupied).
+    pub fn occupied_at(&self, p: V2) -> bool {
+        self.spec.cell_of(p).is_none_or(|(ix, iy)| self.occ[self.spec.index(ix, iy)])
+    }
+
+    /// Distance from the centre of `p`'s cell to the nearest occupied cell's centre.
+    pub fn distance_at(&self, p: V2) -> f64 {
+        match self.spec.cell_of(p) {
+            Some((ix, iy)) => self.dist[self.spec.index(ix, iy)] as f64,
+            None => 0.0,
+        }
+    }
+
+    /// The distance field (per cell).
+    pub fn distances(&self) -> &[f32] {
+        &self.dist
+    }
+}
+
+/// Exact Euclidean distance transform (Felzenszwalb–Huttenlocher), in metres between cell
+/// centres; with nothing occupied every cell gets a large value.
+pub fn distance_field(spec: &GridSpec, occ: &[bool]) -> Vec<f32> {
+    const FAR: f64 = 1e12;
+    let (nx, ny) = (spec.nx, spec.ny);
+    let mut g: Vec<f64> = occ.iter().map(|&o| if o { 0.0 } else { FAR }).collect();
+    let n = nx.max(ny);
+    let (mut f, mut d, mut v, mut z) = (vec![0.0; n], vec![0.0; n], vec![0usize; n], vec![0.0; n + 1]);
+    for x in 0..nx {
+        for y in 0..ny {
+            f[y] = g[y * nx + x];
+        }
+        edt_1d(&f[..ny], &mut d[..ny], &mut v, &mut z);
+        for y in 0..ny {
+            g[y * nx + x] = d[y];
+        }
+    }
+    for y in 0..ny {
+        f[..nx].copy_from_slice(&g[y * nx..(y + 1) * nx]);
+        edt_1d(&f[..nx], &mut d[..nx], &mut v, &mut z);
+        g[y * nx..(y + 1) * nx].copy_from_slice(&d[..nx]);
+    }
+    g.iter().map(|&s| (s.min(FAR).sqrt() * spec.cell) as f32).collect()
+}
+
+/// One dimension of the squared distance transform: `d[q] = min_p (q − p)² + f[p]`.
+fn edt_1d(f: &[f64], d: &mut [f64], v: &mut [usize], z: &mut [f64]) {
+    let n = f.len();
+    if n == 0 {
+        return;
+    }
+    let mut k = 0usize;
+    v[0] = 0;
+    z[0] = f64::NEG_INFINITY;
+    z[1] = f64::INFINITY;
+    for q in 1..n {
+        let qf = q as f64;
+        let mut s;
+        loop {
+            let p = v[k] as f64;
+            s = ((f[q] + qf * qf) - (f[v[k]] + p * p)) / (2.0 * qf - 2.0 * p);
+            // z[0] is −∞, so this never steps below the first parabola.
+            if s <= z[k] && k > 0 {
+                k -= 1;
+            } else {
+                break;
+            }
+        }
+        k += 1;
+        v[k] = q;
+        z[k] = s;
+        z[k + 1] = f64::INFINITY;
+    }
+    k = 0;
+    for (q, dq) in d.iter_mut().enumerate() {
+        let qf = q as f64;
+        while z[k + 1] < qf {
+            k += 1;
+        }
+        let p = v[k] as f64;
+        *dq = (qf - p) * (qf - p) + f[v[k]];
+    }
+}
+
+/// How the sensed layer weighs evidence (log-odds units).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct EvidenceParams {
+    /// Added to a cell on the arc of a reading that the known walls do not explain.
+    pub hit: f32,
+    /// Taken from a cell a reading saw through.
+    pub miss: f32,
+    /// A cell becomes an obstacle at this evidence…
+    pub occupied_above: f32,
+    /// …and stops being one below this.
+    pub free_below: f32,
+    /// Evidence is kept within ± this.
+    pub clamp: f32,
+    /// Cells nearer than `reading − carve_gap` are seen through (the noise's allowance).
+    pub carve_gap: f64,
+    /// A reading this much shorter than the known walls explain reveals an obstacle.
+    pub unexplained: f64,
+    /// Readings within this of the range saw nothing.
+    pub nothing_within: f64,
+}
+
+impl Default for EvidenceParams {
+    fn default() -> Self {
+        Self {
+            hit: 1.0,
+            miss: 0.45,
+            occupied_above: 1.45,
+            free_below: 0.5,
+            clamp: 4.0,
+            carve_gap: 0.12,
+            unexplained: 0.25,
+            nothing_within: 0.2,
+        }
+    }
+}
+
+/// One proximity reading placed in the lab.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Observation {
+    /// The sensor's cone in the lab frame (from the pose estimate).
+    pub cone: Cone,
+    /// The distance read, metres.
+    pub distance: f64,
+    /// The sensor's range, metres.
+    pub range: f64,
+    /// What the known walls alone would make it read.
+    pub expected: f64,
+}
+
+/// Obstacles found by the proximity sensors, as occupancy evidence per cell.
+#[derive(Debug, Clone)]
+pub struct SensedLayer {
+    /// The grid.
+    pub spec: GridSpec,
+    /// The weights.
+    pub params: EvidenceParams,
+    evidence: Vec<f32>,
+    occupied: Vec<bool>,
+    /// Per-cell stamp of the last observation that touched it (one vote per reading).
+    stamp: Vec<u32>,
+    now: u32,
+    cells: Vec<u32>,
+    newly: Vec<u32>,
+    changed: bool,
+}
+
+impl SensedLayer {
+    /// An empty layer on the grid `spec`.
+    pub fn new(spec: GridSpec, params: EvidenceParams) -> Self {
+        Self {
+            spec,
+            params,
+            evidence: vec![0.0; spec.len()],
+            occupied: vec![false; spec.len()],
+            stamp: vec![0; spec.len()],
+            now: 0,
+            cells: Vec::new(),
+            newly: Vec::new(),
+            changed: false,
+        }
+    }
+
+    /// Whether a cell is currently an obstacle.
+    pub fn occupied(&self, i: usize) -> bool {
+        self.occupied[i]
+    }
+
+    /// The evidence of a cell.
+    pub fn evidence(&self, i: usize) -> f32 {
+        self.evidence[i]
+    }
+
+    /// Every obstacle cell (linear indices).
+    pub fn cells(&self) -> &[u32] {
+        &self.cells
+    }
+
+    /// Cells that became obstacles since [`SensedLayer::take_changes`] was last called.
+    pub fn newly_occupied(&self) -> &[u32] {
+        &self.newly
+    }
+
+    /// Whether any cell changed state since the last [`SensedLayer::take_changes`], and
+    /// forgets the list of new obstacle cells.
+    pub fn take_changes(&mut self) -> bool {
+        self.newly.clear();
+        std::mem::take(&mut self.changed)
+    }
+
+    /// Adds one reading: the cells it saw through lose evidence; if the known walls do not
+    /// explain it, the cells of its arc gain some. Cells of known walls, and cells inside the
+    /// chair (`body`, where nothing can be), are left alone.
+    pub fn observe(&mut self, statics: &StaticRaster, obs: &Observation, body: Option<(&Pose, &Footprint)>) {
+        let p = self.params;
+        let d = obs.distance.clamp(0.0, obs.range);
+        if !d.is_finite() {
+            return;
+        }
+        let seen_nothing = d >= obs.range - p.nothing_within;
+        let unexplained = !seen_nothing && obs.expected - d > p.unexplained;
+        let carve_to = d - p.carve_gap;
+        let reach = if unexplained { d + self.spec.cell } else { carve_to };
+        if reach <= 0.0 {
+            return;
+        }
+        self.now = self.now.wrapping_add(1);
+        if self.now == 0 {
+            self.stamp.fill(0);
+            self.now = 1;
+        }
+        let cone = obs.cone;
+        let axis = V2::unit(cone.dir);
+        let u1 = V2::unit(cone.dir - cone.half);
+        let u2 = V2::unit(cone.dir + cone.half);
+        // The sector's bounding box: apex, both edge ends and any arc extreme inside.
+        let mut lo = cone.apex;
+        let mut hi = cone.apex;
+        let mut grow = |q: V2| {
+            lo = V2::new(lo.x.min(q.x), lo.y.min(q.y));
+            hi = V2::new(hi.x.max(q.x), hi.y.max(q.y));
+        };
+        grow(cone.apex + u1 * reach);
+        grow(cone.apex + u2 * reach);
+        grow(cone.apex + axis * reach);
+        for k in 0..4 {
+            let a = k as f64 * std::f64::consts::FRAC_PI_2;
+            if cone.contains(cone.apex + V2::unit(a)) {
+                grow(cone.apex + V2::unit(a) * reach);
+            }
+        }
+        let half_cell = self.spec.cell / 2.0;
+        let (xs, ys) = self.spec.range(lo - V2::new(half_cell, half_cell), hi + V2::new(half_cell, half_cell));
+        // Hits spread over the arc's cells: the obstacle is somewhere on it. A wide cone's
+        // arc holds many cells and so says little about each.
+        let arc_cells = (2.0 * cone.half * d / self.spec.cell).max(1.0);
+        let hit = p.hit * (2.5 / arc_cells as f32).min(1.0);
+        for iy in ys {
+            for ix in xs.clone() {
+                let i = self.spec.index(ix, iy);
+                if statics.occupied(i) || self.stamp[i] == self.now {
+                    continue;
+                }
+                let v = self.spec.center(ix, iy) - cone.apex;
+                let r = v.norm();
+                if r > reach || v.dot(axis) <= 0.0 {
+                    continue;
+                }
+                // Lateral distance of the centre inside each cone edge.
+                let (in1, in2) = (u1.cross(v), v.cross(u2));
+                let delta = if r < carve_to {
+                    if in1 < 0.0 || in2 < 0.0 {
+                        continue;
+                    }
+                    -p.miss
+                } else if unexplained && (r - d).abs() <= half_cell && in1 >= -half_cell && in2 >= -half_cell {
+                    let c = self.spec.center(ix, iy);
+                    if body.is_some_and(|(pose, fp)| fp.contains_body(pose.to_body(c), 0.05)) {
+                        continue;
+                    }
+                    hit
+                } else {
+                    continue;
+                };
+                self.stamp[i] = self.now;
+                self.add(i, delta);
+            }
+        }
+    }
+
+    fn add(&mut self, i: usize, delta: f32) {
+        let p = self.params;
+        let e = (self.evidence[i] + delta).clamp(-p.clamp, p.clamp);
+        self.evidence[i] = e;
+        if !self.occupied[i] && e >= p.occupied_above {
+            self.occupied[i] = true;
+            self.cells.push(i as u32);
+            self.newly.push(i as u32);
+            self.changed = true;
+        } else if self.occupied[i] && e < p.free_below {
+            self.occupied[i] = false;
+            if let Some(k) = self.cells.iter().position(|&c| c as usize == i) {
+                self.cells.swap_remove(k);
+            }
+            self.changed = true;
+        }
+    }
+}
+
+/// Points or segments bucketed on a coarse grid, for "what is near this box" queries.
+#[derive(Debug, Clone)]
+pub struct Buckets {
+    spec: GridSpec,
+    start: Vec<u32>,
+    items: Vec<u32>,
+}
+
+impl Buckets {
+    /// Buckets `count` items over a lab, each listed in every bucket its box `(lo, hi)` meets.
+    pub fn build(width: f64, height: f64, cell: f64, count: usize, bounds: impl Fn(usize) -> (V2, V2)) -> Self {
+        let spec = GridSpec::covering(width, height, cell);
+        let mut counts = vec![0u32; spec.len() + 1];
+        let each = |k: usize, f: &mut dyn FnMut(usize)| {
+            let (lo, hi) = bounds(k);
+            let (xs, ys) = spec.range(lo, hi);
+            for iy in ys {
+                for ix in xs.clone() {
+                    f(spec.index(ix, iy));
+                }
+            }
+        };
+        for k in 0..count {
+            each(k, &mut |b| counts[b + 1] += 1);
+        }
+        for b in 0..spec.len() {
+            counts[b + 1] += counts[b];
+        }
+        let mut fill = counts.clone();
+        let mut items = vec![0u32; counts[spec.len()] as usize];
+        for k in 0..count {
+            each(k, &mut |b| {
+                items[fill[b] as usize] = k as u32;
+                fill[b] += 1;
+            });
+        }
+        Self { spec, start: counts, items }
+    }
+
+    /// Calls `f` with every item listed in a bucket that meets the box `lo`–`hi` (an item
+    /// may come more than once).
+    pub fn query(&self, lo: V2, hi: V2, mut f: impl FnMut(usize)) {
+        let (xs, ys) = self.spec.range(lo, hi);
+        for iy in ys {
+            for ix in xs.clone() {
+                let b = self.spec.index(ix, iy);
+                for &k in &self.items[self.start[b] as usize..self.start[b + 1] as usize] {
+                    f(k as usize);
+                }
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::map::MapWall;
+
+    #[test]
+    fn the_distance_field_is_euclidean() {
+        let spec = GridSpec { cell: 0.1, nx: 20, ny: 10 };
+        let mut occ = vec![false; spec.len()];
+        occ[spec.index(5, 5)] = true;
+        let d = distance_field(&spec, &occ);
+        assert_eq!(d[spec.index(5, 5)], 0.0);
+        assert!((d[spec.index(8, 9)] as f64 - 0.5).abs() < 1e-6, "3-4-5 triangle");
+        assert!((d[spec.index(15, 5)] as f64 - 1.0).abs() < 1e-6);
+    }
+
+    #[test]
+    fn walls_and_border_are_rasterised_but_obstacles_are_not() {
+        let mut map = NavMap::empty(4.0, 3.0);
+        map.walls.push(MapWall::rectangle(1.0, 1.0, 1.1, 2.0, false));
+        map.walls.push(MapWall::rectangle(3.0, 1.0, 3.5, 2.0, true));
+        let r = StaticRaster::new(&map, 0.05);
+        assert!(r.occupied_at(V2::new(1.05, 1.5)));
+        assert!(!r.occupied_at(V2::new(1.3, 1.5)));
+        assert!(!r.occupied_at(V2::new(3.2, 1.5)), "scenario obstacles are for the sensors to find");
+        assert!(r.occupied_at(V2::new(0.01, 1.5)) && r.occupied_at(V2::new(2.0, 2.99)));
+        assert!((r.distance_at(V2::new(1.5, 1.5)) - 0.4).abs() < 0.06);
+    }
+
+    #[test]
+    fn a_short_unexplained_reading_marks_its_arc_and_clears_the_way_to_it() {
+        let map = NavMap::empty(6.0, 4.0);
+        let statics = StaticRaster::new(&map, 0.05);
+        let mut layer = SensedLayer::new(statics.spec, EvidenceParams::default());
+        let cone = Cone { apex: V2::new(1.0, 2.0), dir: 0.0, half: 5f64.to_radians() };
+        let obs = Observation { cone, distance: 2.0, range: 3.0, expected: 3.0 };
+        for _ in 0..3 {
+            layer.observe(&statics, &obs, None);
+        }
+        let at = |x: f64, y: f64| statics.spec.cell_of(V2::new(x, y)).map(|(ix, iy)| statics.spec.index(ix, iy));
+        let i = at(3.0, 2.0).expect("inside");
+        assert!(layer.occupied(i), "evidence {}", layer.evidence(i));
+        let j = at(2.0, 2.0).expect("inside");
+        assert!(layer.evidence(j) < 0.0 && !layer.occupied(j));
+        assert!(layer.take_changes() && !layer.cells().is_empty());
+        // Readings that now see past it clear it again.
+        let far = Observation { distance: 3.0, ..obs };
+        for _ in 0..10 {
+            layer.observe(&statics, &far, None);
+        }
+        assert!(!layer.occupied(i));
+        assert!(layer.cells().is_empty());
+    }
+}

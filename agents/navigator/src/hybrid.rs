@@ -1,0 +1,415 @@
+//! The local planner: hybrid A* over (x, y, heading) with the chair's true rectangle.
+//!
+//! A grid route treats the chair as a disc round its axle, which a rear-wheel-drive chair is
+//! not: 0.88 m of it is ahead of the axle, so where a point fits the front may not. This
+//! search moves the real rectangle along short arcs (forward, optionally backward) and turns
+//! on the spot, checks every pose against the known walls and the sensed obstacles with a
+//! margin, and is guided by the grid's cost-to-go, so it explores little where the way is
+//! easy and finds S-bends like the slalom's where it is not.
+
+use std::cmp::Ordering;
+use std::collections::{BinaryHeap, HashMap};
+
+use crate::geom::{Pose, V2, wrap};
+use crate::model::WorldModel;
+use crate::plan::CostToGo;
+
+/// How a pose was reached.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Motion {
+    /// The start.
+    Start,
+    /// Forward along an arc of this curvature (1/m, left positive).
+    Forward(f64),
+    /// Backward along an arc of this curvature.
+    Reverse(f64),
+    /// A turn on the spot, counter-clockwise when positive (radians).
+    Spin(f64),
+}
+
+impl Motion {
+    /// 1 forward, −1 backward, 0 on the spot or at the start.
+    pub fn direction(&self) -> i8 {
+        match self {
+            Motion::Forward(_) => 1,
+            Motion::Reverse(_) => -1,
+            Motion::Start | Motion::Spin(_) => 0,
+        }
+    }
+
+    /// The curvature of an arc (0 for a spin).
+    pub fn curvature(&self) -> f64 {
+        match *self {
+            Motion::Forward(k) | Motion::Reverse(k) => k,
+            Motion::Start | Motion::Spin(_) => 0.0,
+        }
+    }
+}
+
+/// One pose of a planned path and the motion that reached it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PathPose {
+    /// The pose.
+    pub pose: Pose,
+    /// How it was reached from the previous one.
+    pub motion: Motion,
+}
+
+/// Where a leg ends.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Goal {
+    /// The checkpoint.
+    pub pos: V2,
+    /// A pose this near ends the search at once.
+    pub stop_within: f64,
+    /// Poses this near are acceptable ends; the search keeps the one with the least cost
+    /// plus `weight` × distance.
+    pub accept_within: f64,
+    /// Weight of the remaining distance for acceptable ends.
+    pub weight: f64,
+}
+
+/// The search's settings.
+#[derive(Debug, Clone, PartialEq)]
+pub struct HybridParams {
+    /// Length of one arc, metres.
+    pub step_m: f64,
+    /// Curvatures of forward arcs, 1/m.
+    pub curvatures: Vec<f64>,
+    /// Curvatures of backward arcs (empty: never backwards).
+    pub reverse_curvatures: Vec<f64>,
+    /// Angle of one turn on the spot, radians.
+    pub spin_rad: f64,
+    /// Cost of a metre backwards, relative to forwards.
+    pub reverse_factor: f64,
+    /// Cost of changing between forwards and backwards, metres.
+    pub switch_cost: f64,
+    /// Cost of a radian turned on the spot, metres.
+    pub spin_cost: f64,
+    /// Extra cost per metre and unit of curvature.
+    pub curvature_cost: f64,
+    /// Cost per unit of curvature change between arcs.
+    pub curvature_change_cost: f64,
+    /// Position resolution of the closed set, metres.
+    pub xy_res: f64,
+    /// Heading bins of the closed set.
+    pub heading_bins: usize,
+    /// Nodes expanded at most.
+    pub max_expansions: usize,
+    /// Weight of the heuristic (above 1: faster, slightly longer paths).
+    pub heuristic_weight: f64,
+    /// A path that gains this much cost-to-go is long enough; the rest is planned later.
+    pub horizon_m: f64,
+    /// Poses are checked at most this far apart (the body's farthest corner), metres.
+    pub check_step_m: f64,
+}
+
+impl Default for HybridParams {
+    fn default() -> Self {
+        Self {
+            step_m: 0.1,
+            curvatures: vec![0.0, 0.5, -0.5, 1.2, -1.2, 2.5, -2.5],
+            reverse_curvatures: vec![0.0, 1.0, -1.0],
+            spin_rad: 10f64.to_radians(),
+            reverse_factor: 2.5,
+            switch_cost: 1.0,
+            spin_cost: 0.3,
+            curvature_cost: 0.06,
+            curvature_change_cost: 0.08,
+            xy_res: 0.05,
+            heading_bins: 72,
+            max_expansions: 40_000,
+            heuristic_weight: 1.4,
+            horizon_m: 7.0,
+            check_step_m: 0.05,
+        }
+    }
+}
+
+/// What the search found.
+#[derive(Debug, Clone, PartialEq)]
+pub enum PlanOutcome {
+    /// A path that ends at the goal.
+    Reached(Vec<PathPose>),
+    /// A path that makes `horizon_m` of progress (or the most progress found) towards it.
+    Partial(Vec<PathPose>),
+}
+
+impl PlanOutcome {
+    /// The path.
+    pub fn path(&self) -> &[PathPose] {
+        match self {
+            PlanOutcome::Reached(p) | PlanOutcome::Partial(p) => p,
+        }
+    }
+
+    /// Whether the path ends at the goal.
+    pub fn reaches_goal(&self) -> bool {
+        matches!(self, PlanOutcome::Reached(_))
+    }
+}
+
+/// Why no path was found.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum PlanError {
+    /// The grid's cost-to-go does not reach the start: no way round is known.
+    #[error("no way is known from ({x:.2}, {y:.2}) to the goal")]
+    NoRoute {
+        /// Start x.
+        x: f64,
+        /// Start y.
+        y: f64,
+    },
+    /// The search ran out of nodes (or of expansions) without progress.
+    #[error("no collision-free path found after {expansions} expansions")]
+    Exhausted {
+        /// Nodes expanded.
+        expansions: usize,
+    },
+}
+
+#[derive(Debug, Clone, Copy)]
+struct Node {
+    pose: Pose,
+    motion: Motion,
+    g: f64,
+    h: f64,
+    /// Distance travelled from the start (for the start's relaxed margin).
+    travelled: f64,
+    parent: u32,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Open {
+    f: f64,
+    i: u32,
+}
+
+impl Eq for Open {}
+
+impl Ord for Open {
+    fn cmp(&self, o: &Self) -> Ordering {
+        o.f.total_cmp(&self.f).then_with(|| o.i.cmp(&self.i))
+    }
+}
+
+impl PartialOrd for Open {
+    fn partial_cmp(&self, o: &Self) -> Option<Ordering> {
+        Some(self.cmp(o))
+    }
+}
+
+/// The pose after an arc of length `ds` (negative: backwards) and curvature `k`.
+pub fn arc(p: &Pose, ds: f64, k: f64) -> Pose {
+    let th = p.theta;
+    if (k * ds).abs() < 1e-9 {
+        let (s, c) = th.sin_cos();
+        return Pose::new(p.x + ds * c, p.y + ds * s, th);
+    }
+    let th2 = th + k * ds;
+    Pose::new(p.x + (th2.sin() - th.sin()) / k, p.y + (th.cos() - th2.cos()) / k, th2)
+}
+
+/// Plans from `start` towards `goal` with the chair grown by `margin`. Near the start, where
+/// the chair may already stand closer than `margin` to something, the margin grows from what
+/// the start has to the full value over the first 0.6 m.
+pub fn plan(
+    model: &WorldModel,
+    ctg: &CostToGo,
+    start: Pose,
+    goal: &Goal,
+    margin: f64,
+    params: &HybridParams,
+) -> Result<PlanOutcome, PlanError> {
+    let h_of = |p: &Pose| ctg.at(p.pos());
+    let Some(h0) = h_of(&start) else {
+        return Err(PlanError::NoRoute { x: start.x, y: start.y });
+    };
+    let start_margin = model.clearance(&start, margin).min(margin) - 0.005;
+    let margin_at = |travelled: f64| {
+        if start_margin >= margin {
+            margin
+        } else {
+            start_margin.max(0.0) + (margin - start_margin.max(0.0)) * (travelled / 0.6).min(1.0)
+        }
+    };
+    let reach = model.footprint.reach();
+    let key = |p: &Pose| -> u64 {
+        let ix = (p.x / params.xy_res).floor() as i64 as u64 & 0xFFFFF;
+        let iy = (p.y / params.xy_res).floor() as i64 as u64 & 0xFFFFF;
+        let bins = params.heading_bins as f64;
+        let it = ((wrap(p.theta) + std::f64::consts::PI) / std::f64::consts::TAU * bins).round() as u64
+            % params.heading_bins as u64;
+        (ix << 40) | (iy << 20) | it
+    };
+
+    let mut nodes = vec![Node { pose: start, motion: Motion::Start, g: 0.0, h: h0, travelled: 0.0, parent: u32::MAX }];
+    let mut open = BinaryHeap::new();
+    open.push(Open { f: params.heuristic_weight * h0, i: 0 });
+    let mut closed: HashMap<u64, ()> = HashMap::new();
+    let mut best_progress = (0usize, h0);
+    let mut candidate: Option<(usize, f64)> = None;
+    let mut expansions = 0usize;
+
+    let mut motions: Vec<Motion> = params.curvatures.iter().map(|&k| Motion::Forward(k)).collect();
+    motions.extend(params.reverse_curvatures.iter().map(|&k| Motion::Reverse(k)));
+    motions.push(Motion::Spin(params.spin_rad));
+    motions.push(Motion::Spin(-params.spin_rad));
+
+    while let Some(Open { f, i }) = open.pop() {
+        let n = nodes[i as usize];
+        if let Some((_, total)) = candidate
+            && f >= total * params.heuristic_weight.max(1.0)
+        {
+            break;
+        }
+        let k = key(&n.pose);
+        if closed.insert(k, ()).is_some() {
+            continue;
+        }
+        let dist = (n.pose.pos() - goal.pos).norm();
+        if dist <= goal.stop_within {
+            return Ok(PlanOutcome::Reached(extract(&nodes, i as usize)));
+        }
+        if dist <= goal.accept_within {
+            let total = n.g + goal.weight * dist;
+            if candidate.is_none_or(|(_, t)| total < t) {
+                candidate = Some((i as usize, total));
+            }
+        }
+        if n.h < best_progress.1 {
+            best_progress = (i as usize, n.h);
+        }
+        if candidate.is_none() && h0 - n.h >= params.horizon_m {
+            return Ok(PlanOutcome::Partial(extract(&nodes, i as usize)));
+        }
+        expansions += 1;
+        if expansions > params.max_expansions {
+            break;
+        }
+        for &m in &motions {
+            let (pose, len, turn) = match m {
+                Motion::Forward(kap) => (arc(&n.pose, params.step_m, kap), params.step_m, (kap * params.step_m).abs()),
+                Motion::Reverse(kap) => (arc(&n.pose, -params.step_m, kap), params.step_m, (kap * params.step_m).abs()),
+                Motion::Spin(a) => (Pose::new(n.pose.x, n.pose.y, n.pose.theta + a), 0.0, a.abs()),
+                Motion::Start => continue,
+            };
+            if closed.contains_key(&key(&pose)) {
+                continue;
+            }
+            let Some(h) = h_of(&pose) else { continue };
+            let travelled = n.travelled + len + turn * 0.3;
+            // Check the sweep: enough intermediate poses that no corner moves more than the
+            // check step between two of them.
+            let sweep = len.max(turn * reach);
+            let steps = (sweep / params.check_step_m).ceil().max(1.0) as usize;
+            let mut ok = true;
+            for s in 1..=steps {
+                let t = s as f64 / steps as f64;
+                let p = match m {
+                    Motion::Forward(kap) => arc(&n.pose, params.step_m * t, kap),
+                    Motion::Reverse(kap) => arc(&n.pose, -params.step_m * t, kap),
+                    Motion::Spin(a) => Pose::new(n.pose.x, n.pose.y, n.pose.theta + a * t),
+                    Motion::Start => n.pose,
+                };
+                if !model.free(&p, margin_at(n.travelled + (travelled - n.travelled) * t)) {
+                    ok = false;
+                    break;
+                }
+            }
+            if !ok {
+                continue;
+            }
+            let mut cost = match m {
+                Motion::Forward(kap) => len * (1.0 + params.curvature_cost * kap.abs()),
+                Motion::Reverse(kap) => len * params.reverse_factor * (1.0 + params.curvature_cost * kap.abs()),
+                Motion::Spin(a) => params.spin_cost * a.abs(),
+                Motion::Start => 0.0,
+            };
+            let (d0, d1) = (n.motion.direction(), m.direction());
+            if d0 != 0 && d1 != 0 && d0 != d1 {
+                cost += params.switch_cost;
+            }
+            if d0 == d1 && d1 != 0 {
+                cost += params.curvature_change_cost * (m.curvature() - n.motion.curvature()).abs();
+            }
+            let g = n.g + cost;
+            nodes.push(Node { pose, motion: m, g, h, travelled, parent: i });
+            open.push(Open { f: g + params.heuristic_weight * h, i: (nodes.len() - 1) as u32 });
+        }
+    }
+    if let Some((c, _)) = candidate {
+        return Ok(PlanOutcome::Reached(extract(&nodes, c)));
+    }
+    if h0 - best_progress.1 >= 0.5 {
+        return Ok(PlanOutcome::Partial(extract(&nodes, best_progress.0)));
+    }
+    Err(PlanError::Exhausted { expansions })
+}
+
+fn extract(nodes: &[Node], mut i: usize) -> Vec<PathPose> {
+    let mut out = Vec::new();
+    loop {
+        let n = nodes[i];
+        out.push(PathPose { pose: n.pose, motion: n.motion });
+        if n.parent == u32::MAX {
+            break;
+        }
+        i = n.parent as usize;
+    }
+    out.reverse();
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::geom::Footprint;
+    use crate::map::{MapWall, NavMap};
+    use crate::plan::Costmap;
+
+    #[test]
+    fn arcs_end_where_geometry_says() {
+        let p = Pose::from_deg(1.0, 2.0, 0.0);
+        let q = arc(&p, std::f64::consts::FRAC_PI_2, 1.0);
+        assert!((q.x - 2.0).abs() < 1e-12 && (q.y - 3.0).abs() < 1e-12);
+        assert!((q.theta - std::f64::consts::FRAC_PI_2).abs() < 1e-12);
+        let back = arc(&p, -0.5, 0.0);
+        assert!((back.x - 0.5).abs() < 1e-12 && back.y == 2.0);
+    }
+
+    #[test]
+    fn a_rear_axle_chair_threads_a_slalom_it_knows() {
+        // The LIACC corridor's slalom with both boxes known: below A, then above B.
+        let mut map = NavMap::empty(24.0, 9.0);
+        map.walls.push(MapWall::rectangle(10.4159, 4.9903, 23.0, 5.1304, false));
+        map.walls.push(MapWall::rectangle(10.91, 6.91, 23.0, 7.21, false));
+        map.walls.push(MapWall::rectangle(17.0, 6.1, 17.6, 6.4, false));
+        map.walls.push(MapWall::rectangle(19.4, 5.5, 20.0, 5.9, false));
+        let model = WorldModel::new(map, Footprint::of_body(1.1, 0.65, 0.8));
+        let cm = Costmap::build(&model, 0.33);
+        let goal = V2::new(20.0, 6.1);
+        let seeds: Vec<(usize, f32)> = (0..cm.spec.len())
+            .filter_map(|i| {
+                let (x, y) = cm.spec.coords(i);
+                let d = (cm.spec.center(x, y) - goal).norm();
+                (d <= 0.5).then_some((i, (4.0 * d) as f32))
+            })
+            .collect();
+        let start = Pose::from_deg(12.0, 6.0, 0.0);
+        let start_cell = cm.spec.clamp_cell(start.pos());
+        let ctg = CostToGo::new(&cm, &seeds, Some(cm.spec.index(start_cell.0, start_cell.1)), 6.0, 4.0);
+        let g = Goal { pos: goal, stop_within: 0.15, accept_within: 0.5, weight: 4.0 };
+        let out = plan(&model, &ctg, start, &g, 0.06, &HybridParams::default()).expect("a path");
+        assert!(out.reaches_goal());
+        let path = out.path();
+        let end = path.last().expect("poses").pose;
+        assert!((end.pos() - goal).norm() <= 0.5);
+        for p in path {
+            assert!(model.free(&p.pose, 0.059), "{p:?}");
+        }
+        // Under A the chair is low, above B it is high.
+        let y_at = |x: f64| path.iter().min_by(|a, b| (a.pose.x - x).abs().total_cmp(&(b.pose.x - x).abs())).map(|p| p.pose.y);
+        assert!(y_at(17.3).expect("passes A") < 5.8);
+    }
+}

@@ -1,0 +1,288 @@
+//! Where the navigator's readings come from: the proximity sensors on the chair, and the seam
+//! between the hub's virtual sensors and a physical chair's (thesis §5.4.3: Virtual, Real and
+//! Augmented modes).
+//!
+//! Only [`Mode::Virtual`] runs today. Real and Augmented need the serial bridge to the chair
+//! (`iwsim serial`, not built yet); their types are here so that it plugs in without changing
+//! the navigator: a [`RealChair`] gives the physical readings, and [`AugmentedSensors`]
+//! merges them with the hub's by [`augment`].
+
+use ipc_types::{HAS_GPS, MAX_PROXIMITY, SensorBlock, SensorSpec};
+
+use crate::geom::{Cone, Footprint, Pose, V2};
+
+/// A proximity sensor on the chair, in the body frame (origin at the axle, x ahead, y left).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SensorMount {
+    /// Along the heading, metres.
+    pub x_m: f64,
+    /// Across the heading (left positive), metres.
+    pub y_m: f64,
+    /// Direction relative to the heading, radians.
+    pub angle_rad: f64,
+    /// Full opening, radians.
+    pub cone_rad: f64,
+    /// Range, metres.
+    pub range_m: f64,
+}
+
+impl SensorMount {
+    /// A sensor from metres and degrees.
+    pub fn deg(x_m: f64, y_m: f64, angle_deg: f64, cone_deg: f64, range_m: f64) -> Self {
+        Self { x_m, y_m, angle_rad: angle_deg.to_radians(), cone_rad: cone_deg.to_radians(), range_m }
+    }
+
+    /// The sensor's cone in the lab frame for a chair at `pose`.
+    pub fn cone(&self, pose: &Pose) -> Cone {
+        Cone { apex: pose.to_world(V2::new(self.x_m, self.y_m)), dir: pose.theta + self.angle_rad, half: self.cone_rad / 2.0 }
+    }
+
+    /// The sensor as registered with the hub.
+    pub fn spec(&self) -> SensorSpec {
+        SensorSpec {
+            x_m: self.x_m,
+            y_m: self.y_m,
+            angle_deg: self.angle_rad.to_degrees(),
+            cone_deg: self.cone_rad.to_degrees(),
+            range_m: self.range_m,
+        }
+    }
+}
+
+/// The navigator's eight sensors for a body: five narrow cones across the front (straight
+/// ahead, ±25° from near the front corners, ±60° at the corners) that place what they see
+/// within a few centimetres, one on each side at the body's middle looking sideways, and one
+/// looking back for reversing.
+///
+/// Narrow cones are what make the sensed map usable in a 1 m gap: a reading says only that
+/// something lies somewhere on an arc across the cone, and a 12° arc at 2 m is 0.4 m long.
+pub fn default_layout(fp: &Footprint) -> Vec<SensorMount> {
+    let (front, rear, half, mid) = (fp.front, fp.rear, fp.half, fp.centre_offset());
+    let range = 3.0;
+    vec![
+        SensorMount::deg(front, 0.0, 0.0, 8.0, range),
+        SensorMount::deg(front, 0.6 * half, 25.0, 8.0, range),
+        SensorMount::deg(front, -0.6 * half, -25.0, 8.0, range),
+        SensorMount::deg(front, half, 60.0, 10.0, range),
+        SensorMount::deg(front, -half, -60.0, 10.0, range),
+        SensorMount::deg(mid, half, 90.0, 20.0, range),
+        SensorMount::deg(mid, -half, -90.0, 20.0, range),
+        SensorMount::deg(-rear, 0.0, 180.0, 30.0, range),
+    ]
+}
+
+/// A GPS fix.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct GpsFix {
+    /// x, metres.
+    pub x_m: f64,
+    /// y, metres.
+    pub y_m: f64,
+    /// Heading, degrees.
+    pub heading_deg: f64,
+}
+
+/// One tick's readings, whatever their source.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Input {
+    /// The tick.
+    pub tick: u64,
+    /// Simulated seconds.
+    pub time_s: f64,
+    /// Proximity distances, metres (first `proximity_count`).
+    pub proximity_m: [f64; MAX_PROXIMITY],
+    /// Proximity sensors reported.
+    pub proximity_count: usize,
+    /// Cumulative wheel-encoder ticks, left and right.
+    pub encoder_ticks: [i64; 2],
+    /// The GPS fix, when the run has GPS on.
+    pub gps: Option<GpsFix>,
+    /// The collision sensor.
+    pub collision: bool,
+}
+
+impl Input {
+    /// The proximity readings.
+    pub fn proximity(&self) -> &[f64] {
+        &self.proximity_m[..self.proximity_count.min(MAX_PROXIMITY)]
+    }
+
+    /// The readings of the hub's sensor block (the virtual sensors). The block's `pose` is
+    /// the hub's ground truth and is deliberately not read.
+    pub fn from_block(b: &SensorBlock, time_s: f64) -> Self {
+        let gps = (b.present & HAS_GPS != 0).then_some(GpsFix {
+            x_m: b.gps_x_m,
+            y_m: b.gps_y_m,
+            heading_deg: b.gps_heading_deg,
+        });
+        Self {
+            tick: b.tick,
+            time_s,
+            proximity_m: b.proximity_m,
+            proximity_count: (b.proximity_count as usize).min(MAX_PROXIMITY),
+            encoder_ticks: b.encoder_ticks,
+            gps,
+            collision: b.present & ipc_types::COLLISION != 0,
+        }
+    }
+}
+
+/// Where the chair's sensors are read (thesis §5.4.3).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum Mode {
+    /// A simulated chair: every reading comes from the hub.
+    Virtual,
+    /// A physical chair: its own sensors and encoders, its pose pushed to the hub.
+    Real,
+    /// A physical chair that also sees the virtual world: per sensor, the nearer of the real
+    /// and the virtual reading.
+    Augmented,
+}
+
+/// Why a sensor source could not be set up.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum SensorSourceError {
+    /// Real and Augmented need a physical chair behind the serial bridge.
+    #[error(
+        "--mode {0}: a physical chair is reached through the serial bridge (`iwsim serial`), which is not built \
+         yet; only --mode virtual runs today"
+    )]
+    NeedsSerialBridge(&'static str),
+}
+
+/// The readings of one tick, from wherever they come.
+pub trait SensorSource: std::fmt::Debug {
+    /// The readings for the hub's tick whose block is `block`.
+    fn read(&mut self, block: &SensorBlock, time_s: f64) -> Input;
+}
+
+/// The hub's virtual sensors.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct VirtualSensors;
+
+impl SensorSource for VirtualSensors {
+    fn read(&mut self, block: &SensorBlock, time_s: f64) -> Input {
+        Input::from_block(block, time_s)
+    }
+}
+
+/// A physical chair's own readings (implemented by the serial bridge, later).
+pub trait RealChair: std::fmt::Debug {
+    /// The newest proximity distances, metres, in the navigator's sensor order.
+    fn proximity(&mut self) -> [f64; MAX_PROXIMITY];
+    /// The newest cumulative encoder ticks, left and right.
+    fn encoder_ticks(&mut self) -> [i64; 2];
+}
+
+/// Augmented reality (thesis §5.4.3): the real chair's sensors and encoders, with each
+/// proximity reading lowered to the virtual one where a virtual obstacle is nearer.
+#[derive(Debug)]
+pub struct AugmentedSensors<C: RealChair> {
+    /// The physical chair.
+    pub chair: C,
+}
+
+impl<C: RealChair> SensorSource for AugmentedSensors<C> {
+    fn read(&mut self, block: &SensorBlock, time_s: f64) -> Input {
+        let virtual_input = Input::from_block(block, time_s);
+        let real = self.chair.proximity();
+        let mut input = virtual_input;
+        let n = virtual_input.proximity_count;
+        input.proximity_m[..n].copy_from_slice(&augment(&real[..n], virtual_input.proximity()));
+        input.encoder_ticks = self.chair.encoder_ticks();
+        input
+    }
+}
+
+/// Merges real and virtual readings sensor by sensor: the smaller distance wins, so the chair
+/// avoids both real and virtual obstacles. A reading that is not a number is ignored in
+/// favour of the other.
+pub fn augment(real: &[f64], virtual_: &[f64]) -> Vec<f64> {
+    real.iter()
+        .zip(virtual_)
+        .map(|(&r, &v)| match (r.is_nan(), v.is_nan()) {
+            (false, false) => r.min(v),
+            (true, _) => v,
+            (false, true) => r,
+        })
+        .collect()
+}
+
+/// The source of readings for a mode.
+pub fn sensor_source(mode: Mode) -> Result<Box<dyn SensorSource>, SensorSourceError> {
+    match mode {
+        Mode::Virtual => Ok(Box::new(VirtualSensors)),
+        Mode::Real => Err(SensorSourceError::NeedsSerialBridge("real")),
+        Mode::Augmented => Err(SensorSourceError::NeedsSerialBridge("augmented")),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use bytemuck::Zeroable as _;
+
+    #[derive(Debug)]
+    struct Bench {
+        prox: [f64; MAX_PROXIMITY],
+    }
+
+    impl RealChair for Bench {
+        fn proximity(&mut self) -> [f64; MAX_PROXIMITY] {
+            self.prox
+        }
+        fn encoder_ticks(&mut self) -> [i64; 2] {
+            [7, 9]
+        }
+    }
+
+    #[test]
+    fn augmented_merge_takes_the_smaller_reading_per_sensor() {
+        assert_eq!(augment(&[1.0, 0.5, 3.0], &[2.0, 0.7, 0.4]), vec![1.0, 0.5, 0.4]);
+        assert_eq!(augment(&[f64::NAN, 0.5], &[2.0, f64::NAN]), vec![2.0, 0.5]);
+        // Through the seam: the virtual box at 0.4 m shows on the real chair's sensor 2.
+        let mut block = SensorBlock::zeroed();
+        block.proximity_count = 3;
+        block.proximity_m[..3].copy_from_slice(&[2.0, 0.7, 0.4]);
+        let mut src = AugmentedSensors { chair: Bench { prox: [1.0, 0.5, 3.0, 0.0, 0.0, 0.0, 0.0, 0.0] } };
+        let input = src.read(&block, 0.0);
+        assert_eq!(input.proximity(), &[1.0, 0.5, 0.4]);
+        assert_eq!(input.encoder_ticks, [7, 9]);
+    }
+
+    #[test]
+    fn real_and_augmented_modes_ask_for_the_serial_bridge() {
+        assert!(sensor_source(Mode::Virtual).is_ok());
+        assert_eq!(sensor_source(Mode::Real).err(), Some(SensorSourceError::NeedsSerialBridge("real")));
+        let e = sensor_source(Mode::Augmented).expect_err("not yet");
+        assert!(e.to_string().contains("iwsim serial"), "{e}");
+    }
+
+    #[test]
+    fn blocks_give_readings_but_never_the_true_pose() {
+        let mut b = SensorBlock::zeroed();
+        b.tick = 4;
+        b.proximity_count = 2;
+        b.proximity_m[..2].copy_from_slice(&[0.5, 2.5]);
+        b.encoder_ticks = [100, 120];
+        b.pose = [1.0, 2.0, 3.0];
+        let i = Input::from_block(&b, 0.4);
+        assert_eq!((i.tick, i.proximity(), i.encoder_ticks, i.gps), (4, &[0.5, 2.5][..], [100, 120], None));
+        b.present = HAS_GPS;
+        b.gps_x_m = 9.0;
+        assert_eq!(Input::from_block(&b, 0.4).gps.map(|g| g.x_m), Some(9.0));
+    }
+
+    #[test]
+    fn the_layout_keeps_every_sensor_on_the_body() {
+        let fp = Footprint::of_body(1.1, 0.65, 0.8);
+        let layout = default_layout(&fp);
+        assert_eq!(layout.len(), 8);
+        for s in &layout {
+            assert!(s.x_m <= fp.front + 1e-9 && s.x_m >= -fp.rear - 1e-9 && s.y_m.abs() <= fp.half + 1e-9);
+            assert!(s.range_m <= 3.0);
+        }
+        let c = layout[0].cone(&Pose::from_deg(10.0, 6.1, 90.0));
+        assert!((c.apex.x - 10.0).abs() < 1e-9 && (c.apex.y - 6.98).abs() < 1e-9);
+    }
+}

@@ -1,0 +1,247 @@
+//! The thesis's experiments as a user runs them (`iwsim run builtin:NAME --lockstep`), the
+//! door agent's states across processes, and `iwsim plot` on a real run's log.
+
+use std::path::{Path, PathBuf};
+use std::time::Duration;
+
+use agent_sdk::{Agent, Wait};
+use ipc_types::{ActionBlock, REG_HAS_POSE, RobotKind, RobotRegistration};
+
+use super::common::{Proc, session, text};
+
+fn out_dir(tag: &str) -> PathBuf {
+    std::env::temp_dir().join(format!("iwsim-e2e-{tag}-{}", std::process::id()))
+}
+
+/// Runs `iwsim ARGS` to the end; returns (success, stdout, stderr).
+fn iwsim(args: &[&str], timeout: Duration) -> (bool, String, String) {
+    let out = Proc::spawn(args).wait(timeout);
+    (out.status.success(), text(&out.stdout), text(&out.stderr))
+}
+
+fn summary(dir: &Path) -> serde_json::Value {
+    let s = std::fs::read_to_string(dir.join("summary.json")).expect("summary.json written");
+    serde_json::from_str(&s).expect("summary.json is JSON")
+}
+
+fn robot<'a>(summary: &'a serde_json::Value, name: &str) -> &'a serde_json::Value {
+    summary["robots"]
+        .as_array()
+        .expect("robots")
+        .iter()
+        .find(|r| r["name"] == name)
+        .unwrap_or_else(|| panic!("{name} in {summary}"))
+}
+
+#[test]
+fn builtin_dynamics_reports_the_thesis_top_speed_and_rise_time() {
+    let dir = out_dir("dynamics");
+    let (ok, out, err) = iwsim(
+        &["run", "builtin:dynamics", "--lockstep", "--headless", "--out", dir.to_str().expect("utf-8")],
+        Duration::from_secs(60),
+    );
+    assert!(ok, "{out}\n{err}");
+    assert!(out.contains("expected outcome: PASS"), "{out}");
+    let s = summary(&dir);
+    let c = robot(&s, "chair1");
+    let top = c["top_speed_mps"].as_f64().expect("top speed");
+    assert!((top - 0.49).abs() <= 0.0049, "top speed {top} within 1 % of 0.49");
+    assert_eq!(c["rise_time_s"].as_f64(), Some(1.2), "{c}");
+    assert_eq!(c["collisions"], 0);
+    // The log has one line per tick with the units in the header.
+    let log = std::fs::read_to_string(dir.join("chair1.csv")).expect("log");
+    assert!(log.starts_with("tick,time_s,encoder_left_ticks,encoder_right_ticks,proximity0_m"), "{log}");
+    assert_eq!(log.lines().count(), 1 + 100);
+    let _ = std::fs::remove_dir_all(dir);
+}
+
+#[test]
+fn builtin_door_lets_the_chair_through_for_every_seed() {
+    let dir = out_dir("door");
+    let (ok, out, err) = iwsim(
+        &["run", "builtin:door", "--lockstep", "--seeds", "1..3", "--out", dir.to_str().expect("utf-8")],
+        Duration::from_secs(120),
+    );
+    assert!(ok, "{out}\n{err}");
+    assert!(out.contains("success rate 3/3 (100 %)") && out.contains("collisions 0 in all"), "{out}");
+    for seed in 1..=3 {
+        let s = summary(&dir.join(format!("seed-{seed}")));
+        assert_eq!(s["passed"], true, "{s}");
+        assert_eq!(robot(&s, "chair1")["checkpoints_reached"], 1);
+        // Shut again at the end: the leaf back across the doorway.
+        let h = robot(&s, "door1")["final_pose"][2].as_f64().expect("heading");
+        assert!((h - 90.0).abs() < 1.5, "door heading {h}");
+    }
+    let _ = std::fs::remove_dir_all(dir);
+}
+
+#[test]
+fn the_same_seed_in_lock_step_gives_the_same_run() {
+    let (a, b) = (out_dir("same-a"), out_dir("same-b"));
+    for d in [&a, &b] {
+        let (ok, out, err) = iwsim(
+            &["run", "builtin:door", "--lockstep", "--headless", "--seed", "7", "--out", d.to_str().expect("utf-8")],
+            Duration::from_secs(60),
+        );
+        assert!(ok, "{out}\n{err}");
+    }
+    let (sa, sb) = (summary(&a), summary(&b));
+    assert_eq!(sa["state_hash"], sb["state_hash"]);
+    assert_eq!(
+        std::fs::read(a.join("chair1.csv")).expect("log a"),
+        std::fs::read(b.join("chair1.csv")).expect("log b"),
+        "identical logs"
+    );
+    let _ = std::fs::remove_dir_all(a);
+    let _ = std::fs::remove_dir_all(b);
+}
+
+#[test]
+fn a_bad_scenario_file_is_refused_with_its_line() {
+    let dir = out_dir("badscen");
+    std::fs::create_dir_all(&dir).expect("dir");
+    let f = dir.join("bad.toml");
+    std::fs::write(&f, "name = \"bad\"\nseconds = 10\n[[agents]]\nkind = \"navigator\"\noptions = { pose = [1, 2, }\n")
+        .expect("write");
+    let (ok, _, err) = iwsim(&["run", f.to_str().expect("utf-8"), "--headless"], Duration::from_secs(10));
+    assert!(!ok);
+    assert!(err.contains("bad.toml") && err.contains("line 5"), "{err}");
+    let (ok, _, err) = iwsim(&["run", "builtin:nope"], Duration::from_secs(10));
+    assert!(!ok && err.contains("no built-in scenario \"nope\"") && err.contains("slalom"), "{err}");
+    let _ = std::fs::remove_dir_all(dir);
+}
+
+/// Reads the door agent's stderr and returns its state changes in order.
+fn door_states(stderr: &str) -> Vec<String> {
+    stderr
+        .lines()
+        .filter_map(|l| l.strip_prefix("door door1: "))
+        .map(|l| l.split(" at t").next().unwrap_or_default().to_owned())
+        .collect()
+}
+
+#[test]
+fn the_door_opens_on_request_stops_on_contact_retries_and_closes() {
+    // A hub in lock-step, the door agent, and this test as an agent with a "real" robot it
+    // places by pose: far away, it asks the door to open by message; then it stands in the
+    // closing leaf's way; then it leaves.
+    let s = session("doorstates");
+    let hub =
+        Proc::spawn(&["hub", "--session", &s, "--lockstep", "--no-noise", "--ticks", "400", "--wait-agents", "2"]);
+    let door = Proc::spawn(&[
+        "agent",
+        "door",
+        "--session",
+        &s,
+        "--pose",
+        "9.445,5.46,90",
+        "--open",
+        "90",
+        "--trigger",
+        "1.0",
+        "--quiet",
+        "1.0",
+        "--retry",
+        "1.0",
+    ]);
+    let mut me = Agent::connect_within(&s, "test-visitor", Duration::from_secs(20)).expect("hub up");
+    let mut reg = RobotRegistration::new("visitor");
+    reg.kind = RobotKind::Real as u32;
+    reg.flags |= REG_HAS_POSE;
+    reg.pose = [14.0, 6.0, 0.0];
+    (reg.width_m, reg.height_m, reg.com) = (0.6, 0.5, 0.5);
+    let id = me.register(&reg).expect("registered");
+    me.ready().expect("ready");
+    let far = ActionBlock::pose(id, 14.0, 6.0, 0.0);
+    // In the sweep of the closing leaf (the quarter disc west of the hinge and north of the
+    // open leaf, which lies along y 5.46 from x 8.45 to 9.44).
+    let in_the_way = ActionBlock::pose(id, 8.9, 6.2, 0.0);
+    let mut phase = 0;
+    let mut was_open = false;
+    let mut in_way_since = 0;
+    while let Some(tick) = me.wait_tick(Wait::Blocking).expect("hub alive") {
+        let t = tick.tick;
+        let door_heading = me
+            .world()
+            .expect("world")
+            .1
+            .iter()
+            .find(|r| r.name.as_str() == Some("door1"))
+            .map(|r| r.heading_deg)
+            .expect("the door is in the world");
+        let open = (door_heading.abs() - 180.0).abs() < 2.0;
+        was_open |= open;
+        // Once the door has opened and starts to close, step into the leaf's sweep.
+        if phase == 0 && was_open && !open {
+            phase = 1;
+            in_way_since = t;
+        }
+        if phase == 1 && t > in_way_since + 60 {
+            phase = 2;
+        }
+        let mut act = if phase == 1 { in_the_way } else { far };
+        if t == 5 {
+            assert!(act.with_say(b"door open door1"), "message fits");
+        }
+        me.send(t, &[act]).expect("sent");
+    }
+    me.close();
+    let d = door.wait(Duration::from_secs(20));
+    assert!(d.status.success(), "{}", text(&d.stderr));
+    let states = door_states(&text(&d.stderr));
+    // Opened by the message alone (nothing near), closed into the visitor, stopped, re-opened
+    // after the pause, and shut once the visitor left.
+    assert!(states.len() >= 7, "{states:?}");
+    assert_eq!(&states[..5], ["opening", "open", "closing", "blocked", "opening"], "{states:?}");
+    assert_eq!(&states[states.len() - 2..], ["closing", "closed"], "{states:?}");
+    let h = hub.wait(Duration::from_secs(20));
+    assert!(h.status.success(), "{}", text(&h.stderr));
+}
+
+#[test]
+fn plot_draws_a_runs_trajectory_as_svg() {
+    let dir = out_dir("plot");
+    let (ok, out, err) = iwsim(
+        &["run", "builtin:door", "--lockstep", "--headless", "--out", dir.to_str().expect("utf-8")],
+        Duration::from_secs(60),
+    );
+    assert!(ok, "{out}\n{err}");
+    let log = dir.join("chair1.csv");
+    let svg_path = dir.join("chair1.svg");
+    let (ok, out, err) = iwsim(
+        &["plot", log.to_str().expect("utf-8"), "--out", svg_path.to_str().expect("utf-8")],
+        Duration::from_secs(30),
+    );
+    assert!(ok, "{out}\n{err}");
+    assert!(out.contains("chair1.svg"), "prints the path written: {out}");
+    let svg = std::fs::read_to_string(&svg_path).expect("svg written");
+    // Well-formed XML with an <svg> root.
+    let mut reader = quick_xml::Reader::from_str(&svg);
+    let mut depth = 0i32;
+    let mut root = None;
+    let mut polyline_points = Vec::new();
+    loop {
+        match reader.read_event().expect("well-formed SVG") {
+            quick_xml::events::Event::Start(e) => {
+                root.get_or_insert_with(|| e.name().into_inner().to_owned());
+                depth += 1;
+            }
+            quick_xml::events::Event::Empty(e) => {
+                if e.name().into_inner() == "polyline"
+                    && let Some(Ok(a)) =
+                        e.attributes().find(|a| a.as_ref().is_ok_and(|a| a.key.into_inner() == "points"))
+                {
+                    polyline_points.push(a.value.split_whitespace().count());
+                }
+            }
+            quick_xml::events::Event::End(_) => depth -= 1,
+            quick_xml::events::Event::Eof => break,
+            _ => {}
+        }
+    }
+    assert_eq!((root.as_deref(), depth), (Some("svg"), 0));
+    // The trajectory: a polyline with a point per logged tick.
+    let rows = std::fs::read_to_string(&log).expect("log").lines().count() - 1;
+    assert!(polyline_points.contains(&rows), "a {rows}-point trajectory among polylines of {polyline_points:?} points");
+    let _ = std::fs::remove_dir_all(dir);
+}
