@@ -90,17 +90,18 @@ fn bench_world_prints_the_documented_json_keys() {
 }
 
 #[test]
-fn the_demo_runs_headless_and_logs_csv_with_units() {
+fn the_demo_runs_headless_in_lock_step_and_passes() {
     let dir = std::env::temp_dir().join(format!("iwsim-demo-{}", std::process::id()));
-    let out = iwsim(&["demo", "--seconds", "5", "--out", dir.to_str().expect("utf-8 path")]);
+    let out = iwsim(&["demo", "--headless", "--lockstep", "--out", dir.to_str().expect("utf-8 path")]);
     let text = String::from_utf8_lossy(&out.stdout);
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(out.status.success(), "{text}\n{}", String::from_utf8_lossy(&out.stderr));
+    assert!(text.contains("expected outcome: PASS"), "{text}");
     assert!(text.contains("top speed 0.490 m/s") && text.contains("rise time 1.2 s"), "{text}");
-    let log = std::fs::read_to_string(dir.join("chair1.csv")).expect("log written");
-    let mut lines = log.lines();
-    assert!(
-        lines.next().expect("header").starts_with("tick,time_s,encoder_left_ticks,encoder_right_ticks,proximity0_m")
-    );
-    assert_eq!(lines.count(), 50, "one line per tick");
+    for robot in ["chair1", "chair2", "door1"] {
+        let log = std::fs::read_to_string(dir.join(format!("{robot}.csv"))).expect("log written");
+        let mut lines = log.lines();
+        assert!(lines.next().expect("header").starts_with("tick,time_s,encoder_left_ticks,encoder_right_ticks,proximity0_m"));
+        assert_eq!(lines.count(), 750, "one line per tick of the 75 s demo");
+    }
     let _ = std::fs::remove_dir_all(dir);
 }

@@ -245,3 +245,32 @@ fn plot_draws_a_runs_trajectory_as_svg() {
     assert!(polyline_points.contains(&rows), "a {rows}-point trajectory among polylines of {polyline_points:?} points");
     let _ = std::fs::remove_dir_all(dir);
 }
+
+#[test]
+fn builtin_slalom_reaches_checkpoint_2_without_contact_for_three_seeds_with_noise() {
+    let dir = out_dir("slalom");
+    let (ok, out, err) = iwsim(
+        &["run", "builtin:slalom", "--lockstep", "--seeds", "1..3", "--out", dir.to_str().expect("utf-8")],
+        Duration::from_secs(300),
+    );
+    assert!(ok, "{out}\n{err}");
+    assert!(out.contains("success rate 3/3 (100 %)") && out.contains("collisions 0 in all"), "{out}");
+    for seed in 1..=3 {
+        let s = summary(&dir.join(format!("seed-{seed}")));
+        let c = robot(&s, "chair1");
+        assert_eq!((c["checkpoints_reached"].as_u64(), c["collisions"].as_u64()), (Some(2), Some(0)), "{c}");
+        // It went round obstacle A below it and B above it: between x 17 and 17.6 it was
+        // under y 6.1, between 19.4 and 20 above 5.9 (the log has every tick).
+        let log = std::fs::read_to_string(dir.join(format!("seed-{seed}/chair1.csv"))).expect("log");
+        let rows: Vec<Vec<f64>> =
+            log.lines().skip(1).map(|l| l.split(',').map(|v| v.parse().unwrap_or(f64::NAN)).collect()).collect();
+        let header: Vec<&str> = log.lines().next().expect("header").split(',').collect();
+        let (cx, cy) = (
+            header.iter().position(|h| *h == "x_m").expect("x"),
+            header.iter().position(|h| *h == "y_m").expect("y"),
+        );
+        assert!(rows.iter().filter(|r| (17.0..17.6).contains(&r[cx])).all(|r| r[cy] < 6.1), "seed {seed}: below A");
+        assert!(rows.iter().filter(|r| (19.4..20.0).contains(&r[cx])).all(|r| r[cy] > 5.9), "seed {seed}: above B");
+    }
+    let _ = std::fs::remove_dir_all(dir);
+}

@@ -3,7 +3,8 @@
 // the 3D view is first shown, so a browser without WebGL still gets the 2D view).
 //
 // 2D: wheel zooms, drag pans, a click on a chair follows it. The URL can preset the page:
-// ?view=3d&camera=first|third|free&chair=ID&grid=0&labels=0&cones=0.
+// ?view=3d&camera=first|third|free&chair=ID|NAME&grid=0&labels=0&cones=0; in 2D, chair= also
+// follows that chair and zoom=K magnifies the fitted view K times.
 "use strict";
 
 const HEADER_BYTES = 28, ROBOT_BYTES = 52, MAX_PROXIMITY = 8, NO_READING = 0xffff;
@@ -64,6 +65,7 @@ if (typeof document !== "undefined") {
   const canvas = $("view2d"), ctx = canvas.getContext("2d"), canvas3d = $("view3d"), hud = $("hud"), status = $("status");
   const STATES = ["waiting", "running", "paused", "finished"];
   const CONES_MAX = 300, LABELS_MAX = 300;
+  const zoom = Math.min(Math.max(Number(params.get("zoom")) || 1, 0.1), 50);
   const COLORS = {
     outside: "#f4f4f0", floor: "#ffffff", grid: "#e4e4e4", wall: "#20407a", obstacle: "#d07020",
     chair: "#20a040", real: "#2070d0", door: "#8a5a2b", collision: "#e02020",
@@ -72,7 +74,10 @@ if (typeof document !== "undefined") {
   };
   const page = {
     map: null, frame: null, roster: new Map(), names: new Map(),
-    follow: null, chair: params.has("chair") ? Number(params.get("chair")) : null,
+    // ?chair= takes a robot id or a name; a name is resolved when the roster arrives.
+    chair: /^\d+$/.test(params.get("chair") || "") ? Number(params.get("chair")) : null,
+    chairName: params.has("chair") && !/^\d+$/.test(params.get("chair")) ? params.get("chair") : null,
+    follow: /^\d+$/.test(params.get("chair") || "") ? Number(params.get("chair")) : null,
     mode: params.get("view") === "3d" ? "3d" : "2d", camera: params.get("camera") || "first",
     grid: flag("grid", true), labels: flag("labels", true), cones: flag("cones", true),
     view3d: null, view3dError: null, draws: 0, drawFps: 0, frames: 0, frameFps: 0, tickRate: 0,
@@ -85,7 +90,7 @@ if (typeof document !== "undefined") {
 
   function fit() {
     const w = canvas.width, h = canvas.height;
-    view.scale = Math.min(w / (page.map.width + 2), h / (page.map.height + 2));
+    view.scale = Math.min(w / (page.map.width + 2), h / (page.map.height + 2)) * zoom;
     view.ox = (w - page.map.width * view.scale) / 2;
     view.oy = (h + page.map.height * view.scale) / 2;
     view.fitted = true;
@@ -247,6 +252,11 @@ if (typeof document !== "undefined") {
       } else if (m.type === "roster") {
         page.roster = new Map(m.robots.map((r) => [r.id, r]));
         page.names = new Map(m.robots.map((r) => [r.id, r.name]));
+        const named = page.chairName && m.robots.find((r) => r.name === page.chairName);
+        if (named) {
+          page.chair = named.id; page.follow = named.id; page.chairName = null;
+          if (page.view3d) page.view3d.setCamera(page.camera, page.chair);
+        }
         fillChairs();
       } else if (m.type === "ack") {
         status.textContent = `${m.command}: done`;

@@ -201,8 +201,8 @@ export function createView3D(canvas) {
   const frustum = new THREE.Frustum(), sphere = new THREE.Sphere(), projView = new THREE.Matrix4();
 
   // Runs at render time because culling and level of detail depend on the camera. Software
-  // WebGL (SwiftShader, ~1 us per triangle here) pays per triangle, so once many chairs are
-  // visible only the nearest ones within DETAIL_RANGE get the full model.
+  // WebGL pays for every triangle and pixel, so once many chairs are visible only the
+  // nearest ones within DETAIL_RANGE get the full model.
   function layoutRobots(hidden) {
     const robots = (frame && frame.robots) || [];
     ensureCapacity(robots.length);
@@ -215,8 +215,8 @@ export function createView3D(canvas) {
       sphere.center.set(r.x, r.y, 0.5); sphere.radius = 0.5 * Math.hypot(r.width, r.height) + 1;
       if (frustum.intersectsSphere(sphere)) vis.push(r);
     }
-    // Nearest first: with the robots drawn before the map (renderOrder), hidden fragments then
-    // fail the depth test early, which matters in software rendering when a crowd fills the view.
+    // Nearest first, and robots before the map (renderOrder), so GPUs can reject hidden
+    // fragments early; the order also picks the chairs that get the full model.
     const p = camera.position, d2 = (r) => (r.x - p.x) ** 2 + (r.y - p.y) ** 2;
     const order = vis.map(d2), idx = Array.from(vis.keys()).sort((i, j) => order[i] - order[j]);
     const near = vis.length > DETAILED_NEAREST ? Math.min(DETAIL_RANGE ** 2, order[idx[DETAILED_NEAREST - 1]]) : Infinity;

@@ -143,6 +143,32 @@ impl Pose {
     pub fn is_finite(&self) -> bool {
         self.x.is_finite() && self.y.is_finite() && self.theta.is_finite()
     }
+
+    /// The lab-to-body transform, with the heading's sine and cosine computed once.
+    pub fn body_frame(&self) -> BodyFrame {
+        let (s, c) = self.theta.sin_cos();
+        BodyFrame { origin: self.pos(), c, s }
+    }
+}
+
+/// A pose's lab-to-body transform, for many points.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct BodyFrame {
+    origin: V2,
+    c: f64,
+    s: f64,
+}
+
+impl BodyFrame {
+    /// A lab-frame point in the body frame.
+    pub fn apply(&self, p: V2) -> V2 {
+        (p - self.origin).rotate_cs(self.c, -self.s)
+    }
+
+    /// A body-frame point in the lab frame.
+    pub fn to_world(&self, p: V2) -> V2 {
+        self.origin + p.rotate_cs(self.c, self.s)
+    }
 }
 
 /// A segment of a wall's outline.

@@ -222,23 +222,53 @@ pub struct EvidenceParams {
     pub clamp: f32,
     /// Cells nearer than `reading − carve_gap` are seen through (the noise's allowance).
     pub carve_gap: f64,
+    /// The arc is marked this far behind the reading: a cell straddling the surface is hit
+    /// as often as it is seen through, so the estimate sits on the surface rather than a cell
+    /// in front of it.
+    pub arc_offset: f64,
     /// A reading this much shorter than the known walls explain reveals an obstacle.
     pub unexplained: f64,
     /// Readings within this of the range saw nothing.
     pub nothing_within: f64,
+    /// Readings farther than this only clear cells: their arcs are too long to place what
+    /// they saw.
+    pub hit_range: f64,
+    /// Readings nearer than this mark their arcs with proportionally less evidence: within a
+    /// few noise deviations of the sensor a reading places little (a chair passing 0.1 m from
+    /// a box reads anything from 0 to 0.3 m), though it is all there is of what lies right
+    /// beside the chair.
+    pub short_range: f64,
+    /// A cell updated again from a sensor position within this distance of its last full
+    /// update moves only `same_view` as far: the same view repeats its geometric errors (a
+    /// cone edge grazing a face marks the same wrong cells), while a true obstacle is seen
+    /// alike from everywhere. Hits and misses are weighed alike, so a chair standing still
+    /// still builds up what it sees.
+    pub new_view_m: f64,
+    /// See `new_view_m`.
+    pub same_view: f32,
+    /// Obstacle cells lose this much evidence per tick, seen or not. Off by default: what
+    /// is out of view (an obstacle just passed, beside the chair) must not fade, and what is
+    /// in view is confirmed or cleared by the readings themselves.
+    pub decay: f32,
 }
 
 impl Default for EvidenceParams {
     fn default() -> Self {
         Self {
             hit: 1.0,
-            miss: 0.45,
+            miss: 0.6,
             occupied_above: 1.45,
             free_below: 0.5,
             clamp: 4.0,
-            carve_gap: 0.12,
+            carve_gap: 0.05,
+            arc_offset: 0.025,
             unexplained: 0.25,
             nothing_within: 0.2,
+            hit_range: 2.2,
+            short_range: 0.0,
+            new_view_m: 0.1,
+            same_view: 0.3,
+            decay: 0.0,
         }
     }
 }
@@ -271,6 +301,9 @@ pub struct SensedLayer {
     cells: Vec<u32>,
     newly: Vec<u32>,
     changed: bool,
+    arc: Vec<u32>,
+    /// Where the sensor was at each cell's last full-weight update (NaN: never).
+    last_view: Vec<[f32; 2]>,
 }
 
 impl SensedLayer {
@@ -286,6 +319,8 @@ impl SensedLayer {
             cells: Vec::new(),
             newly: Vec::new(),
             changed: false,
+            arc: Vec::new(),
+            last_view: vec![[f32::NAN; 2]; spec.len()],
         }
     }
 
@@ -326,9 +361,9 @@ impl SensedLayer {
             return;
         }
         let seen_nothing = d >= obs.range - p.nothing_within;
-        let unexplained = !seen_nothing && obs.expected - d > p.unexplained;
+        let unexplained = !seen_nothing && d <= p.hit_range && obs.expected - d > p.unexplained;
         let carve_to = d - p.carve_gap;
-        let reach = if unexplained { d + self.spec.cell } else { carve_to };
+        let reach = if unexplained { d + p.arc_offset + self.spec.cell } else { carve_to };
         if reach <= 0.0 {
             return;
         }
@@ -358,11 +393,14 @@ impl SensedLayer {
             }
         }
         let half_cell = self.spec.cell / 2.0;
+        // Every ray across the arc meets at least one cell centre within this band.
+        let arc_band = self.spec.cell * std::f64::consts::FRAC_1_SQRT_2;
+        // An arc narrower than a cell still marks the cells it crosses; a wider one marks only
+        // cells whose centres are inside the cone, as the carving does.
+        let lateral = (half_cell - d * cone.half.sin()).max(0.0);
         let (xs, ys) = self.spec.range(lo - V2::new(half_cell, half_cell), hi + V2::new(half_cell, half_cell));
-        // Hits spread over the arc's cells: the obstacle is somewhere on it. A wide cone's
-        // arc holds many cells and so says little about each.
-        let arc_cells = (2.0 * cone.half * d / self.spec.cell).max(1.0);
-        let hit = p.hit * (2.5 / arc_cells as f32).min(1.0);
+        let mut arc = std::mem::take(&mut self.arc);
+        arc.clear();
         for iy in ys {
             for ix in xs.clone() {
                 let i = self.spec.index(ix, iy);
@@ -376,24 +414,87 @@ impl SensedLayer {
                 }
                 // Lateral distance of the centre inside each cone edge.
                 let (in1, in2) = (u1.cross(v), v.cross(u2));
-                let delta = if r < carve_to {
-                    if in1 < 0.0 || in2 < 0.0 {
-                        continue;
+                if r < carve_to {
+                    if in1 >= 0.0 && in2 >= 0.0 {
+                        self.stamp[i] = self.now;
+                        let w = self.view_weight(i, cone.apex);
+                        self.add(i, -p.miss * w);
                     }
-                    -p.miss
-                } else if unexplained && (r - d).abs() <= half_cell && in1 >= -half_cell && in2 >= -half_cell {
+                } else if unexplained && (r - d - p.arc_offset).abs() <= arc_band && in1 >= -lateral && in2 >= -lateral {
                     let c = self.spec.center(ix, iy);
-                    if body.is_some_and(|(pose, fp)| fp.contains_body(pose.to_body(c), 0.05)) {
-                        continue;
+                    if !body.is_some_and(|(pose, fp)| fp.contains_body(pose.to_body(c), 0.05)) {
+                        self.stamp[i] = self.now;
+                        arc.push(i as u32);
                     }
-                    hit
-                } else {
-                    continue;
-                };
-                self.stamp[i] = self.now;
-                self.add(i, delta);
+                }
             }
         }
+        if !arc.is_empty() {
+            // The obstacle is somewhere on the arc. Where the arc crosses cells already
+            // believed occupied, those explain the reading and take the hit; otherwise every
+            // cell of it shares the hit (cells seen through often are the least likely), and a
+            // wide arc says little about each of its cells.
+            let explained = 0.6 * p.occupied_above;
+            let n_explained = arc.iter().filter(|&&i| self.evidence[i as usize] >= explained).count();
+            let clear = -2.0 * p.miss;
+            let n_open = arc.iter().filter(|&&i| self.evidence[i as usize] > clear).count();
+            let near = if p.short_range > 0.0 { (d / p.short_range).clamp(0.25, 1.0) as f32 } else { 1.0 };
+            let spread = near * p.hit * (2.5 / (2.0 * cone.half * d / self.spec.cell).max(1.0) as f32).min(1.0);
+            let (threshold, hit) = if n_explained > 0 {
+                (explained, near * p.hit)
+            } else if n_open > 0 {
+                (clear + f32::EPSILON, spread)
+            } else {
+                (f32::NEG_INFINITY, spread)
+            };
+            for &i in &arc {
+                let i = i as usize;
+                if self.evidence[i] >= threshold {
+                    let w = self.view_weight(i, cone.apex);
+                    self.add(i, hit * w);
+                }
+            }
+        }
+        self.arc = arc;
+    }
+
+    /// The weight of an update of cell `i` from a sensor at `apex`: full from a new view
+    /// (which then becomes the cell's last), `same_view` from near the last one.
+    fn view_weight(&mut self, i: usize, apex: V2) -> f32 {
+        let [lx, ly] = self.last_view[i];
+        let moved = ((lx as f64 - apex.x).powi(2) + (ly as f64 - apex.y).powi(2)).sqrt();
+        if lx.is_nan() || moved >= self.params.new_view_m {
+            self.last_view[i] = [apex.x as f32, apex.y as f32];
+            1.0
+        } else {
+            self.params.same_view
+        }
+    }
+
+    /// Lets every obstacle cell lose `decay` of evidence (once per tick).
+    pub fn decay(&mut self) {
+        self.fade(self.params.decay);
+    }
+
+    /// Lets every obstacle cell lose `d` of evidence at once: what the sensors still see comes
+    /// back within a few readings, what they do not (a ghost of noise, out of view) goes.
+    pub fn fade(&mut self, d: f32) {
+        if d <= 0.0 {
+            return;
+        }
+        let cells = std::mem::take(&mut self.cells);
+        let mut kept = Vec::with_capacity(cells.len());
+        for &c in &cells {
+            let i = c as usize;
+            self.evidence[i] -= d;
+            if self.evidence[i] < self.params.free_below {
+                self.occupied[i] = false;
+                self.changed = true;
+            } else {
+                kept.push(c);
+            }
+        }
+        self.cells = kept;
     }
 
     fn add(&mut self, i: usize, delta: f32) {
@@ -505,8 +606,10 @@ mod tests {
         let mut layer = SensedLayer::new(statics.spec, EvidenceParams::default());
         let cone = Cone { apex: V2::new(1.0, 2.0), dir: 0.0, half: 5f64.to_radians() };
         let obs = Observation { cone, distance: 2.0, range: 3.0, expected: 3.0 };
-        for _ in 0..3 {
-            layer.observe(&statics, &obs, None);
+        // The same obstacle at (3, 2) seen while approaching it.
+        for k in 0..5 {
+            let cone = Cone { apex: V2::new(1.0 + 0.12 * k as f64, 2.0), ..cone };
+            layer.observe(&statics, &Observation { cone, distance: 2.0 - 0.12 * k as f64, ..obs }, None);
         }
         let at = |x: f64, y: f64| statics.spec.cell_of(V2::new(x, y)).map(|(ix, iy)| statics.spec.index(ix, iy));
         let i = at(3.0, 2.0).expect("inside");
@@ -514,10 +617,10 @@ mod tests {
         let j = at(2.0, 2.0).expect("inside");
         assert!(layer.evidence(j) < 0.0 && !layer.occupied(j));
         assert!(layer.take_changes() && !layer.cells().is_empty());
-        // Readings that now see past it clear it again.
-        let far = Observation { distance: 3.0, ..obs };
-        for _ in 0..10 {
-            layer.observe(&statics, &far, None);
+        // Readings that now see past it, from wherever, clear it again.
+        for k in 0..10 {
+            let cone = Cone { apex: V2::new(1.0 - 0.12 * k as f64, 2.0), ..cone };
+            layer.observe(&statics, &Observation { cone, distance: 3.0, ..obs }, None);
         }
         assert!(!layer.occupied(i));
         assert!(layer.cells().is_empty());

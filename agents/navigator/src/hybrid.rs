@@ -78,7 +78,7 @@ pub struct HybridParams {
     pub curvatures: Vec<f64>,
     /// Curvatures of backward arcs (empty: never backwards).
     pub reverse_curvatures: Vec<f64>,
-    /// Angle of one turn on the spot, radians.
+    /// Angle of one turn on the spot, radians (0: never turn on the spot).
     pub spin_rad: f64,
     /// Cost of a metre backwards, relative to forwards.
     pub reverse_factor: f64,
@@ -86,8 +86,18 @@ pub struct HybridParams {
     pub switch_cost: f64,
     /// Cost of a radian turned on the spot, metres.
     pub spin_cost: f64,
+    /// Cost of stopping to turn on the spot, metres.
+    pub stop_cost: f64,
     /// Extra cost per metre and unit of curvature.
     pub curvature_cost: f64,
+    /// Soft margins beyond the hard one: a pose closer to something than the hard margin
+    /// plus `comfort[k].0` costs `comfort[k].1` more per metre, so paths keep to the middle
+    /// of gaps where they can and come close only where they must (or where the way round
+    /// is longer still).
+    pub comfort: Vec<(f64, f64)>,
+    /// A path may end (at the goal) only where the chair keeps this much more than the hard
+    /// margin: it may squeeze past things, but it does not stop pressed against them.
+    pub end_clearance_m: f64,
     /// Cost per unit of curvature change between arcs.
     pub curvature_change_cost: f64,
     /// Position resolution of the closed set, metres.
@@ -111,15 +121,18 @@ impl Default for HybridParams {
             curvatures: vec![0.0, 0.5, -0.5, 1.2, -1.2, 2.5, -2.5],
             reverse_curvatures: vec![0.0, 1.0, -1.0],
             spin_rad: 10f64.to_radians(),
-            reverse_factor: 2.5,
-            switch_cost: 1.0,
-            spin_cost: 0.3,
-            curvature_cost: 0.06,
-            curvature_change_cost: 0.08,
+            reverse_factor: 4.0,
+            switch_cost: 1.5,
+            spin_cost: 0.6,
+            stop_cost: 0.3,
+            curvature_cost: 0.15,
+            curvature_change_cost: 0.25,
+            comfort: vec![(0.04, 3.0), (0.12, 0.7)],
+            end_clearance_m: 0.04,
             xy_res: 0.05,
             heading_bins: 72,
-            max_expansions: 40_000,
-            heuristic_weight: 1.4,
+            max_expansions: 20_000,
+            heuristic_weight: 1.25,
             horizon_m: 7.0,
             check_step_m: 0.05,
         }
@@ -128,24 +141,25 @@ impl Default for HybridParams {
 
 /// What the search found.
 #[derive(Debug, Clone, PartialEq)]
-pub enum PlanOutcome {
-    /// A path that ends at the goal.
-    Reached(Vec<PathPose>),
-    /// A path that makes `horizon_m` of progress (or the most progress found) towards it.
-    Partial(Vec<PathPose>),
+pub struct PlanOutcome {
+    /// The poses from the start.
+    pub path: Vec<PathPose>,
+    /// Whether the path ends at the goal; if not, it makes `horizon_m` of progress (or the
+    /// most progress found) towards it.
+    pub reaches_goal: bool,
+    /// Nodes expanded.
+    pub expansions: usize,
 }
 
 impl PlanOutcome {
     /// The path.
     pub fn path(&self) -> &[PathPose] {
-        match self {
-            PlanOutcome::Reached(p) | PlanOutcome::Partial(p) => p,
-        }
+        &self.path
     }
 
     /// Whether the path ends at the goal.
     pub fn reaches_goal(&self) -> bool {
-        matches!(self, PlanOutcome::Reached(_))
+        self.reaches_goal
     }
 }
 
@@ -253,8 +267,10 @@ pub fn plan(
 
     let mut motions: Vec<Motion> = params.curvatures.iter().map(|&k| Motion::Forward(k)).collect();
     motions.extend(params.reverse_curvatures.iter().map(|&k| Motion::Reverse(k)));
-    motions.push(Motion::Spin(params.spin_rad));
-    motions.push(Motion::Spin(-params.spin_rad));
+    if params.spin_rad > 0.0 {
+        motions.push(Motion::Spin(params.spin_rad));
+        motions.push(Motion::Spin(-params.spin_rad));
+    }
 
     while let Some(Open { f, i }) = open.pop() {
         let n = nodes[i as usize];
@@ -268,10 +284,12 @@ pub fn plan(
             continue;
         }
         let dist = (n.pose.pos() - goal.pos).norm();
-        if dist <= goal.stop_within {
-            return Ok(PlanOutcome::Reached(extract(&nodes, i as usize)));
+        let may_end =
+            dist <= goal.accept_within && model.free(&n.pose, margin_at(n.travelled) + params.end_clearance_m);
+        if may_end && dist <= goal.stop_within {
+            return Ok(PlanOutcome { path: extract(&nodes, i as usize), reaches_goal: true, expansions });
         }
-        if dist <= goal.accept_within {
+        if may_end {
             let total = n.g + goal.weight * dist;
             if candidate.is_none_or(|(_, t)| total < t) {
                 candidate = Some((i as usize, total));
@@ -281,7 +299,7 @@ pub fn plan(
             best_progress = (i as usize, n.h);
         }
         if candidate.is_none() && h0 - n.h >= params.horizon_m {
-            return Ok(PlanOutcome::Partial(extract(&nodes, i as usize)));
+            return Ok(PlanOutcome { path: extract(&nodes, i as usize), reaches_goal: false, expansions });
         }
         expansions += 1;
         if expansions > params.max_expansions {
@@ -326,9 +344,20 @@ pub fn plan(
                 Motion::Spin(a) => params.spin_cost * a.abs(),
                 Motion::Start => 0.0,
             };
+            // Soft margins, widest first: a pose free at the widest pays nothing.
+            let hard = margin_at(travelled);
+            for &(extra, per_m) in params.comfort.iter().rev() {
+                if model.free(&pose, hard + extra) {
+                    break;
+                }
+                cost += per_m * (len + turn * 0.3);
+            }
             let (d0, d1) = (n.motion.direction(), m.direction());
             if d0 != 0 && d1 != 0 && d0 != d1 {
                 cost += params.switch_cost;
+            }
+            if d0 != 0 && matches!(m, Motion::Spin(_)) {
+                cost += params.stop_cost;
             }
             if d0 == d1 && d1 != 0 {
                 cost += params.curvature_change_cost * (m.curvature() - n.motion.curvature()).abs();
@@ -339,10 +368,12 @@ pub fn plan(
         }
     }
     if let Some((c, _)) = candidate {
-        return Ok(PlanOutcome::Reached(extract(&nodes, c)));
+        return Ok(PlanOutcome { path: extract(&nodes, c), reaches_goal: true, expansions });
     }
-    if h0 - best_progress.1 >= 0.5 {
-        return Ok(PlanOutcome::Partial(extract(&nodes, best_progress.0)));
+    // Out of expansions far from the goal: a path that at least gets well on the way is
+    // worth driving (the rest is planned from its end); a scrap of progress is not.
+    if h0 - best_progress.1 >= 0.5 * params.horizon_m {
+        return Ok(PlanOutcome { path: extract(&nodes, best_progress.0), reaches_goal: false, expansions });
     }
     Err(PlanError::Exhausted { expansions })
 }
@@ -387,7 +418,7 @@ mod tests {
         map.walls.push(MapWall::rectangle(17.0, 6.1, 17.6, 6.4, false));
         map.walls.push(MapWall::rectangle(19.4, 5.5, 20.0, 5.9, false));
         let model = WorldModel::new(map, Footprint::of_body(1.1, 0.65, 0.8));
-        let cm = Costmap::build(&model, 0.33);
+        let cm = Costmap::build(&model, 0.33, 0.25);
         let goal = V2::new(20.0, 6.1);
         let seeds: Vec<(usize, f32)> = (0..cm.spec.len())
             .filter_map(|i| {
@@ -396,11 +427,14 @@ mod tests {
                 (d <= 0.5).then_some((i, (4.0 * d) as f32))
             })
             .collect();
-        let start = Pose::from_deg(12.0, 6.0, 0.0);
+        let start = Pose::from_deg(13.0, 6.0, 0.0);
         let start_cell = cm.spec.clamp_cell(start.pos());
-        let ctg = CostToGo::new(&cm, &seeds, Some(cm.spec.index(start_cell.0, start_cell.1)), 6.0, 4.0);
+        let ctg = CostToGo::new(&cm, &seeds, Some(cm.spec.index(start_cell.0, start_cell.1)), 6.0, 4.0, &[]);
         let g = Goal { pos: goal, stop_within: 0.15, accept_within: 0.5, weight: 4.0 };
-        let out = plan(&model, &ctg, start, &g, 0.06, &HybridParams::default()).expect("a path");
+        let params = HybridParams { horizon_m: 50.0, max_expansions: 60_000, heuristic_weight: 2.0, ..HybridParams::default() };
+        let t0 = std::time::Instant::now();
+        let out = plan(&model, &ctg, start, &g, 0.06, &params).expect("a path");
+        eprintln!("planned in {:?}", t0.elapsed());
         assert!(out.reaches_goal());
         let path = out.path();
         let end = path.last().expect("poses").pose;
@@ -411,5 +445,10 @@ mod tests {
         // Under A the chair is low, above B it is high.
         let y_at = |x: f64| path.iter().min_by(|a, b| (a.pose.x - x).abs().total_cmp(&(b.pose.x - x).abs())).map(|p| p.pose.y);
         assert!(y_at(17.3).expect("passes A") < 5.8);
+        assert!(y_at(19.7).expect("passes B") > 6.2);
+        for p in path {
+            eprintln!("{:.2} {:.2} {:.0} {:?}", p.pose.x, p.pose.y, p.pose.theta.to_degrees(), p.motion);
+        }
     }
 }
+

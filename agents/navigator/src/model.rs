@@ -14,6 +14,8 @@ const BUCKET_M: f64 = 0.5;
 /// A sensed obstacle cell counts as a disc this wide around its centre.
 pub const SENSED_RADIUS_M: f64 = CELL_M / 2.0;
 
+
+
 /// The navigator's model of the lab.
 #[derive(Debug, Clone)]
 pub struct WorldModel {
@@ -28,13 +30,34 @@ pub struct WorldModel {
     /// Obstacles found by the sensors.
     pub sensed: SensedLayer,
     points: Vec<V2>,
+    /// The cell of each point.
+    point_cells: Vec<u32>,
+
     point_index: Buckets,
+    /// Sensed cells count as obstacles for planning from this much evidence on.
+    pub plan_evidence: f32,
+    /// Extra margin kept from sensed obstacles (their extent beyond what was seen is
+    /// unknown), on top of the margin asked of [`WorldModel::free`].
+    pub sensed_extra: f64,
 }
 
 impl WorldModel {
     /// The model of a map for a chair of this footprint, with nothing sensed yet.
     pub fn new(map: NavMap, footprint: Footprint) -> Self {
-        let segs = map.known_segments();
+        // Long walls are cut into bucket-sized pieces, so a query meets only the pieces near
+        // it, not the whole wall once per bucket.
+        let segs: Vec<Seg> = map
+            .known_segments()
+            .into_iter()
+            .flat_map(|s| {
+                let n = ((s.b - s.a).norm() / BUCKET_M).ceil().max(1.0) as usize;
+                (0..n).map(move |k| {
+                    let t0 = k as f64 / n as f64;
+                    let t1 = (k + 1) as f64 / n as f64;
+                    Seg::new(s.a + (s.b - s.a) * t0, s.a + (s.b - s.a) * t1)
+                })
+            })
+            .collect();
         let seg_index = Buckets::build(map.width_m, map.height_m, BUCKET_M, segs.len(), |k| {
             let s = segs[k];
             (V2::new(s.a.x.min(s.b.x), s.a.y.min(s.b.y)), V2::new(s.a.x.max(s.b.x), s.a.y.max(s.b.y)))
@@ -42,7 +65,21 @@ impl WorldModel {
         let statics = StaticRaster::new(&map, CELL_M);
         let sensed = SensedLayer::new(statics.spec, EvidenceParams::default());
         let point_index = Buckets::build(map.width_m, map.height_m, BUCKET_M, 0, |_| (V2::default(), V2::default()));
-        Self { map, footprint, segs, seg_index, statics, sensed, points: Vec::new(), point_index }
+        let plan_evidence = sensed.params.occupied_above;
+        Self {
+            map,
+            footprint,
+            segs,
+            seg_index,
+            statics,
+            sensed,
+            points: Vec::new(),
+            point_cells: Vec::new(),
+            sensed_extra: 0.0,
+
+            point_index,
+            plan_evidence,
+        }
     }
 
     /// The grid of the layers.
@@ -73,6 +110,19 @@ impl WorldModel {
         best
     }
 
+    /// What a sensor with this cone would read if only the sensed obstacles stood.
+    pub fn sensed_reading(&self, cone: &Cone, range: f64) -> f64 {
+        let mut best = range;
+        let r = V2::new(range, range);
+        self.point_index.query(cone.apex - r, cone.apex + r, |k| {
+            let p = self.points[k];
+            if cone.contains(p) {
+                best = best.min(((p - cone.apex).norm() - SENSED_RADIUS_M).max(0.0));
+            }
+        });
+        best
+    }
+
     /// Adds one reading to the sensed layer; `pose` is where the chair was when it was taken.
     pub fn observe(&mut self, cone: Cone, distance: f64, range: f64, pose: &Pose) {
         let expected = self.expected_reading(&cone, range);
@@ -86,9 +136,9 @@ impl WorldModel {
             return false;
         }
         let spec = self.spec();
+        self.point_cells = self.sensed.cells().to_vec();
         self.points = self
-            .sensed
-            .cells()
+            .point_cells
             .iter()
             .map(|&i| {
                 let (ix, iy) = spec.coords(i as usize);
@@ -100,11 +150,17 @@ impl WorldModel {
         true
     }
 
+    /// Every sensed obstacle cell that counts for planning now, with its centre.
+    pub fn planning_points(&self) -> impl Iterator<Item = (usize, V2)> + '_ {
+        (0..self.points.len()).filter(|&k| self.counts(k)).map(|k| (self.point_cells[k] as usize, self.points[k]))
+    }
+
     /// Whether the chair at `pose`, grown by `margin`, touches no known wall and no sensed
     /// obstacle.
     pub fn free(&self, pose: &Pose, margin: f64) -> bool {
         let fp = &self.footprint;
-        let centre = fp.centre(pose);
+        let frame = pose.body_frame();
+        let centre = frame.to_world(V2::new(fp.centre_offset(), 0.0));
         let reach = fp.centre_reach() + margin;
         // Far from every wall and every sensed point: nothing to test.
         let wall_clear = self.statics.distance_at(centre) - self.spec().cell * std::f64::consts::SQRT_2 > reach;
@@ -114,18 +170,23 @@ impl WorldModel {
             self.seg_index.query(centre - r, centre + r, |k| {
                 if !hit {
                     let s = self.segs[k];
-                    hit = fp.meets_body_segment(pose.to_body(s.a), pose.to_body(s.b), margin);
+                    hit = fp.meets_body_segment(frame.apply(s.a), frame.apply(s.b), margin);
                 }
             });
             if hit {
                 return false;
             }
         }
+        if self.points.is_empty() {
+            return true;
+        }
         let mut hit = false;
-        let grown = margin + SENSED_RADIUS_M;
+        let grown = margin + self.sensed_extra + SENSED_RADIUS_M;
+        let reach = fp.centre_reach() + grown;
+        let r = V2::new(reach, reach);
         self.point_index.query(centre - r, centre + r, |k| {
-            if !hit {
-                hit = fp.contains_body(pose.to_body(self.points[k]), grown);
+            if !hit && self.counts(k) {
+                hit = fp.contains_body(frame.apply(self.points[k]), grown);
             }
         });
         !hit
@@ -135,20 +196,29 @@ impl WorldModel {
     /// `cap` metres.
     pub fn clearance(&self, pose: &Pose, cap: f64) -> f64 {
         let fp = &self.footprint;
-        let centre = fp.centre(pose);
+        let frame = pose.body_frame();
+        let centre = frame.to_world(V2::new(fp.centre_offset(), 0.0));
         let reach = fp.centre_reach() + cap;
         let r = V2::new(reach, reach);
         let mut best = cap;
         self.seg_index.query(centre - r, centre + r, |k| {
             let s = self.segs[k];
-            best = best.min(fp.body_segment_distance(pose.to_body(s.a), pose.to_body(s.b)));
+            best = best.min(fp.body_segment_distance(frame.apply(s.a), frame.apply(s.b)));
         });
         self.point_index.query(centre - r, centre + r, |k| {
-            let p = pose.to_body(self.points[k]);
-            let d = fp.body_segment_distance(p, p) - SENSED_RADIUS_M;
+            if !self.counts(k) {
+                return;
+            }
+            let p = frame.apply(self.points[k]);
+            let d = fp.body_segment_distance(p, p) - SENSED_RADIUS_M - self.sensed_extra;
             best = best.min(d.max(0.0));
         });
         best
+    }
+
+    /// Whether sensed point `k` counts as an obstacle for planning.
+    fn counts(&self, k: usize) -> bool {
+        self.sensed.evidence(self.point_cells[k] as usize) >= self.plan_evidence
     }
 
     /// Whether a point is within the chair at `pose` grown by `margin`.
@@ -175,7 +245,8 @@ mod tests {
         let m = corridor();
         assert!(m.free(&Pose::from_deg(5.0, 1.9, 0.0), 0.1));
         assert!(!m.free(&Pose::from_deg(5.0, 1.9, 0.0), 0.6), "1.8 m wide, the chair is 0.65 m");
-        assert!(!m.free(&Pose::from_deg(5.0, 1.9, 90.0), 0.0), "1.1 m long across 1.8 m: the front hits");
+        assert!(m.free(&Pose::from_deg(5.0, 1.9, 90.0), 0.0), "1.1 m long across 1.8 m: it fits…");
+        assert!(!m.free(&Pose::from_deg(5.0, 2.0, 90.0), 0.0), "…but 0.1 m further the front hits");
         assert!(!m.free(&Pose::from_deg(5.0, 1.2, 0.0), 0.0));
         let c = m.clearance(&Pose::from_deg(5.0, 1.9, 0.0), 1.0);
         assert!((c - (0.9 - 0.325)).abs() < 1e-9, "{c}");
@@ -200,7 +271,8 @@ mod tests {
         }
         assert!(m.refresh_sensed());
         assert!(!m.sensed_points().is_empty());
-        assert!(!m.free(&Pose::from_deg(4.0, 1.9, 0.0), 0.05), "the front would reach 4.88 + 0.5");
+        assert!(m.free(&Pose::from_deg(4.3, 1.9, 0.0), 0.05), "the front reaches 5.18 + 0.05");
+        assert!(!m.free(&Pose::from_deg(4.6, 1.9, 0.0), 0.05), "the front would reach 5.48, past 5.38");
         assert!(m.free(&pose, 0.05));
     }
 }

@@ -13,6 +13,9 @@ use crate::model::WorldModel;
 const HARD: u8 = 255;
 /// Cost of a cell nearer to an obstacle than the inflation radius.
 const SOFT: u8 = 1;
+/// Cost of a cell so near an obstacle that the axle cannot be there with the chair passing
+/// by (see [`Costmap::build`]).
+const NARROW: u8 = 2;
 
 /// Cells the centre of movement may use: 0 free, [`SOFT`] too near an obstacle for the chair
 /// to sit there aligned with a passage, [`HARD`] occupied.
@@ -25,36 +28,42 @@ pub struct Costmap {
 
 impl Costmap {
     /// The cost map of the model: its known walls and sensed obstacles, each grown by
-    /// `inflate` metres.
-    pub fn build(model: &WorldModel, inflate: f64) -> Self {
+    /// `inflate` metres (cells the centre of movement should avoid) and by `narrow` metres
+    /// (cells where it cannot be unless the chair is turning on the spot or leaving a tight
+    /// place: the chair's rectangle holds the disc of that radius round its axle).
+    pub fn build(model: &WorldModel, inflate: f64, narrow: f64) -> Self {
         let spec = model.spec();
         let dist = model.statics.distances();
         let mut cost: Vec<u8> = (0..spec.len())
             .map(|i| {
+                let d = dist[i] as f64;
                 if model.statics.occupied(i) {
                     HARD
-                } else if (dist[i] as f64) < inflate {
+                } else if d < narrow {
+                    NARROW
+                } else if d < inflate {
                     SOFT
                 } else {
                     0
                 }
             })
             .collect();
-        let r = (inflate / spec.cell).ceil() as i64;
-        for &c in model.sensed.cells() {
-            let (cx, cy) = spec.coords(c as usize);
-            cost[c as usize] = HARD;
+        let r = (inflate.max(narrow) / spec.cell).ceil() as i64;
+        for (c, _) in model.planning_points() {
+            let (cx, cy) = spec.coords(c);
+            cost[c] = HARD;
             for dy in -r..=r {
                 for dx in -r..=r {
                     let (x, y) = (cx as i64 + dx, cy as i64 + dy);
                     if x < 0 || y < 0 || x >= spec.nx as i64 || y >= spec.ny as i64 {
                         continue;
                     }
-                    if ((dx * dx + dy * dy) as f64).sqrt() * spec.cell < inflate {
-                        let i = spec.index(x as usize, y as usize);
-                        if cost[i] == 0 {
-                            cost[i] = SOFT;
-                        }
+                    let d = ((dx * dx + dy * dy) as f64).sqrt() * spec.cell;
+                    let i = spec.index(x as usize, y as usize);
+                    if d < narrow && cost[i] != HARD {
+                        cost[i] = NARROW;
+                    } else if d < inflate && cost[i] == 0 {
+                        cost[i] = SOFT;
                     }
                 }
             }
@@ -256,16 +265,33 @@ pub struct CostToGo {
 }
 
 impl CostToGo {
-    /// Dijkstra from `seeds` (cell, starting cost) over every cell not occupied; cells within
-    /// the inflation cost `1 + soft_penalty` per metre. When `start` is reached, the search
-    /// goes on only `slack` metres further (the local planner needs a band around the route,
-    /// not the whole lab).
-    pub fn new(cm: &Costmap, seeds: &[(usize, f32)], start: Option<usize>, slack: f32, soft_penalty: f32) -> Self {
+    /// Dijkstra from `seeds` (cell, starting cost) over every cell not occupied and not
+    /// narrow (narrow cells count only within the discs `open`: round the start and the
+    /// goal); cells within the inflation cost `1 + soft_penalty` per metre. When `start` is
+    /// reached, the search goes on only `slack` metres further (the local planner needs a
+    /// band around the route, not the whole lab).
+    pub fn new(
+        cm: &Costmap,
+        seeds: &[(usize, f32)],
+        start: Option<usize>,
+        slack: f32,
+        soft_penalty: f32,
+        open: &[(V2, f64)],
+    ) -> Self {
         let spec = cm.spec;
+        let passable = |j: usize| {
+            let c = cm.cost[j];
+            c != HARD
+                && (c != NARROW || {
+                    let (x, y) = spec.coords(j);
+                    let p = spec.center(x, y);
+                    open.iter().any(|&(o, r)| (p - o).norm() <= r)
+                })
+        };
         let mut cost = vec![f32::INFINITY; spec.len()];
         let mut open = BinaryHeap::new();
         for &(i, c) in seeds {
-            if i < cost.len() && !cm.hard(i) && c < cost[i] {
+            if i < cost.len() && passable(i) && c < cost[i] {
                 cost[i] = c;
                 open.push(Open { f: c, i: i as u32 });
             }
@@ -283,7 +309,7 @@ impl CostToGo {
             if Some(i) == start {
                 limit = f + slack;
             }
-            neighbours(&spec, i, |j| !cm.hard(j), |j, step| {
+            neighbours(&spec, i, passable, |j, step| {
                 let w = if cm.blocked(j) { 1.0 + soft_penalty } else { 1.0 };
                 let c = f + step * cell * w;
                 if c < cost[j] {
@@ -323,7 +349,7 @@ mod tests {
     }
 
     fn costmap(map: NavMap) -> Costmap {
-        Costmap::build(&WorldModel::new(map, Footprint::of_body(1.1, 0.65, 0.8)), 0.35)
+        Costmap::build(&WorldModel::new(map, Footprint::of_body(1.1, 0.65, 0.8)), 0.35, 0.25)
     }
 
     #[test]
@@ -368,7 +394,7 @@ mod tests {
         let cm = costmap(two_rooms(true));
         let goal = cm.spec.clamp_cell(V2::new(17.0, 1.0));
         let seeds = [(cm.spec.index(goal.0, goal.1), 0.0)];
-        let ctg = CostToGo::new(&cm, &seeds, None, 0.0, 3.0);
+        let ctg = CostToGo::new(&cm, &seeds, None, 0.0, 3.0, &[]);
         let near = ctg.at(V2::new(16.0, 1.0)).expect("reached");
         let far = ctg.at(V2::new(3.0, 1.0)).expect("reached through the door");
         assert!(near < 1.1 && far > 14.0, "{near} {far}");

@@ -60,9 +60,9 @@ pub fn default_layout(fp: &Footprint) -> Vec<SensorMount> {
     let (front, rear, half, mid) = (fp.front, fp.rear, fp.half, fp.centre_offset());
     let range = 3.0;
     vec![
-        SensorMount::deg(front, 0.0, 0.0, 8.0, range),
-        SensorMount::deg(front, 0.6 * half, 25.0, 8.0, range),
-        SensorMount::deg(front, -0.6 * half, -25.0, 8.0, range),
+        SensorMount::deg(front, 0.0, 0.0, 2.0, range),
+        SensorMount::deg(front, 0.6 * half, 25.0, 3.0, range),
+        SensorMount::deg(front, -0.6 * half, -25.0, 3.0, range),
         SensorMount::deg(front, half, 60.0, 10.0, range),
         SensorMount::deg(front, -half, -60.0, 10.0, range),
         SensorMount::deg(mid, half, 90.0, 20.0, range),

@@ -27,6 +27,8 @@ struct Run {
     kappa: Vec<f64>,
     /// Speed limit at each pose, m/s.
     vmax: Vec<f64>,
+    /// Whether each pose is re-checked against new obstacles.
+    check: Vec<bool>,
 }
 
 impl Run {
@@ -99,8 +101,9 @@ pub struct Tracker {
 }
 
 impl Tracker {
-    /// A follower for `path`, with a speed limit for each pose.
-    pub fn new(path: &[PathPose], vmax: &[f64], reaches_goal: bool, params: TrackerParams) -> Self {
+    /// A follower for `path`, with a speed limit for each pose and whether each is to be
+    /// re-checked when the map changes (see [`Tracker::remaining_checked`]).
+    pub fn new(path: &[PathPose], vmax: &[f64], check: &[bool], reaches_goal: bool, params: TrackerParams) -> Self {
         let mut runs: Vec<Run> = Vec::new();
         for (i, pp) in path.iter().enumerate().skip(1) {
             let kind = match pp.motion {
@@ -109,6 +112,7 @@ impl Tracker {
                 Motion::Spin(_) => RunKind::Spin,
             };
             let v = vmax.get(i).copied().unwrap_or(0.1);
+            let c = check.get(i).copied().unwrap_or(false);
             match runs.last_mut() {
                 Some(r) if r.kind == kind => {
                     let ds = (pp.pose.pos() - path[i - 1].pose.pos()).norm();
@@ -117,6 +121,7 @@ impl Tracker {
                     r.s.push(s);
                     r.kappa.push(pp.motion.curvature());
                     r.vmax.push(v);
+                    r.check.push(c);
                 }
                 _ => {
                     let prev = path[i - 1].pose;
@@ -128,6 +133,7 @@ impl Tracker {
                         s: vec![0.0, ds],
                         kappa: vec![pp.motion.curvature(), pp.motion.curvature()],
                         vmax: vec![v0, v],
+                        check: vec![check.get(i - 1).copied().unwrap_or(false), c],
                     });
                 }
             }
@@ -145,6 +151,22 @@ impl Tracker {
     pub fn remaining(&self) -> impl Iterator<Item = &Pose> {
         let first = self.runs.get(self.run).map(|r| &r.poses[self.idx.min(r.poses.len() - 1)..]).unwrap_or(&[]);
         first.iter().chain(self.runs.iter().skip(self.run + 1).flat_map(|r| r.poses.iter()))
+    }
+
+    /// The poses still ahead that are to be re-checked when the map changes.
+    pub fn remaining_checked(&self) -> impl Iterator<Item = &Pose> {
+        let first = self
+            .runs
+            .get(self.run)
+            .map(|r| {
+                let k = self.idx.min(r.poses.len() - 1);
+                r.poses[k..].iter().zip(&r.check[k..])
+            })
+            .into_iter()
+            .flatten();
+        first
+            .chain(self.runs.iter().skip(self.run + 1).flat_map(|r| r.poses.iter().zip(&r.check)))
+            .filter_map(|(p, &c)| c.then_some(p))
     }
 
     /// Length still to drive, metres (turns on the spot count nothing).
@@ -267,6 +289,14 @@ impl Drive {
         (self.max_speed * (l + r) / 2.0, self.max_speed * (r - l) / self.track)
     }
 
+    /// Records powers sent as they are (the model's outputs follow them).
+    pub fn powers_raw(&mut self, powers: [f64; 2]) {
+        let c = self.accel_curve;
+        for (out, p) in self.out.iter_mut().zip(powers) {
+            *out = (1.0 - c) * p + c * *out;
+        }
+    }
+
     /// The powers to send for a wanted speed `v` (m/s) and turn rate `w` (rad/s); updates the
     /// model's outputs.
     pub fn powers(&mut self, v: f64, w: f64) -> [f64; 2] {
@@ -330,7 +360,9 @@ mod tests {
     fn the_follower_drives_a_path_and_then_turns_on_the_spot() {
         let path = straight_then_spin();
         let vmax = vec![0.3; path.len()];
-        let mut t = Tracker::new(&path, &vmax, true, TrackerParams::default());
+        let check = vec![true; path.len()];
+        let mut t = Tracker::new(&path, &vmax, &check, true, TrackerParams::default());
+        assert!(t.remaining_checked().count() >= path.len(), "every pose is re-checked");
         // Start 5 cm to the right of the path: the follower steers back left.
         let mut pose = Pose::from_deg(0.0, -0.05, 0.0);
         let dt = 0.1;

@@ -1,0 +1,213 @@
+//! The agent process: connect to a hub, register the chair, and answer every tick with the
+//! navigator's wheel powers.
+
+use std::process::ExitCode;
+use std::time::Duration;
+
+use agent_sdk::log::RobotLog;
+use agent_sdk::{Agent, Wait};
+use anyhow::Context as _;
+use ipc_types::{ActionBlock, MAX_PROXIMITY, REG_HAS_POSE, RobotRegistration, SENSOR_GPS, SensorSpec};
+
+use crate::geom::{Pose, V2};
+use crate::map::NavMap;
+use crate::navigator::{Body, Checkpoint, NavConfig, NavEvent, Navigator};
+use crate::pose::PoseSourceKind;
+use crate::sensors::{default_layout, sensor_source};
+use crate::traffic::{self, Decision, Traffic};
+use crate::NavigatorArgs;
+
+/// Runs the navigator agent until the hub's run ends. Exits with success when the last
+/// checkpoint was reached.
+pub fn run(args: &NavigatorArgs) -> anyhow::Result<ExitCode> {
+    // Refuse what cannot run before touching the hub.
+    let source = sensor_source(args.mode)?;
+    anyhow::ensure!(args.cruise > 0.0 && args.cruise <= 1.0, "--cruise {} is not in (0, 1]", args.cruise);
+    anyhow::ensure!(args.arrive > 0.0, "--arrive {} must be positive", args.arrive);
+    let timeout = Duration::from_secs_f64(args.connect_timeout.max(0.0));
+    let mut agent = Agent::connect_within(&args.session, &format!("navigator-{}", std::process::id()), timeout)
+        .with_context(|| format!("joining session {:?}", args.session))?;
+    // Close on every path, errors included: the last process of a session removes its files.
+    let result = drive(&mut agent, args, source);
+    agent.close();
+    result
+}
+
+/// The configuration from the options and the hub's map header.
+fn config(args: &NavigatorArgs, header: &ipc_types::MapHeader) -> anyhow::Result<NavConfig> {
+    let [w, h, com] = args.body;
+    let body = Body { width_m: w, height_m: h, com };
+    let checkpoints: Vec<Checkpoint> =
+        args.checkpoints.iter().map(|&[x, y, r]| Checkpoint { pos: V2::new(x, y), radius_m: r }).collect();
+    let first = checkpoints.first().context("at least one --checkpoint is needed")?;
+    let start = match args.pose {
+        Some([x, y, dir]) => Pose::from_deg(x, y, dir),
+        None => {
+            let toward = checkpoints.get(1).map_or(0.0, |c| {
+                let d = c.pos - first.pos;
+                d.y.atan2(d.x)
+            });
+            Pose::new(first.pos.x, first.pos.y, toward)
+        }
+    };
+    let p = &header.params;
+    if args.pose_source != PoseSourceKind::Odometry {
+        anyhow::ensure!(
+            p.sensors_on & SENSOR_GPS != 0,
+            "--pose-source {:?} needs GPS, which this hub's run has off (switch it on in the parameters file)",
+            args.pose_source
+        );
+    }
+    let ticks_per_m =
+        if p.encoder_ticks_per_m > 0.0 { p.encoder_ticks_per_m } else { 1024.0 / (std::f64::consts::TAU * 0.17) };
+    Ok(NavConfig {
+        body,
+        max_speed_mps: args.max_speed,
+        accel_curve: args.accel_curve,
+        cruise: args.cruise,
+        sensors: default_layout(&body.footprint()),
+        checkpoints,
+        start,
+        arrive_m: args.arrive,
+        cycle_s: if header.cycle_ms > 0 { header.cycle_ms as f64 / 1000.0 } else { 0.1 },
+        proximity_latency: p.latency[0],
+        pose_source: args.pose_source,
+        encoder_ticks_per_m: ticks_per_m,
+        ..NavConfig::intellwheels()
+    })
+}
+
+fn drive(agent: &mut Agent, args: &NavigatorArgs, mut source: Box<dyn crate::sensors::SensorSource>) -> anyhow::Result<ExitCode> {
+    let map_data = agent.map()?;
+    let map = NavMap::from_items(&map_data.header, &map_data.items).context("reading the hub's map")?;
+    let cfg = config(args, &map_data.header)?;
+    let name = &args.name;
+
+    let mut reg = RobotRegistration::new(name);
+    reg.requested_id = args.id;
+    reg.width_m = cfg.body.width_m;
+    reg.height_m = cfg.body.height_m;
+    reg.com = cfg.body.com;
+    reg.max_speed_mps = cfg.max_speed_mps;
+    reg.accel_curve = cfg.accel_curve;
+    reg.flags |= REG_HAS_POSE;
+    reg.pose = [cfg.start.x, cfg.start.y, cfg.start.theta.to_degrees()];
+    let mut sensors = [SensorSpec { x_m: 0.0, y_m: 0.0, angle_deg: 0.0, cone_deg: 0.0, range_m: 0.0 }; MAX_PROXIMITY];
+    for (slot, mount) in sensors.iter_mut().zip(&cfg.sensors) {
+        *slot = mount.spec();
+    }
+    reg.sensors = sensors;
+    reg.sensor_count = cfg.sensors.len().min(MAX_PROXIMITY) as u32;
+    let id = agent.register(&reg).with_context(|| format!("registering {name}"))?;
+    agent.ready()?;
+    let checkpoints = cfg.checkpoints.clone();
+    let cycle_s = cfg.cycle_s;
+    eprintln!(
+        "navigator {name}: robot {id} in session {:?} on {:?}, from ({:.2}, {:.2}, {:.0}°) through {} checkpoint(s)",
+        args.session,
+        map.name,
+        cfg.start.x,
+        cfg.start.y,
+        cfg.start.theta.to_degrees(),
+        checkpoints.len()
+    );
+    let mut log = match &args.log {
+        Some(dir) => Some(RobotLog::create(dir, name, cfg.sensors.len()).with_context(|| format!("log in {}", dir.display()))?),
+        None => None,
+    };
+    let mut nav = Navigator::new(map, cfg);
+    let mut traffic = Traffic::new(name);
+    let mut contacts = 0u32;
+    let mut last_time = 0.0;
+    while let Some(tick) = agent.wait_tick(Wait::Blocking)? {
+        let time_s = tick.tick as f64 * cycle_s;
+        last_time = time_s;
+        let Some(block) = agent.sensors().iter().find(|b| b.robot_id == id).copied() else {
+            agent.send(tick.tick, &[ActionBlock::motors(id, 0.0, 0.0)])?;
+            continue;
+        };
+        contacts = block.collision_count;
+        let input = source.read(&block, time_s);
+        for (_, m) in block.messages() {
+            traffic.hear(m, time_s);
+        }
+        let out = nav.step(&input);
+        for e in &out.events {
+            report(name, &checkpoints, e);
+        }
+        // Meeting another navigator head-on overrides the navigator's powers (its odometry
+        // still runs): wait for the other's answer, or pull over and let it pass.
+        let me = nav.pose();
+        let was_yielding = traffic.yielding();
+        let powers = match traffic.decide(me, time_s) {
+            Decision::Go => out.powers,
+            Decision::WaitForAnswer => [0.0, 0.0],
+            Decision::PullOver { spot, heading } => traffic::park(me, spot, heading),
+            Decision::Pass { origin, heading } => traffic::follow_lane(me, origin, heading),
+        };
+        if traffic.yielding() != was_yielding {
+            eprintln!(
+                "navigator {name}: {} at t {time_s:.1} s",
+                if traffic.yielding() { "pulling over to let the other chair pass" } else { "going on" }
+            );
+        }
+        let mut action = ActionBlock::motors(id, powers[0], powers[1]);
+        // Say where we are twice a second, and at once when we start or stop yielding.
+        if tick.tick % 5 == 0 || traffic.yielding() != was_yielding {
+            action.with_say(traffic::encode(name, me, traffic.yielding()).as_bytes());
+        }
+        agent.send(tick.tick, &[action])?;
+        if let Some(log) = &mut log {
+            log.row(&block, time_s, powers)?;
+        }
+    }
+    // The run's final readings, for a complete log.
+    if let (Some(log), Some(block)) = (&mut log, agent.sensors().iter().find(|b| b.robot_id == id)) {
+        log.row(block, block.tick as f64 * cycle_s, [0.0, 0.0])?;
+        contacts = block.collision_count;
+    }
+    if let Some(log) = &mut log {
+        log.flush()?;
+    }
+    let reached = nav.next_checkpoint().min(checkpoints.len());
+    if nav.finished() {
+        eprintln!("navigator {name}: the run ended; all {reached} checkpoint(s) reached, {contacts} contact(s)");
+        Ok(ExitCode::SUCCESS)
+    } else {
+        eprintln!(
+            "navigator {name}: the run ended at t {last_time:.1} s with {reached} of {} checkpoint(s) reached, {contacts} contact(s)",
+            checkpoints.len()
+        );
+        Ok(ExitCode::FAILURE)
+    }
+}
+
+fn report(name: &str, checkpoints: &[Checkpoint], e: &NavEvent) {
+    let at = |i: usize| checkpoints.get(i).map_or(V2::default(), |c| c.pos);
+    match e {
+        NavEvent::Leg { index, route_m } => {
+            let p = at(*index);
+            match route_m {
+                Some(m) => eprintln!("navigator {name}: to checkpoint {} ({:.2}, {:.2}): route {m:.1} m", index + 1, p.x, p.y),
+                None => eprintln!(
+                    "navigator {name}: to checkpoint {} ({:.2}, {:.2}): no route on the map as known; trying anyway",
+                    index + 1,
+                    p.x,
+                    p.y
+                ),
+            }
+        }
+        NavEvent::Reached { index, checkpoint, time_s, .. } => {
+            eprintln!(
+                "navigator {name}: reached checkpoint {} ({:.2}, {:.2}) at t {time_s:.1} s",
+                index + 1,
+                checkpoint.x,
+                checkpoint.y
+            );
+        }
+        NavEvent::Finished { time_s } => eprintln!("navigator {name}: done at t {time_s:.1} s; holding still"),
+        NavEvent::Blocked { index, reason } => {
+            eprintln!("navigator {name}: no way to checkpoint {} just now ({reason}); waiting", index + 1)
+        }
+    }
+}

@@ -1,0 +1,376 @@
+//! The navigator in closed loop with the hub's world model, in-process: the world steps with
+//! noise on, its readings reach the navigator as the SDK's sensor blocks carry them, and the
+//! map reaches it as the hub publishes it (scenario obstacles flagged, so the navigator must
+//! find them with its sensors).
+//!
+//! Set `NAV_TRACE=1` to print every tick of every run (pose, powers, plans).
+
+use bytemuck::Zeroable as _;
+use hub::map::{Lab, Params, Wall, builtin};
+use hub::world::{Action, ProximitySpec, Robot, RobotSpec, World};
+use ipc_types::{COLLISION, HAS_COMPASS, HAS_GPS, MAP_CHECKPOINT, MAP_CORNER, MAP_WALL, MapHeader, MapItem, SensorBlock};
+use navigator::geom::{Footprint, Pose, V2};
+use navigator::map::NavMap;
+use navigator::sensors::{SensorSource, VirtualSensors};
+use navigator::{Body, Checkpoint, NavConfig, NavEvent, Navigator};
+
+/// A run to simulate.
+#[derive(Debug, Clone)]
+struct Scenario {
+    map: &'static str,
+    /// Scenario obstacles: boxes x0, y0, x1, y1 (1 m tall), unknown to the navigator.
+    obstacles: Vec<[f64; 4]>,
+    start: [f64; 3],
+    checkpoints: Vec<[f64; 3]>,
+    body: Body,
+    time_limit_s: f64,
+}
+
+/// How a run went.
+#[derive(Debug, Clone, PartialEq)]
+struct Outcome {
+    seed: u64,
+    finished: bool,
+    reached: usize,
+    time_s: f64,
+    contacts: u64,
+    min_clearance_m: f64,
+    end: V2,
+    plans: u32,
+    expansions: u64,
+}
+
+/// The map as `HubCore::map_items` publishes it: walls from `obstacle_from` on are flagged.
+fn map_items(lab: &Lab, obstacle_from: usize, checkpoints: &[[f64; 3]]) -> (MapHeader, Vec<MapItem>) {
+    let mut items = Vec::new();
+    for (i, w) in lab.walls.iter().enumerate() {
+        let obstacle = if i >= obstacle_from { 1.0 } else { 0.0 };
+        items.push(MapItem { kind: MAP_WALL, index: i as u32, a: w.height_m, b: w.corners.len() as f64, c: obstacle });
+        for c in &w.corners {
+            items.push(MapItem { kind: MAP_CORNER, index: i as u32, a: c.x, b: c.y, c: 0.0 });
+        }
+    }
+    for (i, [x, y, r]) in checkpoints.iter().enumerate() {
+        items.push(MapItem { kind: MAP_CHECKPOINT, index: i as u32, a: *x, b: *y, c: *r });
+    }
+    let header = MapHeader {
+        width_m: lab.width_m,
+        height_m: lab.height_m,
+        item_count: items.len() as u32,
+        wall_count: lab.walls.len() as u32,
+        cycle_ms: 100,
+        ..MapHeader::zeroed()
+    };
+    (header, items)
+}
+
+/// A robot's readings as `HubCore::sensor_block` packs them.
+fn sensor_block(r: &Robot, tick: u64) -> SensorBlock {
+    let mut b = SensorBlock::zeroed();
+    let rd = &r.readings;
+    b.tick = tick;
+    b.robot_id = 1;
+    b.proximity_count = rd.proximity_count as u32;
+    b.proximity_m[..rd.proximity().len()].copy_from_slice(rd.proximity());
+    if let Some(c) = rd.compass_deg {
+        b.present |= HAS_COMPASS;
+        b.compass_deg = c;
+    }
+    if let Some(g) = rd.gps {
+        b.present |= HAS_GPS;
+        (b.gps_x_m, b.gps_y_m, b.gps_heading_deg) = (g.x_m, g.y_m, g.heading_deg);
+    }
+    if rd.collision {
+        b.present |= COLLISION;
+    }
+    b.encoder_ticks = rd.encoder_ticks;
+    b.pose = [r.pose.x, r.pose.y, r.pose.heading_deg()];
+    b.collision_count = r.collision_count as u32;
+    b
+}
+
+/// The chair's true clearance to every wall and obstacle of the lab.
+fn clearance(lab: &Lab, fp: &Footprint, r: &Robot) -> f64 {
+    let pose = Pose::new(r.pose.x, r.pose.y, r.pose.theta);
+    let mut best = f64::INFINITY;
+    for w in &lab.walls {
+        let n = w.corners.len();
+        for i in 0..n {
+            let (a, b) = (w.corners[i], w.corners[(i + 1) % n]);
+            let (a, b) = (pose.to_body(V2::new(a.x, a.y)), pose.to_body(V2::new(b.x, b.y)));
+            best = best.min(fp.body_segment_distance(a, b));
+        }
+    }
+    best
+}
+
+fn simulate(s: &Scenario, seed: u64) -> Outcome {
+    let trace = std::env::var_os("NAV_TRACE").is_some();
+    let map = builtin::map(s.map).expect("a built-in map");
+    let mut lab = map.lab.clone();
+    let known = lab.walls.len();
+    for &[x0, y0, x1, y1] in &s.obstacles {
+        lab.walls.push(Wall::rectangle(x0, y0, x1, y1, 1.0));
+    }
+    let params = Params::default();
+    assert!(params.noise.proximity_m > 0.0 && params.noise.motor_frac > 0.0, "noise on");
+    let ticks_per_m = params.encoder_ticks_per_rev as f64 / (std::f64::consts::TAU * params.wheel_radius_m);
+    let mut world = World::new(&lab, params, seed).expect("a valid world");
+    let base = NavConfig::intellwheels();
+    let cfg = NavConfig {
+        body: s.body,
+        sensors: navigator::sensors::default_layout(&s.body.footprint()),
+        checkpoints: s.checkpoints.iter().map(|&[x, y, r]| Checkpoint { pos: V2::new(x, y), radius_m: r }).collect(),
+        start: Pose::from_deg(s.start[0], s.start[1], s.start[2]),
+        encoder_ticks_per_m: ticks_per_m,
+        ..base
+    };
+    let sensors = cfg
+        .sensors
+        .iter()
+        .map(|m| ProximitySpec { x_m: m.x_m, y_m: m.y_m, angle_rad: m.angle_rad, cone_rad: m.cone_rad, range_m: Some(m.range_m) })
+        .collect();
+    let spec = RobotSpec::at(s.start[0], s.start[1], s.start[2])
+        .body(s.body.width_m, s.body.height_m, s.body.com)
+        .motors(cfg.max_speed_mps, cfg.accel_curve)
+        .sensors(sensors)
+        .named("chair");
+    let handle = world.add_robot(spec).expect("a valid chair");
+    world.refresh_sensors();
+    let (header, items) = map_items(&lab, known, &s.checkpoints);
+    let nav_map = NavMap::from_items(&header, &items).expect("the published map reads back");
+    let fp = s.body.footprint();
+    let mut nav = Navigator::new(nav_map, cfg);
+    let mut source = VirtualSensors;
+    let mut min_clearance = f64::INFINITY;
+    let mut finished_at = None;
+    let limit = (s.time_limit_s / 0.1).round() as u64;
+    let mut last_plans = 0;
+    for tick in 0..=limit {
+        let robot = world.robot(handle).expect("the chair");
+        min_clearance = min_clearance.min(clearance(&lab, &fp, robot));
+        let time_s = tick as f64 * 0.1;
+        let block = sensor_block(robot, tick);
+        let input = source.read(&block, time_s);
+        let out = nav.step(&input);
+        if trace {
+            let p = nav.pose();
+            eprintln!(
+                "seed {seed} t {time_s:5.1} true ({:.3}, {:.3}, {:6.1}°) est ({:.3}, {:.3}) powers ({:+.2}, {:+.2}) clr {:.3}",
+                robot.pose.x,
+                robot.pose.y,
+                robot.pose.heading_deg(),
+                p.x,
+                p.y,
+                out.powers[0],
+                out.powers[1],
+                clearance(&lab, &fp, robot),
+            );
+            for e in &out.events {
+                eprintln!("seed {seed} event {e:?}");
+            }
+            for (k, m) in nav.config().sensors.iter().enumerate() {
+                let cone = m.cone(&nav.pose());
+                let (d, e) = (input.proximity_m[k], nav.model().expected_reading(&cone, m.range_m));
+                if e - d > 0.25 && d < m.range_m - 0.2 {
+                    let hit = cone.apex + V2::unit(cone.dir) * d;
+                    eprintln!("seed {seed}   sensor {k}: {d:.2} (walls {e:.2}) at ({:.2}, {:.2})", hit.x, hit.y);
+                }
+            }
+            if nav.stats().plans != last_plans {
+                last_plans = nav.stats().plans;
+                let path = nav.path();
+                let summary: Vec<String> =
+                    path.iter().step_by(4).map(|p| format!("({:.2},{:.2},{:.0})", p.x, p.y, p.theta.to_degrees())).collect();
+                eprintln!("seed {seed} plan {} ({} poses): {}", last_plans, path.len(), summary.join(" "));
+                eprintln!("{}", ascii_map(&nav, 14.5, 20.5, 5.0, 7.0));
+            }
+        }
+        if out.events.iter().any(|e| matches!(e, NavEvent::Finished { .. })) {
+            finished_at = Some(time_s);
+        }
+        // After the end, keep stepping a little with the powers it sends (zero): the chair
+        // must come to rest without touching anything.
+        if let Some(t) = finished_at
+            && time_s > t + 2.0
+        {
+            break;
+        }
+        world.step(&[Action::motors(handle, out.powers[0], out.powers[1])], 0.1);
+    }
+    let robot = world.robot(handle).expect("the chair");
+    Outcome {
+        seed,
+        finished: nav.finished(),
+        reached: nav.next_checkpoint(),
+        time_s: finished_at.unwrap_or(f64::INFINITY),
+        contacts: robot.collision_count,
+        min_clearance_m: min_clearance,
+        end: V2::new(robot.pose.x, robot.pose.y),
+        plans: nav.stats().plans,
+        expansions: nav.stats().expansions,
+    }
+}
+
+/// The sensed obstacles in a window, one character per cell: `#` known wall, `o` sensed.
+fn ascii_map(nav: &Navigator, x0: f64, x1: f64, y0: f64, y1: f64) -> String {
+    let m = nav.model();
+    let spec = m.spec();
+    let mut rows = Vec::new();
+    let (cx0, cy0) = spec.clamp_cell(V2::new(x0, y0));
+    let (cx1, cy1) = spec.clamp_cell(V2::new(x1, y1));
+    for iy in (cy0..=cy1).rev() {
+        let mut row = format!("{:5.2} ", spec.center(0, iy).y);
+        for ix in cx0..=cx1 {
+            let i = spec.index(ix, iy);
+            row.push(if m.statics.occupied(i) {
+                '#'
+            } else if m.sensed.occupied(i) {
+                'o'
+            } else if m.sensed.evidence(i) > 0.0 {
+                '.'
+            } else {
+                ' '
+            });
+        }
+        rows.push(row);
+    }
+    rows.join("\n")
+}
+
+/// Runs every seed, two at a time.
+fn simulate_seeds(s: &Scenario, seeds: std::ops::RangeInclusive<u64>) -> Vec<Outcome> {
+    let mut seeds: Vec<u64> = seeds.collect();
+    if let Some(v) = std::env::var_os("NAV_SEEDS") {
+        seeds = v
+            .to_string_lossy()
+            .split(',')
+            .flat_map(|t| match t.split_once('-') {
+                Some((a, b)) => (a.parse().unwrap_or(1)..=b.parse().unwrap_or(0)).collect::<Vec<u64>>(),
+                None => t.parse().ok().into_iter().collect(),
+            })
+            .collect();
+    }
+    let workers = std::thread::available_parallelism().map_or(2, |n| n.get()).clamp(1, 4);
+    let mut out: Vec<Outcome> = std::thread::scope(|scope| {
+        let handles: Vec<_> = (0..workers)
+            .map(|w| {
+                let seeds = &seeds;
+                scope.spawn(move || seeds.iter().skip(w).step_by(workers).map(|&seed| simulate(s, seed)).collect::<Vec<_>>())
+            })
+            .collect();
+        handles.into_iter().flat_map(|h| h.join().expect("a simulation thread")).collect()
+    });
+    out.sort_by_key(|o| o.seed);
+    for o in &out {
+        eprintln!(
+            "{}: seed {:2}: {} of {} checkpoints, t {:.1} s, {} contacts, min clearance {:.3} m, end ({:.2}, {:.2}), {} plans, {} expansions",
+            s.map,
+            o.seed,
+            o.reached,
+            s.checkpoints.len(),
+            o.time_s,
+            o.contacts,
+            o.min_clearance_m,
+            o.end.x,
+            o.end.y,
+            o.plans,
+            o.expansions
+        );
+    }
+    out
+}
+
+mod slalom {
+    use super::*;
+
+    /// Thesis Table 7.3, virtual/automatic: LIACC corridor, start at checkpoint 1 (10.0, 6.1)
+    /// heading 0°, stop at checkpoint 2 (20.0, 6.1), boxes A and B in the way.
+    pub fn scenario() -> Scenario {
+        Scenario {
+            map: "liacc",
+            obstacles: vec![[17.0, 6.1, 17.6, 6.4], [19.4, 5.5, 20.0, 5.9]],
+            start: [10.0, 6.1, 0.0],
+            checkpoints: vec![[10.0, 6.1, 0.5], [20.0, 6.1, 0.5]],
+            body: Body::INTELLWHEELS,
+            time_limit_s: 120.0,
+        }
+    }
+
+    #[test]
+    fn the_intellwheels_chair_clears_the_slalom_on_every_seed_without_a_contact() {
+        let s = scenario();
+        let outcomes = simulate_seeds(&s, 1..=20);
+        for o in &outcomes {
+            assert!(o.finished && o.reached == 2, "seed {} did not reach checkpoint 2: {o:?}", o.seed);
+            assert_eq!(o.contacts, 0, "seed {} touched something: {o:?}", o.seed);
+            assert!(o.time_s <= s.time_limit_s);
+            assert!((o.end - V2::new(20.0, 6.1)).norm() <= 0.5, "seed {} stopped at {:?}", o.seed, o.end);
+        }
+    }
+}
+
+mod untuned_maps {
+    use super::*;
+
+    fn check(s: &Scenario, seeds: std::ops::RangeInclusive<u64>) {
+        for o in simulate_seeds(s, seeds) {
+            assert!(o.finished && o.reached == s.checkpoints.len(), "seed {} did not arrive: {o:?}", o.seed);
+            assert_eq!(o.contacts, 0, "seed {} touched something: {o:?}", o.seed);
+            let [x, y, _] = s.checkpoints[s.checkpoints.len() - 1];
+            assert!((o.end - V2::new(x, y)).norm() <= 0.25, "seed {} stopped at {:?}", o.seed, o.end);
+        }
+    }
+
+    #[test]
+    fn from_the_liacc_corridor_through_the_west_door_into_the_south_west_room() {
+        let s = Scenario {
+            map: "liacc",
+            obstacles: vec![],
+            start: [14.0, 6.0, 180.0],
+            checkpoints: vec![[14.0, 6.0, 0.5], [5.0, 3.0, 0.5]],
+            body: Body::INTELLWHEELS,
+            time_limit_s: 120.0,
+        };
+        check(&s, 1..=3);
+    }
+
+    #[test]
+    fn from_the_liacc_corridor_through_the_narrow_door_into_the_west_corridor() {
+        let s = Scenario {
+            map: "liacc",
+            obstacles: vec![],
+            start: [14.0, 6.0, 180.0],
+            checkpoints: vec![[14.0, 6.0, 0.5], [5.0, 8.8, 0.5]],
+            body: Body::INTELLWHEELS,
+            time_limit_s: 150.0,
+        };
+        check(&s, 1..=3);
+    }
+
+    #[test]
+    fn through_the_maze() {
+        let s = Scenario {
+            map: "maze",
+            obstacles: vec![],
+            start: [1.0, 7.0, 0.0],
+            checkpoints: vec![[1.0, 7.0, 0.5], [9.0, 1.0, 0.5]],
+            body: Body::INTELLWHEELS,
+            time_limit_s: 200.0,
+        };
+        check(&s, 1..=3);
+    }
+
+    #[test]
+    fn round_the_thesis_maps_wall_into_the_pocket_of_the_l() {
+        let s = Scenario {
+            map: "thesis",
+            obstacles: vec![],
+            start: [3.0, 7.0, 0.0],
+            checkpoints: vec![[3.0, 7.0, 0.5], [19.5, 8.5, 0.5]],
+            body: Body::INTELLWHEELS,
+            time_limit_s: 150.0,
+        };
+        check(&s, 1..=3);
+    }
+}
