@@ -344,7 +344,8 @@ pub fn run_once(scenario: &Scenario, seed: u64, out: &Path, opts: &RunOptions) -
         hub_out.with_context(|| format!("the run failed; what the processes said:\n{}", messages.join("\n")))?;
     // An agent that fails (a navigator that did not arrive exits 1) fails the run's outcome,
     // not the runner: the summary still says what happened.
-    let agent_failures: Vec<String> = agent_results.into_iter().filter_map(|r| r.err().map(|e| e.to_string())).collect();
+    let agent_failures: Vec<String> =
+        agent_results.into_iter().filter_map(|r| r.err().map(|e| e.to_string())).collect();
     let field = |k: &str| -> Option<String> {
         let key = format!("\"{k}\":");
         let rest = &hub_out[hub_out.find(&key)? + key.len()..];

@@ -100,7 +100,12 @@ fn the_demo_runs_headless_in_lock_step_and_passes() {
     for robot in ["chair1", "chair2", "door1"] {
         let log = std::fs::read_to_string(dir.join(format!("{robot}.csv"))).expect("log written");
         let mut lines = log.lines();
-        assert!(lines.next().expect("header").starts_with("tick,time_s,encoder_left_ticks,encoder_right_ticks,proximity0_m"));
+        assert!(
+            lines
+                .next()
+                .expect("header")
+                .starts_with("tick,time_s,encoder_left_ticks,encoder_right_ticks,proximity0_m")
+        );
         assert_eq!(lines.count(), 750, "one line per tick of the 75 s demo");
     }
     let _ = std::fs::remove_dir_all(dir);

@@ -265,10 +265,8 @@ fn builtin_slalom_reaches_checkpoint_2_without_contact_for_three_seeds_with_nois
         let rows: Vec<Vec<f64>> =
             log.lines().skip(1).map(|l| l.split(',').map(|v| v.parse().unwrap_or(f64::NAN)).collect()).collect();
         let header: Vec<&str> = log.lines().next().expect("header").split(',').collect();
-        let (cx, cy) = (
-            header.iter().position(|h| *h == "x_m").expect("x"),
-            header.iter().position(|h| *h == "y_m").expect("y"),
-        );
+        let (cx, cy) =
+            (header.iter().position(|h| *h == "x_m").expect("x"), header.iter().position(|h| *h == "y_m").expect("y"));
         assert!(rows.iter().filter(|r| (17.0..17.6).contains(&r[cx])).all(|r| r[cy] < 6.1), "seed {seed}: below A");
         assert!(rows.iter().filter(|r| (19.4..20.0).contains(&r[cx])).all(|r| r[cy] > 5.9), "seed {seed}: above B");
     }

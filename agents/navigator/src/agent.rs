@@ -9,13 +9,13 @@ use agent_sdk::{Agent, Wait};
 use anyhow::Context as _;
 use ipc_types::{ActionBlock, MAX_PROXIMITY, REG_HAS_POSE, RobotRegistration, SENSOR_GPS, SensorSpec};
 
+use crate::NavigatorArgs;
 use crate::geom::{Pose, V2};
 use crate::map::NavMap;
 use crate::navigator::{Body, Checkpoint, NavConfig, NavEvent, Navigator};
 use crate::pose::PoseSourceKind;
 use crate::sensors::{default_layout, sensor_source};
 use crate::traffic::{self, Decision, Traffic};
-use crate::NavigatorArgs;
 
 /// Runs the navigator agent until the hub's run ends. Exits with success when the last
 /// checkpoint was reached.
@@ -77,7 +77,11 @@ fn config(args: &NavigatorArgs, header: &ipc_types::MapHeader) -> anyhow::Result
     })
 }
 
-fn drive(agent: &mut Agent, args: &NavigatorArgs, mut source: Box<dyn crate::sensors::SensorSource>) -> anyhow::Result<ExitCode> {
+fn drive(
+    agent: &mut Agent,
+    args: &NavigatorArgs,
+    mut source: Box<dyn crate::sensors::SensorSource>,
+) -> anyhow::Result<ExitCode> {
     let map_data = agent.map()?;
     let map = NavMap::from_items(&map_data.header, &map_data.items).context("reading the hub's map")?;
     let cfg = config(args, &map_data.header)?;
@@ -112,7 +116,9 @@ fn drive(agent: &mut Agent, args: &NavigatorArgs, mut source: Box<dyn crate::sen
         checkpoints.len()
     );
     let mut log = match &args.log {
-        Some(dir) => Some(RobotLog::create(dir, name, cfg.sensors.len()).with_context(|| format!("log in {}", dir.display()))?),
+        Some(dir) => {
+            Some(RobotLog::create(dir, name, cfg.sensors.len()).with_context(|| format!("log in {}", dir.display()))?)
+        }
         None => None,
     };
     let mut nav = Navigator::new(map, cfg);
@@ -188,7 +194,9 @@ fn report(name: &str, checkpoints: &[Checkpoint], e: &NavEvent) {
         NavEvent::Leg { index, route_m } => {
             let p = at(*index);
             match route_m {
-                Some(m) => eprintln!("navigator {name}: to checkpoint {} ({:.2}, {:.2}): route {m:.1} m", index + 1, p.x, p.y),
+                Some(m) => {
+                    eprintln!("navigator {name}: to checkpoint {} ({:.2}, {:.2}): route {m:.1} m", index + 1, p.x, p.y)
+                }
                 None => eprintln!(
                     "navigator {name}: to checkpoint {} ({:.2}, {:.2}): no route on the map as known; trying anyway",
                     index + 1,

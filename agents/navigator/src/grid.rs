@@ -91,7 +91,8 @@ impl StaticRaster {
         let mut occ = vec![false; spec.len()];
         let touch = cell * std::f64::consts::FRAC_1_SQRT_2;
         for wall in map.known_walls() {
-            let (mut lo, mut hi) = (V2::new(f64::INFINITY, f64::INFINITY), V2::new(f64::NEG_INFINITY, f64::NEG_INFINITY));
+            let (mut lo, mut hi) =
+                (V2::new(f64::INFINITY, f64::INFINITY), V2::new(f64::NEG_INFINITY, f64::NEG_INFINITY));
             for c in &wall.corners {
                 lo = V2::new(lo.x.min(c.x), lo.y.min(c.y));
                 hi = V2::new(hi.x.max(c.x), hi.y.max(c.y));
@@ -420,7 +421,8 @@ impl SensedLayer {
                         let w = self.view_weight(i, cone.apex);
                         self.add(i, -p.miss * w);
                     }
-                } else if unexplained && (r - d - p.arc_offset).abs() <= arc_band && in1 >= -lateral && in2 >= -lateral {
+                } else if unexplained && (r - d - p.arc_offset).abs() <= arc_band && in1 >= -lateral && in2 >= -lateral
+                {
                     let c = self.spec.center(ix, iy);
                     if !body.is_some_and(|(pose, fp)| fp.contains_body(pose.to_body(c), 0.05)) {
                         self.stamp[i] = self.now;

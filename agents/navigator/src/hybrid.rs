@@ -431,7 +431,8 @@ mod tests {
         let start_cell = cm.spec.clamp_cell(start.pos());
         let ctg = CostToGo::new(&cm, &seeds, Some(cm.spec.index(start_cell.0, start_cell.1)), 6.0, 4.0, &[]);
         let g = Goal { pos: goal, stop_within: 0.15, accept_within: 0.5, weight: 4.0 };
-        let params = HybridParams { horizon_m: 50.0, max_expansions: 60_000, heuristic_weight: 2.0, ..HybridParams::default() };
+        let params =
+            HybridParams { horizon_m: 50.0, max_expansions: 60_000, heuristic_weight: 2.0, ..HybridParams::default() };
         let t0 = std::time::Instant::now();
         let out = plan(&model, &ctg, start, &g, 0.06, &params).expect("a path");
         eprintln!("planned in {:?}", t0.elapsed());
@@ -443,7 +444,8 @@ mod tests {
             assert!(model.free(&p.pose, 0.059), "{p:?}");
         }
         // Under A the chair is low, above B it is high.
-        let y_at = |x: f64| path.iter().min_by(|a, b| (a.pose.x - x).abs().total_cmp(&(b.pose.x - x).abs())).map(|p| p.pose.y);
+        let y_at =
+            |x: f64| path.iter().min_by(|a, b| (a.pose.x - x).abs().total_cmp(&(b.pose.x - x).abs())).map(|p| p.pose.y);
         assert!(y_at(17.3).expect("passes A") < 5.8);
         assert!(y_at(19.7).expect("passes B") > 6.2);
         for p in path {
@@ -451,4 +453,3 @@ mod tests {
         }
     }
 }
-

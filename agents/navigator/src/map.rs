@@ -186,7 +186,11 @@ impl NavMap {
 
     /// Whether a point lies inside the lab and outside every known wall.
     pub fn is_open(&self, p: V2) -> bool {
-        p.x > 0.0 && p.y > 0.0 && p.x < self.width_m && p.y < self.height_m && !self.known_walls().any(|w| w.contains(p))
+        p.x > 0.0
+            && p.y > 0.0
+            && p.x < self.width_m
+            && p.y < self.height_m
+            && !self.known_walls().any(|w| w.contains(p))
     }
 }
 

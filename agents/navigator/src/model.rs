@@ -14,8 +14,6 @@ const BUCKET_M: f64 = 0.5;
 /// A sensed obstacle cell counts as a disc this wide around its centre.
 pub const SENSED_RADIUS_M: f64 = CELL_M / 2.0;
 
-
-
 /// The navigator's model of the lab.
 #[derive(Debug, Clone)]
 pub struct WorldModel {
@@ -146,7 +144,8 @@ impl WorldModel {
             })
             .collect();
         let pts = &self.points;
-        self.point_index = Buckets::build(self.map.width_m, self.map.height_m, BUCKET_M, pts.len(), |k| (pts[k], pts[k]));
+        self.point_index =
+            Buckets::build(self.map.width_m, self.map.height_m, BUCKET_M, pts.len(), |k| (pts[k], pts[k]));
         true
     }
 

@@ -360,7 +360,12 @@ impl Navigator {
             if !reached {
                 return false;
             }
-            events.push(NavEvent::Reached { index: self.next, checkpoint: cp.pos, at: self.pose.pos(), time_s: input.time_s });
+            events.push(NavEvent::Reached {
+                index: self.next,
+                checkpoint: cp.pos,
+                at: self.pose.pos(),
+                time_s: input.time_s,
+            });
             self.next += 1;
             self.tracker = None;
             self.plan_after = input.tick;
@@ -506,7 +511,8 @@ impl Navigator {
                     // The stop at the last checkpoint may come closer with a little less margin
                     // (the chair is slow there), though never with less than the second level:
                     // what stands on a checkpoint is seen only from close by, and not well.
-                    let closer = docking && level == 0 && best.as_ref().is_some_and(|(o, b)| o.reaches_goal() && *b > 0.3);
+                    let closer =
+                        docking && level == 0 && best.as_ref().is_some_and(|(o, b)| o.reaches_goal() && *b > 0.3);
                     if !closer {
                         break;
                     }
@@ -568,7 +574,8 @@ impl Navigator {
                 continue;
             }
             let cone = mount.cone(&pose);
-            let expected = self.model.expected_reading(&cone, mount.range_m).min(self.model.sensed_reading(&cone, mount.range_m));
+            let expected =
+                self.model.expected_reading(&cone, mount.range_m).min(self.model.sensed_reading(&cone, mount.range_m));
             if expected - d > 0.3 {
                 for a in [-cone.half, 0.0, cone.half] {
                     points.push(cone.apex + V2::unit(cone.dir + a) * d);

@@ -204,14 +204,19 @@ pub fn astar(cm: &Costmap, start: (usize, usize), goal: (usize, usize)) -> Optio
             continue;
         }
         let gi = best[i];
-        neighbours(spec, i, |j| !cm.blocked(j), |j, step| {
-            let gj = gi + step;
-            if gj < best[j] {
-                best[j] = gj;
-                parent[j] = i as u32;
-                open.push(Open { f: gj + h(j), i: j as u32 });
-            }
-        });
+        neighbours(
+            spec,
+            i,
+            |j| !cm.blocked(j),
+            |j, step| {
+                let gj = gi + step;
+                if gj < best[j] {
+                    best[j] = gj;
+                    parent[j] = i as u32;
+                    open.push(Open { f: gj + h(j), i: j as u32 });
+                }
+            },
+        );
     }
     None
 }
@@ -379,7 +384,9 @@ mod tests {
         let cm = costmap(two_rooms(false));
         assert_eq!(route(&cm, V2::new(3.0, 1.0), V2::new(17.0, 1.0), 0.1), None);
         let mut boxed = two_rooms(true);
-        for (x0, y0, x1, y1) in [(15.0, 0.5, 19.0, 0.6), (15.0, 3.4, 19.0, 3.5), (15.0, 0.5, 15.1, 3.5), (18.9, 0.5, 19.0, 3.5)] {
+        for (x0, y0, x1, y1) in
+            [(15.0, 0.5, 19.0, 0.6), (15.0, 3.4, 19.0, 3.5), (15.0, 0.5, 15.1, 3.5), (18.9, 0.5, 19.0, 3.5)]
+        {
             boxed.walls.push(MapWall::rectangle(x0, y0, x1, y1, false));
         }
         let cm = costmap(boxed);

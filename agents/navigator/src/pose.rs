@@ -175,7 +175,11 @@ mod tests {
         let (mut l, mut r) = (0.0, 0.0);
         o.advance([0, 0]);
         for _ in 0..50 {
-            truth = Pose::new(truth.x + v * truth.theta.cos() * dt, truth.y + v * truth.theta.sin() * dt, truth.theta + w * dt);
+            truth = Pose::new(
+                truth.x + v * truth.theta.cos() * dt,
+                truth.y + v * truth.theta.sin() * dt,
+                truth.theta + w * dt,
+            );
             l += (v - w * track / 2.0) * dt;
             r += (v + w * track / 2.0) * dt;
             o.advance([(l * 1e9).round() as i64, (r * 1e9).round() as i64]);

@@ -34,7 +34,11 @@ impl SensorMount {
 
     /// The sensor's cone in the lab frame for a chair at `pose`.
     pub fn cone(&self, pose: &Pose) -> Cone {
-        Cone { apex: pose.to_world(V2::new(self.x_m, self.y_m)), dir: pose.theta + self.angle_rad, half: self.cone_rad / 2.0 }
+        Cone {
+            apex: pose.to_world(V2::new(self.x_m, self.y_m)),
+            dir: pose.theta + self.angle_rad,
+            half: self.cone_rad / 2.0,
+        }
     }
 
     /// The sensor as registered with the hub.

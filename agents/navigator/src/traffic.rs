@@ -162,7 +162,8 @@ impl Traffic {
             return Decision::Pass { origin, heading };
         }
         let peers = &self.peers;
-        self.crossed.retain(|n| peers.iter().any(|p| &p.name == n && (p.pose.x - me.x).hypot(p.pose.y - me.y) < 2.0 * MEET_M));
+        self.crossed
+            .retain(|n| peers.iter().any(|p| &p.name == n && (p.pose.x - me.x).hypot(p.pose.y - me.y) < 2.0 * MEET_M));
         for p in &self.peers {
             let d = (p.pose.x - me.x).hypot(p.pose.y - me.y);
             if self.crossed.contains(&p.name) {
@@ -253,7 +254,9 @@ mod tests {
         assert_eq!(m, "nav chair2 20.00 6.00 180.0 yield");
         let p = decode(m.as_bytes(), 1.0).expect("decodes");
         assert_eq!((p.name.as_str(), p.yielding, p.pose.x), ("chair2", true, 20.0));
-        for junk in [&b"door open door1"[..], b"nav", b"nav a 1 2", b"nav a 1 2 NaN go", b"nav a 1 2 3 maybe", b"\xff\xfe"] {
+        for junk in
+            [&b"door open door1"[..], b"nav", b"nav a 1 2", b"nav a 1 2 NaN go", b"nav a 1 2 3 maybe", b"\xff\xfe"]
+        {
             assert_eq!(decode(junk, 0.0), None, "{junk:?}");
         }
     }

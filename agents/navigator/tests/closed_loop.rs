@@ -8,7 +8,9 @@
 use bytemuck::Zeroable as _;
 use hub::map::{Lab, Params, Wall, builtin};
 use hub::world::{Action, ProximitySpec, Robot, RobotSpec, World};
-use ipc_types::{COLLISION, HAS_COMPASS, HAS_GPS, MAP_CHECKPOINT, MAP_CORNER, MAP_WALL, MapHeader, MapItem, SensorBlock};
+use ipc_types::{
+    COLLISION, HAS_COMPASS, HAS_GPS, MAP_CHECKPOINT, MAP_CORNER, MAP_WALL, MapHeader, MapItem, SensorBlock,
+};
 use navigator::geom::{Footprint, Pose, V2};
 use navigator::map::NavMap;
 use navigator::sensors::{SensorSource, VirtualSensors};
@@ -128,7 +130,13 @@ fn simulate(s: &Scenario, seed: u64) -> Outcome {
     let sensors = cfg
         .sensors
         .iter()
-        .map(|m| ProximitySpec { x_m: m.x_m, y_m: m.y_m, angle_rad: m.angle_rad, cone_rad: m.cone_rad, range_m: Some(m.range_m) })
+        .map(|m| ProximitySpec {
+            x_m: m.x_m,
+            y_m: m.y_m,
+            angle_rad: m.angle_rad,
+            cone_rad: m.cone_rad,
+            range_m: Some(m.range_m),
+        })
         .collect();
     let spec = RobotSpec::at(s.start[0], s.start[1], s.start[2])
         .body(s.body.width_m, s.body.height_m, s.body.com)
@@ -180,8 +188,11 @@ fn simulate(s: &Scenario, seed: u64) -> Outcome {
             if nav.stats().plans != last_plans {
                 last_plans = nav.stats().plans;
                 let path = nav.path();
-                let summary: Vec<String> =
-                    path.iter().step_by(4).map(|p| format!("({:.2},{:.2},{:.0})", p.x, p.y, p.theta.to_degrees())).collect();
+                let summary: Vec<String> = path
+                    .iter()
+                    .step_by(4)
+                    .map(|p| format!("({:.2},{:.2},{:.0})", p.x, p.y, p.theta.to_degrees()))
+                    .collect();
                 eprintln!("seed {seed} plan {} ({} poses): {}", last_plans, path.len(), summary.join(" "));
                 eprintln!("{}", ascii_map(&nav, 14.5, 20.5, 5.0, 7.0));
             }
@@ -256,7 +267,9 @@ fn simulate_seeds(s: &Scenario, seeds: std::ops::RangeInclusive<u64>) -> Vec<Out
         let handles: Vec<_> = (0..workers)
             .map(|w| {
                 let seeds = &seeds;
-                scope.spawn(move || seeds.iter().skip(w).step_by(workers).map(|&seed| simulate(s, seed)).collect::<Vec<_>>())
+                scope.spawn(move || {
+                    seeds.iter().skip(w).step_by(workers).map(|&seed| simulate(s, seed)).collect::<Vec<_>>()
+                })
             })
             .collect();
         handles.into_iter().flat_map(|h| h.join().expect("a simulation thread")).collect()
@@ -353,7 +366,7 @@ mod untuned_maps {
         let s = Scenario {
             map: "maze",
             obstacles: vec![],
-            start: [1.0, 7.0, 0.0],
+            start: [1.0, 7.0, 90.0],
             checkpoints: vec![[1.0, 7.0, 0.5], [9.0, 1.0, 0.5]],
             body: Body::INTELLWHEELS,
             time_limit_s: 200.0,
