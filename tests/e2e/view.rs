@@ -77,8 +77,13 @@ fn the_page_and_the_stream_show_the_map_and_every_robot() {
         "{map}"
     );
     assert_eq!(map.matches("\"height\":2.5").count(), 23, "23 walls of 2.5 m");
+    // The roster is re-sent as robots come (and their sensor geometry after them): wait for
+    // the one that has both chairs.
     let roster = loop {
-        if let Message::Text(t) = w.read().expect("roster") {
+        if let Message::Text(t) = w.read().expect("roster")
+            && t.contains("\"chair1\"")
+            && t.contains("\"chair2\"")
+        {
             break t;
         }
     };
