@@ -151,6 +151,9 @@ fn drive(
             Decision::PullOver { spot, heading } => traffic::park(me, spot, heading),
             Decision::Pass { origin, heading } => traffic::follow_lane(me, origin, heading),
         };
+        if powers != out.powers {
+            nav.overridden(powers);
+        }
         if traffic.yielding() != was_yielding {
             eprintln!(
                 "navigator {name}: {} at t {time_s:.1} s",

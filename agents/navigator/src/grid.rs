@@ -234,11 +234,6 @@ pub struct EvidenceParams {
     /// Readings farther than this only clear cells: their arcs are too long to place what
     /// they saw.
     pub hit_range: f64,
-    /// Readings nearer than this mark their arcs with proportionally less evidence: within a
-    /// few noise deviations of the sensor a reading places little (a chair passing 0.1 m from
-    /// a box reads anything from 0 to 0.3 m), though it is all there is of what lies right
-    /// beside the chair.
-    pub short_range: f64,
     /// A cell updated again from a sensor position within this distance of its last full
     /// update moves only `same_view` as far: the same view repeats its geometric errors (a
     /// cone edge grazing a face marks the same wrong cells), while a true obstacle is seen
@@ -266,7 +261,6 @@ impl Default for EvidenceParams {
             unexplained: 0.25,
             nothing_within: 0.2,
             hit_range: 2.2,
-            short_range: 0.0,
             new_view_m: 0.1,
             same_view: 0.3,
             decay: 0.0,
@@ -300,7 +294,6 @@ pub struct SensedLayer {
     stamp: Vec<u32>,
     now: u32,
     cells: Vec<u32>,
-    newly: Vec<u32>,
     changed: bool,
     arc: Vec<u32>,
     /// Where the sensor was at each cell's last full-weight update (NaN: never).
@@ -318,7 +311,6 @@ impl SensedLayer {
             stamp: vec![0; spec.len()],
             now: 0,
             cells: Vec::new(),
-            newly: Vec::new(),
             changed: false,
             arc: Vec::new(),
             last_view: vec![[f32::NAN; 2]; spec.len()],
@@ -340,15 +332,8 @@ impl SensedLayer {
         &self.cells
     }
 
-    /// Cells that became obstacles since [`SensedLayer::take_changes`] was last called.
-    pub fn newly_occupied(&self) -> &[u32] {
-        &self.newly
-    }
-
-    /// Whether any cell changed state since the last [`SensedLayer::take_changes`], and
-    /// forgets the list of new obstacle cells.
+    /// Whether any cell changed state since the last call.
     pub fn take_changes(&mut self) -> bool {
-        self.newly.clear();
         std::mem::take(&mut self.changed)
     }
 
@@ -440,10 +425,9 @@ impl SensedLayer {
             let n_explained = arc.iter().filter(|&&i| self.evidence[i as usize] >= explained).count();
             let clear = -2.0 * p.miss;
             let n_open = arc.iter().filter(|&&i| self.evidence[i as usize] > clear).count();
-            let near = if p.short_range > 0.0 { (d / p.short_range).clamp(0.25, 1.0) as f32 } else { 1.0 };
-            let spread = near * p.hit * (2.5 / (2.0 * cone.half * d / self.spec.cell).max(1.0) as f32).min(1.0);
+            let spread = p.hit * (2.5 / (2.0 * cone.half * d / self.spec.cell).max(1.0) as f32).min(1.0);
             let (threshold, hit) = if n_explained > 0 {
-                (explained, near * p.hit)
+                (explained, p.hit)
             } else if n_open > 0 {
                 (clear + f32::EPSILON, spread)
             } else {
@@ -506,7 +490,6 @@ impl SensedLayer {
         if !self.occupied[i] && e >= p.occupied_above {
             self.occupied[i] = true;
             self.cells.push(i as u32);
-            self.newly.push(i as u32);
             self.changed = true;
         } else if self.occupied[i] && e < p.free_below {
             self.occupied[i] = false;

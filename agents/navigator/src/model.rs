@@ -3,7 +3,7 @@
 //! and the controller ask of them ("does the chair fit here?", "what should this sensor
 //! read?").
 
-use crate::geom::{Cone, Footprint, Pose, Seg, V2};
+use crate::geom::{BodyFrame, Cone, Footprint, Pose, Seg, V2};
 use crate::grid::{Buckets, EvidenceParams, GridSpec, Observation, SensedLayer, StaticRaster};
 use crate::map::NavMap;
 
@@ -157,14 +157,17 @@ impl WorldModel {
     /// Whether the chair at `pose`, grown by `margin`, touches no known wall and no sensed
     /// obstacle.
     pub fn free(&self, pose: &Pose, margin: f64) -> bool {
+        self.free_in(&pose.body_frame(), margin)
+    }
+
+    /// [`WorldModel::free`] for a pose whose frame is already computed (one sine and cosine
+    /// for several margins).
+    pub fn free_in(&self, frame: &BodyFrame, margin: f64) -> bool {
         let fp = &self.footprint;
-        let frame = pose.body_frame();
         let centre = frame.to_world(V2::new(fp.centre_offset(), 0.0));
-        let reach = fp.centre_reach() + margin;
-        // Far from every wall and every sensed point: nothing to test.
-        let wall_clear = self.statics.distance_at(centre) - self.spec().cell * std::f64::consts::SQRT_2 > reach;
-        let r = V2::new(reach, reach);
-        if !wall_clear {
+        if !self.walls_clear(frame, margin) {
+            let reach = fp.centre_reach() + margin;
+            let r = V2::new(reach, reach);
             let mut hit = false;
             self.seg_index.query(centre - r, centre + r, |k| {
                 if !hit {
@@ -189,6 +192,20 @@ impl WorldModel {
             }
         });
         !hit
+    }
+
+    /// A quick, conservative answer from the walls' distance field: the rectangle grown by
+    /// `margin` lies within three discs along its axis, each far enough from every wall.
+    fn walls_clear(&self, frame: &BodyFrame, margin: f64) -> bool {
+        let fp = &self.footprint;
+        let len = fp.front + fp.rear;
+        let radius = (len / 6.0).hypot(fp.half) + margin;
+        // Distances are between cell centres: allow for the point's and the wall's cells.
+        let slack = self.spec().cell * std::f64::consts::SQRT_2;
+        (0..3).all(|k| {
+            let along = -fp.rear + len * (2 * k + 1) as f64 / 6.0;
+            self.statics.distance_at(frame.to_world(V2::new(along, 0.0))) - slack > radius
+        })
     }
 
     /// The chair's distance at `pose` to the nearest known wall or sensed obstacle, up to

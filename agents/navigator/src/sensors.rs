@@ -53,13 +53,26 @@ impl SensorMount {
     }
 }
 
-/// The navigator's eight sensors for a body: five narrow cones across the front (straight
-/// ahead, ±25° from near the front corners, ±60° at the corners) that place what they see
-/// within a few centimetres, one on each side at the body's middle looking sideways, and one
-/// looking back for reversing.
+/// The navigator's eight sensors, placed on any body (positions scale with it), all with a
+/// 3 m range:
+///
+/// | # | where                        | looking | cone | for                                 |
+/// |---|------------------------------|---------|------|-------------------------------------|
+/// | 0 | front centre                 | 0°      | 2°   | what is straight ahead, placed well |
+/// | 1 | front, 0.6 of the way left   | +25°    | 3°   | faces ahead-left, gap edges         |
+/// | 2 | front, 0.6 of the way right  | −25°    | 3°   | faces ahead-right, gap edges        |
+/// | 3 | front-left corner            | +60°    | 10°  | what the front corner swings into   |
+/// | 4 | front-right corner           | −60°    | 10°  | likewise on the right               |
+/// | 5 | left side, body centre       | +90°    | 20°  | what the chair passes               |
+/// | 6 | right side, body centre      | −90°    | 20°  | likewise on the right               |
+/// | 7 | rear centre                  | 180°    | 30°  | backing up                          |
 ///
 /// Narrow cones are what make the sensed map usable in a 1 m gap: a reading says only that
-/// something lies somewhere on an arc across the cone, and a 12° arc at 2 m is 0.4 m long.
+/// something lies somewhere on an arc across its cone, at the distance read, and a 12° arc at
+/// 2 m is 0.4 m long — as long as the slalom's clearance. With 2–3° the forward sensors place
+/// a face within a few centimetres; the chair's motion sweeps them across what lies ahead.
+/// The wider side and rear cones mostly clear space (everything nearer than a reading is
+/// free) and feed the reactive layer.
 pub fn default_layout(fp: &Footprint) -> Vec<SensorMount> {
     let (front, rear, half, mid) = (fp.front, fp.rear, fp.half, fp.centre_offset());
     let range = 3.0;
@@ -145,7 +158,7 @@ pub enum Mode {
 
 /// Why a sensor source could not be set up.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
-pub enum SensorSourceError {
+pub enum SensorSourceOpenError {
     /// Real and Augmented need a physical chair behind the serial bridge.
     #[error(
         "--mode {0}: a physical chair is reached through the serial bridge (`iwsim serial`), which is not built \
@@ -213,11 +226,11 @@ pub fn augment(real: &[f64], virtual_: &[f64]) -> Vec<f64> {
 }
 
 /// The source of readings for a mode.
-pub fn sensor_source(mode: Mode) -> Result<Box<dyn SensorSource>, SensorSourceError> {
+pub fn sensor_source(mode: Mode) -> Result<Box<dyn SensorSource>, SensorSourceOpenError> {
     match mode {
         Mode::Virtual => Ok(Box::new(VirtualSensors)),
-        Mode::Real => Err(SensorSourceError::NeedsSerialBridge("real")),
-        Mode::Augmented => Err(SensorSourceError::NeedsSerialBridge("augmented")),
+        Mode::Real => Err(SensorSourceOpenError::NeedsSerialBridge("real")),
+        Mode::Augmented => Err(SensorSourceOpenError::NeedsSerialBridge("augmented")),
     }
 }
 
@@ -257,7 +270,7 @@ mod tests {
     #[test]
     fn real_and_augmented_modes_ask_for_the_serial_bridge() {
         assert!(sensor_source(Mode::Virtual).is_ok());
-        assert_eq!(sensor_source(Mode::Real).err(), Some(SensorSourceError::NeedsSerialBridge("real")));
+        assert_eq!(sensor_source(Mode::Real).err(), Some(SensorSourceOpenError::NeedsSerialBridge("real")));
         let e = sensor_source(Mode::Augmented).expect_err("not yet");
         assert!(e.to_string().contains("iwsim serial"), "{e}");
     }

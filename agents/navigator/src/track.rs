@@ -176,13 +176,13 @@ impl Tracker {
         (r.length() - here) + self.runs.iter().skip(self.run + 1).map(Run::length).sum::<f64>()
     }
 
-    /// The command for a chair at `pose`.
-    pub fn command(&mut self, pose: &Pose) -> Option<TrackCommand> {
+    /// The command for a chair at `pose` (standing still once the path is driven).
+    pub fn command(&mut self, pose: &Pose) -> TrackCommand {
         loop {
             let p = self.params;
             let Some(run) = self.runs.get(self.run) else {
                 self.finished = true;
-                return Some(TrackCommand { v: 0.0, w: 0.0, lateral_error: 0.0 });
+                return TrackCommand { v: 0.0, w: 0.0, lateral_error: 0.0 };
             };
             if run.kind == RunKind::Spin {
                 let target = run.poses[run.poses.len() - 1].theta;
@@ -193,7 +193,7 @@ impl Tracker {
                 }
                 // Brake the turn in time: ω ≤ √(2·α·|e|) with α ≈ 1 rad/s².
                 let w = e.signum() * p.spin_rate.min((2.0 * 0.8 * e.abs()).sqrt()).max(0.08);
-                return Some(TrackCommand { v: 0.0, w, lateral_error: 0.0 });
+                return TrackCommand { v: 0.0, w, lateral_error: 0.0 };
             }
             // Project the axle onto the run: the segment nearest to it, searching forwards.
             let n = run.poses.len();
@@ -249,7 +249,7 @@ impl Tracker {
             };
             let w = kappa * v + p.k_lateral * v * lateral + p.k_heading * v.abs() * e_th.sin();
             let w = w.clamp(-p.w_max, p.w_max);
-            return Some(TrackCommand { v, w, lateral_error: lateral.abs() });
+            return TrackCommand { v, w, lateral_error: lateral.abs() };
         }
     }
 
@@ -275,12 +275,14 @@ pub struct Drive {
     pub accel_curve: f64,
     /// The filter's outputs as this model has them, left and right.
     pub out: [f64; 2],
+    /// The outputs before the last powers were applied.
+    before: [f64; 2],
 }
 
 impl Drive {
     /// A drive at rest.
     pub fn new(max_speed: f64, track: f64, accel_curve: f64) -> Self {
-        Self { max_speed, track, accel_curve, out: [0.0; 2] }
+        Self { max_speed, track, accel_curve, out: [0.0; 2], before: [0.0; 2] }
     }
 
     /// Current speed and turn rate as the model has them.
@@ -291,10 +293,17 @@ impl Drive {
 
     /// Records powers sent as they are (the model's outputs follow them).
     pub fn powers_raw(&mut self, powers: [f64; 2]) {
+        self.before = self.out;
         let c = self.accel_curve;
         for (out, p) in self.out.iter_mut().zip(powers) {
             *out = (1.0 - c) * p + c * *out;
         }
+    }
+
+    /// Replaces the powers last applied by these (others were sent after all).
+    pub fn replace_last(&mut self, powers: [f64; 2]) {
+        self.out = self.before;
+        self.powers_raw(powers);
     }
 
     /// The powers to send for a wanted speed `v` (m/s) and turn rate `w` (rad/s); updates the
@@ -306,6 +315,7 @@ impl Drive {
         if big > 1.0 {
             want = [want[0] / big, want[1] / big];
         }
+        self.before = self.out;
         let c = self.accel_curve;
         let mut powers = [0.0; 2];
         for k in 0..2 {
@@ -354,6 +364,11 @@ mod tests {
         }
         let (v, w) = d.velocity();
         assert!(v.abs() < 1e-9 && (w - 0.5).abs() < 1e-9);
+        // Powers overridden after all: the model follows what was sent instead.
+        let before = d.out;
+        d.powers(0.3, 0.0);
+        d.replace_last([0.0, 0.0]);
+        assert_eq!(d.out, [0.83 * before[0], 0.83 * before[1]]);
     }
 
     #[test]
@@ -368,7 +383,7 @@ mod tests {
         let dt = 0.1;
         let mut ticks = 0;
         while !t.finished() && ticks < 400 {
-            let c = t.command(&pose).expect("a command");
+            let c = t.command(&pose);
             pose = Pose::new(
                 pose.x + c.v * pose.theta.cos() * dt,
                 pose.y + c.v * pose.theta.sin() * dt,
