@@ -575,8 +575,12 @@ pub fn run(args: &RunArgs) -> anyhow::Result<ExitCode> {
         all.push(s);
     }
     let passed = all.iter().filter(|s| s.passed()).count();
-    let times: Vec<f64> =
-        all.iter().flat_map(|s| s.robots.iter().filter_map(|r| r.reached_at_s.last().copied())).collect();
+    // A run's time is its last robot's arrival, as in the table's rows.
+    let times: Vec<f64> = all
+        .iter()
+        .map(|s| s.robots.iter().filter_map(|r| r.reached_at_s.last().copied()).fold(f64::NAN, f64::max))
+        .filter(|t| !t.is_nan())
+        .collect();
     let contacts: u64 = all.iter().flat_map(|s| s.robots.iter().map(|r| r.collisions)).sum();
     println!(
         "scenario {}: {} runs, {}",

@@ -13,9 +13,9 @@ use crate::NavigatorArgs;
 use crate::geom::{Pose, V2};
 use crate::map::NavMap;
 use crate::navigator::{Body, Checkpoint, NavConfig, NavEvent, Navigator};
+use crate::pilot::Pilot;
 use crate::pose::PoseSourceKind;
 use crate::sensors::{default_layout, sensor_source};
-use crate::traffic::{self, Decision, Traffic};
 
 /// Runs the navigator agent until the hub's run ends. Exits with success when the last
 /// checkpoint was reached.
@@ -121,8 +121,7 @@ fn drive(
         }
         None => None,
     };
-    let mut nav = Navigator::new(map, cfg);
-    let mut traffic = Traffic::new(name);
+    let mut pilot = Pilot::new(name, Navigator::new(map, cfg));
     let mut contacts = 0u32;
     let mut last_time = 0.0;
     while let Some(tick) = agent.wait_tick(Wait::Blocking)? {
@@ -134,40 +133,20 @@ fn drive(
         };
         contacts = block.collision_count;
         let input = source.read(&block, time_s);
-        for (_, m) in block.messages() {
-            traffic.hear(m, time_s);
-        }
-        let out = nav.step(&input);
+        let out = pilot.tick(&input, block.messages().map(|(_, m)| m));
         for e in &out.events {
             report(name, &checkpoints, e);
         }
-        // Meeting another navigator head-on overrides the navigator's powers (its odometry
-        // still runs): wait for the other's answer, or pull over and let it pass.
-        let me = nav.pose();
-        let was_yielding = traffic.yielding();
-        let powers = match traffic.decide(me, time_s) {
-            Decision::Go => out.powers,
-            Decision::WaitForAnswer => [0.0, 0.0],
-            Decision::PullOver { spot, heading } => traffic::park(me, spot, heading),
-            Decision::Pass { origin, heading } => traffic::follow_lane(me, origin, heading),
-        };
-        if powers != out.powers {
-            nav.overridden(powers);
+        for note in &out.notes {
+            eprintln!("navigator {name}: {note}");
         }
-        if traffic.yielding() != was_yielding {
-            eprintln!(
-                "navigator {name}: {} at t {time_s:.1} s",
-                if traffic.yielding() { "pulling over to let the other chair pass" } else { "going on" }
-            );
-        }
-        let mut action = ActionBlock::motors(id, powers[0], powers[1]);
-        // Say where we are twice a second, and at once when we start or stop yielding.
-        if tick.tick % 5 == 0 || traffic.yielding() != was_yielding {
-            action.with_say(traffic::encode(name, me, traffic.yielding()).as_bytes());
+        let mut action = ActionBlock::motors(id, out.powers[0], out.powers[1]);
+        if let Some(say) = &out.say {
+            action.with_say(say.as_bytes());
         }
         agent.send(tick.tick, &[action])?;
         if let Some(log) = &mut log {
-            log.row(&block, time_s, powers)?;
+            log.row(&block, time_s, out.powers)?;
         }
     }
     // The run's final readings, for a complete log.
@@ -178,6 +157,7 @@ fn drive(
     if let Some(log) = &mut log {
         log.flush()?;
     }
+    let nav = pilot.navigator();
     let reached = nav.next_checkpoint().min(checkpoints.len());
     if nav.finished() {
         eprintln!("navigator {name}: the run ended; all {reached} checkpoint(s) reached, {contacts} contact(s)");

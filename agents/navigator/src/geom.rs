@@ -246,6 +246,15 @@ impl Footprint {
         [V2::new(f, -h), V2::new(f, h), V2::new(r, h), V2::new(r, -h)].map(|p| pose.to_world(p))
     }
 
+    /// Whether this rectangle at `pose` comes within `margin` of rectangle `other` at
+    /// `other_pose` (the other grown by `margin` as a rectangle, which is a little more than
+    /// `margin` at its corners).
+    pub fn meets(&self, pose: &Pose, other: &Footprint, other_pose: &Pose, margin: f64) -> bool {
+        let c = self.corners(pose, 0.0);
+        (0..4).any(|k| other.meets_body_segment(other_pose.to_body(c[k]), other_pose.to_body(c[(k + 1) % 4]), margin))
+            || self.contains_body(pose.to_body(other.centre(other_pose)), margin)
+    }
+
     /// Whether a body-frame point lies inside the rectangle grown by `margin`.
     pub fn contains_body(&self, p: V2, margin: f64) -> bool {
         p.x <= self.front + margin && p.x >= -(self.rear + margin) && p.y.abs() <= self.half + margin

@@ -55,9 +55,11 @@ mod agent;
 pub mod geom;
 pub mod grid;
 pub mod hybrid;
+pub mod manoeuvre;
 pub mod map;
 pub mod model;
 mod navigator;
+pub mod pilot;
 pub mod plan;
 pub mod pose;
 pub mod sensors;
@@ -68,6 +70,7 @@ use std::path::PathBuf;
 
 pub use agent::run;
 pub use navigator::{Body, Checkpoint, NavConfig, NavEvent, NavStats, Navigator, Output};
+pub use pilot::{Pilot, PilotOutput};
 pub use pose::PoseSourceKind;
 pub use sensors::Mode;
 

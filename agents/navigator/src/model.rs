@@ -32,6 +32,13 @@ pub struct WorldModel {
     point_cells: Vec<u32>,
 
     point_index: Buckets,
+    /// Outline points of chairs parked for us (they said so), after the sensed points in
+    /// `points`; they always count as obstacles.
+    parked: Vec<V2>,
+    /// The parked chairs' rectangles as last set, to see whether they changed.
+    parked_bodies: Vec<(Pose, Footprint)>,
+    /// `parked` changed since the points were last rebuilt.
+    parked_changed: bool,
     /// Sensed cells count as obstacles for planning from this much evidence on.
     pub plan_evidence: f32,
     /// Extra margin kept from sensed obstacles (their extent beyond what was seen is
@@ -74,8 +81,10 @@ impl WorldModel {
             points: Vec::new(),
             point_cells: Vec::new(),
             sensed_extra: 0.0,
-
             point_index,
+            parked: Vec::new(),
+            parked_bodies: Vec::new(),
+            parked_changed: false,
             plan_evidence,
         }
     }
@@ -90,9 +99,34 @@ impl WorldModel {
         &self.segs
     }
 
-    /// Sensed obstacle cells as points (centres).
+    /// Sensed obstacle cells as points (centres), then the outlines of parked chairs.
     pub fn sensed_points(&self) -> &[V2] {
         &self.points
+    }
+
+    /// Sets the chairs parked for us: other chairs that said they stand still so that we can
+    /// pass. Their rectangles are obstacles exactly as said (the sensors only ever see a
+    /// face of them); returns whether anything changed by more than a centimetre.
+    pub fn set_parked(&mut self, bodies: &[(Pose, Footprint)]) -> bool {
+        let same = bodies.len() == self.parked_bodies.len()
+            && bodies.iter().zip(&self.parked_bodies).all(|((p, f), (q, g))| {
+                f == g && (p.pos() - q.pos()).norm() < 0.01 && crate::geom::wrap(p.theta - q.theta).abs() < 0.01
+            });
+        if same {
+            return false;
+        }
+        self.parked_bodies = bodies.to_vec();
+        self.parked.clear();
+        for (pose, fp) in bodies {
+            let c = fp.corners(pose, 0.0);
+            for k in 0..4 {
+                let (a, b) = (c[k], c[(k + 1) % 4]);
+                let n = ((b - a).norm() / (CELL_M * 0.8)).ceil().max(1.0) as usize;
+                self.parked.extend((0..n).map(|i| a + (b - a) * (i as f64 / n as f64)));
+            }
+        }
+        self.parked_changed = true;
+        true
     }
 
     /// What a sensor with this cone and range would read if only the known walls stood.
@@ -128,9 +162,20 @@ impl WorldModel {
         self.sensed.observe(&self.statics, &obs, Some((pose, &self.footprint)));
     }
 
+    /// Adds a reading that something known explains (another chair that says where it is):
+    /// it clears the free space before it and marks nothing, so a chair that drives by leaves
+    /// no ghost behind.
+    pub fn observe_explained(&mut self, cone: Cone, distance: f64, range: f64, pose: &Pose) {
+        let expected = self.expected_reading(&cone, range).min(distance);
+        let obs = Observation { cone, distance, range, expected };
+        self.sensed.observe(&self.statics, &obs, Some((pose, &self.footprint)));
+    }
+
     /// Rebuilds the index of sensed points after the layer changed; returns whether it had.
     pub fn refresh_sensed(&mut self) -> bool {
-        if !self.sensed.take_changes() {
+        let sensed = self.sensed.take_changes();
+        let parked = std::mem::take(&mut self.parked_changed);
+        if !sensed && !parked {
             return false;
         }
         let spec = self.spec();
@@ -143,6 +188,11 @@ impl WorldModel {
                 spec.center(ix, iy)
             })
             .collect();
+        for &p in &self.parked {
+            let (ix, iy) = spec.clamp_cell(p);
+            self.point_cells.push(spec.index(ix, iy) as u32);
+            self.points.push(p);
+        }
         let pts = &self.points;
         self.point_index =
             Buckets::build(self.map.width_m, self.map.height_m, BUCKET_M, pts.len(), |k| (pts[k], pts[k]));
@@ -163,9 +213,18 @@ impl WorldModel {
     /// [`WorldModel::free`] for a pose whose frame is already computed (one sine and cosine
     /// for several margins).
     pub fn free_in(&self, frame: &BodyFrame, margin: f64) -> bool {
-        let fp = &self.footprint;
+        self.fits_in(&self.footprint, frame, margin)
+    }
+
+    /// Whether a rectangle `fp` (another chair's, say) at `pose`, grown by `margin`, touches
+    /// no known wall and no sensed obstacle.
+    pub fn fits(&self, fp: &Footprint, pose: &Pose, margin: f64) -> bool {
+        self.fits_in(fp, &pose.body_frame(), margin)
+    }
+
+    fn fits_in(&self, fp: &Footprint, frame: &BodyFrame, margin: f64) -> bool {
         let centre = frame.to_world(V2::new(fp.centre_offset(), 0.0));
-        if !self.walls_clear(frame, margin) {
+        if !self.walls_clear(fp, frame, margin) {
             let reach = fp.centre_reach() + margin;
             let r = V2::new(reach, reach);
             let mut hit = false;
@@ -196,8 +255,7 @@ impl WorldModel {
 
     /// A quick, conservative answer from the walls' distance field: the rectangle grown by
     /// `margin` lies within three discs along its axis, each far enough from every wall.
-    fn walls_clear(&self, frame: &BodyFrame, margin: f64) -> bool {
-        let fp = &self.footprint;
+    fn walls_clear(&self, fp: &Footprint, frame: &BodyFrame, margin: f64) -> bool {
         let len = fp.front + fp.rear;
         let radius = (len / 6.0).hypot(fp.half) + margin;
         // Distances are between cell centres: allow for the point's and the wall's cells.
@@ -234,7 +292,8 @@ impl WorldModel {
 
     /// Whether sensed point `k` counts as an obstacle for planning.
     fn counts(&self, k: usize) -> bool {
-        self.sensed.evidence(self.point_cells[k] as usize) >= self.plan_evidence
+        k + self.parked.len() >= self.points.len()
+            || self.sensed.evidence(self.point_cells[k] as usize) >= self.plan_evidence
     }
 
     /// Whether a point is within the chair at `pose` grown by `margin`.

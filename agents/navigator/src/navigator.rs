@@ -5,7 +5,7 @@
 use std::collections::VecDeque;
 
 use crate::geom::{Footprint, Pose, V2};
-use crate::hybrid::{self, Goal, HybridParams, PathSearchError, PlanOutcome};
+use crate::hybrid::{self, Goal, HybridParams, PathPose, PathSearchError, PlanOutcome};
 use crate::map::NavMap;
 use crate::model::WorldModel;
 use crate::plan::{CostToGo, Costmap, route};
@@ -163,6 +163,21 @@ enum PathKind {
     Partial,
 }
 
+/// Who drives: the planner, a given manoeuvre, or nobody (standing still).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Mode {
+    /// Plan and follow paths to the checkpoints.
+    Plan,
+    /// Follow a given path, then hold.
+    Manoeuvre,
+    /// Stand still until told to go on.
+    Hold,
+}
+
+/// Other chairs are taken to be this much bigger than they say when deciding whether they
+/// explain a reading (their poses are a tick old and estimated), metres.
+const PEER_SLACK_M: f64 = 0.25;
+
 /// A path is dropped when the map changes so that a pose ahead comes nearer than this to
 /// something (poses planned nearer than this, leaving a tight spot, are not re-checked).
 const RECHECK_M: f64 = 0.02;
@@ -208,6 +223,11 @@ pub struct Navigator {
     hybrid: HybridParams,
     track_params: TrackerParams,
     stats: NavStats,
+    mode: Mode,
+    /// The sensed map changed in this tick's [`Navigator::perceive`].
+    map_changed: bool,
+    /// Other chairs' rectangles as they said: readings they explain map nothing.
+    peers: Vec<(Pose, Footprint)>,
 }
 
 impl Navigator {
@@ -237,6 +257,9 @@ impl Navigator {
             hybrid: HybridParams::default(),
             track_params,
             stats: NavStats::default(),
+            mode: Mode::Plan,
+            map_changed: false,
+            peers: Vec::new(),
         }
     }
 
@@ -275,18 +298,62 @@ impl Navigator {
         &self.cfg
     }
 
-    /// Says that other powers than the last [`Output`]'s were sent (another layer took
-    /// over this tick, such as the negotiation with another chair): the motor model follows
-    /// what was sent, the path is dropped, and a new one is planned once the navigator's
-    /// powers are sent again.
-    pub fn overridden(&mut self, powers: [f64; 2]) {
-        self.drive.replace_last(powers);
-        self.tracker = None;
-        self.plan_after = self.last_tick + 3;
+    /// Tells where the other chairs are (as they said): `all` of them, whose readings map
+    /// nothing, since they move; and those `parked` for good or for us, which are obstacles
+    /// to plan round, exactly as said.
+    pub fn set_peers(&mut self, all: Vec<(Pose, Footprint)>, parked: &[(Pose, Footprint)]) {
+        self.peers = all;
+        self.model.set_parked(parked);
     }
 
-    /// One tick: readings in, wheel powers out.
+    /// Drives `path` (forward poses from about where the chair is) at up to `speed` m/s with
+    /// the path follower, then holds; the planner is off meanwhile. Used for manoeuvres
+    /// another layer plans, such as pulling over for another chair.
+    pub fn manoeuvre(&mut self, path: &[PathPose], speed: f64) {
+        let vmax = vec![speed; path.len()];
+        let check = vec![false; path.len()];
+        self.tracker = Some(Tracker::new(path, &vmax, &check, false, self.track_params));
+        self.mode = Mode::Manoeuvre;
+    }
+
+    /// Whether a manoeuvre is being driven.
+    pub fn manoeuvring(&self) -> bool {
+        self.mode == Mode::Manoeuvre
+    }
+
+    /// Stands still (braking now) and plans nothing until [`Navigator::resume`].
+    pub fn hold(&mut self) {
+        if self.mode != Mode::Hold {
+            self.mode = Mode::Hold;
+            self.tracker = None;
+        }
+    }
+
+    /// Goes back to planning after a hold or a manoeuvre, from where the chair is.
+    pub fn resume(&mut self) {
+        if self.mode != Mode::Plan {
+            self.mode = Mode::Plan;
+            self.tracker = None;
+            self.plan_after = self.last_tick;
+        }
+    }
+
+    /// Whether it is standing still on request.
+    pub fn holding(&self) -> bool {
+        self.mode == Mode::Hold
+    }
+
+    /// One tick: readings in, wheel powers out ([`Navigator::perceive`] then
+    /// [`Navigator::act`]).
     pub fn step(&mut self, input: &Input) -> Output {
+        self.perceive(input);
+        self.act(input)
+    }
+
+    /// The first half of a tick: the pose estimate and the map take in the readings. Another
+    /// layer may then look at [`Navigator::pose`] and change the mode before
+    /// [`Navigator::act`].
+    pub fn perceive(&mut self, input: &Input) {
         let tick = input.tick;
         self.last_tick = tick;
         let pose = self.pose_src.update(input);
@@ -300,11 +367,23 @@ impl Navigator {
         }
         self.model.sensed.decay();
         self.map_readings(input);
-        let changed = self.model.refresh_sensed();
+        self.map_changed = self.model.refresh_sensed();
+    }
+
+    /// The second half of a tick: the wheel powers, after [`Navigator::perceive`].
+    pub fn act(&mut self, input: &Input) -> Output {
+        let tick = input.tick;
+        let pose = self.pose;
+        let changed = std::mem::take(&mut self.map_changed);
         let mut events = Vec::new();
         if self.finished {
             self.drive.powers_raw([0.0, 0.0]);
             return Output { powers: [0.0, 0.0], events };
+        }
+        match self.mode {
+            Mode::Plan => {}
+            Mode::Hold => return Output { powers: self.drive.powers(0.0, 0.0), events },
+            Mode::Manoeuvre => return Output { powers: self.manoeuvre_step(input), events },
         }
         if self.check_checkpoints(input, &mut events) {
             self.drive.powers_raw([0.0, 0.0]);
@@ -344,17 +423,58 @@ impl Navigator {
         Output { powers, events }
     }
 
+    /// A manoeuvre's tick: follow its path (the safety layer may slow or stop the chair,
+    /// but does not drop the path); hold once it is driven or lost.
+    fn manoeuvre_step(&mut self, input: &Input) -> [f64; 2] {
+        let pose = self.pose;
+        let cmd = self.tracker.as_mut().map(|t| t.command(&pose));
+        let (mut v, mut w) = match cmd {
+            Some(c) if c.lateral_error <= self.track_params.max_lateral => (c.v, c.w),
+            _ => (0.0, 0.0),
+        };
+        if cmd.is_none_or(|c| c.lateral_error > self.track_params.max_lateral)
+            || self.tracker.as_ref().is_some_and(|t| t.finished())
+        {
+            self.tracker = None;
+            self.mode = Mode::Hold;
+        }
+        if let Some((sv, sw, stop)) = self.safety(input, v, w) {
+            (v, w) = (sv, sw);
+            if stop {
+                self.stats.safety_stops += 1;
+            }
+        }
+        self.drive.powers(v, w)
+    }
+
     /// Adds this tick's proximity readings to the sensed layer, placed with the pose the
-    /// chair had when they were measured.
+    /// chair had when they were measured. A reading another chair explains clears the space
+    /// before it and marks nothing: chairs move, and say where they are.
     fn map_readings(&mut self, input: &Input) {
         let at = input.tick.saturating_sub(self.cfg.proximity_latency as u64);
         let pose = self.history.iter().rev().find(|(t, _)| *t <= at).map_or(self.pose, |(_, p)| *p);
         for (k, mount) in self.cfg.sensors.iter().enumerate().take(input.proximity_count) {
             let d = input.proximity_m[k];
-            if d.is_finite() {
-                self.model.observe(mount.cone(&pose), d, mount.range_m, &pose);
+            if !d.is_finite() {
+                continue;
+            }
+            let cone = mount.cone(&pose);
+            if d < mount.range_m - 0.2 && self.peer_explains(&cone, d) {
+                self.model.observe_explained(cone, d, mount.range_m, &pose);
+            } else {
+                self.model.observe(cone, d, mount.range_m, &pose);
             }
         }
+    }
+
+    /// Whether a reading `d` of `cone` falls on another chair.
+    fn peer_explains(&self, cone: &crate::geom::Cone, d: f64) -> bool {
+        self.peers.iter().any(|(p, fp)| {
+            [-1.0, -0.5, 0.0, 0.5, 1.0].iter().any(|f| {
+                let q = cone.apex + V2::unit(cone.dir + f * cone.half) * d;
+                fp.contains_body(p.to_body(q), PEER_SLACK_M)
+            })
+        })
     }
 
     /// Counts checkpoints reached; returns true when the last one is (the run is over).

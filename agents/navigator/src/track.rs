@@ -275,14 +275,12 @@ pub struct Drive {
     pub accel_curve: f64,
     /// The filter's outputs as this model has them, left and right.
     pub out: [f64; 2],
-    /// The outputs before the last powers were applied.
-    before: [f64; 2],
 }
 
 impl Drive {
     /// A drive at rest.
     pub fn new(max_speed: f64, track: f64, accel_curve: f64) -> Self {
-        Self { max_speed, track, accel_curve, out: [0.0; 2], before: [0.0; 2] }
+        Self { max_speed, track, accel_curve, out: [0.0; 2] }
     }
 
     /// Current speed and turn rate as the model has them.
@@ -293,17 +291,10 @@ impl Drive {
 
     /// Records powers sent as they are (the model's outputs follow them).
     pub fn powers_raw(&mut self, powers: [f64; 2]) {
-        self.before = self.out;
         let c = self.accel_curve;
         for (out, p) in self.out.iter_mut().zip(powers) {
             *out = (1.0 - c) * p + c * *out;
         }
-    }
-
-    /// Replaces the powers last applied by these (others were sent after all).
-    pub fn replace_last(&mut self, powers: [f64; 2]) {
-        self.out = self.before;
-        self.powers_raw(powers);
     }
 
     /// The powers to send for a wanted speed `v` (m/s) and turn rate `w` (rad/s); updates the
@@ -315,7 +306,6 @@ impl Drive {
         if big > 1.0 {
             want = [want[0] / big, want[1] / big];
         }
-        self.before = self.out;
         let c = self.accel_curve;
         let mut powers = [0.0; 2];
         for k in 0..2 {
@@ -364,11 +354,6 @@ mod tests {
         }
         let (v, w) = d.velocity();
         assert!(v.abs() < 1e-9 && (w - 0.5).abs() < 1e-9);
-        // Powers overridden after all: the model follows what was sent instead.
-        let before = d.out;
-        d.powers(0.3, 0.0);
-        d.replace_last([0.0, 0.0]);
-        assert_eq!(d.out, [0.83 * before[0], 0.83 * before[1]]);
     }
 
     #[test]

@@ -1,25 +1,61 @@
 //! Meeting another chair head-on: the two agree by messages who yields (beyond the thesis).
 //!
-//! Every navigator says where it is each second, `nav NAME X Y HEADING go|yield`. When two of
-//! them are within `MEET_M`, face each other and each has the other ahead, both apply the same
-//! rule to what they heard — the name that sorts last yields — and say so: the yielder pulls
-//! over to its right, against the wall, stops, and says `yield`; the other waits until it has
-//! heard that `yield`, then passes in a lane offset to its own right, parallel to its heading,
-//! until the parked chair is behind it. Then both go back to their navigators, which re-plan
-//! from where they are. Nothing is decided on one side alone: the chair with the right of way
-//! does not move into the narrow part before the other has answered. (The navigator's planner
-//! would treat the parked chair as an obstacle, but in a corridor the gap beside it is narrower
-//! than its planning margins; the negotiated lane is exact.)
+//! Every navigator says where it is and what it is doing, `nav NAME X Y HEADING STATE LENGTH
+//! WIDTH COM` ([`encode`]), where STATE is `go`, `pull` (pulling over) or `park` (standing
+//! still: parked for someone, or done). When two of them are within [`MEET_M`], face each
+//! other, each has the other ahead and their lines are close enough to clash, both apply the
+//! same rule to what they heard — the name that sorts last yields:
+//!
+//! - the yielder pulls over to the side (its right if that leaves room for the other, else
+//!   its left) along an S-curve that the navigator's own path follower drives
+//!   ([`crate::manoeuvre`]), stops, and says `park`;
+//! - the other stands still until it hears that `park`; then its navigator plans round the
+//!   parked chair's rectangle (any chair that says `park` is an obstacle to plan round) and
+//!   drives on;
+//! - once the other has gone past, the yielder goes back to its navigator, which re-plans
+//!   from where it stands.
+//!
+//! Nothing is decided on one side alone: the chair with the right of way does not move
+//! towards the other before it has heard that the other is out of the way. This module is
+//! the rule and its state; [`crate::pilot`] carries it out with the navigator.
 
-use crate::geom::Pose;
+use crate::geom::{Footprint, Pose};
 
-/// Chairs nearer than this, facing each other, negotiate.
-pub const MEET_M: f64 = 4.5;
+/// Chairs nearer than this (axle to axle, metres), facing each other, negotiate. The
+/// yielder needs a few metres ahead to pull over and the other a few more to swing round it;
+/// the hub's default message range is 8 m.
+pub const MEET_M: f64 = 7.0;
 /// A peer not heard for this many seconds is forgotten.
 const FORGET_S: f64 = 3.0;
-/// How far to the right the yielder pulls over, metres (a corridor of 1.8 m leaves the other
-/// chair a lane of about a metre).
-pub const PULL_OVER_M: f64 = 0.52;
+/// The chair with the right of way waits this long for the other to yield, then goes on
+/// regardless (its safety layer still stops it short of the other).
+const WAIT_LIMIT_S: f64 = 40.0;
+/// Two chairs whose lines pass farther apart than their half-widths plus this do not clash.
+const CLASH_SLACK_M: f64 = 0.4;
+/// The other has gone past when its axle is this far behind ours, metres.
+const PASSED_M: f64 = 1.4;
+
+/// What a navigator says it is doing.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum State {
+    /// Driving (or waiting) on its own account.
+    Go,
+    /// Pulling over for another chair.
+    Pull,
+    /// Standing still for good or for a while (parked for another chair to pass, or at its
+    /// last checkpoint): plan round it.
+    Park,
+}
+
+impl State {
+    fn word(self) -> &'static str {
+        match self {
+            State::Go => "go",
+            State::Pull => "pull",
+            State::Park => "park",
+        }
+    }
+}
 
 /// What another navigator said.
 #[derive(Debug, Clone, PartialEq)]
@@ -28,24 +64,30 @@ pub struct Peer {
     pub name: String,
     /// Where it is: x, y metres, heading radians.
     pub pose: Pose,
-    /// Whether it has pulled over for us.
-    pub yielding: bool,
+    /// What it is doing.
+    pub state: State,
+    /// Its rectangle relative to its axle.
+    pub footprint: Footprint,
     /// When we heard it, seconds.
     pub heard_s: f64,
 }
 
-/// The message a navigator says about itself.
-pub fn encode(name: &str, pose: Pose, yielding: bool) -> String {
+/// The message a navigator says about itself (at most 100 bytes for names up to 40).
+pub fn encode(name: &str, pose: Pose, state: State, body: &crate::Body) -> String {
     format!(
-        "nav {name} {:.2} {:.2} {:.1} {}",
+        "nav {name} {:.3} {:.3} {:.1} {} {:.2} {:.2} {:.2}",
         pose.x,
         pose.y,
         pose.theta.to_degrees(),
-        if yielding { "yield" } else { "go" }
+        state.word(),
+        body.width_m,
+        body.height_m,
+        body.com
     )
 }
 
-/// Reads another navigator's message; `None` for anything else.
+/// Reads another navigator's message; `None` for anything else (other agents' messages,
+/// junk, impossible bodies).
 pub fn decode(bytes: &[u8], heard_s: f64) -> Option<Peer> {
     let text = std::str::from_utf8(bytes).ok()?;
     let mut w = text.split_whitespace();
@@ -53,40 +95,52 @@ pub fn decode(bytes: &[u8], heard_s: f64) -> Option<Peer> {
         return None;
     }
     let name = w.next()?.to_owned();
-    let mut num = || w.next()?.parse::<f64>().ok().filter(|v| v.is_finite());
-    let (x, y, deg) = (num()?, num()?, num()?);
-    let yielding = match w.next()? {
-        "yield" => true,
-        "go" => false,
+    let num = |t: Option<&str>| t?.parse::<f64>().ok().filter(|v| v.is_finite());
+    let (x, y, deg) = (num(w.next())?, num(w.next())?, num(w.next())?);
+    let state = match w.next()? {
+        "go" => State::Go,
+        "pull" => State::Pull,
+        "park" => State::Park,
         _ => return None,
     };
-    Some(Peer { name, pose: Pose { x, y, theta: deg.to_radians() }, yielding, heard_s })
+    let (length, width, com) = (num(w.next())?, num(w.next())?, num(w.next())?);
+    if w.next().is_some() || length <= 0.0 || width <= 0.0 || !(0.0..=1.0).contains(&com) {
+        return None;
+    }
+    Some(Peer {
+        name,
+        pose: Pose { x, y, theta: deg.to_radians() },
+        state,
+        footprint: Footprint::of_body(length, width, com),
+        heard_s,
+    })
 }
 
-/// How far to the right of its line the passing chair drives, metres.
-pub const PASS_OFFSET_M: f64 = 0.45;
+/// Where this chair stands in a negotiation.
+#[derive(Debug, Clone, PartialEq)]
+enum Role {
+    /// None going on.
+    Free,
+    /// We yield to `peer` and are pulling over.
+    PullingOver { peer: String },
+    /// We yield to `peer` and are parked.
+    Parked { peer: String },
+    /// We have the right of way and wait for `peer` to yield, since `since_s`.
+    Waiting { peer: String, since_s: f64 },
+    /// `peer` has yielded; we drive past it.
+    Passing { peer: String },
+}
 
 /// What the traffic rule asks of the chair this tick.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, PartialEq)]
 pub enum Decision {
     /// Drive on with the navigator.
     Go,
-    /// We have the right of way but the other has not pulled over yet: stand still.
-    WaitForAnswer,
-    /// Pass in the lane through `origin` along `heading`.
-    Pass {
-        /// A point of the lane.
-        origin: [f64; 2],
-        /// Its direction.
-        heading: f64,
-    },
-    /// Pull over to `spot` (facing `heading`) and stay there.
-    PullOver {
-        /// Where to park.
-        spot: [f64; 2],
-        /// Facing.
-        heading: f64,
-    },
+    /// Stand still (waiting for the other to yield, or parked until it has passed).
+    Hold,
+    /// Pull over for this peer now (asked once; then [`Decision::Hold`] until
+    /// [`Traffic::parked`] is called).
+    PullOver(Peer),
 }
 
 /// One navigator's side of the negotiation.
@@ -94,33 +148,46 @@ pub enum Decision {
 pub struct Traffic {
     name: String,
     peers: Vec<Peer>,
-    /// The peer we yield to and where we park, while yielding.
-    yielding_to: Option<(String, [f64; 2], f64)>,
-    /// The peer we pass and our lane, while passing.
-    passing: Option<(String, [f64; 2], f64)>,
-    /// Peers we have already crossed; not met again until they are far away.
+    role: Role,
+    /// Peers we have already met; not met again until they are far away.
     crossed: Vec<String>,
 }
 
-fn ahead(me: Pose, other: Pose) -> bool {
-    let (dx, dy) = (other.x - me.x, other.y - me.y);
-    dx * me.theta.cos() + dy * me.theta.sin() > 0.5
+fn along(me: Pose, other: Pose) -> f64 {
+    (other.x - me.x) * me.theta.cos() + (other.y - me.y) * me.theta.sin()
+}
+
+fn across(me: Pose, other: Pose) -> f64 {
+    -(other.x - me.x) * me.theta.sin() + (other.y - me.y) * me.theta.cos()
 }
 
 fn facing(a: Pose, b: Pose) -> bool {
-    let d = (a.theta - b.theta + std::f64::consts::PI).rem_euclid(std::f64::consts::TAU) - std::f64::consts::PI;
-    d.abs() > 2.4 // more than about 137° apart
+    crate::geom::wrap(a.theta - b.theta).abs() > 2.4 // more than about 137° apart
 }
 
 impl Traffic {
     /// The rule for the navigator called `name`.
     pub fn new(name: &str) -> Self {
-        Self { name: name.to_owned(), peers: Vec::new(), yielding_to: None, passing: None, crossed: Vec::new() }
+        Self { name: name.to_owned(), peers: Vec::new(), role: Role::Free, crossed: Vec::new() }
     }
 
-    /// Whether we are pulled over (what we say).
-    pub fn yielding(&self) -> bool {
-        self.yielding_to.is_some()
+    /// What we say we are doing.
+    pub fn state(&self) -> State {
+        match self.role {
+            Role::PullingOver { .. } => State::Pull,
+            Role::Parked { .. } => State::Park,
+            _ => State::Go,
+        }
+    }
+
+    /// Whether a negotiation is going on.
+    pub fn negotiating(&self) -> bool {
+        self.role != Role::Free
+    }
+
+    /// The peers heard lately.
+    pub fn peers(&self) -> &[Peer] {
+        &self.peers
     }
 
     /// Takes in a message heard at `now_s`.
@@ -133,190 +200,211 @@ impl Traffic {
         }
     }
 
-    /// Decides for this tick, with our pose estimate.
-    pub fn decide(&mut self, me: Pose, now_s: f64) -> Decision {
-        self.peers.retain(|p| now_s - p.heard_s <= FORGET_S);
-        if let Some((other, spot, heading)) = self.yielding_to.clone() {
-            let passed = match self.peers.iter().find(|p| p.name == other) {
-                // Behind us (or gone past the parked chair) or well away: carry on.
-                Some(p) => !ahead(me, p.pose) && (p.pose.x - me.x).hypot(p.pose.y - me.y) > 1.2,
-                None => true,
-            };
-            if passed {
-                self.yielding_to = None;
-                self.crossed.push(other);
-                return Decision::Go;
-            }
-            return Decision::PullOver { spot, heading };
+    /// Says that the pull-over is over: we are parked and say so.
+    pub fn parked(&mut self) {
+        if let Role::PullingOver { peer } = &self.role {
+            self.role = Role::Parked { peer: peer.clone() };
         }
-        if let Some((other, origin, heading)) = self.passing.clone() {
-            let behind = match self.peers.iter().find(|p| p.name == other) {
-                Some(p) => !ahead(me, p.pose) && (p.pose.x - me.x).hypot(p.pose.y - me.y) > 1.5,
-                None => true,
-            };
-            if behind {
-                self.passing = None;
-                self.crossed.push(other);
-                return Decision::Go;
+    }
+
+    /// Gives up the negotiation on our side (no room to pull over here): the other will go
+    /// on after its wait, and its safety layer keeps it off us.
+    pub fn give_up(&mut self) {
+        if let Role::PullingOver { peer } | Role::Parked { peer } | Role::Waiting { peer, .. } =
+            std::mem::replace(&mut self.role, Role::Free)
+        {
+            self.crossed.push(peer);
+        }
+    }
+
+    fn peer(&self, name: &str) -> Option<&Peer> {
+        self.peers.iter().find(|p| p.name == name)
+    }
+
+    /// Whether `peer` has gone past us (or is no longer heard).
+    fn gone_past(&self, me: Pose, peer: &str) -> bool {
+        self.peer(peer).is_none_or(|p| along(me, p.pose) < -PASSED_M)
+    }
+
+    fn finish(&mut self, peer: String) -> Decision {
+        self.role = Role::Free;
+        self.crossed.push(peer);
+        Decision::Go
+    }
+
+    /// Decides for this tick, with our pose estimate and our own rectangle.
+    pub fn decide(&mut self, me: Pose, own: &Footprint, now_s: f64) -> Decision {
+        self.peers.retain(|p| now_s - p.heard_s <= FORGET_S);
+        match self.role.clone() {
+            Role::PullingOver { .. } => return Decision::Hold,
+            Role::Parked { peer } => {
+                return if self.gone_past(me, &peer) { self.finish(peer) } else { Decision::Hold };
             }
-            return Decision::Pass { origin, heading };
+            Role::Waiting { peer, since_s } => match self.peer(&peer).map(|p| p.state) {
+                None => return self.finish(peer),
+                Some(State::Park) => {
+                    self.role = Role::Passing { peer };
+                    return Decision::Go;
+                }
+                Some(_) if now_s - since_s > WAIT_LIMIT_S => return self.finish(peer),
+                Some(_) => return Decision::Hold,
+            },
+            Role::Passing { peer } => {
+                return if self.gone_past(me, &peer) { self.finish(peer) } else { Decision::Go };
+            }
+            Role::Free => {}
         }
         let peers = &self.peers;
         self.crossed
             .retain(|n| peers.iter().any(|p| &p.name == n && (p.pose.x - me.x).hypot(p.pose.y - me.y) < 2.0 * MEET_M));
-        for p in &self.peers {
+        let meeting = self.peers.iter().find(|p| {
             let d = (p.pose.x - me.x).hypot(p.pose.y - me.y);
-            if self.crossed.contains(&p.name) {
-                continue;
-            }
-            if d > MEET_M || !facing(me, p.pose) || !ahead(me, p.pose) || !ahead(p.pose, me) {
-                continue;
-            }
-            if self.name > p.name {
-                // We yield: park to our right, a little ahead, facing the way we were going.
-                let right = me.theta - std::f64::consts::FRAC_PI_2;
-                let spot = [
-                    me.x + PULL_OVER_M * right.cos() + 0.3 * me.theta.cos(),
-                    me.y + PULL_OVER_M * right.sin() + 0.3 * me.theta.sin(),
-                ];
-                self.yielding_to = Some((p.name.clone(), spot, me.theta));
-                return Decision::PullOver { spot, heading: me.theta };
-            }
-            if !p.yielding {
-                return Decision::WaitForAnswer;
-            }
-            let right = me.theta - std::f64::consts::FRAC_PI_2;
-            let origin = [me.x + PASS_OFFSET_M * right.cos(), me.y + PASS_OFFSET_M * right.sin()];
-            self.passing = Some((p.name.clone(), origin, me.theta));
-            return Decision::Pass { origin, heading: me.theta };
+            !self.crossed.contains(&p.name)
+                // One already parked is planned round; one already pulling over may have
+                // seen the meeting a moment before we did.
+                && p.state != State::Park
+                && d <= MEET_M
+                && facing(me, p.pose)
+                && along(me, p.pose) > 0.5
+                && along(p.pose, me) > 0.5
+                && across(me, p.pose).abs() < own.half + p.footprint.half + CLASH_SLACK_M
+        });
+        let Some(p) = meeting.cloned() else { return Decision::Go };
+        if self.name > p.name {
+            self.role = Role::PullingOver { peer: p.name.clone() };
+            Decision::PullOver(p)
+        } else {
+            self.role = Role::Waiting { peer: p.name.clone(), since_s: now_s };
+            Decision::Hold
         }
-        Decision::Go
     }
-}
-
-/// Powers that park the chair at `spot` facing `heading`, from pose estimate `me`: turn toward
-/// the spot, creep to it, then turn to the heading and stop. Gentle, since it happens a metre
-/// from another chair.
-pub fn park(me: Pose, spot: [f64; 2], heading: f64) -> [f64; 2] {
-    let wrap = |a: f64| (a + std::f64::consts::PI).rem_euclid(std::f64::consts::TAU) - std::f64::consts::PI;
-    let (dx, dy) = (spot[0] - me.x, spot[1] - me.y);
-    let dist = dx.hypot(dy);
-    if dist > 0.08 {
-        // Reverse toward it when it is behind us: parking back-and-to-the-side is shorter.
-        let bearing = dy.atan2(dx);
-        let forward = wrap(bearing - me.theta).abs() < std::f64::consts::FRAC_PI_2;
-        let aim = if forward { bearing } else { wrap(bearing + std::f64::consts::PI) };
-        let err = wrap(aim - me.theta);
-        if err.abs() > 0.35 {
-            let t = (0.6 * err).clamp(-0.25, 0.25);
-            return [-t, t];
-        }
-        let v = (0.6 * dist).clamp(0.08, 0.25) * if forward { 1.0 } else { -1.0 };
-        let t = (0.8 * err).clamp(-0.15, 0.15);
-        return [v - t, v + t];
-    }
-    let err = wrap(heading - me.theta);
-    if err.abs() > 0.05 {
-        let t = (0.6 * err).clamp(-0.2, 0.2);
-        let t = if t.abs() < 0.05 { 0.05 * t.signum() } else { t };
-        return [-t, t];
-    }
-    [0.0, 0.0]
-}
-
-/// Powers that follow the lane through `origin` along `heading`: steer onto it and along it
-/// at a walking pace.
-pub fn follow_lane(me: Pose, origin: [f64; 2], heading: f64) -> [f64; 2] {
-    let wrap = |a: f64| (a + std::f64::consts::PI).rem_euclid(std::f64::consts::TAU) - std::f64::consts::PI;
-    // Signed distance to the left of the lane, and the heading that closes it within ~1 m.
-    let cross = -(me.x - origin[0]) * heading.sin() + (me.y - origin[1]) * heading.cos();
-    let want = heading - (1.2 * cross).clamp(-0.5, 0.5);
-    let err = wrap(want - me.theta);
-    if err.abs() > 0.6 {
-        let t = (0.6 * err).clamp(-0.25, 0.25);
-        return [-t, t];
-    }
-    let t = (0.9 * err).clamp(-0.2, 0.2);
-    [0.5 - t, 0.5 + t]
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::Body;
 
     fn pose(x: f64, y: f64, deg: f64) -> Pose {
         Pose { x, y, theta: deg.to_radians() }
     }
 
+    const BODY: Body = Body::INTELLWHEELS;
+
+    fn say(name: &str, p: Pose, state: State) -> Vec<u8> {
+        encode(name, p, state, &BODY).into_bytes()
+    }
+
     #[test]
     fn messages_round_trip_and_junk_is_ignored() {
-        let m = encode("chair2", pose(20.0, 6.0, 180.0), true);
-        assert_eq!(m, "nav chair2 20.00 6.00 180.0 yield");
+        let m = encode("chair2", pose(20.0, 6.0, 180.0), State::Park, &BODY);
+        assert_eq!(m, "nav chair2 20.000 6.000 180.0 park 1.10 0.65 0.80");
         let p = decode(m.as_bytes(), 1.0).expect("decodes");
-        assert_eq!((p.name.as_str(), p.yielding, p.pose.x), ("chair2", true, 20.0));
-        for junk in
-            [&b"door open door1"[..], b"nav", b"nav a 1 2", b"nav a 1 2 NaN go", b"nav a 1 2 3 maybe", b"\xff\xfe"]
-        {
+        assert_eq!((p.name.as_str(), p.state, p.pose.x), ("chair2", State::Park, 20.0));
+        assert_eq!(p.footprint, BODY.footprint());
+        for junk in [
+            &b"door open door1"[..],
+            b"nav",
+            b"nav a 1 2",
+            b"nav a 1 2 NaN go 1 1 0.5",
+            b"nav a 1 2 3 maybe 1 1 0.5",
+            b"nav a 1 2 3 go 1 1",
+            b"nav a 1 2 3 go 1 -1 0.5",
+            b"nav a 1 2 3 go 1 1 2",
+            b"nav a 1 2 3 go 1 1 0.5 extra",
+            b"\xff\xfe",
+        ] {
             assert_eq!(decode(junk, 0.0), None, "{junk:?}");
+        }
+        assert!(encode(&"n".repeat(40), pose(-100.0, -100.0, -179.9), State::Park, &BODY).len() <= 100);
+    }
+
+    #[test]
+    fn the_later_name_pulls_over_and_the_other_waits_until_it_is_parked() {
+        let fp = BODY.footprint();
+        let (a, b) = (pose(15.0, 6.0, 0.0), pose(21.0, 6.0, 180.0));
+        let mut one = Traffic::new("chair1");
+        let mut two = Traffic::new("chair2");
+        one.hear(&say("chair2", b, State::Go), 0.0);
+        two.hear(&say("chair1", a, State::Go), 0.0);
+        assert_eq!(one.decide(a, &fp, 0.1), Decision::Hold);
+        let Decision::PullOver(peer) = two.decide(b, &fp, 0.1) else { panic!("chair2 yields") };
+        assert_eq!(peer.name, "chair1");
+        assert_eq!(two.state(), State::Pull);
+        assert_eq!(two.decide(b, &fp, 0.2), Decision::Hold, "pulling over");
+        // While chair2 is pulling over, chair1 still waits.
+        one.hear(&say("chair2", b, State::Pull), 0.2);
+        assert_eq!(one.decide(a, &fp, 0.3), Decision::Hold);
+        let b = pose(19.5, 6.45, 180.0);
+        two.parked();
+        assert_eq!(two.state(), State::Park);
+        one.hear(&say("chair2", b, two.state()), 0.4);
+        assert_eq!(one.decide(a, &fp, 0.5), Decision::Go, "chair1 goes once chair2 is parked");
+        // chair1 goes by; chair2 stays until chair1 is well behind it.
+        let beside = pose(19.4, 5.55, 0.0);
+        two.hear(&say("chair1", beside, State::Go), 5.0);
+        assert_eq!(two.decide(b, &fp, 5.0), Decision::Hold);
+        assert_eq!(one.decide(beside, &fp, 5.0), Decision::Go);
+        let past = pose(21.0, 5.6, 0.0);
+        two.hear(&say("chair1", past, State::Go), 9.0);
+        assert_eq!(two.decide(b, &fp, 9.0), Decision::Go);
+        assert_eq!(two.state(), State::Go);
+        assert_eq!(one.decide(past, &fp, 9.0), Decision::Go);
+        assert!(!one.negotiating(), "chair1 is past chair2");
+        // Met once: they do not negotiate again while near.
+        one.hear(&say("chair2", b, State::Go), 9.1);
+        assert_eq!(one.decide(past, &fp, 9.2), Decision::Go);
+        assert!(!one.negotiating() && !two.negotiating());
+    }
+
+    #[test]
+    fn the_chair_with_the_right_of_way_waits_even_when_it_hears_of_the_meeting_late() {
+        let fp = BODY.footprint();
+        let (a, b) = (pose(15.0, 6.0, 0.0), pose(21.0, 6.0, 180.0));
+        let mut one = Traffic::new("chair1");
+        // chair2 saw the meeting first and is already pulling over.
+        one.hear(&say("chair2", b, State::Pull), 0.0);
+        assert_eq!(one.decide(a, &fp, 0.1), Decision::Hold);
+        one.hear(&say("chair2", pose(19.0, 6.45, 180.0), State::Park), 3.0);
+        assert_eq!(one.decide(a, &fp, 3.1), Decision::Go);
+        assert!(one.negotiating(), "passing");
+        // A chair already parked head-on is simply planned round.
+        let mut three = Traffic::new("chair1");
+        three.hear(&say("chair0", b, State::Park), 0.0);
+        assert_eq!(three.decide(a, &fp, 0.1), Decision::Go);
+        assert!(!three.negotiating());
+    }
+
+    #[test]
+    fn chairs_going_the_same_way_far_apart_or_on_separate_lines_do_not_negotiate() {
+        let fp = BODY.footprint();
+        let me = pose(15.0, 6.0, 0.0);
+        let cases = [
+            (pose(17.0, 6.0, 0.0), 0.0, "same direction"),
+            (pose(25.0, 6.0, 180.0), 0.0, "10 m away"),
+            (pose(13.0, 6.0, 180.0), 0.0, "behind, going away"),
+            (pose(18.0, 8.0, 180.0), 0.0, "a lane 2 m to the side"),
+            (pose(18.0, 6.0, 180.0), 5.0, "not heard for 5 s"),
+        ];
+        for (other, now, why) in cases {
+            let mut one = Traffic::new("chair1");
+            one.hear(&say("chair2", other, State::Go), 0.0);
+            assert_eq!(one.decide(me, &fp, now), Decision::Go, "{why}");
+            assert!(!one.negotiating(), "{why}");
         }
     }
 
     #[test]
-    fn the_later_name_yields_and_the_other_waits_for_its_answer() {
-        let (a, b) = (pose(15.0, 6.0, 0.0), pose(19.0, 6.0, 180.0));
+    fn a_peer_that_never_yields_is_waited_for_only_so_long() {
+        let fp = BODY.footprint();
+        let (a, b) = (pose(15.0, 6.0, 0.0), pose(20.0, 6.0, 180.0));
         let mut one = Traffic::new("chair1");
-        let mut two = Traffic::new("chair2");
-        one.hear(encode("chair2", b, false).as_bytes(), 0.0);
-        two.hear(encode("chair1", a, false).as_bytes(), 0.0);
-        assert_eq!(one.decide(a, 0.1), Decision::WaitForAnswer);
-        let Decision::PullOver { spot, heading } = two.decide(b, 0.1) else { panic!("chair2 yields") };
-        // Its right, facing west, is north: y grows.
-        assert!(spot[1] > 6.3 && (heading - std::f64::consts::PI).abs() < 1e-9, "{spot:?}");
-        assert!(two.yielding());
-        one.hear(encode("chair2", b, true).as_bytes(), 0.2);
-        // chair1 passes in a lane 0.45 m to its right (south), then drives on.
-        let Decision::Pass { origin, heading } = one.decide(a, 0.3) else { panic!("chair1 passes") };
-        assert!((origin[1] - (6.0 - PASS_OFFSET_M)).abs() < 1e-9 && heading == 0.0, "{origin:?}");
-        one.hear(encode("chair2", b, true).as_bytes(), 4.0);
-        assert!(matches!(one.decide(pose(18.0, 5.55, 0.0), 4.0), Decision::Pass { .. }), "still beside it");
-        assert_eq!(one.decide(pose(20.6, 5.55, 0.0), 4.1), Decision::Go, "1.6 m past it");
-        // Once chair1 is behind chair2, chair2 goes on.
-        two.hear(encode("chair1", pose(18.0, 5.6, 0.0), false).as_bytes(), 5.0);
-        assert!(matches!(two.decide(pose(18.8, 6.45, 180.0), 5.0), Decision::PullOver { .. }));
-        two.hear(encode("chair1", pose(20.5, 5.6, 0.0), false).as_bytes(), 9.0);
-        assert_eq!(two.decide(pose(18.8, 6.45, 180.0), 9.0), Decision::Go);
-        assert!(!two.yielding());
-    }
-
-    #[test]
-    fn chairs_going_the_same_way_or_far_apart_do_not_negotiate() {
-        let mut one = Traffic::new("chair1");
-        one.hear(encode("chair2", pose(17.0, 6.0, 0.0), false).as_bytes(), 0.0);
-        assert_eq!(one.decide(pose(15.0, 6.0, 0.0), 0.0), Decision::Go, "same direction");
-        one.hear(encode("chair2", pose(25.0, 6.0, 180.0), false).as_bytes(), 0.0);
-        assert_eq!(one.decide(pose(15.0, 6.0, 0.0), 0.0), Decision::Go, "10 m away");
-        one.hear(encode("chair2", pose(13.0, 6.0, 180.0), false).as_bytes(), 0.0);
-        assert_eq!(one.decide(pose(15.0, 6.0, 0.0), 0.0), Decision::Go, "behind, going away");
-        one.hear(encode("chair2", pose(18.0, 6.0, 180.0), false).as_bytes(), 0.0);
-        assert_eq!(one.decide(pose(15.0, 6.0, 0.0), 5.0), Decision::Go, "not heard for 5 s");
-    }
-
-    #[test]
-    fn the_lane_is_joined_and_held() {
-        // 0.3 m left of an eastward lane: steer right (left wheel faster).
-        let p = follow_lane(pose(0.0, 0.3, 0.0), [0.0, 0.0], 0.0);
-        assert!(p[0] > p[1] && p[0] > 0.0, "{p:?}");
-        assert_eq!(follow_lane(pose(3.0, 0.0, 0.0), [0.0, 0.0], 0.0), [0.5, 0.5]);
-    }
-
-    #[test]
-    fn parking_turns_creeps_and_squares_up() {
-        let p = park(pose(0.0, 0.0, 0.0), [0.2, 1.0], 0.0);
-        assert!(p[1] > 0.0 && p[0] < 0.0, "turn left toward it: {p:?}");
-        let p = park(pose(0.0, 0.0, 0.0), [1.0, 0.0], 0.0);
-        assert!(p[0] > 0.0 && p[1] > 0.0, "ahead: forward {p:?}");
-        let p = park(pose(0.0, 0.0, 0.0), [-1.0, 0.0], 0.0);
-        assert!(p[0] < 0.0 && p[1] < 0.0, "behind: reverse {p:?}");
-        assert_eq!(park(pose(1.0, 1.0, 30.0), [1.0, 1.0], 30f64.to_radians()), [0.0, 0.0]);
+        one.hear(&say("chair2", b, State::Go), 0.0);
+        assert_eq!(one.decide(a, &fp, 0.0), Decision::Hold);
+        one.hear(&say("chair2", b, State::Go), 30.0);
+        assert_eq!(one.decide(a, &fp, 30.0), Decision::Hold);
+        one.hear(&say("chair2", b, State::Go), 41.0);
+        assert_eq!(one.decide(a, &fp, 41.0), Decision::Go);
+        assert!(!one.negotiating());
     }
 }

@@ -407,3 +407,196 @@ mod untuned_maps {
         check(&s, 1..=3);
     }
 }
+
+mod corridor_swap {
+    use super::*;
+    use hub::world::Message;
+    use navigator::Pilot;
+
+    /// One chair of a meeting: where it starts and where it goes.
+    struct Chair {
+        name: &'static str,
+        start: [f64; 3],
+        goal: [f64; 2],
+    }
+
+    /// How each chair did, and how near the two came.
+    #[derive(Debug)]
+    struct Swap {
+        seed: u64,
+        /// Per chair: arrived, arrival time, contacts, end.
+        chairs: Vec<(bool, f64, u64, V2)>,
+        /// The least distance between the two chairs' rectangles, metres.
+        min_gap_m: f64,
+        /// The least clearance of either chair to a wall, metres.
+        min_clearance_m: f64,
+    }
+
+    /// The distance between two chairs' rectangles (0 when they overlap).
+    fn gap(fp: &Footprint, a: &Robot, b: &Robot) -> f64 {
+        let pa = Pose::new(a.pose.x, a.pose.y, a.pose.theta);
+        let pb = Pose::new(b.pose.x, b.pose.y, b.pose.theta);
+        if fp.meets(&pa, fp, &pb, 0.0) {
+            return 0.0;
+        }
+        let (ca, cb) = (fp.corners(&pa, 0.0), fp.corners(&pb, 0.0));
+        let mut best = f64::INFINITY;
+        for k in 0..4 {
+            let (a0, a1) = (pb.to_body(ca[k]), pb.to_body(ca[(k + 1) % 4]));
+            let (b0, b1) = (pa.to_body(cb[k]), pa.to_body(cb[(k + 1) % 4]));
+            best = best.min(fp.body_segment_distance(a0, a1)).min(fp.body_segment_distance(b0, b1));
+        }
+        best
+    }
+
+    fn simulate(chairs: &[Chair], seconds: f64, seed: u64) -> Swap {
+        let trace = std::env::var_os("NAV_TRACE").is_some();
+        let lab = builtin::map("liacc").expect("a built-in map").lab.clone();
+        let params = Params::default();
+        let ticks_per_m = params.encoder_ticks_per_rev as f64 / (std::f64::consts::TAU * params.wheel_radius_m);
+        let mut world = World::new(&lab, params, seed).expect("a valid world");
+        let body = Body::INTELLWHEELS;
+        let fp = body.footprint();
+        let checkpoints: Vec<[f64; 3]> = chairs.iter().map(|c| [c.goal[0], c.goal[1], 0.5]).collect();
+        let (header, items) = map_items(&lab, lab.walls.len(), &checkpoints);
+        let mut fleet = Vec::new();
+        for c in chairs {
+            let cfg = NavConfig {
+                checkpoints: vec![Checkpoint { pos: V2::new(c.goal[0], c.goal[1]), radius_m: 0.5 }],
+                start: Pose::from_deg(c.start[0], c.start[1], c.start[2]),
+                encoder_ticks_per_m: ticks_per_m,
+                ..NavConfig::intellwheels()
+            };
+            let sensors = cfg
+                .sensors
+                .iter()
+                .map(|m| ProximitySpec {
+                    x_m: m.x_m,
+                    y_m: m.y_m,
+                    angle_rad: m.angle_rad,
+                    cone_rad: m.cone_rad,
+                    range_m: Some(m.range_m),
+                })
+                .collect();
+            let spec = RobotSpec::at(c.start[0], c.start[1], c.start[2])
+                .body(body.width_m, body.height_m, body.com)
+                .motors(cfg.max_speed_mps, cfg.accel_curve)
+                .sensors(sensors)
+                .named(c.name);
+            let handle = world.add_robot(spec).expect("a valid chair");
+            let nav_map = NavMap::from_items(&header, &items).expect("the published map reads back");
+            fleet.push((handle, Pilot::new(c.name, Navigator::new(nav_map, cfg)), None::<f64>));
+        }
+        world.refresh_sensors();
+        let mut min_gap = f64::INFINITY;
+        let mut min_clearance = f64::INFINITY;
+        let limit = (seconds / 0.1).round() as u64;
+        for tick in 0..=limit {
+            let time_s = tick as f64 * 0.1;
+            let mut actions = Vec::new();
+            for (handle, pilot, done) in &mut fleet {
+                let name = pilot.name().to_owned();
+                let robot = world.robot(*handle).expect("a chair");
+                min_clearance = min_clearance.min(clearance(&lab, &fp, robot));
+                let block = sensor_block(robot, tick);
+                let input = VirtualSensors.read(&block, time_s);
+                let heard: Vec<&[u8]> = robot.inbox.iter().map(|h| h.message.as_bytes()).collect();
+                let out = pilot.tick(&input, heard);
+                if trace {
+                    let p = pilot.navigator().pose();
+                    eprintln!(
+                        "seed {seed} t {time_s:5.1} {} true ({:.3}, {:.3}, {:6.1}°) est ({:.3}, {:.3}) powers ({:+.2}, {:+.2}) {:?}",
+                        name,
+                        robot.pose.x,
+                        robot.pose.y,
+                        robot.pose.heading_deg(),
+                        p.x,
+                        p.y,
+                        out.powers[0],
+                        out.powers[1],
+                        pilot.traffic().state(),
+                    );
+                    for n in out.notes.iter().map(|n| n.to_string()).chain(out.events.iter().map(|e| format!("{e:?}")))
+                    {
+                        eprintln!("seed {seed} {name}: {n}");
+                    }
+                }
+                if done.is_none() && pilot.navigator().finished() {
+                    *done = Some(time_s);
+                }
+                let mut action = Action::motors(*handle, out.powers[0], out.powers[1]);
+                action.say = out.say.as_deref().map(|s| Message::new(s.as_bytes()).expect("a short message"));
+                actions.push(action);
+            }
+            let (a, b) = (&fleet[0].0, &fleet[1].0);
+            min_gap = min_gap.min(gap(&fp, world.robot(*a).expect("a chair"), world.robot(*b).expect("a chair")));
+            if fleet.iter().all(|(_, _, done)| done.is_some_and(|t| time_s > t + 2.0)) {
+                break;
+            }
+            world.step(&actions, 0.1);
+        }
+        let chairs = fleet
+            .iter()
+            .map(|(h, pilot, done)| {
+                let r = world.robot(*h).expect("a chair");
+                (
+                    pilot.navigator().finished(),
+                    done.unwrap_or(f64::INFINITY),
+                    r.collision_count,
+                    V2::new(r.pose.x, r.pose.y),
+                )
+            })
+            .collect();
+        Swap { seed, chairs, min_gap_m: min_gap, min_clearance_m: min_clearance }
+    }
+
+    fn seeds(default: std::ops::RangeInclusive<u64>) -> Vec<u64> {
+        match std::env::var_os("NAV_SEEDS") {
+            Some(v) => v
+                .to_string_lossy()
+                .split(',')
+                .flat_map(|t| match t.split_once('-') {
+                    Some((a, b)) => (a.parse().unwrap_or(1)..=b.parse().unwrap_or(0)).collect::<Vec<u64>>(),
+                    None => t.parse().ok().into_iter().collect(),
+                })
+                .collect(),
+            None => default.collect(),
+        }
+    }
+
+    /// The built-in corridor-swap scenario: chair1 east from (14.5, 6.0), chair2 west from
+    /// (24.5, 6.0), in the 1.78 m LIACC corridor; both must arrive without touching anything.
+    #[test]
+    fn two_chairs_meeting_head_on_in_the_corridor_agree_and_both_arrive_untouched() {
+        let chairs = [
+            Chair { name: "chair1", start: [14.5, 6.0, 0.0], goal: [24.5, 6.0] },
+            Chair { name: "chair2", start: [24.5, 6.0, 180.0], goal: [14.5, 6.0] },
+        ];
+        let runs: Vec<Swap> = std::thread::scope(|scope| {
+            let handles: Vec<_> = seeds(1..=3)
+                .into_iter()
+                .map(|seed| {
+                    scope.spawn({
+                        let chairs = &chairs;
+                        move || simulate(chairs, 150.0, seed)
+                    })
+                })
+                .collect();
+            handles.into_iter().map(|h| h.join().expect("a simulation thread")).collect()
+        });
+        assert!(!runs.is_empty());
+        for r in &runs {
+            eprintln!("corridor swap: {r:?}");
+        }
+        for r in &runs {
+            for (k, (arrived, t, contacts, end)) in r.chairs.iter().enumerate() {
+                let goal = V2::new(chairs[k].goal[0], chairs[k].goal[1]);
+                assert!(*arrived && *t <= 150.0, "seed {}: {} did not arrive: {r:?}", r.seed, chairs[k].name);
+                assert_eq!(*contacts, 0, "seed {}: {} touched something: {r:?}", r.seed, chairs[k].name);
+                assert!((*end - goal).norm() <= 0.5, "seed {}: {} stopped at {end:?}", r.seed, chairs[k].name);
+            }
+            assert!(r.min_gap_m > 0.05, "seed {}: the chairs came within {:.3} m", r.seed, r.min_gap_m);
+            assert!(r.min_clearance_m > 0.02, "seed {}: {:.3} m from a wall", r.seed, r.min_clearance_m);
+        }
+    }
+}

@@ -1,0 +1,123 @@
+//! A navigator that keeps to the traffic rule: each tick it hears the other chairs, lets the
+//! rule ([`crate::traffic`]) decide whether to drive, wait, or pull over, has the navigator
+//! carry that out, and says where it is. Without I/O: the agent feeds it from a hub, the
+//! tests from the world model in-process.
+
+use crate::geom::{Footprint, Pose};
+use crate::manoeuvre;
+use crate::navigator::{NavEvent, Navigator};
+use crate::sensors::Input;
+use crate::traffic::{self, Decision, MEET_M, State, Traffic};
+
+/// Speed of the pull-over, m/s: a little below cruising, a few metres from another chair.
+const PULL_OVER_SPEED: f64 = 0.25;
+/// Say where we are every this many ticks when no other chair is near...
+const SAY_EVERY_FAR: u64 = 5;
+/// ...and every tick when one is within this distance, metres (its readings of us are
+/// matched to what we say).
+const NEAR_M: f64 = MEET_M + 3.0;
+
+/// What a tick produced.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PilotOutput {
+    /// Wheel powers, left and right.
+    pub powers: [f64; 2],
+    /// What to say this tick, if anything.
+    pub say: Option<String>,
+    /// What the navigator reported.
+    pub events: Vec<NavEvent>,
+    /// What the traffic rule did, for the user.
+    pub notes: Vec<String>,
+}
+
+/// The navigator and its side of the traffic rule.
+#[derive(Debug)]
+pub struct Pilot {
+    name: String,
+    nav: Navigator,
+    traffic: Traffic,
+    said: Option<State>,
+}
+
+impl Pilot {
+    /// A pilot called `name` (as it registered with the hub) for `nav`.
+    pub fn new(name: &str, nav: Navigator) -> Self {
+        Self { name: name.to_owned(), traffic: Traffic::new(name), nav, said: None }
+    }
+
+    /// The name it goes by.
+    pub fn name(&self) -> &str {
+        &self.name
+    }
+
+    /// The navigator.
+    pub fn navigator(&self) -> &Navigator {
+        &self.nav
+    }
+
+    /// The traffic rule's state.
+    pub fn traffic(&self) -> &Traffic {
+        &self.traffic
+    }
+
+    /// One tick: this tick's readings and the messages heard in it, in; powers and what to
+    /// say, out.
+    pub fn tick<'a>(&mut self, input: &Input, heard: impl IntoIterator<Item = &'a [u8]>) -> PilotOutput {
+        let now = input.time_s;
+        for m in heard {
+            self.traffic.hear(m, now);
+        }
+        let peers = self.traffic.peers();
+        let all: Vec<(Pose, Footprint)> = peers.iter().map(|p| (p.pose, p.footprint)).collect();
+        let parked: Vec<(Pose, Footprint)> =
+            peers.iter().filter(|p| p.state == State::Park).map(|p| (p.pose, p.footprint)).collect();
+        self.nav.set_peers(all, &parked);
+        self.nav.perceive(input);
+        let me = self.nav.pose();
+        let own = self.nav.model().footprint;
+        let mut notes = Vec::new();
+        match self.traffic.decide(me, &own, now) {
+            Decision::Go => {
+                if !self.nav.manoeuvring() && self.nav.holding() {
+                    notes.push(format!("going on at t {now:.1} s"));
+                }
+                self.nav.resume();
+            }
+            Decision::Hold => {
+                if self.traffic.state() == State::Pull {
+                    if !self.nav.manoeuvring() {
+                        self.traffic.parked();
+                        notes.push(format!("parked at t {now:.1} s; waiting for the other chair to pass"));
+                    }
+                } else if !self.nav.holding() {
+                    self.nav.hold();
+                    notes.push(format!("waiting at t {now:.1} s for the chair ahead to pull over"));
+                }
+            }
+            Decision::PullOver(peer) => match manoeuvre::pull_over(self.nav.model(), me, &peer) {
+                Some(p) => {
+                    notes.push(format!(
+                        "pulling over {:.2} m to the {} at t {now:.1} s to let {} pass",
+                        p.offset_m.abs(),
+                        p.side(),
+                        peer.name
+                    ));
+                    self.nav.manoeuvre(&p.path, PULL_OVER_SPEED);
+                }
+                None => {
+                    notes.push(format!("no room to pull over here for {} at t {now:.1} s; going on", peer.name));
+                    self.traffic.give_up();
+                }
+            },
+        }
+        let out = self.nav.act(input);
+        let state = if self.nav.finished() { State::Park } else { self.traffic.state() };
+        let near = self.traffic.peers().iter().any(|p| (p.pose.pos() - me.pos()).norm() < NEAR_M);
+        let say = (near || input.tick.is_multiple_of(SAY_EVERY_FAR) || self.said != Some(state))
+            .then(|| traffic::encode(&self.name, self.nav.pose(), state, &self.nav.config().body));
+        if say.is_some() {
+            self.said = Some(state);
+        }
+        PilotOutput { powers: out.powers, say, events: out.events, notes }
+    }
+}
