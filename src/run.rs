@@ -175,15 +175,18 @@ impl Kid {
         Ok(Self { child: Some(child), what: what.to_owned() })
     }
 
-    /// Copies the child's stderr, line by line, to `sink` (prefixed), on a thread.
+    /// Copies the child's stderr, line by line, to `sink` (prefixed, unless the line already
+    /// starts with the prefix's word, as agents' lines do: `navigator chair1: …`), on a thread.
     fn forward_stderr(&mut self, prefix: String, echo: bool, sink: std::sync::mpsc::Sender<String>) {
         let Some(err) = self.child.as_mut().and_then(|c| c.stderr.take()) else { return };
         std::thread::spawn(move || {
+            let word = prefix.trim_end_matches(": ").to_owned();
             for line in std::io::BufReader::new(err).lines().map_while(Result::ok) {
+                let line = if !word.is_empty() && line.starts_with(&word) { line } else { format!("{prefix}{line}") };
                 if echo {
-                    eprintln!("{prefix}{line}");
+                    eprintln!("{line}");
                 }
-                let _ = sink.send(format!("{prefix}{line}"));
+                let _ = sink.send(line);
             }
         });
     }

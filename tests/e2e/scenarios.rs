@@ -77,23 +77,38 @@ fn builtin_door_lets_the_chair_through_for_every_seed() {
 
 #[test]
 fn the_same_seed_in_lock_step_gives_the_same_run() {
-    let (a, b) = (out_dir("same-a"), out_dir("same-b"));
-    for d in [&a, &b] {
-        let (ok, out, err) = iwsim(
-            &["run", "builtin:door", "--lockstep", "--headless", "--seed", "7", "--out", d.to_str().expect("utf-8")],
-            Duration::from_secs(60),
-        );
-        assert!(ok, "{out}\n{err}");
+    // The door (a door agent and a scripted chair) and the corridor swap (two navigators
+    // that talk to each other, so message order counts too).
+    for (scenario, logs) in [("door", &["chair1.csv"][..]), ("corridor-swap", &["chair1.csv", "chair2.csv"][..])] {
+        let (a, b) = (out_dir(&format!("same-{scenario}-a")), out_dir(&format!("same-{scenario}-b")));
+        for d in [&a, &b] {
+            let (ok, out, err) = iwsim(
+                &[
+                    "run",
+                    &format!("builtin:{scenario}"),
+                    "--lockstep",
+                    "--headless",
+                    "--seed",
+                    "7",
+                    "--out",
+                    d.to_str().expect("utf-8"),
+                ],
+                Duration::from_secs(120),
+            );
+            assert!(ok, "{out}\n{err}");
+        }
+        let (sa, sb) = (summary(&a), summary(&b));
+        assert_eq!(sa["state_hash"], sb["state_hash"], "{scenario}");
+        for log in logs {
+            assert_eq!(
+                std::fs::read(a.join(log)).expect("log a"),
+                std::fs::read(b.join(log)).expect("log b"),
+                "{scenario}: identical {log}"
+            );
+        }
+        let _ = std::fs::remove_dir_all(a);
+        let _ = std::fs::remove_dir_all(b);
     }
-    let (sa, sb) = (summary(&a), summary(&b));
-    assert_eq!(sa["state_hash"], sb["state_hash"]);
-    assert_eq!(
-        std::fs::read(a.join("chair1.csv")).expect("log a"),
-        std::fs::read(b.join("chair1.csv")).expect("log b"),
-        "identical logs"
-    );
-    let _ = std::fs::remove_dir_all(a);
-    let _ = std::fs::remove_dir_all(b);
 }
 
 #[test]
@@ -262,14 +277,52 @@ fn builtin_slalom_reaches_checkpoint_2_without_contact_for_three_seeds_with_nois
         assert_eq!((c["checkpoints_reached"].as_u64(), c["collisions"].as_u64()), (Some(2), Some(0)), "{c}");
         // It went round obstacle A below it and B above it: between x 17 and 17.6 it was
         // under y 6.1, between 19.4 and 20 above 5.9 (the log has every tick).
-        let log = std::fs::read_to_string(dir.join(format!("seed-{seed}/chair1.csv"))).expect("log");
-        let rows: Vec<Vec<f64>> =
-            log.lines().skip(1).map(|l| l.split(',').map(|v| v.parse().unwrap_or(f64::NAN)).collect()).collect();
-        let header: Vec<&str> = log.lines().next().expect("header").split(',').collect();
-        let (cx, cy) =
-            (header.iter().position(|h| *h == "x_m").expect("x"), header.iter().position(|h| *h == "y_m").expect("y"));
-        assert!(rows.iter().filter(|r| (17.0..17.6).contains(&r[cx])).all(|r| r[cy] < 6.1), "seed {seed}: below A");
-        assert!(rows.iter().filter(|r| (19.4..20.0).contains(&r[cx])).all(|r| r[cy] > 5.9), "seed {seed}: above B");
+        let track = trajectory(&dir.join(format!("seed-{seed}/chair1.csv")));
+        assert!(track.iter().filter(|r| (17.0..17.6).contains(&r[1])).all(|r| r[2] < 6.1), "seed {seed}: below A");
+        assert!(track.iter().filter(|r| (19.4..20.0).contains(&r[1])).all(|r| r[2] > 5.9), "seed {seed}: above B");
+    }
+    let _ = std::fs::remove_dir_all(dir);
+}
+
+/// A robot's log as rows of (tick, x, y).
+fn trajectory(path: &Path) -> Vec<[f64; 3]> {
+    let p = path.display().to_string();
+    let log = agent_sdk::log::LogTable::read(path).expect("a readable log");
+    let col = |name| log.column(name, &p).expect("a column of the log");
+    let (t, x, y) = (col("tick"), col("x_m"), col("y_m"));
+    log.rows.iter().map(|r| [r[t], r[x], r[y]]).collect()
+}
+
+#[test]
+fn builtin_corridor_swap_both_chairs_pass_each_other_without_contact_for_two_seeds() {
+    let dir = out_dir("corridor-swap");
+    let (ok, out, err) = iwsim(
+        &["run", "builtin:corridor-swap", "--lockstep", "--seeds", "1..2", "--out", dir.to_str().expect("utf-8")],
+        Duration::from_secs(300),
+    );
+    assert!(ok, "{out}\n{err}");
+    assert!(out.contains("success rate 2/2 (100 %)") && out.contains("collisions 0 in all"), "{out}");
+    for seed in 1..=2 {
+        let run = dir.join(format!("seed-{seed}"));
+        let s = summary(&run);
+        for name in ["chair1", "chair2"] {
+            let c = robot(&s, name);
+            assert_eq!((c["checkpoints_reached"].as_u64(), c["collisions"].as_u64()), (Some(1), Some(0)), "{c}");
+        }
+        // They went by each other side by side: chair2, which yields (its name sorts last),
+        // had pulled over to its right (north) and stood still while chair1 went by south
+        // of it, with the two chairs' 0.65 m widths and a gap between their centre lines.
+        let (one, two) = (trajectory(&run.join("chair1.csv")), trajectory(&run.join("chair2.csv")));
+        let beside = one
+            .iter()
+            .zip(&two)
+            .position(|(a, b)| a[0] == b[0] && a[1] >= b[1])
+            .unwrap_or_else(|| panic!("seed {seed}: chair1 never got past chair2"));
+        let (a, b) = (one[beside], two[beside]);
+        assert!(b[2] - a[2] > 0.7, "seed {seed}: side by side at tick {}: chair1 {a:?}, chair2 {b:?}", a[0]);
+        let still = &two[beside.saturating_sub(20)..(beside + 20).min(two.len())];
+        let moved = still.iter().map(|r| (r[1] - b[1]).hypot(r[2] - b[2])).fold(0.0, f64::max);
+        assert!(moved < 0.01, "seed {seed}: chair2 moved {moved} m while chair1 went by");
     }
     let _ = std::fs::remove_dir_all(dir);
 }

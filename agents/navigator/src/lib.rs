@@ -17,8 +17,12 @@
 //!   a reactive layer that slows or stops for readings nothing in the model explains.
 //! - **Sensor source** ([`sensors`]): Virtual (the hub's readings) runs; Real and Augmented
 //!   are designed in the types and wait for the serial bridge.
+//! - **Other chairs** ([`traffic`], [`manoeuvre`], [`Pilot`]): navigators say where they are;
+//!   a chair parked for good or for us is planned round from what it said, and two that meet
+//!   head-on agree by messages who pulls over.
 //!
-//! [`Navigator::step`] is the logic without I/O; [`run`] connects it to a hub.
+//! [`Navigator::step`] is the logic without I/O, [`Pilot::tick`] the same with the traffic
+//! rule; [`run`] connects a `Pilot` to a hub.
 //!
 //! ```
 //! use navigator::geom::{Pose, V2};
@@ -96,7 +100,7 @@ pub struct NavigatorArgs {
     /// towards the second.
     #[arg(long, value_name = "X,Y,DIR", value_parser = parse_pose, allow_hyphen_values = true)]
     pub pose: Option<[f64; 3]>,
-    /// A checkpoint X,Y[,R] in metres; passing within R (default 0.5 m) counts. Repeat it in
+    /// A checkpoint X,Y or X,Y,R in metres; passing within R (default 0.5 m) counts. Repeat it in
     /// driving order (at least one); the chair stops at the last, within --arrive.
     #[arg(
         long = "checkpoint",

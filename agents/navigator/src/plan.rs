@@ -17,8 +17,8 @@ const SOFT: u8 = 1;
 /// by (see [`Costmap::build`]).
 const NARROW: u8 = 2;
 
-/// Cells the centre of movement may use: 0 free, [`SOFT`] too near an obstacle for the chair
-/// to sit there aligned with a passage, [`HARD`] occupied.
+/// Cells the centre of movement may use: 0 free, `SOFT` (1) too near an obstacle for the chair
+/// to sit there aligned with a passage, `HARD` (255) occupied.
 #[derive(Debug, Clone)]
 pub struct Costmap {
     /// The grid.
