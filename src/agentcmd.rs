@@ -1,6 +1,6 @@
 //! `iwsim agent wheelchair`: the thesis's "Wheelchair Robotic Agent" — several chairs in one
-//! process, each with its body, motors, sensors, start pose and a script (constant powers or
-//! waypoints), on the agent SDK.
+//! process, each with its body, motors, sensors, start pose, type and a script (constant
+//! powers or waypoints), on the agent SDK.
 
 use std::path::Path;
 use std::process::ExitCode;
@@ -8,10 +8,23 @@ use std::process::ExitCode;
 use agent_sdk::log::RobotLog;
 use agent_sdk::{Agent, Wait};
 use anyhow::Context as _;
-use ipc_types::{ActionBlock, MAX_PROXIMITY, REG_HAS_POSE, RobotRegistration, SensorSpec};
+use ipc_types::{ActionBlock, COLLISION, MAX_PROXIMITY, REG_HAS_POSE, RobotKind, RobotRegistration, SensorSpec};
 use serde::Deserialize;
 
 use crate::cli::WheelchairArgs;
+
+/// How a chair moves (the thesis's robot `Type`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Deserialize, clap::ValueEnum)]
+#[serde(rename_all = "lowercase")]
+pub enum ChairKind {
+    /// The hub moves it from its motor powers.
+    #[default]
+    Simulated,
+    /// It moves itself and tells the hub where it is, as a physical chair's controller does
+    /// in mixed reality: here the agent stands in for the chair, integrating the thesis's
+    /// motor filter and kinematics (eqs. 4.4–4.9) from its script's powers.
+    Real,
+}
 
 /// One chair of a `--config` file.
 #[derive(Debug, Clone, Deserialize)]
@@ -25,6 +38,9 @@ pub struct ChairConfig {
     /// Start pose x, y metres, heading degrees (default: a grid slot).
     #[serde(default)]
     pub pose: Option<[f64; 3]>,
+    /// `simulated` (default) or `real`.
+    #[serde(default)]
+    pub kind: ChairKind,
     /// Length, width (wheel track), centre of movement.
     #[serde(default = "default_body")]
     pub body: [f64; 3],
@@ -96,6 +112,7 @@ fn chairs_from_args(args: &WheelchairArgs) -> Vec<ChairConfig> {
             pose: args
                 .pose
                 .map(|[x, y, dir]| [x + args.spacing * (k % 10) as f64, y + args.spacing * (k / 10) as f64, dir]),
+            kind: args.kind,
             body: [args.width, args.height, args.com],
             max_speed: args.max_speed,
             accel_curve: args.accel_curve,
@@ -114,6 +131,10 @@ fn registration(c: &ChairConfig) -> RobotRegistration {
     [reg.width_m, reg.height_m, reg.com] = c.body;
     reg.max_speed_mps = c.max_speed;
     reg.accel_curve = c.accel_curve;
+    reg.kind = match c.kind {
+        ChairKind::Simulated => RobotKind::Simulated,
+        ChairKind::Real => RobotKind::Real,
+    } as u32;
     if let Some(p) = c.pose {
         reg.flags |= REG_HAS_POSE;
         reg.pose = p;
@@ -123,6 +144,39 @@ fn registration(c: &ChairConfig) -> RobotRegistration {
     }
     reg.sensor_count = c.sensors.len() as u32;
     reg
+}
+
+/// A physical chair's motion as the agent computes it for a `real` chair: the motor filter
+/// `out = (1 − curve)·in + curve·out` and the differential-drive kinematics of thesis eqs.
+/// 4.4–4.9, stepped as the hub steps simulated chairs, so that a real chair on a script goes
+/// where a simulated one would (noise apart).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct OwnMotion {
+    /// Filtered motor outputs, left and right.
+    pub out: [f64; 2],
+    /// x, y metres; heading radians.
+    pub pose: [f64; 3],
+}
+
+impl OwnMotion {
+    /// At rest at `pose` (x, y metres, heading degrees, as the hub reports it).
+    pub fn at(pose: [f64; 3]) -> Self {
+        Self { out: [0.0; 2], pose: [pose[0], pose[1], pose[2].to_radians()] }
+    }
+
+    /// One tick of `dt` seconds with `powers`; returns the new pose as x, y, heading degrees.
+    pub fn step(&mut self, c: &ChairConfig, powers: [f64; 2], dt: f64) -> [f64; 3] {
+        for (out, p) in self.out.iter_mut().zip(powers) {
+            *out = (1.0 - c.accel_curve) * p.clamp(-1.0, 1.0) + c.accel_curve * *out;
+        }
+        let [l, r] = self.out;
+        let v = c.max_speed * (r + l) / 2.0;
+        let w = c.max_speed * (r - l) / c.body[1];
+        let [x, y, th] = self.pose;
+        let th2 = (th + w * dt + std::f64::consts::PI).rem_euclid(std::f64::consts::TAU) - std::f64::consts::PI;
+        self.pose = [x + v * th.cos() * dt, y + v * th.sin() * dt, th2];
+        [self.pose[0], self.pose[1], th2.to_degrees()]
+    }
 }
 
 /// Powers that steer a chair at `pose` to `goal`: turn on the spot when far off course,
@@ -169,6 +223,14 @@ fn drive(agent: &mut Agent, args: &WheelchairArgs, chairs: &[ChairConfig]) -> an
     let mut logs: Vec<Option<RobotLog>> = chairs.iter().map(|_| None).collect();
     let wait = if args.busy_poll { Wait::BusyPoll } else { Wait::Blocking };
     let mut next_waypoint = vec![0usize; chairs.len()];
+    // Real chairs move themselves, one tick of the hub's cycle at a time.
+    let dt = if chairs.iter().any(|c| c.kind == ChairKind::Real) {
+        let cycle_ms = agent.map().context("reading the hub's map header for its cycle")?.header.cycle_ms;
+        if cycle_ms > 0 { cycle_ms as f64 / 1000.0 } else { 0.1 }
+    } else {
+        0.1
+    };
+    let mut own: Vec<Option<OwnMotion>> = chairs.iter().map(|_| None).collect();
     let mut actions: Vec<ActionBlock> = Vec::with_capacity(chairs.len());
     let mut answered = 0u64;
     let mut latencies_ns = Vec::new();
@@ -206,7 +268,19 @@ fn drive(agent: &mut Agent, args: &WheelchairArgs, chairs: &[ChairConfig]) -> an
                     log.row(b, tick.sim_time_s, powers)?;
                 }
             }
-            actions.push(ActionBlock::motors(id, powers[0], powers[1]));
+            actions.push(match c.kind {
+                ChairKind::Simulated => ActionBlock::motors(id, powers[0], powers[1]),
+                ChairKind::Real => {
+                    // Start from where the hub placed it; a pose the hub refused (it would
+                    // overlap something) means the chair stopped against it.
+                    let m = own[k].get_or_insert_with(|| OwnMotion::at(b.pose));
+                    if b.present & COLLISION != 0 {
+                        *m = OwnMotion::at(b.pose);
+                    }
+                    let [x, y, dir] = m.step(c, powers, dt);
+                    ActionBlock::pose(id, x, y, dir)
+                }
+            });
         }
         agent.send(tick.tick, &actions)?;
         if args.report_latency {

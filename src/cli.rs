@@ -239,6 +239,10 @@ pub struct WheelchairArgs {
     /// Motor powers LEFT,RIGHT in [-1, 1].
     #[arg(long, value_parser = parse_pair, default_value = "0.5,0.5", allow_hyphen_values = true)]
     pub powers: [f64; 2],
+    /// How the chairs move: simulated (the hub moves them) or real (this agent moves them and
+    /// tells the hub their poses, standing in for physical chairs).
+    #[arg(long, value_enum, default_value = "simulated")]
+    pub kind: crate::agentcmd::ChairKind,
     /// Length along the heading, metres.
     #[arg(long, default_value_t = 1.0)]
     pub width: f64,

@@ -271,3 +271,71 @@ fn a_hung_agent_is_stepped_past_at_the_deadline_and_flagged_lagging() {
     let b_out = b.wait(Duration::from_secs(10));
     assert!(b_out.status.success(), "{}", text(&b_out.stderr));
 }
+
+/// The wheelchair agent's `kind = "real"` chair moves itself and pushes its poses, as a
+/// physical chair's controller does. With the hub's noise on, the simulated chair's motors
+/// are noisy while the real one, on the same script, follows the noiseless model exactly:
+/// the hub takes its poses as they are.
+#[test]
+fn a_real_chair_pushes_its_own_poses_and_the_hub_takes_them() {
+    let s = session("realchair");
+    let dir = std::env::temp_dir().join(format!("iwsim-e2e-realchair-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("a temporary directory");
+    let config = dir.join("chairs.toml");
+    let chair = |name: &str, kind: &str, x: f64| {
+        format!(
+            "[[chairs]]\nname = \"{name}\"\nkind = \"{kind}\"\npose = [{x}, 6.0, 0]\nbody = [0.6, 0.5, 0.5]\n\
+             max_speed = 0.5\naccel_curve = 0.7\npowers = [0.7, 0.8]\n"
+        )
+    };
+    std::fs::write(&config, chair("sim", "simulated", 12.0) + &chair("real", "real", 16.0)).expect("config written");
+    let hub =
+        Proc::spawn(&["hub", "--session", &s, "--lockstep", "--ticks", "40", "--wait-agents", "1", "--seed", "5"]);
+    let agent = Proc::spawn(&[
+        "agent",
+        "wheelchair",
+        "--session",
+        &s,
+        "--config",
+        config.to_str().expect("utf-8"),
+        "--log",
+        dir.to_str().expect("utf-8"),
+    ]);
+    let out = hub.wait(Duration::from_secs(30));
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let a = agent.wait(Duration::from_secs(10));
+    assert!(a.status.success(), "{}", text(&a.stderr));
+    let track = |name: &str| {
+        let path = dir.join(format!("{name}.csv"));
+        let log = agent_sdk::log::LogTable::read(&path).expect("a log");
+        let col = |c| log.column(c, &path.display().to_string()).expect("a column");
+        let (x, y, h) = (col("x_m"), col("y_m"), col("heading_deg"));
+        log.rows.iter().map(|r| [r[x], r[y], r[h]]).collect::<Vec<_>>()
+    };
+    let (sim, real) = (track("sim"), track("real"));
+    assert!(sim.len() >= 40 && real.len() >= 40, "{} and {} rows", sim.len(), real.len());
+    // The same chair and script, noiseless, in this process: row k of a log is the pose after
+    // k ticks.
+    let map = builtin::map("liacc").expect("built in");
+    let mut world = World::new(&map.lab, Params { noise: NoiseParams::NONE, ..Params::default() }, 1).expect("valid");
+    let r = world.add_robot(RobotSpec::at(16.0, 6.0, 0.0).body(0.6, 0.5, 0.5).motors(0.5, 0.7)).expect("free");
+    let mut model = Vec::new();
+    for _ in 0..real.len() {
+        let p = world.robot(r).expect("alive").pose;
+        model.push([p.x, p.y, p.heading_deg()]);
+        world.step(&[Action::motors(r, 0.7, 0.8)], 0.1);
+    }
+    // It turned left as it went: the script is not trivially straight.
+    let last = model[model.len() - 1];
+    assert!(last[0] - 16.0 > 1.0 && last[1] - 6.0 > 0.05 && last[2] > 5.0, "{last:?}");
+    // The logs round positions to 0.1 mm and headings to 0.001°.
+    for (k, (m, q)) in model.iter().zip(&real).enumerate() {
+        let d = [q[0] - m[0], q[1] - m[1], q[2] - m[2]];
+        assert!(d[0].abs() <= 1e-4 && d[1].abs() <= 1e-4 && d[2].abs() <= 1e-3, "tick {k}: model {m:?}, real {q:?}");
+    }
+    // The simulated chair's noisy motors took it elsewhere.
+    let (p, m) = (sim[sim.len() - 1], last);
+    let off = ((p[0] - 12.0) - (m[0] - 16.0)).hypot(p[1] - m[1]);
+    assert!(off > 0.002, "the simulated chair ended {off} m from the noiseless path");
+    let _ = std::fs::remove_dir_all(dir);
+}
