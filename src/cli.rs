@@ -231,13 +231,13 @@ pub struct WheelchairArgs {
     pub id: u32,
     /// Start pose of the first robot as X,Y,DIR (metres, degrees); further robots form a
     /// lattice `--spacing` apart, ten to a row. Without it, robots take grid slots.
-    #[arg(long, value_parser = parse_triple, allow_hyphen_values = true)]
+    #[arg(long, value_parser = agent_sdk::args::pose, allow_hyphen_values = true)]
     pub pose: Option<[f64; 3]>,
     /// Distance between robots of the lattice, metres.
     #[arg(long, default_value_t = 2.0)]
     pub spacing: f64,
     /// Motor powers LEFT,RIGHT in [-1, 1].
-    #[arg(long, value_parser = parse_pair, default_value = "0.5,0.5", allow_hyphen_values = true)]
+    #[arg(long, value_parser = agent_sdk::args::powers, default_value = "0.5,0.5", allow_hyphen_values = true)]
     pub powers: [f64; 2],
     /// How the chairs move: simulated (the hub moves them) or real (this agent moves them and
     /// tells the hub their poses, standing in for physical chairs).
@@ -270,18 +270,6 @@ pub struct WheelchairArgs {
     /// At the end, print the hub-publish → agent-has-it latency percentiles as JSON.
     #[arg(long)]
     pub report_latency: bool,
-}
-
-fn parse_pair(s: &str) -> Result<[f64; 2], String> {
-    let v: Vec<f64> =
-        s.split(',').map(|x| x.trim().parse::<f64>().map_err(|e| format!("{x:?}: {e}"))).collect::<Result<_, _>>()?;
-    <[f64; 2]>::try_from(v).map_err(|_| format!("expected two numbers LEFT,RIGHT, got {s:?}"))
-}
-
-fn parse_triple(s: &str) -> Result<[f64; 3], String> {
-    let v: Vec<f64> =
-        s.split(',').map(|x| x.trim().parse::<f64>().map_err(|e| format!("{x:?}: {e}"))).collect::<Result<_, _>>()?;
-    <[f64; 3]>::try_from(v).map_err(|_| format!("expected three numbers X,Y,DIR, got {s:?}"))
 }
 
 /// `iwsim map …`
@@ -386,7 +374,7 @@ pub struct UdpClientArgs {
     #[arg(long, default_value_t = 1)]
     pub robots: usize,
     /// Start pose of the first robot X,Y (a lattice 5 m apart, ten to a row).
-    #[arg(long, value_parser = parse_pair, allow_hyphen_values = true)]
+    #[arg(long, value_parser = agent_sdk::args::powers, allow_hyphen_values = true)]
     pub pose: [f64; 2],
 }
 

@@ -17,7 +17,8 @@ pub fn config(args: &HubArgs) -> anyhow::Result<HubConfig> {
     let mut lab = builtin::load_lab_spec(&args.lab).map_err(|e| anyhow::anyhow!("{}:{e}", args.lab))?;
     let obstacle_from = lab.walls.len();
     for spec in &args.obstacle {
-        let v = numbers(spec, "--obstacle", 4, 5)?;
+        let v = agent_sdk::args::numbers(spec, "an obstacle X0,Y0,X1,Y1[,H]", 4, 5)
+            .map_err(|e| anyhow::anyhow!("--obstacle {e}"))?;
         let (x0, y0, x1, y1, h) = (v[0], v[1], v[2], v[3], v.get(4).copied().unwrap_or(1.0));
         anyhow::ensure!(
             x0 < x1 && y0 < y1 && h > 0.0,
@@ -33,7 +34,8 @@ pub fn config(args: &HubArgs) -> anyhow::Result<HubConfig> {
     }
     let mut checkpoints = Vec::new();
     for spec in &args.checkpoint {
-        let v = numbers(spec, "--checkpoint", 2, 3)?;
+        let v = agent_sdk::args::numbers(spec, "a checkpoint X,Y[,R]", 2, 3)
+            .map_err(|e| anyhow::anyhow!("--checkpoint {e}"))?;
         let r = v.get(2).copied().unwrap_or(0.5);
         anyhow::ensure!(r > 0.0, "--checkpoint {spec}: the radius must be positive");
         checkpoints.push([v[0], v[1], r]);
@@ -72,17 +74,6 @@ pub fn config(args: &HubArgs) -> anyhow::Result<HubConfig> {
         obstacle_from,
         checkpoints,
     })
-}
-
-/// Parses `min..=max` comma-separated finite numbers, naming the option in the error.
-fn numbers(spec: &str, option: &str, min: usize, max: usize) -> anyhow::Result<Vec<f64>> {
-    let v: Vec<f64> = spec
-        .split(',')
-        .map(|t| t.trim().parse::<f64>().ok().filter(|x| x.is_finite()))
-        .collect::<Option<_>>()
-        .ok_or_else(|| anyhow::anyhow!("{option} {spec}: not a list of numbers"))?;
-    anyhow::ensure!((min..=max).contains(&v.len()), "{option} {spec}: want {min} to {max} numbers, got {}", v.len());
-    Ok(v)
 }
 
 /// `iwsim hub`.

@@ -428,12 +428,7 @@ fn doors_from(args: &DoorArgs) -> anyhow::Result<Vec<DoorConfig>> {
         return Ok(cfg.doors);
     }
     let pose = args.pose.as_deref().context("--pose X,Y,DIR is needed (or --config)")?;
-    let v: Vec<f64> = pose
-        .split(',')
-        .map(|t| t.trim().parse::<f64>())
-        .collect::<Result<_, _>>()
-        .map_err(|_| anyhow::anyhow!("--pose {pose}: expected X,Y,DIR"))?;
-    let pose: [f64; 3] = v.try_into().map_err(|_| anyhow::anyhow!("--pose {pose}: expected three numbers X,Y,DIR"))?;
+    let pose = agent_sdk::args::pose(pose).map_err(|e| anyhow::anyhow!("--pose {e}"))?;
     Ok(vec![DoorConfig {
         name: args.name.clone(),
         preset: Preset::parse(&args.preset)?,

@@ -98,7 +98,7 @@ pub struct NavigatorArgs {
     pub id: u32,
     /// Start pose X,Y,DIR in metres and degrees. Default: the first checkpoint, heading
     /// towards the second.
-    #[arg(long, value_name = "X,Y,DIR", value_parser = parse_pose, allow_hyphen_values = true)]
+    #[arg(long, value_name = "X,Y,DIR", value_parser = agent_sdk::args::pose, allow_hyphen_values = true)]
     pub pose: Option<[f64; 3]>,
     /// A checkpoint X,Y or X,Y,R in metres; passing within R (default 0.5 m) counts. Repeat it in
     /// driving order (at least one); the chair stops at the last, within --arrive.
@@ -149,31 +149,8 @@ pub struct NavigatorArgs {
     pub connect_timeout: f64,
 }
 
-/// Parses `n` comma-separated finite numbers (or `n − 1` when `optional_last`).
-fn numbers<const N: usize>(s: &str, what: &str, optional_last: Option<f64>) -> Result<[f64; N], String> {
-    let v: Vec<f64> = s
-        .split(',')
-        .map(|t| t.trim().parse::<f64>().ok().filter(|x| x.is_finite()))
-        .collect::<Option<_>>()
-        .ok_or_else(|| format!("{what} wants comma-separated numbers, got {s:?}"))?;
-    let mut out = [0.0; N];
-    match (v.len(), optional_last) {
-        (n, _) if n == N => out.copy_from_slice(&v),
-        (n, Some(default)) if n + 1 == N => {
-            out[..n].copy_from_slice(&v);
-            out[N - 1] = default;
-        }
-        (n, _) => return Err(format!("{what} wants {N} numbers, got {n} in {s:?}")),
-    }
-    Ok(out)
-}
-
-fn parse_pose(s: &str) -> Result<[f64; 3], String> {
-    numbers::<3>(s, "X,Y,DIR", None)
-}
-
 fn parse_checkpoint(s: &str) -> Result<[f64; 3], String> {
-    let v = numbers::<3>(s, "X,Y[,R]", Some(0.5))?;
+    let v = agent_sdk::args::fixed::<3>(s, "a checkpoint X,Y[,R]", Some(0.5))?;
     if v[2] <= 0.0 {
         return Err(format!("the radius in {s:?} must be positive"));
     }
@@ -181,7 +158,7 @@ fn parse_checkpoint(s: &str) -> Result<[f64; 3], String> {
 }
 
 fn parse_body(s: &str) -> Result<[f64; 3], String> {
-    let v = numbers::<3>(s, "W,H,COM", None)?;
+    let v = agent_sdk::args::fixed::<3>(s, "a body W,H,COM", None)?;
     if v[0] <= 0.0 || v[1] <= 0.0 || !(v[2] > 0.0 && v[2] < 1.0) {
         return Err(format!("{s:?}: W and H must be positive and COM in (0, 1)"));
     }

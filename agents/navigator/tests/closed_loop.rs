@@ -110,6 +110,41 @@ fn clearance(lab: &Lab, fp: &Footprint, r: &Robot) -> f64 {
     best
 }
 
+/// The chair the navigator is configured for, as the hub would register it.
+fn chair_spec(cfg: &NavConfig, name: &str) -> RobotSpec {
+    let sensors = cfg
+        .sensors
+        .iter()
+        .map(|m| ProximitySpec {
+            x_m: m.x_m,
+            y_m: m.y_m,
+            angle_rad: m.angle_rad,
+            cone_rad: m.cone_rad,
+            range_m: Some(m.range_m),
+        })
+        .collect();
+    RobotSpec::at(cfg.start.x, cfg.start.y, cfg.start.theta.to_degrees())
+        .body(cfg.body.width_m, cfg.body.height_m, cfg.body.com)
+        .motors(cfg.max_speed_mps, cfg.accel_curve)
+        .sensors(sensors)
+        .named(name)
+}
+
+/// The seeds to run: `NAV_SEEDS` (lists and ranges, comma-separated) when set, else `default`.
+fn seed_list(default: std::ops::RangeInclusive<u64>) -> Vec<u64> {
+    match std::env::var_os("NAV_SEEDS") {
+        Some(v) => v
+            .to_string_lossy()
+            .split(',')
+            .flat_map(|t| match t.split_once('-') {
+                Some((a, b)) => (a.parse().unwrap_or(1)..=b.parse().unwrap_or(0)).collect::<Vec<u64>>(),
+                None => t.parse().ok().into_iter().collect(),
+            })
+            .collect(),
+        None => default.collect(),
+    }
+}
+
 fn simulate(s: &Scenario, seed: u64) -> Outcome {
     let trace = std::env::var_os("NAV_TRACE").is_some();
     let map = builtin::map(s.map).expect("a built-in map");
@@ -131,23 +166,7 @@ fn simulate(s: &Scenario, seed: u64) -> Outcome {
         encoder_ticks_per_m: ticks_per_m,
         ..base
     };
-    let sensors = cfg
-        .sensors
-        .iter()
-        .map(|m| ProximitySpec {
-            x_m: m.x_m,
-            y_m: m.y_m,
-            angle_rad: m.angle_rad,
-            cone_rad: m.cone_rad,
-            range_m: Some(m.range_m),
-        })
-        .collect();
-    let spec = RobotSpec::at(s.start[0], s.start[1], s.start[2])
-        .body(s.body.width_m, s.body.height_m, s.body.com)
-        .motors(cfg.max_speed_mps, cfg.accel_curve)
-        .sensors(sensors)
-        .named("chair");
-    let handle = world.add_robot(spec).expect("a valid chair");
+    let handle = world.add_robot(chair_spec(&cfg, "chair")).expect("a valid chair");
     world.refresh_sensors();
     let (header, items) = map_items(&lab, known, &s.checkpoints);
     let nav_map = NavMap::from_items(&header, &items).expect("the published map reads back");
@@ -255,17 +274,7 @@ fn ascii_map(nav: &Navigator, x0: f64, x1: f64, y0: f64, y1: f64) -> String {
 
 /// Runs every seed, two at a time.
 fn simulate_seeds(s: &Scenario, seeds: std::ops::RangeInclusive<u64>) -> Vec<Outcome> {
-    let mut seeds: Vec<u64> = seeds.collect();
-    if let Some(v) = std::env::var_os("NAV_SEEDS") {
-        seeds = v
-            .to_string_lossy()
-            .split(',')
-            .flat_map(|t| match t.split_once('-') {
-                Some((a, b)) => (a.parse().unwrap_or(1)..=b.parse().unwrap_or(0)).collect::<Vec<u64>>(),
-                None => t.parse().ok().into_iter().collect(),
-            })
-            .collect();
-    }
+    let seeds = seed_list(seeds);
     let workers = std::thread::available_parallelism().map_or(2, |n| n.get()).clamp(1, 4);
     let mut out: Vec<Outcome> = std::thread::scope(|scope| {
         let handles: Vec<_> = (0..workers)
@@ -467,23 +476,7 @@ mod corridor_swap {
                 encoder_ticks_per_m: ticks_per_m,
                 ..NavConfig::intellwheels()
             };
-            let sensors = cfg
-                .sensors
-                .iter()
-                .map(|m| ProximitySpec {
-                    x_m: m.x_m,
-                    y_m: m.y_m,
-                    angle_rad: m.angle_rad,
-                    cone_rad: m.cone_rad,
-                    range_m: Some(m.range_m),
-                })
-                .collect();
-            let spec = RobotSpec::at(c.start[0], c.start[1], c.start[2])
-                .body(body.width_m, body.height_m, body.com)
-                .motors(cfg.max_speed_mps, cfg.accel_curve)
-                .sensors(sensors)
-                .named(c.name);
-            let handle = world.add_robot(spec).expect("a valid chair");
+            let handle = world.add_robot(chair_spec(&cfg, c.name)).expect("a valid chair");
             let nav_map = NavMap::from_items(&header, &items).expect("the published map reads back");
             fleet.push((handle, Pilot::new(c.name, Navigator::new(nav_map, cfg)), None::<f64>));
         }
@@ -550,20 +543,6 @@ mod corridor_swap {
         Swap { seed, chairs, min_gap_m: min_gap, min_clearance_m: min_clearance }
     }
 
-    fn seeds(default: std::ops::RangeInclusive<u64>) -> Vec<u64> {
-        match std::env::var_os("NAV_SEEDS") {
-            Some(v) => v
-                .to_string_lossy()
-                .split(',')
-                .flat_map(|t| match t.split_once('-') {
-                    Some((a, b)) => (a.parse().unwrap_or(1)..=b.parse().unwrap_or(0)).collect::<Vec<u64>>(),
-                    None => t.parse().ok().into_iter().collect(),
-                })
-                .collect(),
-            None => default.collect(),
-        }
-    }
-
     /// The built-in corridor-swap scenario: chair1 east from (14.5, 6.0), chair2 west from
     /// (24.5, 6.0), in the 1.78 m LIACC corridor; both must arrive without touching anything.
     #[test]
@@ -573,7 +552,7 @@ mod corridor_swap {
             Chair { name: "chair2", start: [24.5, 6.0, 180.0], goal: [14.5, 6.0] },
         ];
         let runs: Vec<Swap> = std::thread::scope(|scope| {
-            let handles: Vec<_> = seeds(1..=3)
+            let handles: Vec<_> = seed_list(1..=3)
                 .into_iter()
                 .map(|seed| {
                     scope.spawn({

@@ -83,7 +83,7 @@ pub struct TeleopArgs {
     #[arg(long, default_value_t = 0)]
     pub id: u32,
     /// Start pose as X,Y,DIR (metres, degrees); without it the chair takes its grid slot.
-    #[arg(long, value_name = "X,Y,DIR", value_parser = parse_pose, allow_hyphen_values = true)]
+    #[arg(long, value_name = "X,Y,DIR", value_parser = agent_sdk::args::pose, allow_hyphen_values = true)]
     pub pose: Option<[f64; 3]>,
     /// Length along the heading, metres.
     #[arg(long, default_value_t = 1.0)]
@@ -106,13 +106,6 @@ pub struct TeleopArgs {
     /// Seconds to wait for the hub to start serving the session.
     #[arg(long, default_value_t = 5.0)]
     pub connect_timeout: f64,
-}
-
-fn parse_pose(s: &str) -> Result<[f64; 3], String> {
-    let v: Vec<f64> =
-        s.split(',').map(|x| x.trim().parse::<f64>().map_err(|e| format!("{x:?}: {e}"))).collect::<Result<_, _>>()?;
-    let pose = <[f64; 3]>::try_from(v).map_err(|_| format!("expected three numbers X,Y,DIR, got {s:?}"))?;
-    if pose.iter().all(|v| v.is_finite()) { Ok(pose) } else { Err(format!("{s:?} is not three finite numbers")) }
 }
 
 /// What a batch of key bytes did.
@@ -508,15 +501,6 @@ mod tests {
     }
 
     #[test]
-    fn poses_parse_with_negative_numbers_and_refuse_junk() {
-        assert_eq!(parse_pose("10,6.1,0"), Ok([10.0, 6.1, 0.0]));
-        assert_eq!(parse_pose("-1.5, 2 ,-90"), Ok([-1.5, 2.0, -90.0]));
-        assert!(parse_pose("1,2").is_err());
-        assert!(parse_pose("1,2,x").is_err());
-        assert!(parse_pose("1,2,inf").is_err());
-    }
-
-    #[test]
     fn the_registration_carries_every_option() {
         use clap::Parser as _;
         #[derive(clap::Parser)]
@@ -533,5 +517,8 @@ mod tests {
         let plain = registration(&Cli::parse_from(["teleop"]).args);
         assert_eq!((plain.flags & REG_HAS_POSE, plain.requested_id), (0, 0));
         assert_eq!(plain.name.as_str(), Some("chair1"));
+        for junk in ["1,2", "1,2,x", "1,2,inf"] {
+            assert!(Cli::try_parse_from(["teleop", "--pose", junk]).is_err(), "{junk}");
+        }
     }
 }
