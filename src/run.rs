@@ -72,9 +72,8 @@ impl RunSummary {
 
 /// Reads a robot's log and measures what the summary reports.
 pub fn summarise_log(path: &Path, route: &[usize], scenario: &Scenario) -> anyhow::Result<RobotSummary> {
-    let p = path.display().to_string();
     let t = LogTable::read(path)?;
-    let col = |n: &str| t.column(n, &p);
+    let col = |n: &str| t.column(n);
     let (ct, cx, cy, ch, cc) = (col("time_s")?, col("x_m")?, col("y_m")?, col("heading_deg")?, col("contacts")?);
     let mut s = RobotSummary {
         name: path.file_stem().map(|f| f.to_string_lossy().into_owned()).unwrap_or_default(),

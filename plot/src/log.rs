@@ -1,31 +1,16 @@
-//! Reading a run log: the per-robot CSV the agents write, one row per tick, with the thesis's
-//! Annex C columns in clear units (`tick,time_s,encoder_left_ticks,encoder_right_ticks,
-//! proximity0_m,…,heading_deg,x_m,y_m,collision,contacts,power_left,power_right`).
-//!
-//! Columns are found by name, so logs with fewer proximity sensors, extra columns, or without
-//! the `contacts`/`power_*` columns of older writers all read. Every known column must hold a
-//! number (`NaN` is a number here: a sensor that saw nothing); the pose and the clock must be
-//! finite. Anything else is an error naming the file, the line and the column.
+//! A run log as the plot uses it: the per-robot CSV the agents write (read by
+//! [`agent_sdk::log::LogTable`], the project's one log reader, whose errors name the file,
+//! line and column), turned into samples of tick, time, position, heading and collision.
+//! The plot needs `tick`, `time_s`, `x_m` and `y_m`; the tick must be a whole number and the
+//! clock and position finite.
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
+
+pub use agent_sdk::log::LogReadError;
+use agent_sdk::log::LogTable;
 
 /// Columns a log must have: the plot cannot be drawn without them.
 pub const REQUIRED_COLUMNS: [&str; 4] = ["tick", "time_s", "x_m", "y_m"];
-
-/// Columns that hold numbers when present (the proximity columns `proximityK_m` too).
-const NUMERIC_COLUMNS: [&str; 11] = [
-    "tick",
-    "time_s",
-    "encoder_left_ticks",
-    "encoder_right_ticks",
-    "heading_deg",
-    "x_m",
-    "y_m",
-    "collision",
-    "contacts",
-    "power_left",
-    "power_right",
-];
 
 /// One row of a log, the columns the plot uses.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -53,175 +38,46 @@ pub struct RunLog {
     pub samples: Vec<Sample>,
 }
 
-/// Why a log could not be read. Line numbers count from 1 (the header); columns from 1.
-#[derive(Debug, thiserror::Error)]
-pub enum LogReadError {
-    /// The file could not be opened or read.
-    #[error("{}: cannot read the log: {source}", .path.display())]
-    Io {
-        /// The log file.
-        path: PathBuf,
-        /// What the system said.
-        source: std::io::Error,
-    },
-    /// The file holds nothing, not even a header.
-    #[error("{}: the log is empty: expected a header line `tick,time_s,…,x_m,y_m,…`", .path.display())]
-    Empty {
-        /// The log file.
-        path: PathBuf,
-    },
-    /// The first line holds data, not column names.
-    #[error("{}:{line}: no header: expected column names `tick,time_s,…,x_m,y_m,…`, found `{found}`", .path.display())]
-    NoHeader {
-        /// The log file.
-        path: PathBuf,
-        /// The line that should have been the header.
-        line: usize,
-        /// Its start, as found.
-        found: String,
-    },
-    /// The header lacks a column the plot needs.
-    #[error("{}:{line}: the header has no column `{column}` (it needs tick, time_s, x_m and y_m)", .path.display())]
-    MissingColumn {
-        /// The log file.
-        path: PathBuf,
-        /// The header's line.
-        line: usize,
-        /// The missing column.
-        column: &'static str,
-    },
-    /// The header names a column twice.
-    #[error("{}:{line}: the header names column `{column}` twice", .path.display())]
-    DuplicateColumn {
-        /// The log file.
-        path: PathBuf,
-        /// The header's line.
-        line: usize,
-        /// The repeated name.
-        column: String,
-    },
-    /// A row has more or fewer fields than the header has columns.
-    #[error("{}:{line}: {found} fields, expected {expected} as in the header", .path.display())]
-    FieldCount {
-        /// The log file.
-        path: PathBuf,
-        /// The row's line.
-        line: usize,
-        /// Columns in the header.
-        expected: usize,
-        /// Fields in this row.
-        found: usize,
-    },
-    /// A field of a numeric column does not parse.
-    #[error("{}:{line}: column {column} ({name}): `{text}` is not {expected}", .path.display())]
-    BadNumber {
-        /// The log file.
-        path: PathBuf,
-        /// The row's line.
-        line: usize,
-        /// The column, counting from 1.
-        column: usize,
-        /// The column's name.
-        name: String,
-        /// The field as found.
-        text: String,
-        /// What was expected ("a number", "a whole number", "a finite number").
-        expected: &'static str,
-    },
-    /// The header is there but no row follows.
-    #[error("{}: the log has a header but no rows", .path.display())]
-    NoRows {
-        /// The log file.
-        path: PathBuf,
-    },
-}
-
 impl RunLog {
     /// Reads and parses the log at `path`.
     pub fn read(path: &Path) -> Result<Self, LogReadError> {
-        let text = std::fs::read_to_string(path).map_err(|source| LogReadError::Io { path: path.into(), source })?;
-        Self::parse(&text, path)
+        Self::from_table(LogTable::read(path)?)
     }
 
     /// Parses the text of a log; `path` only names the file in errors.
     pub fn parse(text: &str, path: &Path) -> Result<Self, LogReadError> {
-        // Blank lines (a trailing newline, an editor's empty last line) are skipped but counted.
-        let mut lines = text.lines().enumerate().map(|(k, l)| (k + 1, l.trim_end_matches('\r')));
-        let (header_line, header) = lines
-            .by_ref()
-            .find(|(_, l)| !l.trim().is_empty())
-            .ok_or_else(|| LogReadError::Empty { path: path.into() })?;
-        let columns: Vec<String> = header.split(',').map(|c| c.trim().to_owned()).collect();
-        if columns.first().is_some_and(|c| c.parse::<f64>().is_ok()) {
-            let found: String = header.chars().take(40).collect();
-            return Err(LogReadError::NoHeader { path: path.into(), line: header_line, found });
-        }
-        for (k, c) in columns.iter().enumerate() {
-            if columns[..k].contains(c) {
-                return Err(LogReadError::DuplicateColumn { path: path.into(), line: header_line, column: c.clone() });
-            }
-        }
-        let index = |name: &str| columns.iter().position(|c| c == name);
+        Self::from_table(LogTable::parse(text, path)?)
+    }
+
+    fn from_table(t: LogTable) -> Result<Self, LogReadError> {
         let mut required = [0; REQUIRED_COLUMNS.len()];
         for (slot, name) in required.iter_mut().zip(REQUIRED_COLUMNS) {
-            *slot = index(name).ok_or(LogReadError::MissingColumn {
-                path: path.into(),
-                line: header_line,
-                column: name,
-            })?;
+            *slot = t.column(name)?;
         }
         let [tick_col, time_col, x_col, y_col] = required;
-        let heading_col = index("heading_deg");
-        let collision_col = index("collision");
-        let numeric: Vec<bool> = columns.iter().map(|c| is_numeric_column(c)).collect();
-
-        let mut samples = Vec::new();
-        let mut values = vec![0.0; columns.len()];
-        for (line, row) in lines {
-            if row.trim().is_empty() {
-                continue;
+        let (heading_col, collision_col) = (t.column("heading_deg").ok(), t.column("collision").ok());
+        let mut samples = Vec::with_capacity(t.rows.len());
+        for (k, row) in t.rows.iter().enumerate() {
+            let tick = row[tick_col];
+            if !(tick >= 0.0 && tick.fract() == 0.0 && tick <= u64::MAX as f64) {
+                return Err(t.bad_field(k, tick_col, "a whole number"));
             }
-            let fields: Vec<&str> = row.split(',').map(str::trim).collect();
-            if fields.len() != columns.len() {
-                return Err(LogReadError::FieldCount {
-                    path: path.into(),
-                    line,
-                    expected: columns.len(),
-                    found: fields.len(),
-                });
-            }
-            let bad = |column: usize, expected: &'static str| LogReadError::BadNumber {
-                path: path.into(),
-                line,
-                column: column + 1,
-                name: columns[column].clone(),
-                text: fields[column].to_owned(),
-                expected,
-            };
-            for (k, field) in fields.iter().enumerate() {
-                if numeric[k] {
-                    values[k] = field.parse::<f64>().map_err(|_| bad(k, "a number"))?;
-                }
-            }
-            let tick = fields[tick_col].parse::<u64>().map_err(|_| bad(tick_col, "a whole number"))?;
-            for col in [time_col, x_col, y_col] {
-                if !values[col].is_finite() {
-                    return Err(bad(col, "a finite number"));
-                }
+            if let Some(col) = [time_col, x_col, y_col].into_iter().find(|&c| !row[c].is_finite()) {
+                return Err(t.bad_field(k, col, "a finite number"));
             }
             samples.push(Sample {
-                tick,
-                time_s: values[time_col],
-                x_m: values[x_col],
-                y_m: values[y_col],
-                heading_deg: heading_col.map_or(f64::NAN, |c| values[c]),
-                collision: collision_col.is_some_and(|c| values[c] != 0.0 && !values[c].is_nan()),
+                tick: tick as u64,
+                time_s: row[time_col],
+                x_m: row[x_col],
+                y_m: row[y_col],
+                heading_deg: heading_col.map_or(f64::NAN, |c| row[c]),
+                collision: collision_col.is_some_and(|c| row[c] != 0.0 && !row[c].is_nan()),
             });
         }
         if samples.is_empty() {
-            return Err(LogReadError::NoRows { path: path.into() });
+            return Err(LogReadError::NoRows { path: t.path });
         }
-        Ok(Self { columns, samples })
+        Ok(Self { columns: t.columns, samples })
     }
 
     /// Distance driven along the logged positions, metres.
@@ -234,16 +90,6 @@ impl RunLog {
     pub fn collision_rows(&self) -> usize {
         self.samples.iter().filter(|s| s.collision).count()
     }
-}
-
-/// Whether a column of this name holds numbers (the log's own columns; unknown extras do not
-/// have to).
-fn is_numeric_column(name: &str) -> bool {
-    NUMERIC_COLUMNS.contains(&name)
-        || name
-            .strip_prefix("proximity")
-            .and_then(|rest| rest.strip_suffix("_m"))
-            .is_some_and(|k| !k.is_empty() && k.bytes().all(|b| b.is_ascii_digit()))
 }
 
 /// The speed over one interval between two logged ticks.
@@ -333,7 +179,7 @@ mod tests {
     #[test]
     fn a_missing_position_column_is_named() {
         let err = parse("tick,time_s,x_m\n1,0.1,3\n").expect_err("no y_m");
-        assert!(matches!(err, LogReadError::MissingColumn { column: "y_m", line: 1, .. }), "{err:?}");
+        assert!(matches!(&err, LogReadError::MissingColumn { column, line: 1, .. } if column == "y_m"), "{err:?}");
     }
 
     #[test]

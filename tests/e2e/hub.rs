@@ -308,7 +308,7 @@ fn a_real_chair_pushes_its_own_poses_and_the_hub_takes_them() {
     let track = |name: &str| {
         let path = dir.join(format!("{name}.csv"));
         let log = agent_sdk::log::LogTable::read(&path).expect("a log");
-        let col = |c| log.column(c, &path.display().to_string()).expect("a column");
+        let col = |c| log.column(c).expect("a column");
         let (x, y, h) = (col("x_m"), col("y_m"), col("heading_deg"));
         log.rows.iter().map(|r| [r[x], r[y], r[h]]).collect::<Vec<_>>()
     };

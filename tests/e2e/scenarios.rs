@@ -286,9 +286,8 @@ fn builtin_slalom_reaches_checkpoint_2_without_contact_for_three_seeds_with_nois
 
 /// A robot's log as rows of (tick, x, y).
 fn trajectory(path: &Path) -> Vec<[f64; 3]> {
-    let p = path.display().to_string();
     let log = agent_sdk::log::LogTable::read(path).expect("a readable log");
-    let col = |name| log.column(name, &p).expect("a column of the log");
+    let col = |name| log.column(name).expect("a column of the log");
     let (t, x, y) = (col("tick"), col("x_m"), col("y_m"));
     log.rows.iter().map(|r| [r[t], r[x], r[y]]).collect()
 }

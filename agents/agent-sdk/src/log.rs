@@ -87,116 +87,216 @@ pub fn file_stem(name: &str) -> String {
     if s.is_empty() { "robot".into() } else { s }
 }
 
-/// A log read back: its column names and one row of numbers per tick.
-#[derive(Debug, Clone, PartialEq)]
-pub struct LogTable {
-    /// Column names, from the header.
-    pub columns: Vec<String>,
-    /// Rows, each as long as `columns`.
-    pub rows: Vec<Vec<f64>>,
+/// The columns the writer fills with numbers (and `proximityK_m`): a reader insists on
+/// numbers there; other columns (a user's additions) may hold anything and read as NaN when
+/// they are not numbers.
+const NUMERIC_COLUMNS: [&str; 11] = [
+    "tick",
+    "time_s",
+    "encoder_left_ticks",
+    "encoder_right_ticks",
+    "heading_deg",
+    "x_m",
+    "y_m",
+    "collision",
+    "contacts",
+    "power_left",
+    "power_right",
+];
+
+fn is_numeric_column(name: &str) -> bool {
+    NUMERIC_COLUMNS.contains(&name)
+        || name
+            .strip_prefix("proximity")
+            .and_then(|rest| rest.strip_suffix("_m"))
+            .is_some_and(|k| !k.is_empty() && k.bytes().all(|b| b.is_ascii_digit()))
 }
 
-/// Why a log could not be read.
+/// A log read back: its column names and one row of numbers per tick. The one reader of the
+/// project's logs (`iwsim run`'s summary and `iwsim plot` both use it).
+///
+/// Columns are found by name, so logs with fewer proximity sensors, extra columns, or without
+/// the `contacts`/`power_*` columns of older writers all read. Blank lines are skipped but
+/// counted, so errors give the line a text editor shows.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LogTable {
+    /// The file, as named in errors.
+    pub path: PathBuf,
+    /// Column names, from the header.
+    pub columns: Vec<String>,
+    /// The header's line, 1-based.
+    pub header_line: usize,
+    /// Rows, each as long as `columns` (NaN for what is not a number in a column of the
+    /// user's own).
+    pub rows: Vec<Vec<f64>>,
+    /// Each row's line, 1-based.
+    pub lines: Vec<usize>,
+}
+
+/// Why a log could not be read. Lines count from 1; columns from 1.
 #[derive(Debug, thiserror::Error)]
 pub enum LogReadError {
-    /// The file could not be read.
-    #[error("{path}: {source}")]
+    /// The file could not be opened or read.
+    #[error("{}: cannot read the log: {source}", .path.display())]
     Io {
-        /// File.
-        path: String,
-        /// Why.
+        /// The log file.
+        path: PathBuf,
+        /// What the system said.
         source: std::io::Error,
     },
-    /// The file has no header line.
-    #[error("{path}: empty file, expected a header line")]
+    /// The file holds nothing, not even a header.
+    #[error("{}: the log is empty: expected a header line `tick,time_s,…,x_m,y_m,…`", .path.display())]
     Empty {
-        /// File.
-        path: String,
+        /// The log file.
+        path: PathBuf,
     },
-    /// A row has the wrong number of fields.
-    #[error("{path}:{line}: {got} fields, the header has {want}")]
-    Width {
-        /// File.
-        path: String,
-        /// Line, 1-based.
+    /// The first line holds data, not column names.
+    #[error("{}:{line}: no header: expected column names `tick,time_s,…,x_m,y_m,…`, found `{found}`", .path.display())]
+    NoHeader {
+        /// The log file.
+        path: PathBuf,
+        /// The line that should have been the header.
         line: usize,
-        /// Fields found.
-        got: usize,
-        /// Fields expected.
-        want: usize,
+        /// Its start, as found.
+        found: String,
     },
-    /// A field is not a number.
-    #[error("{path}:{line}: column {column} ({name}): {text:?} is not a number")]
-    Number {
-        /// File.
-        path: String,
-        /// Line, 1-based.
+    /// The header names a column twice.
+    #[error("{}:{line}: the header names column `{column}` twice", .path.display())]
+    DuplicateColumn {
+        /// The log file.
+        path: PathBuf,
+        /// The header's line.
         line: usize,
-        /// Column, 1-based.
-        column: usize,
-        /// Column name.
-        name: String,
-        /// The text.
-        text: String,
+        /// The repeated name.
+        column: String,
     },
-    /// A column the reader needs is missing.
-    #[error("{path}: no column {name:?} in the header")]
+    /// The header lacks a column the reader needs.
+    #[error("{}:{line}: the header has no column `{column}`", .path.display())]
     MissingColumn {
-        /// File.
-        path: String,
-        /// Column.
+        /// The log file.
+        path: PathBuf,
+        /// The header's line.
+        line: usize,
+        /// The missing column.
+        column: String,
+    },
+    /// A row has more or fewer fields than the header has columns.
+    #[error("{}:{line}: {found} fields, expected {expected} as in the header", .path.display())]
+    FieldCount {
+        /// The log file.
+        path: PathBuf,
+        /// The row's line.
+        line: usize,
+        /// Columns in the header.
+        expected: usize,
+        /// Fields in this row.
+        found: usize,
+    },
+    /// A field is not what its column holds.
+    #[error("{}:{line}: column {column} ({name}): `{text}` is not {expected}", .path.display())]
+    BadNumber {
+        /// The log file.
+        path: PathBuf,
+        /// The row's line.
+        line: usize,
+        /// The column, counting from 1.
+        column: usize,
+        /// The column's name.
         name: String,
+        /// The field as found.
+        text: String,
+        /// What was expected ("a number", "a whole number", "a finite number").
+        expected: &'static str,
+    },
+    /// The header is there but no row follows.
+    #[error("{}: the log has a header but no rows", .path.display())]
+    NoRows {
+        /// The log file.
+        path: PathBuf,
     },
 }
 
 impl LogTable {
-    /// Reads a log written by [`RobotLog`] (or any all-numeric CSV with a header).
+    /// Reads the log at `path`.
     pub fn read(path: &Path) -> Result<Self, LogReadError> {
-        let p = path.display().to_string();
-        let text = std::fs::read_to_string(path).map_err(|source| LogReadError::Io { path: p.clone(), source })?;
-        Self::parse(&text, &p)
+        let text = std::fs::read_to_string(path).map_err(|source| LogReadError::Io { path: path.into(), source })?;
+        Self::parse(&text, path)
     }
 
     /// Parses log text; `path` only names it in errors.
-    pub fn parse(text: &str, path: &str) -> Result<Self, LogReadError> {
-        let mut lines = text.lines().enumerate().filter(|(_, l)| !l.trim().is_empty());
-        let (_, head) = lines.next().ok_or_else(|| LogReadError::Empty { path: path.to_owned() })?;
+    pub fn parse(text: &str, path: &Path) -> Result<Self, LogReadError> {
+        let mut lines = text.lines().enumerate().map(|(k, l)| (k + 1, l.trim_end_matches('\r')));
+        let (header_line, head) = lines
+            .by_ref()
+            .find(|(_, l)| !l.trim().is_empty())
+            .ok_or_else(|| LogReadError::Empty { path: path.into() })?;
         let columns: Vec<String> = head.split(',').map(|c| c.trim().to_owned()).collect();
+        if columns.first().is_some_and(|c| c.parse::<f64>().is_ok()) {
+            let found: String = head.chars().take(40).collect();
+            return Err(LogReadError::NoHeader { path: path.into(), line: header_line, found });
+        }
+        for (k, c) in columns.iter().enumerate() {
+            if columns[..k].contains(c) {
+                return Err(LogReadError::DuplicateColumn { path: path.into(), line: header_line, column: c.clone() });
+            }
+        }
+        let numeric: Vec<bool> = columns.iter().map(|c| is_numeric_column(c)).collect();
         let mut rows = Vec::new();
-        for (i, line) in lines {
-            let fields: Vec<&str> = line.split(',').collect();
+        let mut row_lines = Vec::new();
+        for (line, text) in lines {
+            if text.trim().is_empty() {
+                continue;
+            }
+            let fields: Vec<&str> = text.split(',').map(str::trim).collect();
             if fields.len() != columns.len() {
-                return Err(LogReadError::Width {
-                    path: path.to_owned(),
-                    line: i + 1,
-                    got: fields.len(),
-                    want: columns.len(),
+                return Err(LogReadError::FieldCount {
+                    path: path.into(),
+                    line,
+                    expected: columns.len(),
+                    found: fields.len(),
                 });
             }
             let row = fields
                 .iter()
                 .enumerate()
-                .map(|(c, f)| {
-                    f.trim().parse::<f64>().map_err(|_| LogReadError::Number {
-                        path: path.to_owned(),
-                        line: i + 1,
-                        column: c + 1,
-                        name: columns[c].clone(),
-                        text: f.trim().to_owned(),
-                    })
+                .map(|(k, f)| match f.parse::<f64>() {
+                    Ok(v) => Ok(v),
+                    Err(_) if !numeric[k] => Ok(f64::NAN),
+                    Err(_) => Err(LogReadError::BadNumber {
+                        path: path.into(),
+                        line,
+                        column: k + 1,
+                        name: columns[k].clone(),
+                        text: (*f).to_owned(),
+                        expected: "a number",
+                    }),
                 })
                 .collect::<Result<Vec<f64>, _>>()?;
             rows.push(row);
+            row_lines.push(line);
         }
-        Ok(Self { columns, rows })
+        Ok(Self { path: path.into(), columns, header_line, rows, lines: row_lines })
     }
 
-    /// The index of column `name`, or an error naming `path`.
-    pub fn column(&self, name: &str, path: &str) -> Result<usize, LogReadError> {
-        self.columns
-            .iter()
-            .position(|c| c == name)
-            .ok_or_else(|| LogReadError::MissingColumn { path: path.to_owned(), name: name.to_owned() })
+    /// The index of column `name`, or an error naming the file and the header's line.
+    pub fn column(&self, name: &str) -> Result<usize, LogReadError> {
+        self.columns.iter().position(|c| c == name).ok_or_else(|| LogReadError::MissingColumn {
+            path: self.path.clone(),
+            line: self.header_line,
+            column: name.to_owned(),
+        })
+    }
+
+    /// The error for the field of row `row`, column `column` that is not `expected`.
+    pub fn bad_field(&self, row: usize, column: usize, expected: &'static str) -> LogReadError {
+        LogReadError::BadNumber {
+            path: self.path.clone(),
+            line: self.lines.get(row).copied().unwrap_or(0),
+            column: column + 1,
+            name: self.columns.get(column).cloned().unwrap_or_default(),
+            text: self.rows.get(row).and_then(|r| r.get(column)).map_or_else(String::new, |v| v.to_string()),
+            expected,
+        }
     }
 }
 
@@ -228,19 +328,30 @@ mod tests {
         );
         let table = LogTable::read(&dir.join("chair_1.csv")).expect("reads back");
         assert_eq!(table.rows.len(), 1);
-        assert_eq!(table.rows[0][table.column("x_m", "log").expect("x")], 10.5);
+        assert_eq!(table.rows[0][table.column("x_m").expect("x")], 10.5);
         let _ = std::fs::remove_dir_all(dir);
     }
 
     #[test]
-    fn bad_logs_name_the_line_and_column() {
-        let err = LogTable::parse("tick,x_m\n1,2\n2,oops\n", "a.csv").expect_err("bad number");
-        assert_eq!(err.to_string(), "a.csv:3: column 2 (x_m): \"oops\" is not a number");
-        let err = LogTable::parse("tick,x_m\n1\n", "a.csv").expect_err("short row");
-        assert_eq!(err.to_string(), "a.csv:2: 1 fields, the header has 2");
-        assert!(matches!(LogTable::parse("", "a.csv"), Err(LogReadError::Empty { .. })));
-        let t = LogTable::parse("tick,x_m\n1,NaN\n", "a.csv").expect("NaN is a number");
-        assert!(t.rows[0][1].is_nan());
-        assert!(t.column("y_m", "a.csv").is_err());
+    fn bad_logs_name_the_file_line_and_column() {
+        let parse = |t: &str| LogTable::parse(t, Path::new("runs/a.csv"));
+        let err = parse("tick,x_m\n1,2\n\n2,oops\n").expect_err("bad number");
+        assert_eq!(err.to_string(), "runs/a.csv:4: column 2 (x_m): `oops` is not a number");
+        let err = parse("tick,x_m\n1\n").expect_err("short row");
+        assert_eq!(err.to_string(), "runs/a.csv:2: 1 fields, expected 2 as in the header");
+        assert!(matches!(parse("\n\n"), Err(LogReadError::Empty { .. })));
+        let err = parse("1,0.1,10,6.1\n").expect_err("no header");
+        assert!(err.to_string().starts_with("runs/a.csv:1: no header"), "{err}");
+        let err = parse("tick,x_m,x_m\n").expect_err("twice");
+        assert!(matches!(&err, LogReadError::DuplicateColumn { column, .. } if column == "x_m"), "{err:?}");
+        // NaN is a number (a sensor that saw nothing); a user's own column may hold text.
+        let t = parse("tick,x_m,note\r\n1,NaN,hello\r\n").expect("reads");
+        assert!(t.rows[0][1].is_nan() && t.rows[0][2].is_nan());
+        let err = t.column("y_m").expect_err("no y_m");
+        assert_eq!(err.to_string(), "runs/a.csv:1: the header has no column `y_m`");
+        assert_eq!(
+            t.bad_field(0, 1, "a finite number").to_string(),
+            "runs/a.csv:2: column 2 (x_m): `NaN` is not a finite number"
+        );
     }
 }
