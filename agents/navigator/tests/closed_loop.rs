@@ -130,6 +130,20 @@ fn chair_spec(cfg: &NavConfig, name: &str) -> RobotSpec {
         .named(name)
 }
 
+/// A trace line's middle: the chair's true pose, the navigator's estimate and the powers.
+fn trace_pose(robot: &Robot, est: Pose, powers: [f64; 2]) -> String {
+    format!(
+        "true ({:.3}, {:.3}, {:6.1}°) est ({:.3}, {:.3}) powers ({:+.2}, {:+.2})",
+        robot.pose.x,
+        robot.pose.y,
+        robot.pose.heading_deg(),
+        est.x,
+        est.y,
+        powers[0],
+        powers[1]
+    )
+}
+
 /// The seeds to run: `NAV_SEEDS` (lists and ranges, comma-separated) when set, else `default`.
 fn seed_list(default: std::ops::RangeInclusive<u64>) -> Vec<u64> {
     match std::env::var_os("NAV_SEEDS") {
@@ -185,17 +199,10 @@ fn simulate(s: &Scenario, seed: u64) -> Outcome {
         let input = source.read(&block, time_s);
         let out = nav.step(&input);
         if trace {
-            let p = nav.pose();
             eprintln!(
-                "seed {seed} t {time_s:5.1} true ({:.3}, {:.3}, {:6.1}°) est ({:.3}, {:.3}) powers ({:+.2}, {:+.2}) clr {:.3}",
-                robot.pose.x,
-                robot.pose.y,
-                robot.pose.heading_deg(),
-                p.x,
-                p.y,
-                out.powers[0],
-                out.powers[1],
-                clearance(&lab, &fp, robot),
+                "seed {seed} t {time_s:5.1} {} clr {:.3}",
+                trace_pose(robot, nav.pose(), out.powers),
+                clearance(&lab, &fp, robot)
             );
             for e in &out.events {
                 eprintln!("seed {seed} event {e:?}");
@@ -496,18 +503,10 @@ mod corridor_swap {
                 let heard: Vec<&[u8]> = robot.inbox.iter().map(|h| h.message.as_bytes()).collect();
                 let out = pilot.tick(&input, heard);
                 if trace {
-                    let p = pilot.navigator().pose();
                     eprintln!(
-                        "seed {seed} t {time_s:5.1} {} true ({:.3}, {:.3}, {:6.1}°) est ({:.3}, {:.3}) powers ({:+.2}, {:+.2}) {:?}",
-                        name,
-                        robot.pose.x,
-                        robot.pose.y,
-                        robot.pose.heading_deg(),
-                        p.x,
-                        p.y,
-                        out.powers[0],
-                        out.powers[1],
-                        pilot.traffic().state(),
+                        "seed {seed} t {time_s:5.1} {name} {} {:?}",
+                        trace_pose(robot, pilot.navigator().pose(), out.powers),
+                        pilot.traffic().state()
                     );
                     for n in out.notes.iter().map(|n| n.to_string()).chain(out.events.iter().map(|e| format!("{e:?}")))
                     {
