@@ -18,7 +18,7 @@ use ipc_types::{
 use navigator::geom::{Footprint, Pose, V2};
 use navigator::map::NavMap;
 use navigator::sensors::{SensorSource, VirtualSensors};
-use navigator::{Body, Checkpoint, NavConfig, NavEvent, Navigator};
+use navigator::{Body, Checkpoint, NavConfig, NavEvent, Navigator, PoseSourceKind};
 
 /// A run to simulate.
 #[derive(Debug, Clone)]
@@ -30,6 +30,10 @@ struct Scenario {
     checkpoints: Vec<[f64; 3]>,
     body: Body,
     time_limit_s: f64,
+    /// Where the navigator's pose comes from.
+    pose_source: PoseSourceKind,
+    /// GPS on with this noise (metres, degrees); off when `None`.
+    gps: Option<[f64; 2]>,
 }
 
 /// How a run went.
@@ -167,8 +171,12 @@ fn simulate(s: &Scenario, seed: u64) -> Outcome {
     for &[x0, y0, x1, y1] in &s.obstacles {
         lab.walls.push(Wall::rectangle(x0, y0, x1, y1, 1.0));
     }
-    let params = Params::default();
+    let mut params = Params::default();
     assert!(params.noise.proximity_m > 0.0 && params.noise.motor_frac > 0.0, "noise on");
+    if let Some([pos_m, heading_deg]) = s.gps {
+        params.sensors.gps = true;
+        (params.noise.gps_pos_m, params.noise.gps_heading_deg) = (pos_m, heading_deg);
+    }
     let ticks_per_m = params.encoder_ticks_per_rev as f64 / (std::f64::consts::TAU * params.wheel_radius_m);
     let mut world = World::new(&lab, params, seed).expect("a valid world");
     let base = NavConfig::intellwheels();
@@ -178,6 +186,7 @@ fn simulate(s: &Scenario, seed: u64) -> Outcome {
         checkpoints: s.checkpoints.iter().map(|&[x, y, r]| Checkpoint { pos: V2::new(x, y), radius_m: r }).collect(),
         start: Pose::from_deg(s.start[0], s.start[1], s.start[2]),
         encoder_ticks_per_m: ticks_per_m,
+        pose_source: s.pose_source,
         ..base
     };
     let handle = world.add_robot(chair_spec(&cfg, "chair")).expect("a valid chair");
@@ -327,6 +336,8 @@ mod slalom {
             checkpoints: vec![[10.0, 6.1, 0.5], [20.0, 6.1, 0.5]],
             body: Body::INTELLWHEELS,
             time_limit_s: 120.0,
+            pose_source: PoseSourceKind::Odometry,
+            gps: None,
         }
     }
 
@@ -367,6 +378,8 @@ mod untuned_maps {
             checkpoints: vec![[14.0, 6.0, 0.5], [5.0, 3.0, 0.5]],
             body: Body::INTELLWHEELS,
             time_limit_s: 120.0,
+            pose_source: PoseSourceKind::Odometry,
+            gps: None,
         };
         check(&s, 1..=3);
     }
@@ -380,6 +393,8 @@ mod untuned_maps {
             checkpoints: vec![[14.0, 6.0, 0.5], [5.0, 8.8, 0.5]],
             body: Body::INTELLWHEELS,
             time_limit_s: 150.0,
+            pose_source: PoseSourceKind::Odometry,
+            gps: None,
         };
         check(&s, 1..=3);
     }
@@ -393,6 +408,8 @@ mod untuned_maps {
             checkpoints: vec![[1.0, 7.0, 0.5], [9.0, 1.0, 0.5]],
             body: Body::INTELLWHEELS,
             time_limit_s: 200.0,
+            pose_source: PoseSourceKind::Odometry,
+            gps: None,
         };
         check(&s, 1..=3);
     }
@@ -406,8 +423,44 @@ mod untuned_maps {
             checkpoints: vec![[1.0, 13.0, 0.5], [13.0, 9.0, 0.5], [25.0, 7.0, 0.5]],
             body: Body { width_m: 1.0, height_m: 0.6, com: 0.5 },
             time_limit_s: 300.0,
+            pose_source: PoseSourceKind::Odometry,
+            gps: None,
         };
         check(&s, 1..=2);
+    }
+
+    /// The west-door route again, the pose from GPS alone: an indoor positioning system of
+    /// 2 cm and 1° (the GPS sensor with its noise set so).
+    #[test]
+    fn through_the_west_door_on_a_precise_gps_alone() {
+        let s = Scenario {
+            map: "liacc",
+            obstacles: vec![],
+            start: [14.0, 6.0, 180.0],
+            checkpoints: vec![[14.0, 6.0, 0.5], [5.0, 3.0, 0.5]],
+            body: Body::INTELLWHEELS,
+            time_limit_s: 120.0,
+            pose_source: PoseSourceKind::Gps,
+            gps: Some([0.02, 1.0]),
+        };
+        check(&s, 1..=3);
+    }
+
+    /// And with odometry corrected by Ciber-Rato's default GPS (0.5 m, 5°): the fusion keeps
+    /// the GPS's noise out of the path while it holds odometry's drift in check.
+    #[test]
+    fn through_the_west_door_on_odometry_fused_with_a_noisy_gps() {
+        let s = Scenario {
+            map: "liacc",
+            obstacles: vec![],
+            start: [14.0, 6.0, 180.0],
+            checkpoints: vec![[14.0, 6.0, 0.5], [5.0, 3.0, 0.5]],
+            body: Body::INTELLWHEELS,
+            time_limit_s: 120.0,
+            pose_source: PoseSourceKind::Fused,
+            gps: Some([0.5, 5.0]),
+        };
+        check(&s, 1..=3);
     }
 
     #[test]
@@ -419,6 +472,8 @@ mod untuned_maps {
             checkpoints: vec![[3.0, 7.0, 0.5], [19.5, 8.5, 0.5]],
             body: Body::INTELLWHEELS,
             time_limit_s: 150.0,
+            pose_source: PoseSourceKind::Odometry,
+            gps: None,
         };
         check(&s, 1..=3);
     }
