@@ -9,7 +9,7 @@ use plotters::coord::types::RangedCoordf64;
 use plotters::prelude::*;
 use plotters::style::text_anchor::{HPos, Pos, VPos};
 
-use crate::log::{RunLog, SpeedPoint, speeds};
+use crate::log::{RunLog, Sample, SpeedPoint, speeds};
 use crate::scene::{Scene, View};
 
 /// Width of the picture, pixels.
@@ -19,8 +19,11 @@ pub const MAP_MAX_PX: (u32, u32) = (915, 600);
 /// Smallest height of the trajectory panel's plotting area, pixels (when the floor allows).
 pub const MAP_MIN_H_PX: u32 = 320;
 
-/// Colour of the trajectory line.
+/// Colour of the trajectory line (of the first robot when there are several).
 pub const TRAJECTORY_RGB: (u8, u8, u8) = (20, 80, 200);
+/// Colours of the robots' lines, in the order of their logs (then again from the first).
+pub const ROBOT_RGB: [(u8, u8, u8); 6] =
+    [TRAJECTORY_RGB, (205, 95, 0), (125, 45, 175), (0, 130, 125), (185, 30, 115), (95, 95, 95)];
 /// Colour of the checkpoint circles' outline and numbers.
 pub const CHECKPOINT_RGB: (u8, u8, u8) = (0, 140, 70);
 /// Colour of the speed line.
@@ -49,9 +52,14 @@ const COLLISION: RGBColor = RGBColor(215, 25, 30);
 const START: RGBColor = RGBColor(0, 150, 60);
 const TOP_SPEED: RGBColor = RGBColor(200, 60, 40);
 
-const TRAJECTORY: RGBColor = RGBColor(TRAJECTORY_RGB.0, TRAJECTORY_RGB.1, TRAJECTORY_RGB.2);
 const CHECKPOINT: RGBColor = RGBColor(CHECKPOINT_RGB.0, CHECKPOINT_RGB.1, CHECKPOINT_RGB.2);
 const SPEED: RGBColor = RGBColor(SPEED_RGB.0, SPEED_RGB.1, SPEED_RGB.2);
+
+/// The colour of robot `k`'s lines.
+fn robot_color(k: usize) -> RGBColor {
+    let (r, g, b) = ROBOT_RGB[k % ROBOT_RGB.len()];
+    RGBColor(r, g, b)
+}
 
 /// Why the SVG could not be drawn (in practice only a bug: the backend writes to memory).
 #[derive(Debug, thiserror::Error)]
@@ -67,12 +75,23 @@ impl<E: std::error::Error + Send + Sync> From<DrawingAreaErrorKind<E>> for PlotD
 /// What one picture shows.
 #[derive(Debug)]
 pub struct Figure<'a> {
-    /// First line of the title (the log's file name).
+    /// First line of the title (the log's file name, or the names of several).
     pub title: String,
-    /// The log.
-    pub log: &'a RunLog,
-    /// Lab, obstacles and checkpoints under the trajectory.
+    /// The logs with their robots' names: one robot, or several in one run.
+    pub logs: Vec<(String, &'a RunLog)>,
+    /// Lab, obstacles and checkpoints under the trajectories.
     pub scene: &'a Scene,
+}
+
+impl Figure<'_> {
+    /// Several robots: each is named in the legends and drawn in its own colour.
+    fn several(&self) -> bool {
+        self.logs.len() > 1
+    }
+
+    fn samples(&self) -> impl Iterator<Item = &Sample> {
+        self.logs.iter().flat_map(|(_, l)| l.samples.iter())
+    }
 }
 
 /// A text style whose SVG `font-size` is `px` (plotters writes size / 1.24).
@@ -92,7 +111,7 @@ fn text_width(text: &str, px: f64) -> i32 {
 
 /// Pixels per metre and the window of the floor shown, with equal scales on both axes.
 fn map_window(fig: &Figure) -> (f64, View) {
-    let points = fig.log.samples.iter().map(|s| (s.x_m, s.y_m));
+    let points = fig.samples().map(|s| (s.x_m, s.y_m));
     let view = View::around(points, fig.scene);
     let bounds = view.bounds(fig.scene);
     let (wmax, hmax) = (f64::from(MAP_MAX_PX.0), f64::from(MAP_MAX_PX.1));
@@ -133,7 +152,7 @@ pub fn render(fig: &Figure) -> Result<String, PlotDrawError> {
         root.fill(&WHITE)?;
         let (title, rest) = root.split_vertically(TITLE_H);
         let (map_panel, speed_panel) = rest.split_vertically(map_panel_h);
-        let v = speeds(&fig.log.samples);
+        let v: Vec<Vec<SpeedPoint>> = fig.logs.iter().map(|(_, l)| speeds(&l.samples)).collect();
         draw_title(&title, fig, &v)?;
         draw_map(&map_panel, fig, view, scale, map_w)?;
         draw_speed(&speed_panel, fig, &v)?;
@@ -142,21 +161,23 @@ pub fn render(fig: &Figure) -> Result<String, PlotDrawError> {
     Ok(svg)
 }
 
-fn draw_title(area: &DrawingArea<SVGBackend, Shift>, fig: &Figure, v: &[SpeedPoint]) -> Result<(), PlotDrawError> {
-    let log = fig.log;
-    let first = log.samples.first().map_or(0.0, |s| s.time_s);
-    let last = log.samples.last().map_or(0.0, |s| s.time_s);
-    let top = v.iter().map(|p| p.speed_m_s).fold(0.0, f64::max);
+fn draw_title(area: &DrawingArea<SVGBackend, Shift>, fig: &Figure, v: &[Vec<SpeedPoint>]) -> Result<(), PlotDrawError> {
+    let first = fig.samples().map(|s| s.time_s).fold(f64::INFINITY, f64::min);
+    let last = fig.samples().map(|s| s.time_s).fold(f64::NEG_INFINITY, f64::max);
+    let top = v.iter().flatten().map(|p| p.speed_m_s).fold(0.0, f64::max);
     let lab = fig.scene.lab.as_ref().map_or_else(|| "no map".to_owned(), |l| format!("lab {}", l.name));
     let centre = (WIDTH_PX / 2) as i32;
     area.draw(&Text::new(fig.title.clone(), (centre, 12), bold(22.0).pos(Pos::new(HPos::Center, VPos::Top))))?;
+    let driven: f64 = fig.logs.iter().map(|(_, l)| l.distance_m()).sum();
+    let collided: usize = fig.logs.iter().map(|(_, l)| l.collision_rows()).sum();
+    let rows = if fig.several() {
+        format!("{} robots", fig.logs.len())
+    } else {
+        format!("{} rows", fig.logs.iter().map(|(_, l)| l.samples.len()).sum::<usize>())
+    };
     let subtitle = format!(
-        "{lab}  ·  {} rows, {:.1} s  ·  {:.1} m driven  ·  top speed {:.2} m/s  ·  ticks in collision: {}",
-        log.samples.len(),
-        last - first,
-        log.distance_m(),
-        top,
-        log.collision_rows()
+        "{lab}  ·  {rows}, {:.1} s  ·  {driven:.1} m driven  ·  top speed {top:.2} m/s  ·  ticks in collision: {collided}",
+        (last - first).max(0.0),
     );
     area.draw(&Text::new(subtitle, (centre, 42), font(14.0).pos(Pos::new(HPos::Center, VPos::Top))))?;
     Ok(())
@@ -209,14 +230,17 @@ fn draw_map(
     map_w: u32,
 ) -> Result<(), PlotDrawError> {
     let scene = fig.scene;
-    let samples = &fig.log.samples;
     let heading_y = (HEADING_H / 2 + 4) as i32;
     panel.draw(&Text::new(
-        "Trajectory over the map",
+        if fig.several() { "Trajectories over the map" } else { "Trajectory over the map" },
         (MARGIN_LEFT as i32, heading_y),
         bold(16.0).pos(Pos::new(HPos::Left, VPos::Center)),
     ))?;
-    let mut keys = vec![(Key::Line(TRAJECTORY, false), "trajectory".to_owned())];
+    let mut keys = if fig.several() {
+        fig.logs.iter().enumerate().map(|(k, (name, _))| (Key::Line(robot_color(k), false), name.clone())).collect()
+    } else {
+        vec![(Key::Line(robot_color(0), false), "trajectory".to_owned())]
+    };
     keys.push((Key::Dot(START, 6), "start".into()));
     keys.push((Key::Square(INK), "end".into()));
     if scene.lab.as_ref().is_some_and(|l| !l.walls.is_empty()) {
@@ -228,7 +252,7 @@ fn draw_map(
     if !scene.checkpoints.is_empty() {
         keys.push((Key::Ring(CHECKPOINT), "checkpoint".into()));
     }
-    if samples.iter().any(|s| s.collision) {
+    if fig.samples().any(|s| s.collision) {
         keys.push((Key::Dot(COLLISION, 4), "collision".into()));
     }
     draw_legend(panel, &keys, (WIDTH_PX - MARGIN_RIGHT) as i32, heading_y)?;
@@ -317,8 +341,23 @@ fn draw_map(
         chart.draw_series(std::iter::once(EmptyElement::at(at) + label))?;
     }
 
+    for (k, (name, log)) in fig.logs.iter().enumerate() {
+        draw_track(&mut chart, &log.samples, robot_color(k), scale, fig.several().then_some(name.as_str()))?;
+    }
+    Ok(())
+}
+
+/// One robot's trajectory with its collisions, start and end; with several robots the start
+/// carries the robot's `name` instead of the word "start", and the end no word.
+fn draw_track(
+    chart: &mut MapChart,
+    samples: &[Sample],
+    color: RGBColor,
+    scale: f64,
+    name: Option<&str>,
+) -> Result<(), PlotDrawError> {
     let path: Vec<(f64, f64)> = samples.iter().map(|s| (s.x_m, s.y_m)).collect();
-    chart.draw_series(LineSeries::new(path.iter().copied(), TRAJECTORY.stroke_width(2)))?;
+    chart.draw_series(LineSeries::new(path.iter().copied(), color.stroke_width(2)))?;
     // One mark per place hit: rows of a long contact fall on the same pixels.
     let mut last_mark: Option<(f64, f64)> = None;
     for s in samples.iter().filter(|s| s.collision) {
@@ -332,12 +371,20 @@ fn draw_map(
         let start = EmptyElement::at(first)
             + Circle::new((0, 0), 7, START.filled())
             + Circle::new((0, 0), 7, WHITE.stroke_width(2))
-            + Text::new("start", (10, 10), bold(13.0).color(&START).pos(Pos::new(HPos::Left, VPos::Top)));
+            + Text::new(
+                name.unwrap_or("start").to_owned(),
+                (10, 10),
+                bold(13.0).color(if name.is_some() { &color } else { &START }).pos(Pos::new(HPos::Left, VPos::Top)),
+            );
         chart.draw_series(std::iter::once(start))?;
         let end = EmptyElement::at(last)
             + Rectangle::new([(-6, -6), (6, 6)], INK.filled())
             + Rectangle::new([(-6, -6), (6, 6)], WHITE.stroke_width(1))
-            + Text::new("end", (10, -10), bold(13.0).pos(Pos::new(HPos::Left, VPos::Bottom)));
+            + Text::new(
+                if name.is_some() { String::new() } else { "end".to_owned() },
+                (10, -10),
+                bold(13.0).pos(Pos::new(HPos::Left, VPos::Bottom)),
+            );
         chart.draw_series(std::iter::once(end))?;
     }
     Ok(())
@@ -402,27 +449,38 @@ fn draw_lab_outline(chart: &mut MapChart, view: &View, width: f64, height: f64) 
     Ok(())
 }
 
-fn draw_speed(panel: &DrawingArea<SVGBackend, Shift>, fig: &Figure, v: &[SpeedPoint]) -> Result<(), PlotDrawError> {
-    let samples = &fig.log.samples;
+fn draw_speed(
+    panel: &DrawingArea<SVGBackend, Shift>,
+    fig: &Figure,
+    v: &[Vec<SpeedPoint>],
+) -> Result<(), PlotDrawError> {
     let heading_y = (HEADING_H / 2 + 4) as i32;
     panel.draw(&Text::new(
         "Speed over time",
         (MARGIN_LEFT as i32, heading_y),
         bold(16.0).pos(Pos::new(HPos::Left, VPos::Center)),
     ))?;
-    let top = v.iter().map(|p| p.speed_m_s).fold(0.0, f64::max);
-    let mut keys = vec![
-        (Key::Line(SPEED, false), "speed".to_owned()),
-        (Key::Line(TOP_SPEED, true), format!("top speed {top:.2} m/s")),
-    ];
-    let collided: Vec<&SpeedPoint> = v.iter().filter(|p| samples[p.sample].collision).collect();
+    let top = v.iter().flatten().map(|p| p.speed_m_s).fold(0.0, f64::max);
+    let mut keys = if fig.several() {
+        fig.logs.iter().enumerate().map(|(k, (name, _))| (Key::Line(robot_color(k), false), name.clone())).collect()
+    } else {
+        vec![(Key::Line(SPEED, false), "speed".to_owned())]
+    };
+    keys.push((Key::Line(TOP_SPEED, true), format!("top speed {top:.2} m/s")));
+    let collided: Vec<(f64, f64)> = fig
+        .logs
+        .iter()
+        .zip(v)
+        .flat_map(|((_, l), v)| v.iter().filter(|p| l.samples[p.sample].collision).map(|p| (p.time_s, p.speed_m_s)))
+        .collect();
     if !collided.is_empty() {
         keys.push((Key::Dot(COLLISION, 3), "collision".into()));
     }
     draw_legend(panel, &keys, (WIDTH_PX - MARGIN_RIGHT) as i32, heading_y)?;
 
-    let t0 = samples.first().map_or(0.0, |s| s.time_s);
-    let t1 = samples.last().map_or(1.0, |s| s.time_s).max(t0 + 0.1);
+    let t0 = fig.samples().map(|s| s.time_s).fold(f64::INFINITY, f64::min);
+    let t0 = if t0.is_finite() { t0 } else { 0.0 };
+    let t1 = fig.samples().map(|s| s.time_s).fold(t0 + 0.1, f64::max);
     let y_max = if top > 0.0 { top * 1.15 } else { 1.0 };
     let mut chart = ChartBuilder::on(panel)
         .margin_top(HEADING_H + MARGIN_TOP)
@@ -452,14 +510,17 @@ fn draw_speed(panel: &DrawingArea<SVGBackend, Shift>, fig: &Figure, v: &[SpeedPo
         .y_desc("speed (m/s)")
         .draw()?;
 
-    if v.is_empty() {
+    if v.iter().all(|v| v.is_empty()) {
         let note = Text::new("fewer than two distinct ticks: no speed", ((t0 + t1) / 2.0, 0.5), centred(font(14.0)));
         chart.draw_series(std::iter::once(note))?;
         return Ok(());
     }
     chart.draw_series(DashedLineSeries::new([(t0, top), (t1, top)], 8, 5, TOP_SPEED.stroke_width(2)))?;
-    chart.draw_series(LineSeries::new(v.iter().map(|p| (p.time_s, p.speed_m_s)), SPEED.stroke_width(2)))?;
-    chart.draw_series(collided.iter().map(|p| Circle::new((p.time_s, p.speed_m_s), 3, COLLISION.filled())))?;
+    for (k, v) in v.iter().enumerate() {
+        let color = if fig.several() { robot_color(k) } else { SPEED };
+        chart.draw_series(LineSeries::new(v.iter().map(|p| (p.time_s, p.speed_m_s)), color.stroke_width(2)))?;
+    }
+    chart.draw_series(collided.iter().map(|&p| Circle::new(p, 3, COLLISION.filled())))?;
     Ok(())
 }
 

@@ -1,5 +1,6 @@
 //! `iwsim plot`: a run log's trajectory over the map (thesis Fig. 7.6) and its speed over time
-//! (Figs. 7.3–7.4), as one SVG.
+//! (Figs. 7.3–7.4), as one SVG; several logs of one run (several robots) in one figure, a
+//! colour each.
 //!
 //! ```
 //! use std::path::Path;
@@ -12,7 +13,7 @@
 //! assert!((speeds(&log.samples)[0].speed_m_s - 0.5).abs() < 1e-9);
 //!
 //! let scene = Scene { checkpoints: vec![Checkpoint::parse("10,6.1")?], ..Default::default() };
-//! let svg = render(&Figure { title: "chair1.csv".into(), log: &log, scene: &scene })?;
+//! let svg = render(&Figure { title: "chair1.csv".into(), logs: vec![("chair1".into(), &log)], scene: &scene })?;
 //! assert!(svg.contains("<polyline"));
 //! # Ok::<(), Box<dyn std::error::Error>>(())
 //! ```
@@ -41,9 +42,12 @@ pub const SUMMARY_FILE: &str = "summary.json";
 /// Options of `iwsim plot`.
 #[derive(Debug, clap::Args, Clone)]
 pub struct PlotArgs {
-    /// The CSV log of one robot (`iwsim run` and the agents write one per robot).
-    pub log: PathBuf,
-    /// The SVG to write [default: the log's path with `.svg`].
+    /// The CSV log of a robot (`iwsim run` and the agents write one per robot); several logs of
+    /// one run are drawn together, a colour each.
+    #[arg(required = true, num_args = 1.., value_name = "LOG")]
+    pub log: Vec<PathBuf>,
+    /// The SVG to write [default: the log's path with `.svg`; for several logs,
+    /// `trajectories.svg` beside the first].
     #[arg(long, value_name = "FILE.svg")]
     pub out: Option<PathBuf>,
     /// Lab drawn under the trajectory: builtin:liacc, builtin:thesis, builtin:maze or a lab
@@ -66,7 +70,20 @@ pub struct PlotArgs {
 impl PlotArgs {
     /// The file to write.
     pub fn out_path(&self) -> PathBuf {
-        self.out.clone().unwrap_or_else(|| self.log.with_extension("svg"))
+        if let Some(out) = &self.out {
+            return out.clone();
+        }
+        match self.log.as_slice() {
+            [one] => one.with_extension("svg"),
+            logs => logs
+                .first()
+                .map_or_else(|| PathBuf::from("trajectories.svg"), |first| first.with_file_name("trajectories.svg")),
+        }
+    }
+
+    /// The first log (the one whose directory may hold a summary.json).
+    fn first_log(&self) -> anyhow::Result<&Path> {
+        self.log.first().map(PathBuf::as_path).context("no log given")
     }
 }
 
@@ -80,18 +97,27 @@ pub fn run(args: &PlotArgs) -> anyhow::Result<ExitCode> {
 /// What [`run`] does, without printing: returns the path written.
 pub fn plot(args: &PlotArgs) -> anyhow::Result<PathBuf> {
     let out = args.out_path();
-    anyhow::ensure!(out != args.log, "{}: the SVG would overwrite the log; give --out", args.log.display());
-    let log = RunLog::read(&args.log)?;
+    if let Some(log) = args.log.iter().find(|l| **l == out) {
+        anyhow::bail!("{}: the SVG would overwrite the log; give --out", log.display());
+    }
+    let logs = args.log.iter().map(|p| RunLog::read(p)).collect::<Result<Vec<_>, _>>()?;
     let scene = scene(args)?;
-    let title = args.log.file_name().map_or_else(|| args.log.display().to_string(), |n| n.to_string_lossy().into());
-    let svg = draw::render(&draw::Figure { title, log: &log, scene: &scene })?;
+    let file_name = |p: &Path| p.file_name().map_or_else(|| p.display().to_string(), |n| n.to_string_lossy().into());
+    let title = args.log.iter().map(|p| file_name(p)).collect::<Vec<_>>().join(", ");
+    let named = args
+        .log
+        .iter()
+        .zip(&logs)
+        .map(|(p, l)| (p.file_stem().map_or_else(|| file_name(p), |s| s.to_string_lossy().into()), l))
+        .collect();
+    let svg = draw::render(&draw::Figure { title, logs: named, scene: &scene })?;
     std::fs::write(&out, svg).with_context(|| format!("{}: cannot write the SVG", out.display()))?;
     Ok(out)
 }
 
 /// The map under the trajectory: the command line first, then summary.json beside the log.
 fn scene(args: &PlotArgs) -> anyhow::Result<Scene> {
-    let dir = args.log.parent().filter(|d| !d.as_os_str().is_empty()).unwrap_or(Path::new("."));
+    let dir = args.first_log()?.parent().filter(|d| !d.as_os_str().is_empty()).unwrap_or(Path::new("."));
     let summary_path = dir.join(SUMMARY_FILE);
     let summary =
         if !args.no_summary && summary_path.is_file() { Summary::read(&summary_path)? } else { Summary::default() };

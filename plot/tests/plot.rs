@@ -5,7 +5,7 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 use plot::PlotArgs;
-use plot::draw::{CHECKPOINT_RGB, TRAJECTORY_RGB};
+use plot::draw::{CHECKPOINT_RGB, ROBOT_RGB, TRAJECTORY_RGB};
 use quick_xml::events::Event;
 
 /// A fresh directory for one test, removed when dropped.
@@ -63,7 +63,7 @@ fn write_run(dir: &Path) -> (PathBuf, Vec<(f64, f64)>) {
 }
 
 fn args(log: &Path) -> PlotArgs {
-    PlotArgs { log: log.into(), out: None, lab: None, obstacle: vec![], checkpoint: vec![], no_summary: false }
+    PlotArgs { log: vec![log.into()], out: None, lab: None, obstacle: vec![], checkpoint: vec![], no_summary: false }
 }
 
 /// One SVG element: its name, attributes and the text directly inside it.
@@ -259,4 +259,40 @@ fn a_bad_log_is_an_error_naming_file_line_and_column() {
 
     let err = plot::plot(&args(&dir.0.join("missing.csv"))).expect_err("missing");
     assert!(format!("{err:#}").contains("missing.csv: cannot read the log"), "{err:#}");
+}
+
+#[test]
+fn several_logs_of_one_run_are_drawn_together_a_colour_each() {
+    let dir = TempDir::new("several");
+    let (one, positions) = write_run(&dir.0);
+    // A second robot: the same path shifted 1 m south and driven in half the rows.
+    let mut text = format!("{HEADER}\n");
+    for (k, (x, y)) in positions.iter().step_by(2).enumerate() {
+        text += &format!("{},{:.3},0,0,1.5,NaN,0.0,{x:.4},{:.4},0,0,0.5,0.5\n", k + 1, 0.1 * (k + 1) as f64, y - 1.0);
+    }
+    let two = dir.0.join("chair2.csv");
+    std::fs::write(&two, text).expect("second log written");
+    let mut a = args(&one);
+    a.log.push(two.clone());
+    let out = plot::plot(&a).expect("plotted");
+    assert_eq!(out, dir.0.join("trajectories.svg"), "default output for several logs");
+    let elements = parse_svg(&std::fs::read_to_string(&out).expect("SVG written"));
+    let lines = |rgb, n: usize| {
+        elements
+            .iter()
+            .filter(|e| e.name == "polyline" && e.attr("stroke") == hex(rgb) && e.points().len() == n)
+            .count()
+    };
+    let (n1, n2) = (positions.len(), positions.len().div_ceil(2));
+    // Each robot: a trajectory with a point per row and a speed line with one per interval.
+    assert_eq!((lines(ROBOT_RGB[0], n1), lines(ROBOT_RGB[0], n1 - 1)), (1, 1), "chair1 in the first colour");
+    assert_eq!((lines(ROBOT_RGB[1], n2), lines(ROBOT_RGB[1], n2 - 1)), (1, 1), "chair2 in the second colour");
+    let texts: Vec<&str> = elements.iter().filter(|e| e.name == "text").map(|e| e.text.as_str()).collect();
+    for want in ["chair1.csv, chair2.csv", "chair1", "chair2", "Trajectories over the map"] {
+        assert!(texts.contains(&want), "text {want:?} missing from {texts:?}");
+    }
+    assert!(texts.iter().any(|t| t.contains("2 robots")), "{texts:?}");
+    // A log among the inputs is never overwritten.
+    a.out = Some(two);
+    assert!(plot::plot(&a).expect_err("would overwrite").to_string().contains("overwrite the log"));
 }
