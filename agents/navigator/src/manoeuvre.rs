@@ -21,6 +21,9 @@ const WALL_MARGIN_M: f64 = 0.05;
 /// Distance kept from the other chair while pulling over (it may still be coming to a
 /// stop), metres.
 const PEER_MARGIN_M: f64 = 0.5;
+/// Distance kept from any third chair's rectangle as it last said (it may be pulling over
+/// itself, towards a spot nobody knows yet), metres.
+const OTHERS_MARGIN_M: f64 = 0.3;
 /// What the other needs beside the parked chair: clearance from walls, and from us.
 const PASS_WALL_M: f64 = 0.04;
 const PASS_GAP_M: f64 = 0.1;
@@ -64,9 +67,10 @@ pub fn s_curve(from: Pose, offset: f64, length: f64) -> Vec<PathPose> {
         .collect()
 }
 
-/// Plans the pull-over of the chair at `me` (with the model's footprint) for `peer`; `None`
-/// when there is no room for it on either side.
-pub fn pull_over(model: &WorldModel, me: Pose, peer: &Peer) -> Option<PullOver> {
+/// Plans the pull-over of the chair at `me` (with the model's footprint) for `peer`, keeping
+/// clear of the `others` chairs heard; `None` when there is no room for it on either side
+/// just now.
+pub fn pull_over(model: &WorldModel, me: Pose, peer: &Peer, others: &[Peer]) -> Option<PullOver> {
     let fp = model.footprint;
     // Farther aside than this helps nobody.
     let enough = fp.half + peer.footprint.half + 0.35;
@@ -76,13 +80,15 @@ pub fn pull_over(model: &WorldModel, me: Pose, peer: &Peer) -> Option<PullOver> 
             for length in LENGTHS_M {
                 let path = s_curve(me, side * offset, length);
                 let clear = path.iter().all(|p| {
-                    model.free(&p.pose, WALL_MARGIN_M) && !fp.meets(&p.pose, &peer.footprint, &peer.pose, PEER_MARGIN_M)
+                    model.free(&p.pose, WALL_MARGIN_M)
+                        && !fp.meets(&p.pose, &peer.footprint, &peer.pose, PEER_MARGIN_M)
+                        && !others.iter().any(|o| fp.meets(&p.pose, &o.footprint, &o.pose, OTHERS_MARGIN_M))
                 });
                 if !clear {
                     continue;
                 }
                 let end = path[path.len() - 1].pose;
-                if room_to_pass(model, &fp, &end, peer) {
+                if room_to_pass(model, &fp, &end, peer, others) {
                     return Some(PullOver { path, offset_m: side * offset });
                 }
                 // Less offset on this side leaves the other even less room.
@@ -95,9 +101,10 @@ pub fn pull_over(model: &WorldModel, me: Pose, peer: &Peer) -> Option<PullOver> 
 }
 
 /// Whether `peer` can drive past a chair parked at `parked` (rectangle `fp`): along its own
-/// line shifted away from the parked chair, some lane keeps it clear of the walls and of
-/// the parked chair for three metres either side.
-pub fn room_to_pass(model: &WorldModel, fp: &Footprint, parked: &Pose, peer: &Peer) -> bool {
+/// line shifted away from the parked chair, some lane keeps it clear of the walls, of the
+/// parked chair and of the `others` (as they last said where they are) for three metres
+/// either side.
+pub fn room_to_pass(model: &WorldModel, fp: &Footprint, parked: &Pose, peer: &Peer, others: &[Peer]) -> bool {
     let line = peer.pose;
     let (c, s) = (line.theta.cos(), line.theta.sin());
     let centre = fp.centre(parked) - line.pos();
@@ -113,7 +120,9 @@ pub fn room_to_pass(model: &WorldModel, fp: &Footprint, parked: &Pose, peer: &Pe
             let t = beside + k as f64 * 0.1;
             let q = away * lane;
             let pose = Pose::new(line.x + t * c - q * s, line.y + t * s + q * c, line.theta);
-            model.fits(&peer.footprint, &pose, PASS_WALL_M) && !peer.footprint.meets(&pose, fp, parked, PASS_GAP_M)
+            model.fits(&peer.footprint, &pose, PASS_WALL_M)
+                && !peer.footprint.meets(&pose, fp, parked, PASS_GAP_M)
+                && !others.iter().any(|o| peer.footprint.meets(&pose, &o.footprint, &o.pose, PASS_GAP_M))
         });
         if ok {
             return true;
@@ -174,7 +183,7 @@ mod tests {
         // Westbound on the centre line: its right is north.
         let me = Pose::from_deg(21.0, 6.02, 180.0);
         let peer = peer_at(14.5, 6.0, 0.0);
-        let p = pull_over(&model, me, &peer).expect("room to pull over");
+        let p = pull_over(&model, me, &peer, &[]).expect("room to pull over");
         assert_eq!(p.side(), "right");
         let end = p.path[p.path.len() - 1].pose;
         let fp = model.footprint;
@@ -186,11 +195,11 @@ mod tests {
             let top = fp.corners(&q.pose, 0.0).iter().map(|c| c.y).fold(f64::MIN, f64::max);
             assert!(top < 6.91 - WALL_MARGIN_M + 1e-9, "{q:?} comes within {} m of the wall", 6.91 - top);
         }
-        assert!(room_to_pass(&model, &fp, &end, &peer));
+        assert!(room_to_pass(&model, &fp, &end, &peer, &[]));
         // Not by enough when the other chair is far wider than the corridor allows.
         let mut wide = peer.clone();
         wide.footprint = Footprint::of_body(1.1, 1.2, 0.8);
-        assert_eq!(pull_over(&model, me, &wide), None);
+        assert_eq!(pull_over(&model, me, &wide, &[]), None);
     }
 
     #[test]
@@ -199,10 +208,40 @@ mod tests {
         // Eastbound near the south wall: its right has no room left; its left does.
         let me = Pose::from_deg(10.0, 5.6, 0.0);
         let peer = peer_at(17.0, 6.3, 180.0);
-        let p = pull_over(&model, me, &peer).expect("room on the left");
+        let p = pull_over(&model, me, &peer, &[]).expect("room on the left");
         assert_eq!(p.side(), "left");
         let end = p.path[p.path.len() - 1].pose;
         assert!(end.y > 6.2 && fp_top(&end) < 6.91 - WALL_MARGIN_M + 1e-9, "{end:?}");
+    }
+
+    #[test]
+    fn a_third_chair_where_the_pull_over_would_go_leaves_no_room_until_it_has_gone() {
+        let model = corridor();
+        let me = Pose::from_deg(23.0, 6.0, 180.0);
+        let peer = peer_at(15.0, 6.0, 0.0);
+        // Another westbound chair 2 m ahead, itself pulling over to the north.
+        let mut ahead = peer_at(21.0, 6.2, 170.0);
+        ahead.name = "chair2".into();
+        assert_eq!(pull_over(&model, me, &peer, std::slice::from_ref(&ahead)), None);
+        ahead.pose = Pose::from_deg(18.5, 6.43, 180.0);
+        let p = pull_over(&model, me, &peer, &[ahead]).expect("room behind it once it has parked further on");
+        assert_eq!(p.side(), "right");
+        // The south side would leave chair1 an S-bend between the two: never chosen.
+        let mut parked_north = peer_at(21.2, 6.43, 180.0);
+        parked_north.name = "chair2".into();
+        let me = Pose::from_deg(24.0, 6.0, 180.0);
+        let north = Pose::from_deg(23.0, 6.43, 180.0);
+        assert!(!room_to_pass(
+            &model,
+            &model.footprint,
+            &Pose::from_deg(23.0, 5.57, 180.0),
+            &peer,
+            &[parked_north.clone()]
+        ));
+        assert!(room_to_pass(&model, &model.footprint, &north, &peer, &[parked_north.clone()]));
+        if let Some(p) = pull_over(&model, me, &peer, &[parked_north]) {
+            assert_eq!(p.side(), "right", "{p:?}");
+        }
     }
 
     #[test]
@@ -211,6 +250,6 @@ mod tests {
         map.walls.push(MapWall::rectangle(0.0, 4.99, 30.0, 5.13, false));
         map.walls.push(MapWall::rectangle(0.0, 6.3, 30.0, 6.6, false));
         let model = WorldModel::new(map, Body::INTELLWHEELS.footprint());
-        assert_eq!(pull_over(&model, Pose::from_deg(10.0, 5.7, 0.0), &peer_at(17.0, 5.7, 180.0)), None);
+        assert_eq!(pull_over(&model, Pose::from_deg(10.0, 5.7, 0.0), &peer_at(17.0, 5.7, 180.0), &[]), None);
     }
 }

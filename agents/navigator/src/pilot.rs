@@ -37,12 +37,14 @@ pub struct Pilot {
     nav: Navigator,
     traffic: Traffic,
     said: Option<State>,
+    /// "No room to pull over" was said (once per search).
+    no_room_said: bool,
 }
 
 impl Pilot {
     /// A pilot called `name` (as it registered with the hub) for `nav`.
     pub fn new(name: &str, nav: Navigator) -> Self {
-        Self { name: name.to_owned(), traffic: Traffic::new(name), nav, said: None }
+        Self { name: name.to_owned(), traffic: Traffic::new(name), nav, said: None, no_room_said: false }
     }
 
     /// The name it goes by.
@@ -69,8 +71,12 @@ impl Pilot {
         }
         let peers = self.traffic.peers();
         let all: Vec<(Pose, Footprint)> = peers.iter().map(|p| (p.pose, p.footprint)).collect();
-        let parked: Vec<(Pose, Footprint)> =
-            peers.iter().filter(|p| p.state == State::Park).map(|p| (p.pose, p.footprint)).collect();
+        // Chairs that say they stand still are obstacles to plan round.
+        let parked: Vec<(Pose, Footprint)> = peers
+            .iter()
+            .filter(|p| matches!(p.state, State::Park | State::Wait))
+            .map(|p| (p.pose, p.footprint))
+            .collect();
         self.nav.set_peers(all, &parked);
         self.nav.perceive(input);
         let me = self.nav.pose();
@@ -94,21 +100,33 @@ impl Pilot {
                     notes.push(format!("waiting at t {now:.1} s for the chair ahead to pull over"));
                 }
             }
-            Decision::PullOver(peer) => match manoeuvre::pull_over(self.nav.model(), me, &peer) {
-                Some(p) => {
-                    notes.push(format!(
-                        "pulling over {:.2} m to the {} at t {now:.1} s to let {} pass",
-                        p.offset_m.abs(),
-                        p.side(),
-                        peer.name
-                    ));
-                    self.nav.manoeuvre(&p.path, PULL_OVER_SPEED);
+            // Looking for room costs a few milliseconds: twice a second is often enough.
+            Decision::PullOver(_) if self.no_room_said && !input.tick.is_multiple_of(5) => self.nav.hold(),
+            Decision::PullOver(peer) => {
+                let others: Vec<_> = self.traffic.peers().iter().filter(|p| p.name != peer.name).cloned().collect();
+                match manoeuvre::pull_over(self.nav.model(), me, &peer, &others) {
+                    Some(p) => {
+                        notes.push(format!(
+                            "pulling over {:.2} m to the {} at t {now:.1} s to let {} pass",
+                            p.offset_m.abs(),
+                            p.side(),
+                            peer.name
+                        ));
+                        self.nav.manoeuvre(&p.path, PULL_OVER_SPEED);
+                        self.traffic.pulling();
+                        self.no_room_said = false;
+                    }
+                    None => {
+                        if !std::mem::replace(&mut self.no_room_said, true) {
+                            notes.push(format!(
+                                "no room to pull over for {} at t {now:.1} s; waiting for some",
+                                peer.name
+                            ));
+                        }
+                        self.nav.hold();
+                    }
                 }
-                None => {
-                    notes.push(format!("no room to pull over here for {} at t {now:.1} s; going on", peer.name));
-                    self.traffic.give_up();
-                }
-            },
+            }
         }
         let out = self.nav.act(input);
         let state = if self.nav.finished() { State::Park } else { self.traffic.state() };

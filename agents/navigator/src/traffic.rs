@@ -1,17 +1,18 @@
 //! Meeting another chair head-on: the two agree by messages who yields (beyond the thesis).
 //!
 //! Every navigator says where it is and what it is doing, `nav NAME X Y HEADING STATE LENGTH
-//! WIDTH COM` ([`encode`]), where STATE is `go`, `pull` (pulling over) or `park` (standing
-//! still: parked for someone, or done). When two of them are within [`MEET_M`], face each
+//! WIDTH COM` ([`encode`]), where STATE is `go`, `pull` (pulling over), `wait` (standing still
+//! until the chair ahead has pulled over) or `park` (standing still: parked for someone, or
+//! done). When two of them are within [`MEET_M`], face each
 //! other, each has the other ahead and their lines are close enough to clash, both apply the
 //! same rule to what they heard — the name that sorts last yields:
 //!
 //! - the yielder pulls over to the side (its right if that leaves room for the other, else
 //!   its left) along an S-curve that the navigator's own path follower drives
 //!   ([`crate::manoeuvre`]), stops, and says `park`;
-//! - the other stands still until it hears that `park`; then its navigator plans round the
-//!   parked chair's rectangle (any chair that says `park` is an obstacle to plan round) and
-//!   drives on;
+//! - the other stands still (saying `wait`) until it hears that `park`; then its navigator
+//!   plans round the parked chair's rectangle (any chair that says `park` or `wait` stands
+//!   still and is an obstacle to plan round) and drives on;
 //! - once the other has gone past, the yielder goes back to its navigator, which re-plans
 //!   from where it stands.
 //!
@@ -40,8 +41,10 @@ const PASSED_M: f64 = 1.4;
 pub enum State {
     /// Driving (or waiting) on its own account.
     Go,
-    /// Pulling over for another chair.
+    /// Pulling over for another chair (or looking for room to).
     Pull,
+    /// Standing still until the chair ahead has pulled over: plan round it.
+    Wait,
     /// Standing still for good or for a while (parked for another chair to pass, or at its
     /// last checkpoint): plan round it.
     Park,
@@ -52,6 +55,7 @@ impl State {
         match self {
             State::Go => "go",
             State::Pull => "pull",
+            State::Wait => "wait",
             State::Park => "park",
         }
     }
@@ -100,6 +104,7 @@ pub fn decode(bytes: &[u8], heard_s: f64) -> Option<Peer> {
     let state = match w.next()? {
         "go" => State::Go,
         "pull" => State::Pull,
+        "wait" => State::Wait,
         "park" => State::Park,
         _ => return None,
     };
@@ -121,8 +126,9 @@ pub fn decode(bytes: &[u8], heard_s: f64) -> Option<Peer> {
 enum Role {
     /// None going on.
     Free,
-    /// We yield to `peer` and are pulling over.
-    PullingOver { peer: String },
+    /// We yield to `peer` and pull over; `since_s` we have looked for room, and `moving` once
+    /// the manoeuvre is under way.
+    PullingOver { peer: String, since_s: f64, moving: bool },
     /// We yield to `peer` and are parked.
     Parked { peer: String },
     /// We have the right of way and wait for `peer` to yield, since `since_s`.
@@ -138,8 +144,8 @@ pub enum Decision {
     Go,
     /// Stand still (waiting for the other to yield, or parked until it has passed).
     Hold,
-    /// Pull over for this peer now (asked once; then [`Decision::Hold`] until
-    /// [`Traffic::parked`] is called).
+    /// Pull over for this peer now: asked each tick, standing still, until there is room and
+    /// [`Traffic::pulling`] is called; then [`Decision::Hold`] until [`Traffic::parked`].
     PullOver(Peer),
 }
 
@@ -176,6 +182,7 @@ impl Traffic {
         match self.role {
             Role::PullingOver { .. } => State::Pull,
             Role::Parked { .. } => State::Park,
+            Role::Waiting { .. } => State::Wait,
             _ => State::Go,
         }
     }
@@ -200,20 +207,17 @@ impl Traffic {
         }
     }
 
-    /// Says that the pull-over is over: we are parked and say so.
-    pub fn parked(&mut self) {
-        if let Role::PullingOver { peer } = &self.role {
-            self.role = Role::Parked { peer: peer.clone() };
+    /// Says that the pull-over manoeuvre has begun.
+    pub fn pulling(&mut self) {
+        if let Role::PullingOver { moving, .. } = &mut self.role {
+            *moving = true;
         }
     }
 
-    /// Gives up the negotiation on our side (no room to pull over here): the other will go
-    /// on after its wait, and its safety layer keeps it off us.
-    pub fn give_up(&mut self) {
-        if let Role::PullingOver { peer } | Role::Parked { peer } | Role::Waiting { peer, .. } =
-            std::mem::replace(&mut self.role, Role::Free)
-        {
-            self.crossed.push(peer);
+    /// Says that the pull-over is over: we are parked and say so.
+    pub fn parked(&mut self) {
+        if let Role::PullingOver { peer, .. } = &self.role {
+            self.role = Role::Parked { peer: peer.clone() };
         }
     }
 
@@ -236,7 +240,17 @@ impl Traffic {
     pub fn decide(&mut self, me: Pose, own: &Footprint, now_s: f64) -> Decision {
         self.peers.retain(|p| now_s - p.heard_s <= FORGET_S);
         match self.role.clone() {
-            Role::PullingOver { .. } => return Decision::Hold,
+            Role::PullingOver { peer, since_s, moving } => {
+                if moving {
+                    return Decision::Hold;
+                }
+                // No room found yet: look again while the other is still there, and give up
+                // after as long as the other waits (it then goes on regardless).
+                return match self.peer(&peer).cloned() {
+                    Some(p) if now_s - since_s <= WAIT_LIMIT_S => Decision::PullOver(p),
+                    _ => self.finish(peer),
+                };
+            }
             Role::Parked { peer } => {
                 return if self.gone_past(me, &peer) { self.finish(peer) } else { Decision::Hold };
             }
@@ -271,7 +285,7 @@ impl Traffic {
         });
         let Some(p) = meeting.cloned() else { return Decision::Go };
         if self.name > p.name {
-            self.role = Role::PullingOver { peer: p.name.clone() };
+            self.role = Role::PullingOver { peer: p.name.clone(), since_s: now_s, moving: false };
             Decision::PullOver(p)
         } else {
             self.role = Role::Waiting { peer: p.name.clone(), since_s: now_s };
@@ -330,8 +344,9 @@ mod tests {
         assert_eq!(one.decide(a, &fp, 0.1), Decision::Hold);
         let Decision::PullOver(peer) = two.decide(b, &fp, 0.1) else { panic!("chair2 yields") };
         assert_eq!(peer.name, "chair1");
-        assert_eq!(two.state(), State::Pull);
-        assert_eq!(two.decide(b, &fp, 0.2), Decision::Hold, "pulling over");
+        assert!(matches!(two.decide(b, &fp, 0.2), Decision::PullOver(_)), "asked again until it moves");
+        two.pulling();
+        assert_eq!(two.decide(b, &fp, 0.3), Decision::Hold, "pulling over");
         // While chair2 is pulling over, chair1 still waits.
         one.hear(&say("chair2", b, State::Pull), 0.2);
         assert_eq!(one.decide(a, &fp, 0.3), Decision::Hold);
@@ -392,6 +407,21 @@ mod tests {
             assert_eq!(one.decide(me, &fp, now), Decision::Go, "{why}");
             assert!(!one.negotiating(), "{why}");
         }
+    }
+
+    #[test]
+    fn a_chair_without_room_to_pull_over_keeps_looking_then_gives_up() {
+        let fp = BODY.footprint();
+        let (a, b) = (pose(15.0, 6.0, 0.0), pose(21.0, 6.0, 180.0));
+        let mut two = Traffic::new("chair2");
+        two.hear(&say("chair1", a, State::Go), 0.0);
+        assert!(matches!(two.decide(b, &fp, 0.1), Decision::PullOver(_)));
+        two.hear(&say("chair1", a, State::Wait), 20.0);
+        assert!(matches!(two.decide(b, &fp, 20.0), Decision::PullOver(_)), "still looking");
+        assert_eq!(two.state(), State::Pull);
+        two.hear(&say("chair1", a, State::Wait), 41.0);
+        assert_eq!(two.decide(b, &fp, 41.0), Decision::Go, "given up");
+        assert_eq!(two.state(), State::Go);
     }
 
     #[test]
