@@ -223,19 +223,23 @@ fn drive(agent: &mut Agent, args: &WheelchairArgs, chairs: &[ChairConfig]) -> an
     let mut logs: Vec<Option<RobotLog>> = chairs.iter().map(|_| None).collect();
     let wait = if args.busy_poll { Wait::BusyPoll } else { Wait::Blocking };
     let mut next_waypoint = vec![0usize; chairs.len()];
-    // Real chairs move themselves, one tick of the hub's cycle at a time.
-    let dt = if chairs.iter().any(|c| c.kind == ChairKind::Real) {
+    // Real chairs move themselves by the simulated time since the tick they last answered
+    // (in real time a slow agent may miss ticks); the first step is one cycle.
+    let cycle_s = if chairs.iter().any(|c| c.kind == ChairKind::Real) {
         let cycle_ms = agent.map().context("reading the hub's map header for its cycle")?.header.cycle_ms;
-        if cycle_ms > 0 { cycle_ms as f64 / 1000.0 } else { 0.1 }
+        f64::from(cycle_ms.max(1)) / 1000.0
     } else {
         0.1
     };
     let mut own: Vec<Option<OwnMotion>> = chairs.iter().map(|_| None).collect();
+    let mut last_time: Option<f64> = None;
     let mut actions: Vec<ActionBlock> = Vec::with_capacity(chairs.len());
     let mut answered = 0u64;
     let mut latencies_ns = Vec::new();
     while let Some(tick) = agent.wait_tick(wait)? {
         actions.clear();
+        let dt = last_time.map_or(cycle_s, |t| (tick.sim_time_s - t).max(0.0));
+        last_time = Some(tick.sim_time_s);
         for (k, (c, &id)) in chairs.iter().zip(&ids).enumerate() {
             let Some(b) = agent.sensors().get(k) else { continue };
             let powers = if tick.sim_time_s < c.start_s {

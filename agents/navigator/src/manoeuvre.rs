@@ -2,7 +2,7 @@
 //! model before it is driven.
 //!
 //! A rear-wheel-drive chair cannot step sideways, and in a corridor it cannot turn on the
-//! spot either (the Intellwheels body sweeps a 0.94 m circle round its axle in a 1.78 m
+//! spot either (the Intellwheels body sweeps a circle of 0.94 m radius round its axle in a 1.78 m
 //! corridor). So the yielder drives forward along an S-curve whose lateral offset follows a
 //! quintic smoothstep (straight, with no curvature, at both ends), and ends parallel to where
 //! it was going, against the side. The curve is chosen as the widest offset and shortest
@@ -109,6 +109,9 @@ pub fn room_to_pass(model: &WorldModel, fp: &Footprint, parked: &Pose, peer: &Pe
     let (c, s) = (line.theta.cos(), line.theta.sin());
     let centre = fp.centre(parked) - line.pos();
     let beside = centre.x * c + centre.y * s;
+    // The sweep starts ahead of where the other stands: its own rectangle is in the model
+    // when it says it is waiting.
+    let clear_of_itself = peer.footprint.front + peer.footprint.rear + 0.05;
     // Away from the parked chair, by at least what clears it, and by little more: a lane
     // farther off could lie beyond a wall.
     let side = -centre.x * s + centre.y * c;
@@ -116,8 +119,7 @@ pub fn room_to_pass(model: &WorldModel, fp: &Footprint, parked: &Pose, peer: &Pe
     let least = (fp.half + peer.footprint.half + PASS_GAP_M - side.abs()).max(0.0);
     let mut lane = least;
     while lane <= least + 0.3 {
-        let ok = (-30..=30).all(|k| {
-            let t = beside + k as f64 * 0.1;
+        let ok = (-30..=30).map(|k| beside + k as f64 * 0.1).filter(|&t| t >= clear_of_itself).all(|t| {
             let q = away * lane;
             let pose = Pose::new(line.x + t * c - q * s, line.y + t * s + q * c, line.theta);
             model.fits(&peer.footprint, &pose, PASS_WALL_M)

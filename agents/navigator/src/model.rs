@@ -39,6 +39,8 @@ pub struct WorldModel {
     parked_bodies: Vec<(Pose, Footprint)>,
     /// `parked` changed since the points were last rebuilt.
     parked_changed: bool,
+    /// Where the parked chairs' points begin in `points`, as of the last rebuild.
+    parked_from: usize,
     /// Sensed cells count as obstacles for planning from this much evidence on.
     pub plan_evidence: f32,
     /// Extra margin kept from sensed obstacles (their extent beyond what was seen is
@@ -85,6 +87,7 @@ impl WorldModel {
             parked: Vec::new(),
             parked_bodies: Vec::new(),
             parked_changed: false,
+            parked_from: 0,
             plan_evidence,
         }
     }
@@ -104,9 +107,10 @@ impl WorldModel {
         &self.points
     }
 
-    /// Sets the chairs parked for us: other chairs that said they stand still so that we can
-    /// pass. Their rectangles are obstacles exactly as said (the sensors only ever see a
-    /// face of them); returns whether anything changed by more than a centimetre.
+    /// Sets the chairs that stand still (they said so: parked for us, waiting, or arrived).
+    /// Their rectangles, as said, are obstacles like sensed ones (the sensors only ever see
+    /// a face of them); they take effect at the next [`WorldModel::refresh_sensed`]. Returns
+    /// whether anything changed by more than a centimetre.
     pub fn set_parked(&mut self, bodies: &[(Pose, Footprint)]) -> bool {
         let same = bodies.len() == self.parked_bodies.len()
             && bodies.iter().zip(&self.parked_bodies).all(|((p, f), (q, g))| {
@@ -188,6 +192,7 @@ impl WorldModel {
                 spec.center(ix, iy)
             })
             .collect();
+        self.parked_from = self.points.len();
         for &p in &self.parked {
             let (ix, iy) = spec.clamp_cell(p);
             self.point_cells.push(spec.index(ix, iy) as u32);
@@ -292,8 +297,7 @@ impl WorldModel {
 
     /// Whether sensed point `k` counts as an obstacle for planning.
     fn counts(&self, k: usize) -> bool {
-        k + self.parked.len() >= self.points.len()
-            || self.sensed.evidence(self.point_cells[k] as usize) >= self.plan_evidence
+        k >= self.parked_from || self.sensed.evidence(self.point_cells[k] as usize) >= self.plan_evidence
     }
 
     /// Whether a point is within the chair at `pose` grown by `margin`.

@@ -226,6 +226,8 @@ pub struct Navigator {
     mode: Mode,
     /// The sensed map changed in this tick's [`Navigator::perceive`].
     map_changed: bool,
+    /// The last manoeuvre was given up on the way.
+    manoeuvre_lost: bool,
     /// Other chairs' rectangles as they said: readings they explain map nothing.
     peers: Vec<(Pose, Footprint)>,
 }
@@ -259,6 +261,7 @@ impl Navigator {
             stats: NavStats::default(),
             mode: Mode::Plan,
             map_changed: false,
+            manoeuvre_lost: false,
             peers: Vec::new(),
         }
     }
@@ -314,11 +317,18 @@ impl Navigator {
         let check = vec![false; path.len()];
         self.tracker = Some(Tracker::new(path, &vmax, &check, false, self.track_params));
         self.mode = Mode::Manoeuvre;
+        self.manoeuvre_lost = false;
     }
 
     /// Whether a manoeuvre is being driven.
     pub fn manoeuvring(&self) -> bool {
         self.mode == Mode::Manoeuvre
+    }
+
+    /// Whether the last manoeuvre was given up on the way (the chair strayed from it) rather
+    /// than driven to its end.
+    pub fn manoeuvre_lost(&self) -> bool {
+        self.manoeuvre_lost
     }
 
     /// Stands still (braking now) and plans nothing until [`Navigator::resume`].
@@ -432,11 +442,11 @@ impl Navigator {
             Some(c) if c.lateral_error <= self.track_params.max_lateral => (c.v, c.w),
             _ => (0.0, 0.0),
         };
-        if cmd.is_none_or(|c| c.lateral_error > self.track_params.max_lateral)
-            || self.tracker.as_ref().is_some_and(|t| t.finished())
-        {
+        let lost = cmd.is_none_or(|c| c.lateral_error > self.track_params.max_lateral);
+        if lost || self.tracker.as_ref().is_some_and(|t| t.finished()) {
             self.tracker = None;
             self.mode = Mode::Hold;
+            self.manoeuvre_lost = lost;
         }
         if let Some((sv, sw, stop)) = self.safety(input, v, w) {
             (v, w) = (sv, sw);

@@ -11,7 +11,8 @@ use crate::traffic::{self, Decision, MEET_M, State, Traffic};
 
 /// Speed of the pull-over, m/s: a little below cruising, a few metres from another chair.
 const PULL_OVER_SPEED: f64 = 0.25;
-/// Say where we are every this many ticks when no other chair is near...
+/// Say where we are every this many ticks (twice a second at 100 ms) when no other chair is
+/// near...
 const SAY_EVERY_FAR: u64 = 5;
 /// ...and every tick when one is within this distance, metres (its readings of us are
 /// matched to what we say).
@@ -82,7 +83,13 @@ impl Pilot {
         let me = self.nav.pose();
         let own = self.nav.model().footprint;
         let mut notes = Vec::new();
-        match self.traffic.decide(me, &own, now) {
+        // A chair at its last checkpoint stands for good (and says `park`): it negotiates
+        // nothing.
+        let decision = if self.nav.finished() { Decision::Go } else { self.traffic.decide(me, &own, now) };
+        if !matches!(decision, Decision::PullOver(_)) {
+            self.no_room_said = false;
+        }
+        match decision {
             Decision::Go => {
                 if !self.nav.manoeuvring() && self.nav.holding() {
                     notes.push(format!("going on at t {now:.1} s"));
@@ -90,17 +97,22 @@ impl Pilot {
                 self.nav.resume();
             }
             Decision::Hold => {
-                if self.traffic.state() == State::Pull {
-                    if !self.nav.manoeuvring() {
-                        self.traffic.parked();
-                        notes.push(format!("parked at t {now:.1} s; waiting for the other chair to pass"));
-                    }
+                let pulling = self.traffic.state() == State::Pull;
+                if pulling && self.nav.manoeuvring() {
+                    // The pull-over is under way.
+                } else if pulling && self.nav.manoeuvre_lost() {
+                    // Strayed from the curve: not parked where it should be; look again.
+                    self.traffic.pull_lost();
+                    notes.push(format!("lost the way pulling over at t {now:.1} s; looking again"));
+                } else if pulling {
+                    self.traffic.parked();
+                    notes.push(format!("parked at t {now:.1} s; waiting for the other chair to pass"));
                 } else if !self.nav.holding() {
                     self.nav.hold();
                     notes.push(format!("waiting at t {now:.1} s for the chair ahead to pull over"));
                 }
             }
-            // Looking for room costs a few milliseconds: twice a second is often enough.
+            // Looking for room costs a few milliseconds: every fifth tick is often enough.
             Decision::PullOver(_) if self.no_room_said && !input.tick.is_multiple_of(5) => self.nav.hold(),
             Decision::PullOver(peer) => {
                 let others: Vec<_> = self.traffic.peers().iter().filter(|p| p.name != peer.name).cloned().collect();

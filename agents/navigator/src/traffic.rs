@@ -35,6 +35,10 @@ const WAIT_LIMIT_S: f64 = 40.0;
 const CLASH_SLACK_M: f64 = 0.4;
 /// The other has gone past when its axle is this far behind ours, metres.
 const PASSED_M: f64 = 1.4;
+/// Bodies said to be longer or wider than this are not believed, metres.
+const MAX_BODY_M: f64 = 5.0;
+/// Nor places farther from the origin than this, metres.
+const MAX_COORD_M: f64 = 10_000.0;
 
 /// What a navigator says it is doing.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -109,7 +113,13 @@ pub fn decode(bytes: &[u8], heard_s: f64) -> Option<Peer> {
         _ => return None,
     };
     let (length, width, com) = (num(w.next())?, num(w.next())?, num(w.next())?);
-    if w.next().is_some() || length <= 0.0 || width <= 0.0 || !(0.0..=1.0).contains(&com) {
+    // Anything may say anything (the UDP bridge relays remote agents): only bodies and places
+    // a chair could have are believed, so that no message can make the planner's work or
+    // memory blow up.
+    let body = |v: f64| v > 0.0 && v <= MAX_BODY_M;
+    let place = |v: f64| v.abs() <= MAX_COORD_M;
+    let believable = body(length) && body(width) && com > 0.0 && com < 1.0 && place(x) && place(y);
+    if w.next().is_some() || !believable {
         return None;
     }
     Some(Peer {
@@ -214,6 +224,14 @@ impl Traffic {
         }
     }
 
+    /// Says that the pull-over manoeuvre was lost on the way (the chair strayed from it):
+    /// look for room again from where the chair is.
+    pub fn pull_lost(&mut self) {
+        if let Role::PullingOver { moving, .. } = &mut self.role {
+            *moving = false;
+        }
+    }
+
     /// Says that the pull-over is over: we are parked and say so.
     pub fn parked(&mut self) {
         if let Role::PullingOver { peer, .. } = &self.role {
@@ -254,15 +272,26 @@ impl Traffic {
             Role::Parked { peer } => {
                 return if self.gone_past(me, &peer) { self.finish(peer) } else { Decision::Hold };
             }
-            Role::Waiting { peer, since_s } => match self.peer(&peer).map(|p| p.state) {
-                None => return self.finish(peer),
-                Some(State::Park) => {
-                    self.role = Role::Passing { peer };
-                    return Decision::Go;
+            Role::Waiting { peer, since_s } => {
+                if self.gone_past(me, &peer) {
+                    return self.finish(peer);
                 }
-                Some(_) if now_s - since_s > WAIT_LIMIT_S => return self.finish(peer),
-                Some(_) => return Decision::Hold,
-            },
+                match self.peer(&peer).map(|p| p.state) {
+                    None => return self.finish(peer),
+                    Some(State::Park) => {
+                        self.role = Role::Passing { peer };
+                        return Decision::Go;
+                    }
+                    // Pulling over (or looking for room to): the wait starts again, so that
+                    // the two sides' limits do not race.
+                    Some(State::Pull) => {
+                        self.role = Role::Waiting { peer, since_s: now_s };
+                        return Decision::Hold;
+                    }
+                    Some(_) if now_s - since_s > WAIT_LIMIT_S => return self.finish(peer),
+                    Some(_) => return Decision::Hold,
+                }
+            }
             Role::Passing { peer } => {
                 return if self.gone_past(me, &peer) { self.finish(peer) } else { Decision::Go };
             }
@@ -281,7 +310,9 @@ impl Traffic {
                 && facing(me, p.pose)
                 && along(me, p.pose) > 0.5
                 && along(p.pose, me) > 0.5
-                && across(me, p.pose).abs() < own.half + p.footprint.half + CLASH_SLACK_M
+                // Each side measures the other's offset in its own frame; the larger of the
+                // two makes the test the same on both sides.
+                && across(me, p.pose).abs().max(across(p.pose, me).abs()) < own.half + p.footprint.half + CLASH_SLACK_M
         });
         let Some(p) = meeting.cloned() else { return Decision::Go };
         if self.name > p.name {
@@ -325,6 +356,9 @@ mod tests {
             b"nav a 1 2 3 go 1 1",
             b"nav a 1 2 3 go 1 -1 0.5",
             b"nav a 1 2 3 go 1 1 2",
+            b"nav a 1 2 3 go 1 1 0",
+            b"nav a 1 2 180 park 1 1e18 0.5",
+            b"nav a 1e300 2 180 park 1 1 0.5",
             b"nav a 1 2 3 go 1 1 0.5 extra",
             b"\xff\xfe",
         ] {
@@ -436,5 +470,16 @@ mod tests {
         one.hear(&say("chair2", b, State::Go), 41.0);
         assert_eq!(one.decide(a, &fp, 41.0), Decision::Go);
         assert!(!one.negotiating());
+        // While the other says it is pulling over, the wait starts again.
+        let mut one = Traffic::new("chair1");
+        one.hear(&say("chair2", b, State::Go), 0.0);
+        assert_eq!(one.decide(a, &fp, 0.0), Decision::Hold);
+        one.hear(&say("chair2", b, State::Pull), 39.0);
+        assert_eq!(one.decide(a, &fp, 39.0), Decision::Hold);
+        one.hear(&say("chair2", b, State::Pull), 60.0);
+        assert_eq!(one.decide(a, &fp, 60.0), Decision::Hold, "still pulling over");
+        // And it ends once the other has gone by regardless.
+        one.hear(&say("chair2", pose(13.0, 6.5, 180.0), State::Go), 61.0);
+        assert_eq!(one.decide(a, &fp, 61.0), Decision::Go);
     }
 }
