@@ -36,6 +36,23 @@ struct Scenario {
     gps: Option<[f64; 2]>,
 }
 
+impl Scenario {
+    /// The Intellwheels chair on `map` from `start` through `checkpoints` (X, Y, radius),
+    /// no obstacles, pose from odometry, GPS off.
+    fn route(map: &'static str, start: [f64; 3], checkpoints: &[[f64; 3]], time_limit_s: f64) -> Self {
+        Self {
+            map,
+            obstacles: vec![],
+            start,
+            checkpoints: checkpoints.to_vec(),
+            body: Body::INTELLWHEELS,
+            time_limit_s,
+            pose_source: PoseSourceKind::Odometry,
+            gps: None,
+        }
+    }
+}
+
 /// How a run went.
 #[derive(Debug, Clone, PartialEq)]
 struct Outcome {
@@ -330,14 +347,8 @@ mod slalom {
     /// heading 0°, stop at checkpoint 2 (20.0, 6.1), boxes A and B in the way.
     pub fn scenario() -> Scenario {
         Scenario {
-            map: "liacc",
             obstacles: vec![[17.0, 6.1, 17.6, 6.4], [19.4, 5.5, 20.0, 5.9]],
-            start: [10.0, 6.1, 0.0],
-            checkpoints: vec![[10.0, 6.1, 0.5], [20.0, 6.1, 0.5]],
-            body: Body::INTELLWHEELS,
-            time_limit_s: 120.0,
-            pose_source: PoseSourceKind::Odometry,
-            gps: None,
+            ..Scenario::route("liacc", [10.0, 6.1, 0.0], &[[10.0, 6.1, 0.5], [20.0, 6.1, 0.5]], 120.0)
         }
     }
 
@@ -371,60 +382,27 @@ mod untuned_maps {
 
     #[test]
     fn from_the_liacc_corridor_through_the_west_door_into_the_south_west_room() {
-        let s = Scenario {
-            map: "liacc",
-            obstacles: vec![],
-            start: [14.0, 6.0, 180.0],
-            checkpoints: vec![[14.0, 6.0, 0.5], [5.0, 3.0, 0.5]],
-            body: Body::INTELLWHEELS,
-            time_limit_s: 120.0,
-            pose_source: PoseSourceKind::Odometry,
-            gps: None,
-        };
+        let s = Scenario::route("liacc", [14.0, 6.0, 180.0], &[[14.0, 6.0, 0.5], [5.0, 3.0, 0.5]], 120.0);
         check(&s, 1..=3);
     }
 
     #[test]
     fn from_the_liacc_corridor_through_the_narrow_door_into_the_west_corridor() {
-        let s = Scenario {
-            map: "liacc",
-            obstacles: vec![],
-            start: [14.0, 6.0, 180.0],
-            checkpoints: vec![[14.0, 6.0, 0.5], [5.0, 8.8, 0.5]],
-            body: Body::INTELLWHEELS,
-            time_limit_s: 150.0,
-            pose_source: PoseSourceKind::Odometry,
-            gps: None,
-        };
+        let s = Scenario::route("liacc", [14.0, 6.0, 180.0], &[[14.0, 6.0, 0.5], [5.0, 8.8, 0.5]], 150.0);
         check(&s, 1..=3);
     }
 
     #[test]
     fn through_the_maze() {
-        let s = Scenario {
-            map: "maze",
-            obstacles: vec![],
-            start: [1.0, 7.0, 90.0],
-            checkpoints: vec![[1.0, 7.0, 0.5], [9.0, 1.0, 0.5]],
-            body: Body::INTELLWHEELS,
-            time_limit_s: 200.0,
-            pose_source: PoseSourceKind::Odometry,
-            gps: None,
-        };
+        let s = Scenario::route("maze", [1.0, 7.0, 90.0], &[[1.0, 7.0, 0.5], [9.0, 1.0, 0.5]], 200.0);
         check(&s, 1..=3);
     }
 
     #[test]
     fn a_mid_wheel_drive_chair_across_the_maze() {
         let s = Scenario {
-            map: "maze",
-            obstacles: vec![],
-            start: [1.0, 13.0, 0.0],
-            checkpoints: vec![[1.0, 13.0, 0.5], [13.0, 9.0, 0.5], [25.0, 7.0, 0.5]],
             body: Body { width_m: 1.0, height_m: 0.6, com: 0.5 },
-            time_limit_s: 300.0,
-            pose_source: PoseSourceKind::Odometry,
-            gps: None,
+            ..Scenario::route("maze", [1.0, 13.0, 0.0], &[[1.0, 13.0, 0.5], [13.0, 9.0, 0.5], [25.0, 7.0, 0.5]], 300.0)
         };
         check(&s, 1..=2);
     }
@@ -434,14 +412,9 @@ mod untuned_maps {
     #[test]
     fn through_the_west_door_on_a_precise_gps_alone() {
         let s = Scenario {
-            map: "liacc",
-            obstacles: vec![],
-            start: [14.0, 6.0, 180.0],
-            checkpoints: vec![[14.0, 6.0, 0.5], [5.0, 3.0, 0.5]],
-            body: Body::INTELLWHEELS,
-            time_limit_s: 120.0,
             pose_source: PoseSourceKind::Gps,
             gps: Some([0.02, 1.0]),
+            ..Scenario::route("liacc", [14.0, 6.0, 180.0], &[[14.0, 6.0, 0.5], [5.0, 3.0, 0.5]], 120.0)
         };
         check(&s, 1..=3);
     }
@@ -451,30 +424,16 @@ mod untuned_maps {
     #[test]
     fn through_the_west_door_on_odometry_fused_with_a_noisy_gps() {
         let s = Scenario {
-            map: "liacc",
-            obstacles: vec![],
-            start: [14.0, 6.0, 180.0],
-            checkpoints: vec![[14.0, 6.0, 0.5], [5.0, 3.0, 0.5]],
-            body: Body::INTELLWHEELS,
-            time_limit_s: 120.0,
             pose_source: PoseSourceKind::Fused,
             gps: Some([0.5, 5.0]),
+            ..Scenario::route("liacc", [14.0, 6.0, 180.0], &[[14.0, 6.0, 0.5], [5.0, 3.0, 0.5]], 120.0)
         };
         check(&s, 1..=3);
     }
 
     #[test]
     fn round_the_thesis_maps_wall_into_the_pocket_of_the_l() {
-        let s = Scenario {
-            map: "thesis",
-            obstacles: vec![],
-            start: [3.0, 7.0, 0.0],
-            checkpoints: vec![[3.0, 7.0, 0.5], [19.5, 8.5, 0.5]],
-            body: Body::INTELLWHEELS,
-            time_limit_s: 150.0,
-            pose_source: PoseSourceKind::Odometry,
-            gps: None,
-        };
+        let s = Scenario::route("thesis", [3.0, 7.0, 0.0], &[[3.0, 7.0, 0.5], [19.5, 8.5, 0.5]], 150.0);
         check(&s, 1..=3);
     }
 }
