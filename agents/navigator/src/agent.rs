@@ -141,8 +141,12 @@ fn drive(
             eprintln!("navigator {name}: {note}");
         }
         let mut action = ActionBlock::motors(id, out.powers[0], out.powers[1]);
-        if let Some(say) = &out.say {
-            action.with_say(say.as_bytes());
+        if let Some(say) = &out.say
+            && !action.with_say(say.as_bytes())
+        {
+            // Cannot happen for names the hub accepts (31 bytes) and places on a map; say so
+            // if it does, since the other chairs would not hear this one.
+            eprintln!("navigator {name}: message of {} bytes too long to say: {say}", say.len());
         }
         agent.send(tick.tick, &[action])?;
         if let Some(log) = &mut log {

@@ -5,9 +5,10 @@
 //! spot either (the Intellwheels body sweeps a circle of 0.94 m radius round its axle in a 1.78 m
 //! corridor). So the yielder drives forward along an S-curve whose lateral offset follows a
 //! quintic smoothstep (straight, with no curvature, at both ends), and ends parallel to where
-//! it was going, against the side. The curve is chosen as the widest offset and shortest
-//! length for which every pose of it keeps clear of the walls and of what the sensors found,
-//! stays well away from the other chair, and leaves the other room to pass on the far side.
+//! it was going, against the side. The curve is the widest offset, and for it the shortest
+//! length, for which every pose keeps clear of the walls, of what the sensors found and of
+//! the other chairs; if the spot it ends at leaves the other no room to pass on the far side,
+//! the other side of the corridor is tried.
 //! The navigator's path follower drives it ([`crate::Navigator::manoeuvre`]), so the motor
 //! model and the odometry stay in step.
 
