@@ -217,7 +217,7 @@ fn drive(agent: &mut Agent, args: &WheelchairArgs, chairs: &[ChairConfig]) -> an
         ids.push(agent.register(&registration(c)).with_context(|| format!("registering {}", c.name))?);
     }
     agent.ready()?;
-    eprintln!("iwsim agent wheelchair: agent {} drives robots {:?} in session {:?}", agent.id(), ids, args.session);
+    eprintln!("wheelchair: agent {} drives robots {:?} in session {:?}", agent.id(), ids, args.session);
     // Logs are opened at the first tick, when the sensor blocks say how many sensors each
     // chair has.
     let mut logs: Vec<Option<RobotLog>> = chairs.iter().map(|_| None).collect();
@@ -253,7 +253,7 @@ fn drive(agent: &mut Agent, args: &WheelchairArgs, chairs: &[ChairConfig]) -> an
                         Some(p) => break p,
                         None => {
                             eprintln!(
-                                "iwsim agent wheelchair: {} reached waypoint {:?} at t {:.1} s",
+                                "wheelchair {}: reached waypoint {:?} at t {:.1} s",
                                 c.name, goal, tick.sim_time_s
                             );
                             next_waypoint[k] += 1;
@@ -298,7 +298,7 @@ fn drive(agent: &mut Agent, args: &WheelchairArgs, chairs: &[ChairConfig]) -> an
     for log in logs.iter_mut().flatten() {
         log.flush()?;
     }
-    eprintln!("iwsim agent wheelchair: answered {answered} ticks");
+    eprintln!("wheelchair: answered {answered} ticks");
     if args.report_latency {
         // The first ticks include connection set-up; they are not the steady state.
         let steady = latencies_ns.get(latencies_ns.len().min(100)..).unwrap_or(&[]);

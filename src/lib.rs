@@ -25,7 +25,12 @@ pub fn init_logging() {
     let filter = std::env::var("RUST_LOG")
         .ok()
         .and_then(|s| s.parse::<Targets>().ok())
-        .unwrap_or_else(|| Targets::new().with_default(LevelFilter::WARN));
+        // iceoryx2 is configured in code (`ipc_services::Session`), so its warnings about
+        // config files it did not find, and the like, only confuse; its errors still show,
+        // and RUST_LOG brings the rest back.
+        .unwrap_or_else(|| {
+            Targets::new().with_default(LevelFilter::WARN).with_target("iceoryx2_bb_loggers", LevelFilter::ERROR)
+        });
     use tracing_subscriber::layer::SubscriberExt;
     use tracing_subscriber::util::SubscriberInitExt;
     let _ = tracing_subscriber::registry()
