@@ -272,21 +272,8 @@ fn draw_map(
     let step = tick_step(view.width().max(view.height()), 16.0);
     let digits = decimals(step);
     let fmt = move |v: &f64| format!("{v:.digits$}");
-    chart
-        .configure_mesh()
-        .x_labels((view.width() / step) as usize + 2)
-        .y_labels((view.height() / step) as usize + 2)
-        .x_label_formatter(&fmt)
-        .y_label_formatter(&fmt)
-        .max_light_lines(1)
-        .bold_line_style(GRID.stroke_width(1))
-        .light_line_style(TRANSPARENT)
-        .axis_style(INK.stroke_width(1))
-        .label_style(font(13.0))
-        .axis_desc_style(font(14.0))
-        .x_desc("x (m)")
-        .y_desc("y (m)")
-        .draw()?;
+    let labels = ((view.width() / step) as usize + 2, (view.height() / step) as usize + 2);
+    draw_mesh(&mut chart, labels, (&fmt, &fmt), ("x (m)", "y (m)"))?;
 
     let px = |m: f64| (m * scale).round() as i32;
     if let Some(lab) = &scene.lab {
@@ -404,6 +391,34 @@ fn obstacle_name(k: usize) -> String {
 
 type MapChart<'a, 'b> = ChartContext<'a, SVGBackend<'b>, Cartesian2d<RangedCoordf64, RangedCoordf64>>;
 
+/// A number's label on an axis.
+type Label<'f> = &'f dyn Fn(&f64) -> String;
+
+/// Both panels' grid and axes: `labels` ticks on x and y, their formats and descriptions.
+fn draw_mesh(
+    chart: &mut MapChart,
+    labels: (usize, usize),
+    format: (Label, Label),
+    desc: (&str, &str),
+) -> Result<(), PlotDrawError> {
+    chart
+        .configure_mesh()
+        .x_labels(labels.0)
+        .y_labels(labels.1)
+        .x_label_formatter(format.0)
+        .y_label_formatter(format.1)
+        .max_light_lines(1)
+        .bold_line_style(GRID.stroke_width(1))
+        .light_line_style(TRANSPARENT)
+        .axis_style(INK.stroke_width(1))
+        .label_style(font(13.0))
+        .axis_desc_style(font(14.0))
+        .x_desc(desc.0)
+        .y_desc(desc.1)
+        .draw()?;
+    Ok(())
+}
+
 /// Fills the part of a polygon inside the window, with an outline if asked.
 fn fill(
     chart: &mut MapChart,
@@ -494,21 +509,8 @@ fn draw_speed(
     let (xd, yd) = (decimals(xs), decimals(ys));
     let xfmt = move |v: &f64| format!("{v:.xd$}");
     let yfmt = move |v: &f64| format!("{v:.yd$}");
-    chart
-        .configure_mesh()
-        .x_labels(((t1 - t0) / xs) as usize + 2)
-        .y_labels((y_max / ys) as usize + 2)
-        .x_label_formatter(&xfmt)
-        .y_label_formatter(&yfmt)
-        .max_light_lines(1)
-        .bold_line_style(GRID.stroke_width(1))
-        .light_line_style(TRANSPARENT)
-        .axis_style(INK.stroke_width(1))
-        .label_style(font(13.0))
-        .axis_desc_style(font(14.0))
-        .x_desc("time (s)")
-        .y_desc("speed (m/s)")
-        .draw()?;
+    let labels = (((t1 - t0) / xs) as usize + 2, (y_max / ys) as usize + 2);
+    draw_mesh(&mut chart, labels, (&xfmt, &yfmt), ("time (s)", "speed (m/s)"))?;
 
     if v.iter().all(|v| v.is_empty()) {
         let note = Text::new("fewer than two distinct ticks: no speed", ((t0 + t1) / 2.0, 0.5), centred(font(14.0)));
