@@ -132,3 +132,15 @@ pub fn wait_for_tick(session: &str, tick: u64, timeout: Duration) -> Agent {
         std::thread::sleep(Duration::from_millis(5));
     }
 }
+
+/// Asserts that session `s` left no files in /dev/shm (the last process of a session removes
+/// them, whatever way it ended).
+pub fn assert_no_shared_memory_left(s: &str) {
+    let prefix = format!("iwsim_{s}_");
+    let left: Vec<String> = std::fs::read_dir("/dev/shm")
+        .expect("/dev/shm")
+        .filter_map(|e| e.ok().map(|e| e.file_name().to_string_lossy().into_owned()))
+        .filter(|n| n.starts_with(&prefix))
+        .collect();
+    assert!(left.is_empty(), "left in /dev/shm: {left:?}");
+}

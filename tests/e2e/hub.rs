@@ -3,7 +3,7 @@
 
 use std::time::{Duration, Instant};
 
-use super::common::{Proc, json_field, session, text, wait_for_tick};
+use super::common::{Proc, assert_no_shared_memory_left, json_field, session, text, wait_for_tick};
 
 use agent_sdk::{Agent, AgentError, control};
 use hub::map::{NoiseParams, Params, builtin};
@@ -229,13 +229,7 @@ fn sigterm_stops_hub_and_agent_cleanly_and_leaves_no_shared_memory() {
     assert!(text(&out.stdout).contains("stopped by a termination signal"));
     let a = agent.wait(Duration::from_secs(10));
     assert!(a.status.success(), "{}", text(&a.stderr));
-    let prefix = format!("iwsim_{s}_");
-    let left: Vec<String> = std::fs::read_dir("/dev/shm")
-        .expect("/dev/shm")
-        .filter_map(|e| e.ok().map(|e| e.file_name().to_string_lossy().into_owned()))
-        .filter(|n| n.starts_with(&prefix))
-        .collect();
-    assert!(left.is_empty(), "left in /dev/shm: {left:?}");
+    assert_no_shared_memory_left(&s);
     let _ = hub.stderr_now();
 }
 

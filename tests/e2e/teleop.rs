@@ -13,7 +13,7 @@ use ::teleop::term::local_modes;
 use agent_sdk::{Observer, control};
 use ipc_types::{Command as Cmd, RobotState, WorldHeader};
 
-use super::common::{Proc, session, text};
+use super::common::{Proc, assert_no_shared_memory_left, session, text};
 
 /// Everything the teleop has written to its terminal, collected by a thread draining the
 /// master (a pseudo-terminal whose master is not read blocks its writer once full).
@@ -198,14 +198,4 @@ fn spawn_teleop(s: &str, pty: &Pty) -> Proc {
         .env("RUST_LOG", "warn");
     pty.attach(&mut cmd).expect("stdio on the slave");
     Proc(Some(cmd.spawn().expect("iwsim starts")))
-}
-
-fn assert_no_shared_memory_left(s: &str) {
-    let prefix = format!("iwsim_{s}_");
-    let left: Vec<String> = std::fs::read_dir("/dev/shm")
-        .expect("/dev/shm")
-        .filter_map(|e| e.ok().map(|e| e.file_name().to_string_lossy().into_owned()))
-        .filter(|n| n.starts_with(&prefix))
-        .collect();
-    assert!(left.is_empty(), "left in /dev/shm: {left:?}");
 }
