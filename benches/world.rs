@@ -9,8 +9,8 @@
 use std::hint::black_box;
 use std::time::{Duration, Instant};
 
+use bench_harness::tiled::TiledWorld;
 use criterion::{BenchmarkId, Criterion, Throughput, criterion_group, criterion_main};
-use hub::tiled::TiledWorld;
 
 fn world_tick(c: &mut Criterion) {
     let mut group = c.benchmark_group("world_tick");

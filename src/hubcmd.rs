@@ -4,11 +4,11 @@ use std::process::ExitCode;
 use std::time::Duration;
 
 use anyhow::Context as _;
-use hub::map::builtin::{self, PREFIX};
-use hub::map::xml::{parse_params, read_text};
-use hub::map::{Grid, NoiseParams, Wall};
-use hub::serve::HubConfig;
-use hub::serve::core::Mode;
+use hub::HubConfig;
+use hub::core::Mode;
+use world::map::builtin::{self, PREFIX};
+use world::map::xml::{parse_params, read_text};
+use world::map::{Grid, NoiseParams, Wall};
 
 use crate::cli::HubArgs;
 
@@ -50,7 +50,7 @@ pub fn config(args: &HubArgs) -> anyhow::Result<HubConfig> {
             let text = read_text(path).map_err(|e| anyhow::anyhow!("{e}"))?;
             parse_params(&text).map_err(|e| anyhow::anyhow!("{}:{e}", path.display()))?
         }
-        None => hub::map::Params::default(),
+        None => world::map::Params::default(),
     };
     if let Some(ms) = args.cycle_ms {
         params.cycle_ms = ms;
@@ -86,7 +86,7 @@ pub fn run(args: &HubArgs) -> anyhow::Result<ExitCode> {
         if cfg.mode == Mode::LockStep { "lock-step" } else { "real-time" },
         if cfg.tick_limit > 0 { format!(", {} ticks", cfg.tick_limit) } else { String::new() }
     );
-    let out = hub::serve::run(cfg).context("hub")?;
+    let out = hub::run(cfg).context("hub")?;
     if args.json {
         let robots: Vec<String> = out
             .robots

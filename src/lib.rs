@@ -2,21 +2,15 @@
 //! in its own module as a library function, so tests and benches call the same code.
 #![warn(missing_docs)]
 
-pub mod agentcmd;
-pub mod bench;
-pub mod benchview;
 pub mod cli;
-pub mod demo;
 pub mod hubcmd;
 pub mod mapcheck;
-pub mod run;
-pub mod scenario;
 pub mod udpcmd;
 pub mod viewcmd;
 
 use std::process::ExitCode;
 
-use cli::{AgentCommand, BenchCommand, Cli, Command, MapCommand};
+use cli::{AgentCommand, Cli, Command, MapCommand};
 
 /// Logs go to stderr, filtered by `RUST_LOG` (e.g. `RUST_LOG=debug` or `RUST_LOG=hub=trace`);
 /// warnings and errors by default.
@@ -43,21 +37,16 @@ pub fn init_logging() {
 pub fn run(cli: Cli) -> anyhow::Result<ExitCode> {
     match cli.command {
         Command::Map { command: MapCommand::Check { file } } => mapcheck::check(&file),
-        Command::Bench { command: BenchCommand::World(args) } => bench::world(&args),
-        Command::Bench { command: BenchCommand::Latency(args) } => bench::latency(&args),
-        Command::Bench { command: BenchCommand::Lockstep(args) } => bench::lockstep(&args),
-        Command::Bench { command: BenchCommand::Viewer(args) } => benchview::run(&args),
-        Command::Bench { command: BenchCommand::RawPeer(args) } => bench::raw_peer(&args),
-        Command::Bench { command: BenchCommand::UdpClient(args) } => bench::udp_client(&args),
-        Command::Demo(args) => demo::run(&args),
+        Command::Bench { command } => bench_harness::run(&command),
+        Command::Demo(args) => runner::demo::run(&args),
         Command::Hub(args) => hubcmd::run(&args),
         Command::Udp(args) => udpcmd::run(&args),
         Command::View(args) => viewcmd::run(&args),
-        Command::Agent { agent: AgentCommand::Wheelchair(args) } => agentcmd::wheelchair(&args),
+        Command::Agent { agent: AgentCommand::Wheelchair(args) } => wheelchair::run(&args),
         Command::Agent { agent: AgentCommand::Navigator(args) } => navigator::run(&args),
         Command::Agent { agent: AgentCommand::Teleop(args) } => teleop::run(&args),
         Command::Agent { agent: AgentCommand::Door(args) } => door::run(&args),
         Command::Plot(args) => plot::run(&args),
-        Command::Run(args) => run::run(&args),
+        Command::Run(args) => runner::run::run(&args),
     }
 }

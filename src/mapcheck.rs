@@ -3,9 +3,9 @@
 
 use std::process::ExitCode;
 
-use hub::map::builtin;
-use hub::map::xml::{MapFile, parse_any, read_text};
-use hub::world::World;
+use world::World;
+use world::map::builtin;
+use world::map::xml::{MapFile, parse_any, read_text};
 
 /// Checks one file (or `builtin:NAME`) and prints what it holds; exit code 1 when it is bad.
 pub fn check(spec: &str) -> anyhow::Result<ExitCode> {
@@ -31,7 +31,7 @@ pub fn check(spec: &str) -> anyhow::Result<ExitCode> {
             if let MapFile::Lab(lab) = &file {
                 // The world model has its own checks (beacon count, triangulation): run them
                 // too, so a lab that passes here loads in the hub.
-                if let Err(err) = World::new(lab, hub::map::Params::default(), 0) {
+                if let Err(err) = World::new(lab, world::map::Params::default(), 0) {
                     eprintln!("{spec}: the lab parses but the world refuses it: {err}");
                     return Ok(ExitCode::FAILURE);
                 }

@@ -3,7 +3,7 @@
 #![no_main]
 libfuzzer_sys::fuzz_target!(|data: &[u8]| {
     let Ok(text) = std::str::from_utf8(data) else { return };
-    if let Ok(hub::map::xml::MapFile::Lab(lab)) = hub::map::xml::parse_any(text) {
-        let _ = hub::world::World::new(&lab, hub::map::Params::default(), 0);
+    if let Ok(world::map::xml::MapFile::Lab(lab)) = world::map::xml::parse_any(text) {
+        let _ = world::World::new(&lab, world::map::Params::default(), 0);
     }
 });

@@ -1,27 +1,546 @@
-//! The iwsim world model: maps, rectangular differential-drive bodies with motors, collisions,
-//! sensors, noise and robot-to-robot messages, stepped deterministically.
+//! The hub process: steps a [`world::World`] and serves it over iceoryx2 shared memory.
 //!
-//! The world is pure: it does no I/O, reads no clock and owns its only random generator, which
-//! is seeded when the world is built. Time enters as the duration of each step.
-//!
-//! ```
-//! use hub::map::builtin;
-//! use hub::world::{Action, RobotSpec, World};
-//!
-//! let map = builtin::map("liacc").expect("built in");
-//! let mut world = World::new(&map.lab, hub::map::Params::default(), 7).expect("valid lab");
-//! let chair = world.add_robot(RobotSpec::at(10.0, 6.1, 0.0)).expect("free start");
-//! for _ in 0..10 {
-//!     world.step(&[Action::motors(chair, 1.0, 1.0)], 0.1);
-//! }
-//! assert!(world.robot(chair).expect("alive").pose.x > 10.0);
-//! ```
+//! [`core::HubCore`] holds the logic; this module owns the ports and the loop. The loop sleeps
+//! in `poll(2)` on the hub's doorbell (rung by every client after it sends something) and on
+//! one pidfd per agent process, so a crashed agent wakes the hub within a millisecond and a
+//! lock-step run never waits for it. Every service is created with explicit limits by
+//! `ipc_services`, the one place that also opens them for clients.
+
 #![warn(missing_docs)]
 
-mod geom;
-pub mod map;
-pub mod math;
-pub mod rng;
-pub mod serve;
-pub mod tiled;
-pub mod world;
+pub mod core;
+
+use std::collections::BTreeMap;
+use std::os::fd::{AsRawFd, FromRawFd, OwnedFd};
+use std::time::{Duration, Instant};
+
+use ipc_services::iceoryx2::port::publisher::Publisher;
+use ipc_services::iceoryx2::port::update_connections::UpdateConnections as _;
+use ipc_services::iceoryx2::prelude::FileDescriptorBased;
+use ipc_services::{Role, SLICE_ALLOCATION, ServicesError, Session, Svc, clean_dead_nodes};
+use ipc_types::{
+    Command, ControlResponse, Refusal, RegisterKind, RegisterResponse, RobotSensors, RobotState, RunState, SensorBlock,
+    TickHeader,
+};
+
+use self::core::{HubCore, Mode};
+use world::WorldBuildError;
+use world::map::{Grid, Lab, Params};
+
+/// How to run a hub.
+#[derive(Debug, Clone)]
+pub struct HubConfig {
+    /// Session name: the hub's services live under `iwsim/<session>/`.
+    pub session: String,
+    /// The lab.
+    pub lab: Lab,
+    /// Start poses.
+    pub grid: Grid,
+    /// Parameters (cycle time, noise, sensors…).
+    pub params: Params,
+    /// Seed of the world's generator.
+    pub seed: u64,
+    /// Real time or lock-step.
+    pub mode: Mode,
+    /// Lock-step: how long to wait for a lagging agent before stepping without it.
+    pub deadline: Duration,
+    /// Start once this many agents are ready (0: start at once unless `start_on_command`).
+    pub wait_agents: usize,
+    /// Wait for a Start command.
+    pub start_on_command: bool,
+    /// Stop after this many ticks (0: run until stopped).
+    pub tick_limit: u64,
+    /// Robots the hub accepts (at most `ipc_types::MAX_ROBOTS`).
+    pub max_robots: usize,
+    /// The lab's walls from this index on are a scenario's obstacles (`lab.walls.len()`: none).
+    pub obstacle_from: usize,
+    /// A scenario's checkpoints, x, y, radius in metres, published in the map for viewers.
+    pub checkpoints: Vec<[f64; 3]>,
+}
+
+/// Why the hub stopped with an error.
+#[derive(Debug, thiserror::Error)]
+pub enum HubError {
+    /// A service could not be set up.
+    #[error(transparent)]
+    Services(#[from] ServicesError),
+    /// The lab or parameters were refused.
+    #[error(transparent)]
+    World(#[from] WorldBuildError),
+    /// iceoryx2 failed while serving.
+    #[error("iceoryx2 failed to {0}")]
+    Ipc(String),
+}
+
+/// How a hub run ended.
+#[derive(Debug, Clone, PartialEq)]
+pub struct HubOutcome {
+    /// Ticks stepped.
+    pub ticks: u64,
+    /// The world's state hash at the end.
+    pub state_hash: u64,
+    /// Agents that said hello.
+    pub agents_seen: usize,
+    /// Agents noticed dead (their robots were frozen).
+    pub agents_died: usize,
+    /// Stopped by SIGINT/SIGTERM.
+    pub interrupted: bool,
+    /// Wall-clock seconds from the first step to the end of the run.
+    pub run_s: f64,
+    /// Robots at the end: (id, x, y, heading in degrees, flags).
+    pub robots: Vec<(u32, f64, f64, f64, u32)>,
+}
+
+fn ipc<E: std::fmt::Debug>(what: &str) -> impl FnOnce(E) -> HubError + '_ {
+    move |e| HubError::Ipc(format!("{what}: {e:?}"))
+}
+
+/// A Linux pidfd: readable once the process has exited.
+#[derive(Debug)]
+struct PidFd(OwnedFd);
+
+impl PidFd {
+    fn open(pid: u32) -> Option<Self> {
+        #[allow(unsafe_code)]
+        // SAFETY: pidfd_open takes a pid and flags and returns a new fd or −1; no memory is
+        // passed.
+        let fd = unsafe { libc::syscall(libc::SYS_pidfd_open, pid as libc::pid_t, 0) };
+        if fd < 0 {
+            return None;
+        }
+        #[allow(unsafe_code)]
+        // SAFETY: the fd was just returned by pidfd_open and is owned by nothing else.
+        Some(Self(unsafe { OwnedFd::from_raw_fd(fd as i32) }))
+    }
+}
+
+/// Raises the soft open-file limit to the hard one: the hub holds about 11 fds per agent.
+fn raise_fd_limit() {
+    let mut lim = libc::rlimit { rlim_cur: 0, rlim_max: 0 };
+    #[allow(unsafe_code)]
+    // SAFETY: getrlimit/setrlimit read and write the struct passed, which lives on our stack.
+    unsafe {
+        if libc::getrlimit(libc::RLIMIT_NOFILE, &mut lim) == 0 && lim.rlim_cur < lim.rlim_max {
+            lim.rlim_cur = lim.rlim_max;
+            libc::setrlimit(libc::RLIMIT_NOFILE, &lim);
+        }
+    }
+}
+
+/// Waits until one of `fds` is readable or `timeout` passes; returns the readable ones.
+fn poll_readable(fds: &[i32], timeout: Duration, ready: &mut Vec<usize>) {
+    ready.clear();
+    let mut pfds: Vec<libc::pollfd> =
+        fds.iter().map(|&fd| libc::pollfd { fd, events: libc::POLLIN, revents: 0 }).collect();
+    let ms = timeout.as_millis().min(i32::MAX as u128) as i32;
+    #[allow(unsafe_code)]
+    // SAFETY: pfds is a live, correctly sized array of pollfd for the duration of the call.
+    let n = unsafe { libc::poll(pfds.as_mut_ptr(), pfds.len() as libc::nfds_t, ms) };
+    if n > 0 {
+        ready.extend(pfds.iter().enumerate().filter(|(_, p)| p.revents != 0).map(|(i, _)| i));
+    }
+}
+
+struct AgentPorts {
+    publisher: Publisher<Svc, [SensorBlock], TickHeader>,
+    _service: ipc_services::SensorService,
+    pidfd: Option<PidFd>,
+}
+
+/// Runs a hub until its tick limit, a Stop command, or SIGINT/SIGTERM.
+pub fn run(cfg: HubConfig) -> Result<HubOutcome, HubError> {
+    raise_fd_limit();
+    let session = Session::new(&cfg.session)?;
+    let cleaned = clean_dead_nodes(&session);
+    if cleaned > 0 {
+        tracing::info!("removed {cleaned} dead iceoryx2 nodes left by an earlier run of session {}", cfg.session);
+    }
+    let node = session.node("iwsim-hub")?;
+    let mut core = HubCore::new(&cfg.lab, cfg.grid.clone(), cfg.params.clone(), cfg.seed, cfg.mode, cfg.tick_limit)?;
+    core.set_max_robots(cfg.max_robots);
+    core.set_scenario(cfg.obstacle_from, cfg.checkpoints.clone());
+
+    let world_svc = session.world(&node, Role::Hub)?;
+    let map_svc = session.map(&node, Role::Hub)?;
+    let sensors_svc = session.robot_sensors(&node, Role::Hub)?;
+    let actions_svc = session.actions(&node, Role::Hub)?;
+    let register_svc = session.register(&node, Role::Hub)?;
+    let control_svc = session.control(&node, Role::Hub)?;
+    let tick_svc = session.tick_event(&node, Role::Hub)?;
+    let doorbell_svc = session.hub_event(&node, Role::Hub)?;
+
+    let world_pub = world_svc
+        .publisher_builder()
+        .initial_max_slice_len(64)
+        .allocation_strategy(SLICE_ALLOCATION)
+        .create()
+        .map_err(ipc("create the world publisher"))?;
+    let sensors_pub = sensors_svc
+        .publisher_builder()
+        .initial_max_slice_len(64)
+        .allocation_strategy(SLICE_ALLOCATION)
+        .create()
+        .map_err(ipc("create the robot-sensors publisher"))?;
+    let mut roster = Roster { publisher: sensors_pub, ids: None, scratch: Vec::new() };
+    let (map_header, items) =
+        core.map_items(cfg.params.cycle_ms, cfg.deadline.as_millis().min(u32::MAX as u128) as u32);
+    let map_pub = map_svc
+        .publisher_builder()
+        .initial_max_slice_len(items.len().max(1))
+        .allocation_strategy(SLICE_ALLOCATION)
+        .create()
+        .map_err(ipc("create the map publisher"))?;
+    let mut sample = map_pub.loan_slice_uninit(items.len()).map_err(ipc("loan the map"))?;
+    *sample.user_header_mut() = map_header;
+    sample.write_from_slice(&items).send().map_err(ipc("send the map"))?;
+
+    let actions_sub = actions_svc.subscriber_builder().create().map_err(ipc("create the actions subscriber"))?;
+    let register_server = register_svc.server_builder().create().map_err(ipc("create the register server"))?;
+    let control_server = control_svc.server_builder().create().map_err(ipc("create the control server"))?;
+    let tick_notifier = tick_svc.notifier_builder().create().map_err(ipc("create the tick notifier"))?;
+    let doorbell = doorbell_svc.listener_builder().create().map_err(ipc("create the doorbell listener"))?;
+    #[allow(unsafe_code)]
+    // SAFETY: the listener outlives every poll below; we only read the fd number.
+    let doorbell_fd = unsafe { doorbell.file_descriptor().native_handle() };
+
+    let hub_pid = std::process::id();
+    let mut agents: BTreeMap<u32, AgentPorts> = BTreeMap::new();
+    let mut outcome = HubOutcome {
+        ticks: 0,
+        state_hash: 0,
+        agents_seen: 0,
+        agents_died: 0,
+        interrupted: false,
+        run_s: 0.0,
+        robots: vec![],
+    };
+    let mut first_step: Option<Instant> = None;
+    let mut states: Vec<RobotState> = Vec::new();
+    let mut blocks: Vec<SensorBlock> = Vec::new();
+    let cycle = Duration::from_millis(cfg.params.cycle_ms.max(1) as u64);
+    let mut next_tick_at = Instant::now() + cycle;
+    let mut deadline_at = Instant::now() + cfg.deadline;
+    let mut fds: Vec<i32> = Vec::new();
+    let mut fd_agents: Vec<u32> = Vec::new();
+    let mut ready = Vec::new();
+    let mut dead_agents: Vec<u32> = Vec::new();
+    let mut publish = true;
+    let mut last_published: Option<u64> = None;
+
+    tracing::info!(
+        "hub serving session {} ({:?}, lab {:?}, {} grid slots)",
+        cfg.session,
+        cfg.mode,
+        cfg.lab.name,
+        cfg.grid.poses.len()
+    );
+    loop {
+        if node.wait(Duration::ZERO).is_err() {
+            outcome.interrupted = true;
+            break;
+        }
+        if publish {
+            if core.world().tick() == 0 {
+                core.prime_sensors();
+            }
+            publish_tick(&core, &world_pub, &agents, &mut states, &mut blocks)?;
+            roster.publish_if_changed(&core, &states)?;
+            tick_notifier.notify().map_err(ipc("ring the tick"))?;
+            publish = false;
+            // The deadline runs from the tick's first publication: re-publishing the same tick
+            // (a command, an agent joining) must not push it back, or lock-step could hang.
+            if last_published != Some(core.world().tick()) {
+                last_published = Some(core.world().tick());
+                deadline_at = Instant::now() + cfg.deadline;
+            }
+            if core.state() == RunState::Finished {
+                break;
+            }
+        }
+
+        let now = Instant::now();
+        let timeout = if !core.may_step() {
+            Duration::from_millis(50)
+        } else {
+            match core.mode() {
+                Mode::RealTime => next_tick_at.saturating_duration_since(now),
+                Mode::LockStep => deadline_at.saturating_duration_since(now),
+            }
+        }
+        .min(Duration::from_millis(50));
+        fds.clear();
+        fd_agents.clear();
+        fds.push(doorbell_fd);
+        for (&id, a) in &agents {
+            if let Some(p) = &a.pidfd {
+                fds.push(p.0.as_raw_fd());
+                fd_agents.push(id);
+            }
+        }
+        poll_readable(&fds, timeout, &mut ready);
+        let _ = doorbell.try_wait(|_| {});
+        // A new subscriber gets the kept (history) sample only when the publisher next looks
+        // at its connections: the map is sent once, and the world not while paused.
+        let _ = map_pub.update_connections();
+        let _ = world_pub.update_connections();
+        let _ = roster.publisher.update_connections();
+        dead_agents.clear();
+        dead_agents.extend(ready.iter().filter(|&&i| i > 0).map(|&i| fd_agents[i - 1]));
+
+        for id in dead_agents.drain(..) {
+            if core.agent_died(id) {
+                outcome.agents_died += 1;
+                tracing::warn!("agent {id} (pid {:?}) died; its robots are frozen", core.agent_pid(id));
+            }
+            agents.remove(&id);
+            let _ = node.try_cleanup_dead_nodes();
+        }
+
+        // Registrations.
+        while let Some(req) = register_server.receive().map_err(ipc("receive a registration"))? {
+            let r = *req.payload();
+            tracing::debug!("registration request kind {} from pid {} agent {}", r.kind, r.pid, r.agent_id);
+            let mut resp =
+                RegisterResponse { hub_pid, tick: core.world().tick() as u32, ..bytemuck::Zeroable::zeroed() };
+            match RegisterKind::from_u32(r.kind) {
+                Some(RegisterKind::Hello) => match core.hello(r.pid) {
+                    Ok(id) => {
+                        let ports = session.agent_sensors(&node, id, Role::Hub).map_err(|e| e.to_string()).and_then(
+                            |service| {
+                                let publisher = service
+                                    .publisher_builder()
+                                    .initial_max_slice_len(4)
+                                    .allocation_strategy(SLICE_ALLOCATION)
+                                    .create()
+                                    .map_err(|e| format!("{e:?}"))?;
+                                Ok((service, publisher))
+                            },
+                        );
+                        match ports {
+                            Ok((service, publisher)) => {
+                                let pidfd = PidFd::open(r.pid);
+                                if pidfd.is_none() {
+                                    tracing::warn!(
+                                        "agent {id}: pid {} cannot be watched; only the deadline guards it",
+                                        r.pid
+                                    );
+                                }
+                                agents.insert(id, AgentPorts { publisher, _service: service, pidfd });
+                                outcome.agents_seen += 1;
+                                resp.agent_id = id;
+                            }
+                            Err(e) => {
+                                // Out of shared memory or file descriptors: refuse this agent, serve the rest.
+                                tracing::warn!("agent {id}: cannot create its sensor service: {e}");
+                                core.bye(id);
+                                resp.status = Refusal::Capacity as u32;
+                                resp.set_detail("the hub cannot create this agent's sensor service");
+                            }
+                        }
+                    }
+                    Err(refused) => {
+                        resp.status = refused.reason as u32;
+                        resp.set_detail(&refused.detail);
+                    }
+                },
+                Some(RegisterKind::Robot) => {
+                    resp.agent_id = r.agent_id;
+                    match core.register(r.agent_id, &r.robot) {
+                        Ok((robot_id, sensors)) => {
+                            resp.robot_id = robot_id;
+                            resp.sensor_count = sensors;
+                            // Its agent gets the new robot's readings without waiting a tick.
+                            publish = true;
+                        }
+                        Err(refused) => {
+                            resp.status = refused.reason as u32;
+                            resp.set_detail(&refused.detail);
+                        }
+                    }
+                }
+                Some(RegisterKind::Ready) => {
+                    resp.agent_id = r.agent_id;
+                    if let Err(refused) = core.ready(r.agent_id) {
+                        resp.status = refused.reason as u32;
+                        resp.set_detail(&refused.detail);
+                    }
+                    // The new agent's first sensor blocks: the current tick.
+                    publish = true;
+                }
+                Some(RegisterKind::Bye) => {
+                    core.bye(r.agent_id);
+                    agents.remove(&r.agent_id);
+                }
+                None => {
+                    resp.status = Refusal::Malformed as u32;
+                    resp.set_detail("unknown request kind");
+                }
+            }
+            req.send_copy(resp).map_err(ipc("answer a registration"))?;
+            tracing::debug!(
+                "answered pid {}: status {} agent {} robot {}",
+                r.pid,
+                resp.status,
+                resp.agent_id,
+                resp.robot_id
+            );
+        }
+        if core.state() == RunState::Waiting && !cfg.start_on_command {
+            if cfg.wait_agents == 0 {
+                core.command(Command::Start, 0);
+            } else {
+                core.start_when_ready(cfg.wait_agents);
+            }
+            if core.state() == RunState::Running {
+                next_tick_at = Instant::now() + cycle;
+                publish = true;
+            }
+        }
+
+        // Run control.
+        while let Some(req) = control_server.receive().map_err(ipc("receive a command"))? {
+            let c = *req.payload();
+            let status = match Command::from_u32(c.command) {
+                Some(cmd) => core.command(cmd, c.robot_id),
+                None => 1,
+            };
+            let resp = ControlResponse { status, run_state: core.state() as u32, tick: core.world().tick() };
+            req.send_copy(resp).map_err(ipc("answer a command"))?;
+            publish = true;
+        }
+
+        // Actions.
+        while let Some(sample) = actions_sub.receive().map_err(ipc("receive actions"))? {
+            let h = *sample.user_header();
+            let ignored = core.actions(h.agent_id, h.tick, sample.payload());
+            if ignored > 0 {
+                tracing::debug!("agent {}: {ignored} actions for robots it does not own were ignored", h.agent_id);
+            }
+        }
+
+        if core.state() == RunState::Finished {
+            publish = true;
+            continue;
+        }
+        if core.may_step() {
+            let now = Instant::now();
+            let step = match core.mode() {
+                Mode::RealTime => now >= next_tick_at,
+                Mode::LockStep => {
+                    core.all_answered()
+                        || core.ready_agents() > 0 && {
+                            let late = now >= deadline_at;
+                            if late {
+                                let n = core.mark_laggards();
+                                tracing::warn!(
+                                    "tick {}: {n} agents missed the {:?} deadline",
+                                    core.world().tick(),
+                                    cfg.deadline
+                                );
+                            }
+                            late
+                        }
+                }
+            };
+            if step {
+                first_step.get_or_insert_with(Instant::now);
+                core.step();
+                publish = true;
+                if core.mode() == Mode::RealTime {
+                    next_tick_at += cycle;
+                    if next_tick_at < now {
+                        next_tick_at = now + cycle; // fell behind: do not try to catch up
+                    }
+                }
+            }
+        }
+    }
+
+    // Interrupted: tell everyone the run is over before the services go away.
+    if outcome.interrupted {
+        core.command(Command::Stop, 0);
+        let _ = publish_tick(&core, &world_pub, &agents, &mut states, &mut blocks);
+        let _ = tick_notifier.notify();
+    }
+    // An agent reads the final tick from the hub's shared memory, which goes when the hub does:
+    // give every agent process up to 2 s to read it and leave.
+    let linger_until = Instant::now() + Duration::from_secs(2);
+    let mut waiting: Vec<i32> = agents.values().filter_map(|a| a.pidfd.as_ref().map(|p| p.0.as_raw_fd())).collect();
+    while !waiting.is_empty() && Instant::now() < linger_until {
+        poll_readable(&waiting, linger_until.saturating_duration_since(Instant::now()), &mut ready);
+        if ready.is_empty() {
+            break;
+        }
+        let done: Vec<i32> = ready.iter().map(|&i| waiting[i]).collect();
+        waiting.retain(|fd| !done.contains(fd));
+    }
+    outcome.ticks = core.world().tick();
+    outcome.run_s = first_step.map_or(0.0, |t| t.elapsed().as_secs_f64());
+    outcome.state_hash = core.world().state_hash();
+    outcome.robots = core.robot_states().map(|s| (s.id, s.x_m, s.y_m, s.heading_deg, s.flags)).collect();
+    drop((agents, world_pub, map_pub, roster, actions_sub, register_server, control_server, tick_notifier, doorbell));
+    drop((world_svc, map_svc, sensors_svc, actions_svc, register_svc, control_svc, tick_svc, doorbell_svc, node));
+    session.release_if_unused();
+    Ok(outcome)
+}
+
+/// The robot-sensors publisher and the robot ids it last published for.
+struct Roster {
+    publisher: Publisher<Svc, [RobotSensors], ()>,
+    ids: Option<Vec<u32>>,
+    scratch: Vec<RobotSensors>,
+}
+
+impl Roster {
+    /// Republishes every robot's sensor geometry when the set of robots has changed since the
+    /// last time (a robot's sensors are fixed at registration, so ids are enough).
+    fn publish_if_changed(&mut self, core: &HubCore, states: &[RobotState]) -> Result<(), HubError> {
+        if self.ids.as_ref().is_some_and(|ids| ids.iter().copied().eq(states.iter().map(|r| r.id))) {
+            return Ok(());
+        }
+        self.ids = Some(states.iter().map(|r| r.id).collect());
+        self.scratch.clear();
+        self.scratch.extend(core.robot_sensors());
+        let sample = self.publisher.loan_slice_uninit(self.scratch.len()).map_err(ipc("loan robot sensors"))?;
+        sample.write_from_slice(&self.scratch).send().map_err(ipc("send robot sensors"))?;
+        Ok(())
+    }
+}
+
+fn publish_tick(
+    core: &HubCore,
+    world_pub: &Publisher<Svc, [RobotState], ipc_types::WorldHeader>,
+    agents: &BTreeMap<u32, AgentPorts>,
+    states: &mut Vec<RobotState>,
+    blocks: &mut Vec<SensorBlock>,
+) -> Result<(), HubError> {
+    states.clear();
+    states.extend(core.robot_states());
+    let header = core.world_header();
+    let mut sample = world_pub.loan_slice_uninit(states.len()).map_err(ipc("loan a world snapshot"))?;
+    *sample.user_header_mut() = header;
+    sample.write_from_slice(states).send().map_err(ipc("send a world snapshot"))?;
+    let finished = header.run_state == RunState::Finished as u32;
+    for (&id, ports) in agents {
+        let robots = core.agent_robots(id);
+        // Agents without robots get nothing per tick, but every agent hears the end.
+        if robots.is_empty() && !finished {
+            continue;
+        }
+        blocks.clear();
+        blocks.extend(robots.iter().map(|&r| core.sensor_block(r)));
+        let mut sample = ports.publisher.loan_slice_uninit(blocks.len()).map_err(ipc("loan sensor blocks"))?;
+        *sample.user_header_mut() = TickHeader {
+            tick: header.tick,
+            sim_time_s: header.sim_time_s,
+            run_state: header.run_state,
+            count: blocks.len() as u32,
+            t_pub_ns: 0,
+        };
+        let mut sample = sample.write_from_slice(blocks);
+        // Stamped last, so the latency figure starts at the send itself.
+        sample.user_header_mut().t_pub_ns = ipc_types::monotonic_ns();
+        sample.send().map_err(ipc("send sensor blocks"))?;
+    }
+    Ok(())
+}

@@ -165,7 +165,7 @@ pub struct WorldHeader {
     pub tick: u64,
     /// Simulated seconds.
     pub sim_time_s: f64,
-    /// The world's state hash after this tick (see `hub::world::World::state_hash`).
+    /// The world's state hash after this tick (see `world::World::state_hash`).
     pub state_hash: u64,
     /// [`RunState`] as u32.
     pub run_state: u32,

@@ -149,7 +149,7 @@ fn the_2d_view_draws_the_walls_obstacles_and_chair_where_the_world_has_them() {
     let shot = Shot::take(&mut b, "iwsim-e2e-2d.png");
 
     // The page fits the lab with a metre of margin and y up; project exactly as it must.
-    let map = hub::map::builtin::map("liacc").expect("built-in map");
+    let map = world::map::builtin::map("liacc").expect("built-in map");
     let (lw, lh) = (map.lab.width_m, map.lab.height_m);
     let scale = (W as f64 / (lw + 2.0)).min(H as f64 / (lh + 2.0));
     let (ox, oy) = ((W as f64 - lw * scale) / 2.0, (H as f64 + lh * scale) / 2.0);

@@ -6,9 +6,9 @@ use std::time::{Duration, Instant};
 use super::common::{Proc, assert_no_shared_memory_left, json_field, session, text, wait_for_tick};
 
 use agent_sdk::{Agent, AgentError, control};
-use hub::map::{NoiseParams, Params, builtin};
-use hub::world::{Action, RobotSpec, World};
 use ipc_types::{Command as Cmd, REG_HAS_POSE, ROBOT_FROZEN, Refusal, RobotRegistration};
+use world::map::{NoiseParams, Params, builtin};
+use world::{Action, RobotSpec, World};
 
 #[test]
 fn an_agent_drives_and_the_hubs_pose_matches_the_world_model() {

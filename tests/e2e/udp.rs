@@ -4,9 +4,9 @@
 use std::net::{SocketAddr, UdpSocket};
 use std::time::{Duration, Instant};
 
-use hub::map::{NoiseParams, Params, builtin};
-use hub::math::Pose;
-use hub::world::{Action, RobotSpec, World};
+use world::map::{NoiseParams, Params, builtin};
+use world::math::Pose;
+use world::{Action, RobotSpec, World};
 
 use super::common::{Proc, session, text};
 

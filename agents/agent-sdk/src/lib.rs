@@ -18,8 +18,7 @@
 //! Agents depend on `ipc-types` and `ipc-services` only, never on the hub.
 #![warn(missing_docs)]
 
-pub mod args;
-pub mod log;
+pub use records::{args, log};
 
 use std::time::{Duration, Instant};
 

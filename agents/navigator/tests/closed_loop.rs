@@ -10,8 +10,6 @@
 //! slalom); by default the seeds are the fixed ones each test names.
 
 use bytemuck::Zeroable as _;
-use hub::map::{Lab, Params, Wall, builtin};
-use hub::world::{Action, ProximitySpec, Robot, RobotSpec, World};
 use ipc_types::{
     COLLISION, HAS_COMPASS, HAS_GPS, MAP_CHECKPOINT, MAP_CORNER, MAP_WALL, MapHeader, MapItem, SensorBlock,
 };
@@ -19,6 +17,8 @@ use navigator::geom::{Footprint, Pose, V2};
 use navigator::map::NavMap;
 use navigator::sensors::{SensorSource, VirtualSensors};
 use navigator::{Body, Checkpoint, NavConfig, NavEvent, Navigator, PoseSourceKind};
+use world::map::{Lab, Params, Wall, builtin};
+use world::{Action, ProximitySpec, Robot, RobotSpec, World};
 
 /// A run to simulate.
 #[derive(Debug, Clone)]
@@ -440,8 +440,8 @@ mod untuned_maps {
 
 mod corridor_swap {
     use super::*;
-    use hub::world::Message;
     use navigator::Pilot;
+    use world::Message;
 
     /// One chair of a meeting: where it starts and where it goes.
     struct Chair {

@@ -1,0 +1,423 @@
+//! `iwsim agent wheelchair`: the thesis's "Wheelchair Robotic Agent" — several chairs in one
+//! process, each with its body, motors, sensors, start pose, type and a script (constant
+//! powers or waypoints), on the agent SDK.
+
+use std::path::Path;
+use std::process::ExitCode;
+
+use agent_sdk::log::RobotLog;
+use agent_sdk::{Agent, Wait};
+use anyhow::Context as _;
+use ipc_types::{ActionBlock, COLLISION, MAX_PROXIMITY, REG_HAS_POSE, RobotKind, RobotRegistration, SensorSpec};
+use serde::Deserialize;
+
+use clap::Args;
+use std::path::PathBuf;
+
+/// Options of `iwsim agent wheelchair`.
+#[derive(Debug, Args, Clone)]
+#[command(long_about = "Registers one or more wheelchairs and drives each by a script: constant motor \
+powers, or a list of waypoints it drives to in turn (steering on the hub's pose: this is a scripted \
+test agent, not a navigator) before it stops.
+
+With --config FILE the chairs come from a TOML file, one [[chairs]] table each:
+
+  [[chairs]]
+  name = \"chair1\"
+  pose = [12.5, 6.0, 180.0]      # x, y metres, heading degrees
+  body = [1.1, 0.65, 0.8]        # length, width (wheel track), centre of movement
+  max_speed = 0.49               # m/s at full power
+  accel_curve = 0.83             # motor filter, thesis chapter 4
+  sensors = [[0.88, 0.0, 0.0, 60.0, 3.0]]   # x, y, angle, cone, range (default: thesis Table 4.5)
+  powers = [1.0, 1.0]            # script: constant powers, or
+  waypoints = [[7.0, 6.0]]       # script: drive to each point in turn, then stop
+  speed = 0.5                    # power used on the way to waypoints
+  start_s = 0.0                  # wait this long before moving
+
+Without --config, the options below describe --robots identical chairs.")]
+pub struct WheelchairArgs {
+    /// Session of the hub to join.
+    #[arg(long, default_value = "default")]
+    pub session: String,
+    /// Chairs from a TOML file (see above); the body and script options below are ignored.
+    #[arg(long)]
+    pub config: Option<PathBuf>,
+    /// Write one CSV log per chair into this directory.
+    #[arg(long)]
+    pub log: Option<PathBuf>,
+    /// Robots to register.
+    #[arg(long, default_value_t = 1)]
+    pub robots: usize,
+    /// Name prefix of the robots.
+    #[arg(long, default_value = "chair")]
+    pub name: String,
+    /// Requested id of the first robot (0: first free grid slot).
+    #[arg(long, default_value_t = 0)]
+    pub id: u32,
+    /// Start pose of the first robot as X,Y,DIR (metres, degrees); further robots form a
+    /// lattice `--spacing` apart, ten to a row. Without it, robots take grid slots.
+    #[arg(long, value_parser = agent_sdk::args::pose, allow_hyphen_values = true)]
+    pub pose: Option<[f64; 3]>,
+    /// Distance between robots of the lattice, metres.
+    #[arg(long, default_value_t = 2.0)]
+    pub spacing: f64,
+    /// Motor powers LEFT,RIGHT in [-1, 1].
+    #[arg(long, value_parser = agent_sdk::args::powers, default_value = "0.5,0.5", allow_hyphen_values = true)]
+    pub powers: [f64; 2],
+    /// How the chairs move: simulated (the hub moves them) or real (this agent moves them and
+    /// tells the hub their poses, standing in for physical chairs).
+    #[arg(long, value_enum, default_value = "simulated")]
+    pub kind: ChairKind,
+    /// Length along the heading, metres.
+    #[arg(long, default_value_t = 1.0)]
+    pub width: f64,
+    /// Size across the heading, metres.
+    #[arg(long, default_value_t = 1.0)]
+    pub height: f64,
+    /// Centre of movement, (0, 1).
+    #[arg(long, default_value_t = 0.5)]
+    pub com: f64,
+    /// Top speed, m/s.
+    #[arg(long, default_value_t = 0.5)]
+    pub max_speed: f64,
+    /// Acceleration curve, [0, 1).
+    #[arg(long, default_value_t = 0.5)]
+    pub accel_curve: f64,
+    /// Stop after answering this many ticks (0: until the run ends).
+    #[arg(long, default_value_t = 0)]
+    pub ticks: u64,
+    /// Spin on shared memory instead of sleeping between ticks.
+    #[arg(long)]
+    pub busy_poll: bool,
+    /// Wait this many seconds for the hub to start serving the session.
+    #[arg(long, default_value_t = 5.0)]
+    pub connect_timeout: f64,
+    /// At the end, print the hub-publish → agent-has-it latency percentiles as JSON.
+    #[arg(long)]
+    pub report_latency: bool,
+}
+
+/// How a chair moves (the thesis's robot `Type`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Deserialize, clap::ValueEnum)]
+#[serde(rename_all = "lowercase")]
+pub enum ChairKind {
+    /// The hub moves it from its motor powers.
+    #[default]
+    Simulated,
+    /// It moves itself and tells the hub where it is, as a physical chair's controller does
+    /// in mixed reality: here the agent stands in for the chair, integrating the thesis's
+    /// motor filter and kinematics (eqs. 4.4–4.9) from its script's powers.
+    Real,
+}
+
+/// One chair of a `--config` file.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ChairConfig {
+    /// Name (also its log's file name).
+    pub name: String,
+    /// Requested id (0: any).
+    #[serde(default)]
+    pub id: u32,
+    /// Start pose x, y metres, heading degrees (default: a grid slot).
+    #[serde(default)]
+    pub pose: Option<[f64; 3]>,
+    /// `simulated` (default) or `real`.
+    #[serde(default)]
+    pub kind: ChairKind,
+    /// Length, width (wheel track), centre of movement.
+    #[serde(default = "default_body")]
+    pub body: [f64; 3],
+    /// Speed at full power, m/s.
+    #[serde(default = "default_speed")]
+    pub max_speed: f64,
+    /// Motor filter (thesis chapter 4).
+    #[serde(default = "default_curve")]
+    pub accel_curve: f64,
+    /// Proximity sensors: x, y, angle, cone, range (empty: thesis Table 4.5's four).
+    #[serde(default)]
+    pub sensors: Vec<[f64; 5]>,
+    /// Script: constant powers.
+    #[serde(default)]
+    pub powers: Option<[f64; 2]>,
+    /// Script: points to drive to in turn, then stop.
+    #[serde(default)]
+    pub waypoints: Vec<[f64; 2]>,
+    /// Power on the way to waypoints.
+    #[serde(default = "default_cruise")]
+    pub speed: f64,
+    /// Seconds to stand still before the script starts.
+    #[serde(default)]
+    pub start_s: f64,
+}
+
+fn default_body() -> [f64; 3] {
+    [1.0, 1.0, 0.5]
+}
+fn default_speed() -> f64 {
+    0.5
+}
+fn default_curve() -> f64 {
+    0.5
+}
+fn default_cruise() -> f64 {
+    0.5
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct ConfigFile {
+    chairs: Vec<ChairConfig>,
+}
+
+/// Reads a `--config` file.
+pub fn read_config(path: &Path) -> anyhow::Result<Vec<ChairConfig>> {
+    let text = std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+    let cfg: ConfigFile = toml::from_str(&text).map_err(|e| anyhow::anyhow!("{}: {}", path.display(), e))?;
+    anyhow::ensure!(!cfg.chairs.is_empty(), "{}: no [[chairs]]", path.display());
+    for c in &cfg.chairs {
+        anyhow::ensure!(c.sensors.len() <= MAX_PROXIMITY, "{}: chair {}: at most 8 sensors", path.display(), c.name);
+        anyhow::ensure!(
+            c.powers.is_none() || c.waypoints.is_empty(),
+            "{}: chair {}: give powers or waypoints, not both",
+            path.display(),
+            c.name
+        );
+    }
+    Ok(cfg.chairs)
+}
+
+/// The chairs the command line describes.
+fn chairs_from_args(args: &WheelchairArgs) -> Vec<ChairConfig> {
+    (0..args.robots)
+        .map(|k| ChairConfig {
+            name: format!("{}{}", args.name, k + 1),
+            id: if args.id > 0 { args.id + k as u32 } else { 0 },
+            pose: args
+                .pose
+                .map(|[x, y, dir]| [x + args.spacing * (k % 10) as f64, y + args.spacing * (k / 10) as f64, dir]),
+            kind: args.kind,
+            body: [args.width, args.height, args.com],
+            max_speed: args.max_speed,
+            accel_curve: args.accel_curve,
+            sensors: Vec::new(),
+            powers: Some(args.powers),
+            waypoints: Vec::new(),
+            speed: default_cruise(),
+            start_s: 0.0,
+        })
+        .collect()
+}
+
+fn registration(c: &ChairConfig) -> RobotRegistration {
+    let mut reg = RobotRegistration::new(&c.name);
+    reg.requested_id = c.id;
+    [reg.width_m, reg.height_m, reg.com] = c.body;
+    reg.max_speed_mps = c.max_speed;
+    reg.accel_curve = c.accel_curve;
+    reg.kind = match c.kind {
+        ChairKind::Simulated => RobotKind::Simulated,
+        ChairKind::Real => RobotKind::Real,
+    } as u32;
+    if let Some(p) = c.pose {
+        reg.flags |= REG_HAS_POSE;
+        reg.pose = p;
+    }
+    for (k, [x_m, y_m, angle_deg, cone_deg, range_m]) in c.sensors.iter().copied().enumerate() {
+        reg.sensors[k] = SensorSpec { x_m, y_m, angle_deg, cone_deg, range_m };
+    }
+    reg.sensor_count = c.sensors.len() as u32;
+    reg
+}
+
+/// A physical chair's motion as the agent computes it for a `real` chair: the motor filter
+/// `out = (1 − curve)·in + curve·out` and the differential-drive kinematics of thesis eqs.
+/// 4.4–4.9, stepped as the hub steps simulated chairs, so that a real chair on a script goes
+/// where a simulated one would (noise apart).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct OwnMotion {
+    /// Filtered motor outputs, left and right.
+    pub out: [f64; 2],
+    /// x, y metres; heading radians.
+    pub pose: [f64; 3],
+}
+
+impl OwnMotion {
+    /// At rest at `pose` (x, y metres, heading degrees, as the hub reports it).
+    pub fn at(pose: [f64; 3]) -> Self {
+        Self { out: [0.0; 2], pose: [pose[0], pose[1], pose[2].to_radians()] }
+    }
+
+    /// One tick of `dt` seconds with `powers`; returns the new pose as x, y, heading degrees.
+    pub fn step(&mut self, c: &ChairConfig, powers: [f64; 2], dt: f64) -> [f64; 3] {
+        for (out, p) in self.out.iter_mut().zip(powers) {
+            *out = (1.0 - c.accel_curve) * p.clamp(-1.0, 1.0) + c.accel_curve * *out;
+        }
+        let [l, r] = self.out;
+        let v = c.max_speed * (r + l) / 2.0;
+        let w = c.max_speed * (r - l) / c.body[1];
+        let [x, y, th] = self.pose;
+        let th2 = (th + w * dt + std::f64::consts::PI).rem_euclid(std::f64::consts::TAU) - std::f64::consts::PI;
+        self.pose = [x + v * th.cos() * dt, y + v * th.sin() * dt, th2];
+        [self.pose[0], self.pose[1], th2.to_degrees()]
+    }
+}
+
+/// Powers that steer a chair at `pose` to `goal`: turn on the spot when far off course,
+/// otherwise drive with a proportional correction. `None` once within 0.15 m.
+pub fn toward(pose: [f64; 3], goal: [f64; 2], speed: f64) -> Option<[f64; 2]> {
+    let (dx, dy) = (goal[0] - pose[0], goal[1] - pose[1]);
+    if dx.hypot(dy) < 0.15 {
+        return None;
+    }
+    let mut err = dy.atan2(dx) - pose[2].to_radians();
+    err = (err + std::f64::consts::PI).rem_euclid(std::f64::consts::TAU) - std::f64::consts::PI;
+    if err.abs() > 0.6 {
+        let t = 0.3 * err.signum();
+        return Some([-t, t]);
+    }
+    let turn = (0.8 * err).clamp(-0.3, 0.3);
+    Some([(speed - turn).clamp(-1.0, 1.0), (speed + turn).clamp(-1.0, 1.0)])
+}
+
+/// `iwsim agent wheelchair`.
+pub fn run(args: &WheelchairArgs) -> anyhow::Result<ExitCode> {
+    let chairs = match &args.config {
+        Some(path) => read_config(path)?,
+        None => chairs_from_args(args),
+    };
+    let timeout = std::time::Duration::from_secs_f64(args.connect_timeout.max(0.0));
+    let mut agent = Agent::connect_within(&args.session, &format!("wheelchair-{}", std::process::id()), timeout)?;
+    // Close the agent on every path, errors included: the last process of a session removes
+    // its files, even when the hub died first.
+    let result = drive(&mut agent, args, &chairs);
+    agent.close();
+    result
+}
+
+fn drive(agent: &mut Agent, args: &WheelchairArgs, chairs: &[ChairConfig]) -> anyhow::Result<ExitCode> {
+    let mut ids = Vec::new();
+    for c in chairs {
+        ids.push(agent.register(&registration(c)).with_context(|| format!("registering {}", c.name))?);
+    }
+    agent.ready()?;
+    eprintln!("wheelchair: agent {} drives robots {:?} in session {:?}", agent.id(), ids, args.session);
+    // Logs are opened at the first tick, when the sensor blocks say how many sensors each
+    // chair has.
+    let mut logs: Vec<Option<RobotLog>> = chairs.iter().map(|_| None).collect();
+    let wait = if args.busy_poll { Wait::BusyPoll } else { Wait::Blocking };
+    let mut next_waypoint = vec![0usize; chairs.len()];
+    // Real chairs move themselves by the simulated time since the tick they last answered
+    // (in real time a slow agent may miss ticks); the first step is one cycle.
+    let cycle_s = if chairs.iter().any(|c| c.kind == ChairKind::Real) {
+        let cycle_ms = agent.map().context("reading the hub's map header for its cycle")?.header.cycle_ms;
+        f64::from(cycle_ms.max(1)) / 1000.0
+    } else {
+        0.1
+    };
+    let mut own: Vec<Option<OwnMotion>> = chairs.iter().map(|_| None).collect();
+    let mut last_time: Option<f64> = None;
+    let mut actions: Vec<ActionBlock> = Vec::with_capacity(chairs.len());
+    let mut answered = 0u64;
+    let mut latencies_ns = Vec::new();
+    while let Some(tick) = agent.wait_tick(wait)? {
+        actions.clear();
+        let dt = last_time.map_or(cycle_s, |t| (tick.sim_time_s - t).max(0.0));
+        last_time = Some(tick.sim_time_s);
+        for (k, (c, &id)) in chairs.iter().zip(&ids).enumerate() {
+            let Some(b) = agent.sensors().get(k) else { continue };
+            let powers = if tick.sim_time_s < c.start_s {
+                [0.0, 0.0]
+            } else if let Some(p) = c.powers {
+                p
+            } else {
+                loop {
+                    let Some(&goal) = c.waypoints.get(next_waypoint[k]) else { break [0.0, 0.0] };
+                    match toward(b.pose, goal, c.speed) {
+                        Some(p) => break p,
+                        None => {
+                            eprintln!(
+                                "wheelchair {}: reached waypoint {:?} at t {:.1} s",
+                                c.name, goal, tick.sim_time_s
+                            );
+                            next_waypoint[k] += 1;
+                        }
+                    }
+                }
+            };
+            if let Some(dir) = &args.log {
+                if logs[k].is_none() {
+                    logs[k] = Some(
+                        RobotLog::create(dir, &c.name, b.proximity_count as usize)
+                            .with_context(|| format!("creating a log in {}", dir.display()))?,
+                    );
+                }
+                if let Some(log) = logs[k].as_mut() {
+                    log.row(b, tick.sim_time_s, powers)?;
+                }
+            }
+            actions.push(match c.kind {
+                ChairKind::Simulated => ActionBlock::motors(id, powers[0], powers[1]),
+                ChairKind::Real => {
+                    // Start from where the hub placed it; a pose the hub refused (it would
+                    // overlap something) means the chair stopped against it.
+                    let m = own[k].get_or_insert_with(|| OwnMotion::at(b.pose));
+                    if b.present & COLLISION != 0 {
+                        *m = OwnMotion::at(b.pose);
+                    }
+                    let [x, y, dir] = m.step(c, powers, dt);
+                    ActionBlock::pose(id, x, y, dir)
+                }
+            });
+        }
+        agent.send(tick.tick, &actions)?;
+        if args.report_latency {
+            latencies_ns.push(tick.latency_ns);
+        }
+        answered += 1;
+        if args.ticks > 0 && answered >= args.ticks {
+            break;
+        }
+    }
+    for log in logs.iter_mut().flatten() {
+        log.flush()?;
+    }
+    eprintln!("wheelchair: answered {answered} ticks");
+    if args.report_latency {
+        // The first ticks include connection set-up; they are not the steady state.
+        let steady = latencies_ns.get(latencies_ns.len().min(100)..).unwrap_or(&[]);
+        println!("{}", records::latency::Percentiles::of_ns(steady).json());
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn waypoint_steering_turns_first_then_drives() {
+        // Facing +x, goal behind: turn on the spot (left wheel back, right forward for +).
+        assert_eq!(toward([0.0, 0.0, 0.0], [-5.0, 0.1], 0.5).map(|p| p[0] < 0.0 && p[1] > 0.0), Some(true));
+        // Facing the goal: both wheels forward at the cruise power.
+        assert_eq!(toward([0.0, 0.0, 0.0], [5.0, 0.0], 0.5), Some([0.5, 0.5]));
+        // Arrived.
+        assert_eq!(toward([5.0, 0.05, 0.0], [5.0, 0.0], 0.5), None);
+    }
+
+    #[test]
+    fn config_files_are_checked() {
+        let dir = std::env::temp_dir().join(format!("iwsim-wcfg-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).expect("dir");
+        let p = dir.join("c.toml");
+        std::fs::write(&p, "[[chairs]]\nname = \"a\"\npowers = [1, 1]\nwaypoints = [[1, 2]]\n").expect("write");
+        assert!(read_config(&p).expect_err("both").to_string().contains("not both"));
+        std::fs::write(&p, "[[chairs]]\nname = \"a\"\nbody = [1, 2]\n").expect("write");
+        let e = read_config(&p).expect_err("short body").to_string();
+        assert!(e.contains("c.toml") && e.contains("line 3"), "{e}");
+        std::fs::write(&p, "[[chairs]]\nname = \"a\"\npose = [10, 6.1, 0]\nwaypoints = [[12, 6.1]]\n").expect("write");
+        let c = read_config(&p).expect("good");
+        assert_eq!((c[0].pose, c[0].waypoints.len(), c[0].body), (Some([10.0, 6.1, 0.0]), 1, [1.0, 1.0, 0.5]));
+        let _ = std::fs::remove_dir_all(dir);
+    }
+}

@@ -1,0 +1,137 @@
+//! The command line of `iwsim bench`: one clap struct per benchmark.
+
+use clap::{Args, Subcommand};
+
+/// `iwsim bench …`
+#[derive(Debug, Subcommand)]
+pub enum BenchCommand {
+    /// World model throughput: ticks per second of tiled LIACC floors with N chairs.
+    World(BenchWorldArgs),
+    /// Hub publish -> agent has its sensor block, busy-poll and blocking, against a raw
+    /// iceoryx2 ping-pong measured in the same run.
+    Latency(BenchLatencyArgs),
+    /// End-to-end lock-step ticks per second with agents as separate processes.
+    Lockstep(BenchLockstepArgs),
+    /// The viewer page's frame rates with many chairs in a real headless Chromium, and the
+    /// hub's lock-step rate with and without a viewer attached.
+    Viewer(BenchViewerArgs),
+    /// The peer process of the raw iceoryx2 ping-pong (started by `bench latency`).
+    #[command(hide = true)]
+    RawPeer(RawPeerArgs),
+    /// A Ciber-Rato-style UDP client answering every Measures (started by `bench lockstep`).
+    #[command(hide = true)]
+    UdpClient(UdpClientArgs),
+}
+
+/// Options of `iwsim bench latency`.
+#[derive(Debug, Args, Clone)]
+pub struct BenchLatencyArgs {
+    /// Samples per measurement (after 100 warm-up ones).
+    #[arg(long, default_value_t = 20_000)]
+    pub samples: u64,
+    /// Print one JSON object instead of text.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// Options of `iwsim bench viewer`.
+#[derive(Debug, Args, Clone)]
+pub struct BenchViewerArgs {
+    /// Chairs on the floor.
+    #[arg(long, default_value_t = 1000)]
+    pub robots: usize,
+    /// Seconds to count the page's frames in each view.
+    #[arg(long, default_value_t = 5.0)]
+    pub seconds: f64,
+    /// Lock-step ticks for the hub-cost runs.
+    #[arg(long, default_value_t = 2000)]
+    pub ticks: u64,
+    /// Print one JSON object instead of text.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// Options of `iwsim bench lockstep`.
+#[derive(Debug, Args, Clone)]
+pub struct BenchLockstepArgs {
+    /// Agent processes.
+    #[arg(long, default_value_t = 1)]
+    pub agents: usize,
+    /// Robots each agent registers.
+    #[arg(long, default_value_t = 100)]
+    pub robots_per_agent: usize,
+    /// Ticks to run.
+    #[arg(long, default_value_t = 5000)]
+    pub ticks: u64,
+    /// Agents attach over shared memory (shm), over the UDP/XML bridge (udp), or both in
+    /// one run with the ratio (both).
+    #[arg(long, default_value = "shm")]
+    pub transport: Transport,
+    /// Print one JSON object instead of text.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// How bench agents attach to the hub.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum Transport {
+    /// Agent SDK over iceoryx2 shared memory.
+    Shm,
+    /// Ciber-Rato UDP/XML clients through `iwsim udp`.
+    Udp,
+    /// Both, one after the other, with the ratio.
+    Both,
+}
+
+/// Options of the hidden UDP bench client.
+#[derive(Debug, Args, Clone)]
+pub struct UdpClientArgs {
+    /// The bridge's registration address.
+    #[arg(long)]
+    pub server: std::net::SocketAddr,
+    /// Robots to register (one socket each, as Ciber-Rato clients do).
+    #[arg(long, default_value_t = 1)]
+    pub robots: usize,
+    /// Start pose of the first robot X,Y (a lattice 5 m apart, ten to a row).
+    #[arg(long, value_parser = agent_sdk::args::powers, allow_hyphen_values = true)]
+    pub pose: [f64; 2],
+}
+
+/// Options of the hidden raw ping-pong peer.
+#[derive(Debug, Args, Clone)]
+pub struct RawPeerArgs {
+    /// Session (iceoryx2 domain) of the ping-pong.
+    #[arg(long)]
+    pub session: String,
+    /// Pings to answer.
+    #[arg(long)]
+    pub samples: u64,
+    /// Spin instead of sleeping.
+    #[arg(long)]
+    pub busy_poll: bool,
+    /// Sleep on the event (the default).
+    #[arg(long)]
+    pub blocking: bool,
+}
+
+/// Options of `iwsim bench world`.
+#[derive(Debug, Args, Clone)]
+pub struct BenchWorldArgs {
+    /// Number of chairs (ten per LIACC floor).
+    #[arg(long, default_value_t = 1000)]
+    pub robots: usize,
+    /// Ticks to time.
+    #[arg(long, default_value_t = 300)]
+    pub ticks: u64,
+    /// Ticks the chairs drive, untimed, before timing starts (100 = 10 simulated seconds).
+    /// The load grows as chairs gather near walls and each other: after 6,000 ticks each
+    /// chair has about twice as many edges in sensor range.
+    #[arg(long, default_value_t = 100)]
+    pub warmup: u64,
+    /// Seed for placement and noise.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Print one JSON object instead of text.
+    #[arg(long)]
+    pub json: bool,
+}

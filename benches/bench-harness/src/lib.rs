@@ -1,0 +1,565 @@
+//! `iwsim bench`: the benchmarks that need processes or the whole simulator — world
+//! throughput on tiled LIACC floors, hub latency against a raw iceoryx2 ping-pong measured in
+//! the same run, lock-step rates over shared memory and over the UDP/XML bridge, and the
+//! viewer's cost. Each prints figures (or one JSON object with `--json`).
+//!
+//! The benchmark world ([`tiled`]) lives here, not in the production libraries.
+#![warn(missing_docs)]
+
+pub mod args;
+pub mod tiled;
+pub mod viewer;
+
+pub use args::BenchCommand;
+
+/// Runs one `iwsim bench` subcommand.
+pub fn run(command: &BenchCommand) -> anyhow::Result<std::process::ExitCode> {
+    match command {
+        BenchCommand::World(a) => world(a),
+        BenchCommand::Latency(a) => latency(a),
+        BenchCommand::Lockstep(a) => lockstep(a),
+        BenchCommand::Viewer(a) => viewer::run(a),
+        BenchCommand::RawPeer(a) => raw_peer(a),
+        BenchCommand::UdpClient(a) => udp_client(a),
+    }
+}
+
+use std::process::ExitCode;
+use std::time::{Duration, Instant};
+
+use crate::tiled::TiledWorld;
+
+use anyhow::Context as _;
+
+use crate::args::{BenchLatencyArgs, BenchLockstepArgs, BenchWorldArgs, RawPeerArgs, Transport, UdpClientArgs};
+
+/// Result of `iwsim bench world`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct WorldBench {
+    /// Chairs in the world.
+    pub robots: usize,
+    /// Ticks timed.
+    pub ticks: u64,
+    /// Ticks per second of `World::step` alone.
+    pub ticks_per_s: f64,
+    /// Microseconds per robot per tick.
+    pub us_per_robot_tick: f64,
+    /// Median time of one tick, milliseconds.
+    pub p50_tick_ms: f64,
+    /// Time to build the world and place the chairs, seconds.
+    pub build_s: f64,
+}
+
+/// Steps tiled LIACC floors with `robots` chairs and times `World::step` (the controller that
+/// makes the actions runs between ticks and is not timed).
+/// The chairs first drive `warmup` ticks untimed, so every run times the same stretch of the
+/// same (seeded) drive.
+pub fn measure_world(robots: usize, ticks: u64, warmup: u64, seed: u64) -> anyhow::Result<WorldBench> {
+    let t0 = Instant::now();
+    let mut w = TiledWorld::build(robots, seed)?;
+    let build_s = t0.elapsed().as_secs_f64();
+    for _ in 0..warmup {
+        w.tick(0.1);
+    }
+    let mut per_tick = Vec::with_capacity(ticks as usize);
+    let mut total = Duration::ZERO;
+    for _ in 0..ticks {
+        w.control();
+        let t = Instant::now();
+        w.step_only(0.1);
+        let dt = t.elapsed();
+        total += dt;
+        per_tick.push(dt);
+    }
+    per_tick.sort_unstable();
+    let secs = total.as_secs_f64().max(1e-12);
+    Ok(WorldBench {
+        robots,
+        ticks,
+        ticks_per_s: ticks as f64 / secs,
+        us_per_robot_tick: secs * 1e6 / (ticks as f64 * robots.max(1) as f64),
+        p50_tick_ms: per_tick.get(per_tick.len() / 2).map_or(0.0, |d| d.as_secs_f64() * 1e3),
+        build_s,
+    })
+}
+
+/// `iwsim bench world`.
+pub fn world(args: &BenchWorldArgs) -> anyhow::Result<ExitCode> {
+    let b = measure_world(args.robots, args.ticks, args.warmup, args.seed)?;
+    if args.json {
+        println!(
+            "{{\"robots\":{},\"ticks\":{},\"warmup\":{},\"ticks_per_s\":{:.1},\"us_per_robot_tick\":{:.4},\"p50_tick_ms\":{:.4},\"build_s\":{:.3}}}",
+            b.robots, b.ticks, args.warmup, b.ticks_per_s, b.us_per_robot_tick, b.p50_tick_ms, b.build_s
+        );
+    } else {
+        println!(
+            "world: {} chairs on tiled LIACC floors, 8 proximity sensors each, noise on\n  {:.1} ticks/s  ({:.3} us per robot-tick, median tick {:.3} ms, {} ticks timed; built in {:.2} s)\n  real-time factor at 100 ms ticks: {:.1}x",
+            b.robots,
+            b.ticks_per_s,
+            b.us_per_robot_tick,
+            b.p50_tick_ms,
+            b.ticks,
+            b.build_s,
+            b.ticks_per_s / 10.0
+        );
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
+pub use records::latency::Percentiles;
+
+fn iwsim_exe() -> anyhow::Result<std::path::PathBuf> {
+    std::env::current_exe().context("finding the iwsim executable")
+}
+
+pub(crate) fn spawn_self(args: &[String]) -> anyhow::Result<std::process::Child> {
+    std::process::Command::new(iwsim_exe()?)
+        .args(args)
+        .stdin(std::process::Stdio::null())
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .context("starting an iwsim process")
+}
+
+pub(crate) fn finish(child: std::process::Child, what: &str) -> anyhow::Result<String> {
+    let out = child.wait_with_output().with_context(|| format!("waiting for the {what}"))?;
+    let stdout = String::from_utf8_lossy(&out.stdout).into_owned();
+    if !out.status.success() {
+        anyhow::bail!("the {what} failed: {}{}", stdout, String::from_utf8_lossy(&out.stderr));
+    }
+    Ok(stdout)
+}
+
+/// Hub publish → agent has its sensor block, through the real hub and agent processes.
+fn hub_latency(samples: u64, busy: bool) -> anyhow::Result<Percentiles> {
+    let session = format!("bench-lat-{}-{}", std::process::id(), busy as u8);
+    let s = |x: &str| x.to_owned();
+    let hub = spawn_self(&[
+        s("hub"),
+        s("--session"),
+        session.clone(),
+        s("--lockstep"),
+        s("--ticks"),
+        (samples + 100).to_string(),
+        s("--wait-agents"),
+        s("1"),
+        s("--no-noise"),
+        s("--json"),
+    ])?;
+    let mut agent_args =
+        vec![s("agent"), s("wheelchair"), s("--session"), session, s("--report-latency"), s("--powers"), s("0.2,0.2")];
+    if busy {
+        agent_args.push(s("--busy-poll"));
+    }
+    let agent = spawn_self(&agent_args)?;
+    finish(hub, "hub")?;
+    let out = finish(agent, "agent")?;
+    Percentiles::parse(&out).context("the agent printed no latency figures")
+}
+
+/// The same one-way latency for a bare iceoryx2 publish (+ notify) of a sample of the sensor
+/// block's size, answered by a pong, between this process and a peer. The driver waits for
+/// each pong asleep, as the hub waits for actions, so both sides tick at a similar pace.
+fn raw_latency(samples: u64, busy: bool) -> anyhow::Result<Percentiles> {
+    use ipc_services::iceoryx2::prelude::*;
+    let session = ipc_services::Session::new(&format!("bench-raw-{}-{}", std::process::id(), busy as u8))?;
+    let node = session.node("raw-driver")?;
+    let (ping, ping_ev, pong, pong_ev) = raw::services(&session, &node, true)?;
+    let publisher = ping.publisher_builder().create().map_err(|e| anyhow::anyhow!("{e:?}"))?;
+    let notifier = ping_ev.notifier_builder().create().map_err(|e| anyhow::anyhow!("{e:?}"))?;
+    let subscriber = pong.subscriber_builder().create().map_err(|e| anyhow::anyhow!("{e:?}"))?;
+    let listener = pong_ev.listener_builder().create().map_err(|e| anyhow::anyhow!("{e:?}"))?;
+    let peer = spawn_self(&[
+        "bench".into(),
+        "raw-peer".into(),
+        "--session".into(),
+        session.name().to_owned(),
+        "--samples".into(),
+        (samples + 100).to_string(),
+        if busy { "--busy-poll".into() } else { "--blocking".into() },
+    ])?;
+    let start = Instant::now();
+    while ping.dynamic_config().number_of_subscribers() == 0 || ping_ev.dynamic_config().number_of_listeners() == 0 {
+        anyhow::ensure!(start.elapsed() < Duration::from_secs(10), "the raw peer did not connect");
+        std::thread::sleep(Duration::from_millis(1));
+    }
+    for seq in 0..samples + 100 {
+        let mut sample = publisher.loan_uninit().map_err(|e| anyhow::anyhow!("{e:?}"))?;
+        let mut ping_msg = raw::Ping { seq, t_pub_ns: 0, payload: [0; raw::PAYLOAD] };
+        ping_msg.t_pub_ns = ipc_types::monotonic_ns();
+        sample.payload_mut().write(ping_msg);
+        #[allow(unsafe_code)]
+        // SAFETY: the payload was written in full on the line above.
+        let sample = unsafe { sample.assume_init() };
+        sample.send().map_err(|e| anyhow::anyhow!("{e:?}"))?;
+        notifier.notify().map_err(|e| anyhow::anyhow!("{e:?}"))?;
+        let deadline = Instant::now() + Duration::from_secs(5);
+        loop {
+            if let Some(p) = subscriber.receive().map_err(|e| anyhow::anyhow!("{e:?}"))?
+                && *p.payload() == seq
+            {
+                break;
+            }
+            anyhow::ensure!(Instant::now() < deadline, "the raw peer stopped answering");
+            // The driver plays the hub, which sleeps until the agent answers whatever the
+            // agent's own wait: only the receiving side differs between the two modes.
+            listener.timed_wait(|_| {}, Duration::from_millis(100)).map_err(|e| anyhow::anyhow!("{e:?}"))?;
+        }
+    }
+    let out = finish(peer, "raw peer")?;
+    drop((publisher, notifier, subscriber, listener, ping, ping_ev, pong, pong_ev, node));
+    session.release_if_unused();
+    Percentiles::parse(&out).context("the raw peer printed no latency figures")
+}
+
+/// The peer of the raw ping-pong: receives pings, records their one-way latency, answers.
+pub fn raw_peer(args: &RawPeerArgs) -> anyhow::Result<ExitCode> {
+    let session = ipc_services::Session::new(&args.session)?;
+    let node = session.node("raw-peer")?;
+    let (ping, ping_ev, pong, pong_ev) = raw::services(&session, &node, false)?;
+    let subscriber = ping.subscriber_builder().create().map_err(|e| anyhow::anyhow!("{e:?}"))?;
+    let listener = ping_ev.listener_builder().create().map_err(|e| anyhow::anyhow!("{e:?}"))?;
+    let publisher = pong.publisher_builder().create().map_err(|e| anyhow::anyhow!("{e:?}"))?;
+    let notifier = pong_ev.notifier_builder().create().map_err(|e| anyhow::anyhow!("{e:?}"))?;
+    let mut lat = Vec::with_capacity(args.samples as usize);
+    let deadline = Instant::now() + Duration::from_secs(120);
+    while (lat.len() as u64) < args.samples {
+        anyhow::ensure!(Instant::now() < deadline, "the raw driver stopped sending");
+        if let Some(p) = subscriber.receive().map_err(|e| anyhow::anyhow!("{e:?}"))? {
+            let now = ipc_types::monotonic_ns();
+            lat.push(now.saturating_sub(p.payload().t_pub_ns));
+            publisher.send_copy(p.payload().seq).map_err(|e| anyhow::anyhow!("{e:?}"))?;
+            notifier.notify().map_err(|e| anyhow::anyhow!("{e:?}"))?;
+        } else if !args.busy_poll {
+            listener.timed_wait(|_| {}, Duration::from_millis(100)).map_err(|e| anyhow::anyhow!("{e:?}"))?;
+        }
+    }
+    println!("{}", Percentiles::of_ns(&lat[lat.len().min(100)..]).json());
+    drop((subscriber, listener, publisher, notifier, ping, ping_ev, pong, pong_ev, node));
+    session.release_if_unused();
+    Ok(ExitCode::SUCCESS)
+}
+
+mod raw {
+    use ipc_services::iceoryx2::node::Node;
+    use ipc_services::iceoryx2::prelude::ZeroCopySend;
+    use ipc_services::{EventService, Session, Svc};
+
+    /// Bytes after the header, so a ping is as large as a sensor block.
+    pub const PAYLOAD: usize = 816;
+
+    /// A ping of the size of a sensor block.
+    #[repr(C)]
+    #[derive(Debug, Clone, Copy, ZeroCopySend)]
+    #[type_name("iwsim::bench::Ping.v1")]
+    pub struct Ping {
+        pub seq: u64,
+        pub t_pub_ns: u64,
+        pub payload: [u8; PAYLOAD],
+    }
+    const _: () = assert!(core::mem::size_of::<Ping>() == core::mem::size_of::<ipc_types::SensorBlock>());
+
+    type PingService = ipc_services::iceoryx2::service::port_factory::publish_subscribe::PortFactory<Svc, Ping, ()>;
+    type PongService = ipc_services::iceoryx2::service::port_factory::publish_subscribe::PortFactory<Svc, u64, ()>;
+
+    pub fn services(
+        session: &Session,
+        node: &Node<Svc>,
+        create: bool,
+    ) -> anyhow::Result<(PingService, EventService, PongService, EventService)> {
+        let name = |p: &str| {
+            ipc_services::iceoryx2::prelude::ServiceName::new(&session.service_name(p))
+                .map_err(|e| anyhow::anyhow!("{e:?}"))
+        };
+        let ping = node
+            .service_builder(&name("ping")?)
+            .publish_subscribe::<Ping>()
+            .subscriber_max_buffer_size(1)
+            .enable_safe_overflow(true);
+        let pong = node
+            .service_builder(&name("pong")?)
+            .publish_subscribe::<u64>()
+            .subscriber_max_buffer_size(1)
+            .enable_safe_overflow(true);
+        let ping_ev = node.service_builder(&name("ping")?).event();
+        let pong_ev = node.service_builder(&name("pong")?).event();
+        let e = |e: &dyn std::fmt::Debug| anyhow::anyhow!("{e:?}");
+        Ok(if create {
+            (
+                ping.create().map_err(|x| e(&x))?,
+                ping_ev.create().map_err(|x| e(&x))?,
+                pong.create().map_err(|x| e(&x))?,
+                pong_ev.create().map_err(|x| e(&x))?,
+            )
+        } else {
+            (
+                ping.open().map_err(|x| e(&x))?,
+                ping_ev.open().map_err(|x| e(&x))?,
+                pong.open().map_err(|x| e(&x))?,
+                pong_ev.open().map_err(|x| e(&x))?,
+            )
+        })
+    }
+}
+
+/// `iwsim bench latency`.
+pub fn latency(args: &BenchLatencyArgs) -> anyhow::Result<ExitCode> {
+    let n = args.samples;
+    let raw_busy = raw_latency(n, true)?;
+    let hub_busy = hub_latency(n, true)?;
+    let raw_block = raw_latency(n, false)?;
+    let hub_block = hub_latency(n, false)?;
+    let r = |a: f64, b: f64| if b > 0.0 { a / b } else { 0.0 };
+    if args.json {
+        println!(
+            "{{\"samples\":{n},\"busy_poll\":{{\"hub\":{},\"raw\":{},\"ratio_p50\":{:.3},\"ratio_p99\":{:.3}}},\"blocking\":{{\"hub\":{},\"raw\":{},\"ratio_p50\":{:.3},\"ratio_p99\":{:.3}}}}}",
+            hub_busy.json(),
+            raw_busy.json(),
+            r(hub_busy.p50_us, raw_busy.p50_us),
+            r(hub_busy.p99_us, raw_busy.p99_us),
+            hub_block.json(),
+            raw_block.json(),
+            r(hub_block.p50_us, raw_block.p50_us),
+            r(hub_block.p99_us, raw_block.p99_us),
+        );
+    } else {
+        println!("latency: hub publishes a tick -> the agent has its sensor block ({n} samples each, one-way, us)");
+        println!("  {:<22} {:>9} {:>9} {:>9}", "", "p50", "p99", "p99.9");
+        for (name, p) in [
+            ("busy-poll  iwsim hub", hub_busy),
+            ("busy-poll  raw iceoryx2", raw_busy),
+            ("blocking   iwsim hub", hub_block),
+            ("blocking   raw iceoryx2", raw_block),
+        ] {
+            println!("  {:<22} {:>9.2} {:>9.2} {:>9.2}", name, p.p50_us, p.p99_us, p.p999_us);
+        }
+        println!(
+            "  ratio iwsim / raw: busy-poll p50 {:.2}x p99 {:.2}x; blocking p50 {:.2}x p99 {:.2}x",
+            r(hub_busy.p50_us, raw_busy.p50_us),
+            r(hub_busy.p99_us, raw_busy.p99_us),
+            r(hub_block.p50_us, raw_block.p50_us),
+            r(hub_block.p99_us, raw_block.p99_us)
+        );
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
+/// Result of `iwsim bench lockstep`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LockstepBench {
+    /// Agent processes.
+    pub agents: usize,
+    /// Robots per agent.
+    pub robots_per_agent: usize,
+    /// Ticks run.
+    pub ticks: u64,
+    /// Ticks per second, end to end.
+    pub ticks_per_s: f64,
+}
+
+/// A hub in lock-step with `agents` agent processes of `robots_per_agent` robots each, physics
+/// and sensors on, on an open 400 m lab; ticks per second from the first step to the last.
+/// Robots stand in lattices 5 m apart (one per 25 m², about three times the density of the
+/// LIACC floor in `bench world`), driving slow arcs. Over UDP, each agent is a Ciber-Rato-style
+/// client process (one socket per robot, one `<Actions>` per `<Measures>`) talking to
+/// `iwsim udp`.
+pub fn measure_lockstep(
+    agents: usize,
+    robots_per_agent: usize,
+    ticks: u64,
+    udp: bool,
+) -> anyhow::Result<LockstepBench> {
+    let dir = std::env::temp_dir().join(format!("iwsim-bench-{}-{}", std::process::id(), udp as u8));
+    std::fs::create_dir_all(&dir)?;
+    let lab = dir.join("lab.xml");
+    std::fs::write(
+        &lab,
+        "<Lab Name=\"bench\" Width=\"400\" Height=\"400\">\n  <Wall Height=\"2\"><Corner X=\"200\" Y=\"0\"/><Corner X=\"201\" Y=\"0\"/><Corner X=\"201\" Y=\"150\"/><Corner X=\"200\" Y=\"150\"/></Wall>\n</Lab>\n",
+    )?;
+    let session = format!("bench-ls-{}-{}", std::process::id(), udp as u8);
+    // Over UDP the bridge is the hub's one agent, whatever the number of UDP clients.
+    let hub_agents = if udp { 1 } else { agents };
+    let hub = spawn_self(&[
+        "hub".into(),
+        "--session".into(),
+        session.clone(),
+        "--lab".into(),
+        lab.display().to_string(),
+        "--lockstep".into(),
+        "--ticks".into(),
+        ticks.to_string(),
+        "--wait-agents".into(),
+        hub_agents.to_string(),
+        "--json".into(),
+    ])?;
+    const SPACING: f64 = 5.0;
+    let rows = robots_per_agent.div_ceil(10).max(1) as f64 * SPACING + SPACING;
+    let origin = |i: usize| (5.0 + (10.0 * SPACING + SPACING) * (i % 7) as f64, 5.0 + rows * (i / 7) as f64);
+    let mut children = Vec::new();
+    let mut bridge = None;
+    if udp {
+        let mut b = spawn_self(&[
+            "udp".into(),
+            "--session".into(),
+            session.clone(),
+            "--port".into(),
+            "0".into(),
+            "--connect-timeout".into(),
+            "30".into(),
+        ])?;
+        let server = bridge_address(&mut b)?;
+        bridge = Some(b);
+        // The hub starts when the bridge is ready, i.e. at its first robot: register every
+        // client's robots before the first tick matters, which the clients do at once.
+        for i in 0..agents {
+            let (bx, by) = origin(i);
+            children.push(spawn_self(&[
+                "bench".into(),
+                "udp-client".into(),
+                "--server".into(),
+                server.to_string(),
+                "--robots".into(),
+                robots_per_agent.to_string(),
+                "--pose".into(),
+                format!("{bx},{by}"),
+            ])?);
+        }
+    } else {
+        for i in 0..agents {
+            let (bx, by) = origin(i);
+            children.push(spawn_self(&[
+                "agent".into(),
+                "wheelchair".into(),
+                "--session".into(),
+                session.clone(),
+                "--robots".into(),
+                robots_per_agent.to_string(),
+                "--pose".into(),
+                format!("{bx},{by},0"),
+                "--spacing".into(),
+                SPACING.to_string(),
+                "--powers".into(),
+                "0.3,0.28".into(),
+                "--connect-timeout".into(),
+                "30".into(),
+            ])?);
+        }
+    }
+    let out = finish(hub, "hub")?;
+    for c in children {
+        finish(c, "agent")?;
+    }
+    if let Some(b) = bridge {
+        finish(b, "bridge")?;
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+    let field = |k: &str| -> Option<f64> {
+        let key = format!("\"{k}\":");
+        let rest = &out[out.find(&key)? + key.len()..];
+        rest[..rest.find([',', '}'])?].parse().ok()
+    };
+    let run_s = field("run_s").context("hub printed no run time")?;
+    let ticks_done = field("ticks").context("hub printed no tick count")? as u64;
+    Ok(LockstepBench { agents, robots_per_agent, ticks: ticks_done, ticks_per_s: ticks_done as f64 / run_s.max(1e-9) })
+}
+
+/// Reads the bridge's "registrations on ADDR" line from its stderr.
+fn bridge_address(bridge: &mut std::process::Child) -> anyhow::Result<std::net::SocketAddr> {
+    use std::io::BufRead;
+    let stderr = bridge.stderr.take().context("bridge stderr")?;
+    let mut lines = std::io::BufReader::new(stderr).lines();
+    loop {
+        let line = lines.next().context("the bridge exited before announcing its port")??;
+        if let Some(addr) = line.split("registrations on ").nth(1) {
+            // Keep draining stderr so the bridge never blocks on a full pipe.
+            std::thread::spawn(move || for _ in lines.by_ref() {});
+            return addr.trim().parse().context("the bridge's address");
+        }
+    }
+}
+
+/// The UDP bench client: registers robots like a Ciber-Rato client (one socket each) and
+/// answers every `<Measures>` with one `<Actions>`, until the Measures stop.
+pub fn udp_client(args: &UdpClientArgs) -> anyhow::Result<ExitCode> {
+    use std::net::UdpSocket;
+    let mut socks = Vec::new();
+    for k in 0..args.robots {
+        let s = UdpSocket::bind("127.0.0.1:0").context("bind a client socket")?;
+        s.set_read_timeout(Some(Duration::from_secs(10)))?;
+        let (x, y) = (args.pose[0] + 5.0 * (k % 10) as f64, args.pose[1] + 5.0 * (k / 10) as f64);
+        let reg = format!("<Robot Name=\"udp{k}\" X=\"{x}\" Y=\"{y}\" Dir=\"0\"/>");
+        s.send_to(reg.as_bytes(), args.server)?;
+        let mut buf = [0u8; 4096];
+        let (n, from) = s.recv_from(&mut buf).context("no registration reply")?;
+        anyhow::ensure!(
+            buf[..n].starts_with(b"<Reply Status=\"Ok\""),
+            "registration refused: {}",
+            String::from_utf8_lossy(&buf[..n])
+        );
+        s.connect(from)?;
+        socks.push(s);
+    }
+    let mut answered = 0u64;
+    let mut buf = [0u8; 4096];
+    'run: loop {
+        for s in &socks {
+            // After the run the bridge exits and the Measures stop: that is the end.
+            let timeout = if answered == 0 { Duration::from_secs(30) } else { Duration::from_millis(1500) };
+            s.set_read_timeout(Some(timeout))?;
+            match s.recv(&mut buf) {
+                Ok(_) => {
+                    s.send(b"<Actions LeftMotor=\"0.045\" RightMotor=\"0.042\"/>")?;
+                    answered += 1;
+                }
+                Err(_) => break 'run,
+            }
+        }
+    }
+    eprintln!("udp client: answered {answered} Measures");
+    Ok(ExitCode::SUCCESS)
+}
+
+/// `iwsim bench lockstep`.
+pub fn lockstep(args: &BenchLockstepArgs) -> anyhow::Result<ExitCode> {
+    let runs: Vec<(&str, LockstepBench)> = match args.transport {
+        Transport::Shm => vec![("shm", measure_lockstep(args.agents, args.robots_per_agent, args.ticks, false)?)],
+        Transport::Udp => vec![("udp", measure_lockstep(args.agents, args.robots_per_agent, args.ticks, true)?)],
+        Transport::Both => vec![
+            ("shm", measure_lockstep(args.agents, args.robots_per_agent, args.ticks, false)?),
+            ("udp", measure_lockstep(args.agents, args.robots_per_agent, args.ticks, true)?),
+        ],
+    };
+    let ratio = (runs.len() == 2).then(|| runs[0].1.ticks_per_s / runs[1].1.ticks_per_s.max(1e-9));
+    if args.json {
+        let mut s = format!(
+            "{{\"agents\":{},\"robots_per_agent\":{},\"ticks\":{}",
+            args.agents, args.robots_per_agent, runs[0].1.ticks
+        );
+        for (name, b) in &runs {
+            let key = if runs.len() == 1 { "ticks_per_s".to_owned() } else { format!("{name}_ticks_per_s") };
+            s += &format!(",\"transport\":\"{name}\",\"{key}\":{:.1}", b.ticks_per_s);
+            if runs.len() == 1 {
+                break;
+            }
+        }
+        if let Some(r) = ratio {
+            s = format!(
+                "{{\"agents\":{},\"robots_per_agent\":{},\"ticks\":{},\"shm_ticks_per_s\":{:.1},\"udp_ticks_per_s\":{:.1},\"ratio_shm_over_udp\":{:.2}",
+                args.agents, args.robots_per_agent, runs[0].1.ticks, runs[0].1.ticks_per_s, runs[1].1.ticks_per_s, r
+            );
+        }
+        println!("{s}}}");
+    } else {
+        for (name, b) in &runs {
+            println!(
+                "lockstep over {name}: {} agents x {} robots, physics and sensors on: {:.1} ticks/s over {} ticks",
+                b.agents, b.robots_per_agent, b.ticks_per_s, b.ticks
+            );
+        }
+        if let Some(r) = ratio {
+            println!("  shared memory / UDP: {r:.2}x");
+        }
+    }
+    Ok(ExitCode::SUCCESS)
+}

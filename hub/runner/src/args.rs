@@ -1,0 +1,63 @@
+//! The command lines of `iwsim run` and `iwsim demo`.
+
+use std::path::PathBuf;
+
+use clap::Args;
+
+/// Options of `iwsim run`.
+#[derive(Debug, Args, Clone)]
+pub struct RunArgs {
+    /// The scenario: a TOML file, or builtin:dynamics, builtin:slalom, builtin:door,
+    /// builtin:corridor-swap, builtin:demo.
+    pub scenario: String,
+    /// Step as fast as the agents allow (deterministic) instead of in real time.
+    #[arg(long)]
+    pub lockstep: bool,
+    /// No viewer.
+    #[arg(long)]
+    pub headless: bool,
+    /// Seed (default: the scenario's).
+    #[arg(long, conflicts_with = "seeds")]
+    pub seed: Option<u64>,
+    /// A batch of runs, one per seed, A..B inclusive (headless), with a table at the end.
+    #[arg(long, value_name = "A..B")]
+    pub seeds: Option<String>,
+    /// Where logs and summary.json go (default runs/<scenario>; a batch uses seed-N/ below it).
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    /// Where the viewer serves (use 0.0.0.0:8080 to watch from another machine).
+    #[arg(long, default_value = "127.0.0.1:8080")]
+    pub http: std::net::SocketAddr,
+    /// Let the viewer's page start, pause, step and stop the run.
+    #[arg(long)]
+    pub allow_control: bool,
+    /// Print only the summary.
+    #[arg(long)]
+    pub quiet: bool,
+}
+
+/// Options of `iwsim demo`.
+#[derive(Debug, Args, Clone)]
+pub struct DemoArgs {
+    /// Simulated seconds to run (default: the whole demo, 75 s).
+    #[arg(long)]
+    pub seconds: Option<f64>,
+    /// Seed for the world's noise.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Where the logs and summary.json go.
+    #[arg(long, default_value = "runs/demo")]
+    pub out: PathBuf,
+    /// No viewer.
+    #[arg(long)]
+    pub headless: bool,
+    /// As fast as the agents allow instead of real time (implies --headless makes sense).
+    #[arg(long)]
+    pub lockstep: bool,
+    /// Where the viewer serves (0.0.0.0:8080 to watch from another machine).
+    #[arg(long, default_value = "127.0.0.1:8080")]
+    pub http: std::net::SocketAddr,
+    /// Let the viewer's page start, pause, step and stop the run.
+    #[arg(long)]
+    pub allow_control: bool,
+}

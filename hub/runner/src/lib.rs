@@ -1,0 +1,17 @@
+//! The scenario runner behind `iwsim run` and `iwsim demo`: a scenario file ([`scenario`])
+//! becomes a run of real processes — the hub, every agent and (unless headless) the viewer —
+//! whose outcome is a summary ([`run`]) written as `summary.json` and judged against the
+//! scenario's expectations.
+//!
+//! ```
+//! let slalom = runner::scenario::Scenario::load("builtin:slalom").expect("built in");
+//! assert_eq!(slalom.checkpoints.len(), 2);
+//! ```
+#![warn(missing_docs)]
+
+pub mod args;
+pub mod demo;
+pub mod run;
+pub mod scenario;
+
+pub use args::{DemoArgs, RunArgs};

@@ -1,0 +1,121 @@
+//! The formulas every iwsim process shares: the hub's world model steps robots with them, and a
+//! client that models its own chair (the wheelchair agent's `real` mode, the navigator's
+//! odometry, the UDP bridge's IR values) calls the same functions, so the two can never drift
+//! apart. No dependencies, no state: plain functions of their inputs.
+//!
+//! ```
+//! use sim_model::{advance, motor_filter, velocity, wrap_rad};
+//!
+//! // One 100 ms tick of a chair at rest given full power on both wheels (thesis eqs. 4.4–4.9).
+//! let curve = 0.5;
+//! let out = [motor_filter(1.0, 0.0, curve), motor_filter(1.0, 0.0, curve)];
+//! let (v, omega) = velocity(0.5, 0.65, out);
+//! let (s, c) = 0.0_f64.sin_cos();
+//! let [x, y, theta] = advance([0.0, 0.0, 0.0], v, omega, c, s, 0.1);
+//! assert_eq!((x, y, theta), (0.025, 0.0, 0.0));
+//! assert_eq!(wrap_rad(3.0 * std::f64::consts::PI), std::f64::consts::PI);
+//! ```
+#![warn(missing_docs)]
+
+use std::f64::consts::{PI, TAU};
+
+/// Wraps an angle in radians to (−π, π]: the one angle convention of the project.
+#[inline]
+pub fn wrap_rad(a: f64) -> f64 {
+    if a > -PI && a <= PI {
+        return a;
+    }
+    let mut r = a % TAU; // now in (−2π, 2π)
+    if r <= -PI {
+        r += TAU;
+    } else if r > PI {
+        r -= TAU;
+    }
+    r
+}
+
+/// An angle in radians as degrees normalised to (−180, 180], as written on every wire and file.
+#[inline]
+pub fn wire_deg(a_rad: f64) -> f64 {
+    let d = wrap_rad(a_rad).to_degrees();
+    // Rounding in to_degrees can land exactly on −180 for an input just above −π.
+    if d <= -180.0 { d + 360.0 } else { d }
+}
+
+/// Thesis eq. 4.4: a wheel's output after the acceleration filter,
+/// `out = (1 − curve)·input + curve·previous`, with `curve` (AccelerationCurve) in [0, 1).
+#[inline]
+pub fn motor_filter(input: f64, previous: f64, curve: f64) -> f64 {
+    (1.0 - curve) * input + curve * previous
+}
+
+/// Thesis eqs. 4.5–4.6: linear (m/s) and angular (rad/s) speed of a differential-drive body
+/// whose wheels, `track_m` apart, output `[left, right]` (fractions of `max_speed_mps`).
+#[inline]
+pub fn velocity(max_speed_mps: f64, track_m: f64, [left, right]: [f64; 2]) -> (f64, f64) {
+    (max_speed_mps * (right + left) / 2.0, max_speed_mps * (right - left) / track_m)
+}
+
+/// Thesis eqs. 4.7–4.9 (4.8's typo fixed): the pose `[x, y, θ]` (metres, radians) after `dt`
+/// seconds at speeds `v`, `omega`, moving along the *old* heading, whose cosine and sine the
+/// caller passes (the hub keeps them from its last commit). The new heading is wrapped.
+#[inline]
+pub fn advance([x, y, theta]: [f64; 3], v: f64, omega: f64, cos: f64, sin: f64, dt: f64) -> [f64; 3] {
+    [x + v * cos * dt, y + v * sin * dt, wrap_rad(theta + omega * dt)]
+}
+
+/// Ciber-Rato's obstacle-sensor value of a distance: 1/d rounded to 0.1, saturating at 100
+/// when d ≤ 0.01 m (what `<IRSensor Value>` carries on the wire).
+#[inline]
+pub fn ir_value(distance_m: f64) -> f64 {
+    if distance_m > 0.01 { ((1.0 / distance_m) * 10.0).round() / 10.0 } else { 100.0 }
+}
+
+/// Encoder ticks per metre of wheel travel for an encoder of `ticks_per_rev` on a wheel of
+/// `wheel_radius_m`.
+#[inline]
+pub fn encoder_ticks_per_m(ticks_per_rev: f64, wheel_radius_m: f64) -> f64 {
+    ticks_per_rev / (TAU * wheel_radius_m)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn angles_wrap_into_the_half_open_interval() {
+        for (a, want) in [(PI, PI), (-PI, PI), (3.0 * PI, PI), (-7.0, -7.0 + TAU), (7.0, 7.0 - TAU), (0.5, 0.5)] {
+            assert!((wrap_rad(a) - want).abs() < 1e-12, "{a} -> {}", wrap_rad(a));
+        }
+        assert_eq!(wire_deg(-PI), 180.0);
+        assert_eq!(wire_deg(-PI + 1e-17), 180.0);
+        assert!((wire_deg(-3.0 * PI / 2.0) - 90.0).abs() < 1e-9);
+    }
+
+    #[test]
+    fn the_filter_reaches_its_input_geometrically() {
+        let mut out = 0.0;
+        for _ in 0..10 {
+            out = motor_filter(1.0, out, 0.5);
+        }
+        assert!((out - (1.0 - 0.5f64.powi(10))).abs() < 1e-15);
+        assert_eq!(motor_filter(0.3, 0.9, 0.0), 0.3);
+    }
+
+    #[test]
+    fn opposite_wheels_spin_on_the_spot() {
+        let (v, omega) = velocity(0.5, 0.5, [-1.0, 1.0]);
+        assert_eq!((v, omega), (0.0, 2.0));
+        let [x, y, th] = advance([1.0, 2.0, 0.0], v, omega, 1.0, 0.0, 0.1);
+        assert_eq!((x, y), (1.0, 2.0));
+        assert!((th - 0.2).abs() < 1e-15);
+    }
+
+    #[test]
+    fn ir_values_follow_ciber_rato() {
+        assert_eq!(ir_value(0.5), 2.0);
+        assert_eq!(ir_value(3.0), 0.3);
+        assert_eq!(ir_value(0.005), 100.0);
+        assert!((encoder_ticks_per_m(1024.0, 0.17) - 958.67).abs() < 0.01);
+    }
+}

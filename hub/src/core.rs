@@ -1,0 +1,870 @@
+//! The hub's logic without I/O: agents and their robots, registration rules, the lock-step
+//! barrier, the run state, and the conversion of the world into the shared-memory layouts.
+//! The process loop in [`super`] feeds it what arrived and publishes what it fills.
+
+use std::collections::BTreeMap;
+
+use bytemuck::Zeroable;
+use ipc_types::{
+    ACT_MOTORS, ACT_POSE, ACT_SAY, ActionBlock, COLLISION, Command, FixedName, HAS_COMPASS, HAS_GPS, HAS_GROUND,
+    HubParams, InboxEntry, MAP_BEACON, MAP_CHECKPOINT, MAP_CORNER, MAP_GRID, MAP_TARGET, MAP_WALL, MAX_AGENTS,
+    MAX_INBOX_MESSAGES, MAX_PROXIMITY, MAX_ROBOTS, MapHeader, MapItem, REG_HAS_POSE, ROBOT_COLLISION, ROBOT_FROZEN,
+    ROBOT_LAGGING, Refusal, RobotKind as WireKind, RobotRegistration, RobotSensors, RobotState, RunState,
+    SENSOR_BEACON, SENSOR_COLLISION, SENSOR_COMPASS, SENSOR_GPS, SENSOR_GROUND, SENSOR_OBSTACLE, SensorBlock,
+    SensorGeometry, WorldHeader,
+};
+
+use world::map::{Grid, Lab, Params};
+use world::math::Pose;
+use world::{Action, Message, ProximitySpec, RobotHandle, RobotKind, RobotSpec, World, WorldBuildError};
+
+/// How the hub steps.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Mode {
+    /// A tick every cycle; late agents keep their last action.
+    RealTime,
+    /// A tick as soon as every live agent has answered (or the deadline passed).
+    LockStep,
+}
+
+/// A refused registration: the reason and a sentence for the agent.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Refused {
+    /// Why.
+    pub reason: Refusal,
+    /// What was wrong.
+    pub detail: String,
+}
+
+impl Refused {
+    fn new(reason: Refusal, detail: impl Into<String>) -> Self {
+        Self { reason, detail: detail.into() }
+    }
+}
+
+#[derive(Debug, Clone)]
+struct AgentEntry {
+    pid: u32,
+    ready: bool,
+    alive: bool,
+    robots: Vec<u32>,
+    /// The last tick this agent answered.
+    answered: Option<u64>,
+    lagging: bool,
+}
+
+#[derive(Debug, Clone)]
+struct RobotEntry {
+    handle: RobotHandle,
+    agent_id: u32,
+    leds: u32,
+}
+
+/// The hub's state apart from its ports.
+#[derive(Debug)]
+pub struct HubCore {
+    world: World,
+    grid: Grid,
+    mode: Mode,
+    dt_s: f64,
+    state: RunState,
+    agents: BTreeMap<u32, AgentEntry>,
+    robots: BTreeMap<u32, RobotEntry>,
+    /// Robot id by world slot index, for message senders.
+    id_by_slot: Vec<u32>,
+    next_agent_id: u32,
+    tick_limit: u64,
+    seed: u64,
+    settled: bool,
+    max_robots: usize,
+    pending: Vec<Action>,
+    /// Steps left to take while paused (from `Step` commands).
+    single_steps: u32,
+    /// Walls from this index on are a scenario's obstacles (the map's walls come first).
+    obstacle_from: usize,
+    /// A scenario's checkpoints: x, y, radius in metres.
+    checkpoints: Vec<[f64; 3]>,
+}
+
+impl HubCore {
+    /// A hub on `lab` with `grid` and `params`, seeded with `seed`. `tick_limit` 0 = no limit.
+    pub fn new(
+        lab: &Lab,
+        grid: Grid,
+        params: Params,
+        seed: u64,
+        mode: Mode,
+        tick_limit: u64,
+    ) -> Result<Self, WorldBuildError> {
+        let dt_s = params.cycle_ms.max(1) as f64 / 1000.0;
+        let mut world = World::new(lab, params, seed)?;
+        world.set_capacity(MAX_ROBOTS);
+        Ok(Self {
+            world,
+            grid,
+            mode,
+            dt_s,
+            state: RunState::Waiting,
+            agents: BTreeMap::new(),
+            robots: BTreeMap::new(),
+            id_by_slot: Vec::new(),
+            next_agent_id: 1,
+            tick_limit,
+            seed,
+            settled: false,
+            max_robots: MAX_ROBOTS,
+            pending: Vec::new(),
+            single_steps: 0,
+            obstacle_from: lab.walls.len(),
+            checkpoints: Vec::new(),
+        })
+    }
+
+    /// Lowers how many robots the hub accepts (never above `MAX_ROBOTS`).
+    pub fn set_max_robots(&mut self, max: usize) {
+        self.max_robots = max.min(MAX_ROBOTS);
+    }
+
+    /// Marks the lab's walls from `obstacle_from` on as a scenario's obstacles and sets its
+    /// checkpoints; both are only published in the map (the walls are already in the world).
+    pub fn set_scenario(&mut self, obstacle_from: usize, checkpoints: Vec<[f64; 3]>) {
+        self.obstacle_from = obstacle_from;
+        self.checkpoints = checkpoints;
+    }
+
+    /// The world.
+    pub fn world(&self) -> &World {
+        &self.world
+    }
+
+    /// The simulated duration of one tick, seconds (the cycle time, also in lock-step).
+    pub fn dt_s(&self) -> f64 {
+        self.dt_s
+    }
+
+    /// The run state.
+    pub fn state(&self) -> RunState {
+        self.state
+    }
+
+    /// The stepping mode.
+    pub fn mode(&self) -> Mode {
+        self.mode
+    }
+
+    /// A new agent process; its id, or a refusal when the hub is full.
+    pub fn hello(&mut self, pid: u32) -> Result<u32, Refused> {
+        if self.agents.values().filter(|a| a.alive).count() >= MAX_AGENTS {
+            return Err(Refused::new(Refusal::Capacity, format!("the hub serves at most {MAX_AGENTS} agents")));
+        }
+        let id = self.next_agent_id;
+        self.next_agent_id += 1;
+        self.agents.insert(
+            id,
+            AgentEntry { pid, ready: false, alive: true, robots: Vec::new(), answered: None, lagging: false },
+        );
+        Ok(id)
+    }
+
+    /// The process id an agent said hello with.
+    pub fn agent_pid(&self, agent_id: u32) -> Option<u32> {
+        self.agents.get(&agent_id).map(|a| a.pid)
+    }
+
+    /// Live agents.
+    pub fn live_agents(&self) -> usize {
+        self.agents.values().filter(|a| a.alive).count()
+    }
+
+    /// Live agents that said they are ready.
+    pub fn ready_agents(&self) -> usize {
+        self.agents.values().filter(|a| a.alive && a.ready).count()
+    }
+
+    /// Registers a robot for an agent: its id and sensor count, or why not.
+    pub fn register(&mut self, agent_id: u32, reg: &RobotRegistration) -> Result<(u32, u32), Refused> {
+        if !self.agents.get(&agent_id).is_some_and(|a| a.alive) {
+            return Err(Refused::new(Refusal::UnknownAgent, format!("agent {agent_id} has not said hello")));
+        }
+        if self.robots.len() >= self.max_robots {
+            return Err(Refused::new(Refusal::Capacity, format!("the hub serves at most {} robots", self.max_robots)));
+        }
+        let has_pose = reg.flags & REG_HAS_POSE != 0;
+        let id = if reg.requested_id == 0 {
+            let free = (1u32..).find(|id| !self.robots.contains_key(id)).unwrap_or(u32::MAX);
+            if !has_pose && free as usize > self.grid.poses.len() {
+                return Err(Refused::new(
+                    Refusal::GridFull,
+                    format!("all {} grid slots are taken; give a pose", self.grid.poses.len()),
+                ));
+            }
+            free
+        } else {
+            if self.robots.contains_key(&reg.requested_id) {
+                return Err(Refused::new(Refusal::DuplicateId, format!("robot id {} is taken", reg.requested_id)));
+            }
+            if !has_pose && reg.requested_id as usize > self.grid.poses.len() {
+                return Err(Refused::new(
+                    Refusal::NoSuchSlot,
+                    format!("id {} is past the grid's {} slots; give a pose", reg.requested_id, self.grid.poses.len()),
+                ));
+            }
+            reg.requested_id
+        };
+        let spec = self.spec_of(id, reg)?;
+        let sensors = if spec.sensors.is_empty() { 4 } else { spec.sensors.len() as u32 };
+        let handle = self.world.add_robot(spec).map_err(|e| match e {
+            world::AddRobotError::Full { .. } => Refused::new(Refusal::Capacity, e.to_string()),
+            _ => Refused::new(Refusal::BadParameters, e.to_string()),
+        })?;
+        let slot = handle.index() as usize;
+        if self.id_by_slot.len() <= slot {
+            self.id_by_slot.resize(slot + 1, 0);
+        }
+        self.id_by_slot[slot] = id;
+        self.robots.insert(id, RobotEntry { handle, agent_id, leds: 0 });
+        if let Some(a) = self.agents.get_mut(&agent_id) {
+            a.robots.push(id);
+        }
+        Ok((id, sensors))
+    }
+
+    fn spec_of(&self, id: u32, reg: &RobotRegistration) -> Result<RobotSpec, Refused> {
+        let name = reg.name.as_str().ok_or_else(|| Refused::new(Refusal::Malformed, "the name is not UTF-8"))?;
+        let kind = match WireKind::from_u32(reg.kind) {
+            Some(WireKind::Simulated) => RobotKind::Simulated,
+            Some(WireKind::Real) => RobotKind::Real,
+            Some(WireKind::Door) => RobotKind::Door,
+            None => return Err(Refused::new(Refusal::Malformed, format!("unknown robot kind {}", reg.kind))),
+        };
+        let pose = if reg.flags & REG_HAS_POSE != 0 {
+            Pose::from_deg(reg.pose[0], reg.pose[1], reg.pose[2])
+        } else {
+            let p = self.grid.poses[id as usize - 1];
+            Pose::from_deg(p.pos.x, p.pos.y, p.heading_deg)
+        };
+        if reg.sensor_count as usize > reg.sensors.len() {
+            return Err(Refused::new(
+                Refusal::BadParameters,
+                format!("{} sensors given; at most {}", reg.sensor_count, reg.sensors.len()),
+            ));
+        }
+        let sensors = reg.sensors[..reg.sensor_count as usize]
+            .iter()
+            .map(|s| ProximitySpec {
+                x_m: s.x_m,
+                y_m: s.y_m,
+                angle_rad: s.angle_deg.to_radians(),
+                cone_rad: s.cone_deg.to_radians(),
+                range_m: (s.range_m != 0.0).then_some(s.range_m),
+            })
+            .collect();
+        Ok(RobotSpec {
+            name: if name.is_empty() { format!("robot{id}") } else { name.to_owned() },
+            kind,
+            width_m: reg.width_m,
+            height_m: reg.height_m,
+            com: reg.com,
+            max_speed_mps: reg.max_speed_mps,
+            accel_curve: reg.accel_curve,
+            pose,
+            sensors,
+        })
+    }
+
+    /// An agent has registered all its robots.
+    pub fn ready(&mut self, agent_id: u32) -> Result<(), Refused> {
+        match self.agents.get_mut(&agent_id) {
+            Some(a) if a.alive => {
+                a.ready = true;
+                Ok(())
+            }
+            _ => Err(Refused::new(Refusal::UnknownAgent, format!("agent {agent_id} is unknown"))),
+        }
+    }
+
+    /// An agent leaves: its robots are removed from the world.
+    pub fn bye(&mut self, agent_id: u32) {
+        if let Some(a) = self.agents.get_mut(&agent_id) {
+            a.alive = false;
+            for id in std::mem::take(&mut a.robots) {
+                if let Some(r) = self.robots.remove(&id) {
+                    self.world.remove_robot(r.handle);
+                }
+            }
+        }
+    }
+
+    /// An agent's process died: its robots are frozen and flagged, the run goes on without
+    /// waiting for it. Returns whether the agent was alive.
+    pub fn agent_died(&mut self, agent_id: u32) -> bool {
+        let Some(a) = self.agents.get_mut(&agent_id) else { return false };
+        let was_alive = a.alive;
+        a.alive = false;
+        for id in &a.robots {
+            if let Some(r) = self.robots.get(id) {
+                self.world.set_frozen(r.handle, true);
+            }
+        }
+        was_alive
+    }
+
+    /// Agents whose process id is `pid` (normally one).
+    pub fn agents_with_pid(&self, pid: u32) -> Vec<u32> {
+        self.agents.iter().filter(|(_, a)| a.alive && a.pid == pid).map(|(&id, _)| id).collect()
+    }
+
+    /// Takes an agent's actions for `tick`. Actions for robots it does not own are ignored;
+    /// returns how many were.
+    pub fn actions(&mut self, agent_id: u32, tick: u64, blocks: &[ActionBlock]) -> usize {
+        let now = self.world.tick();
+        let Some(agent) = self.agents.get_mut(&agent_id).filter(|a| a.alive) else { return blocks.len() };
+        // Only an answer to the tick in hand counts for the barrier: a tick from the future
+        // (a buggy or hostile agent) must not excuse it from later ticks. Late answers still
+        // set the robots' inputs for the next step.
+        if tick == now {
+            agent.answered = Some(now);
+            agent.lagging = false;
+        }
+        let mut ignored = 0;
+        for b in blocks {
+            let Some(r) = self.robots.get_mut(&b.robot_id).filter(|r| r.agent_id == agent_id) else {
+                ignored += 1;
+                continue;
+            };
+            let mut a = Action { robot: r.handle, motors: None, pose: None, say: None };
+            if b.flags & ACT_MOTORS != 0 {
+                a.motors = Some(b.motors);
+            }
+            if b.flags & ACT_POSE != 0 {
+                a.pose = Some(Pose::from_deg(b.pose[0], b.pose[1], b.pose[2]));
+            }
+            if b.flags & ACT_SAY != 0 {
+                let len = (b.say_len as usize).min(b.say_bytes.len());
+                a.say = Message::new(&b.say_bytes[..len]).ok();
+            }
+            r.leds = b.flags & 0xff00;
+            self.pending.push(a);
+        }
+        ignored
+    }
+
+    /// Whether every live, ready agent with robots has answered the current tick. With no
+    /// such agent there is nothing to step for: a lock-step hub waits for one instead of
+    /// racing ahead on its own.
+    pub fn all_answered(&self) -> bool {
+        let t = self.world.tick();
+        let mut waiting_on = self.agents.values().filter(|a| a.alive && a.ready && !a.robots.is_empty()).peekable();
+        waiting_on.peek().is_some() && waiting_on.all(|a| a.answered.is_some_and(|x| x >= t))
+    }
+
+    /// Measures every robot where it stands (before the first step), without noise.
+    pub fn prime_sensors(&mut self) {
+        self.world.refresh_sensors();
+    }
+
+    /// Agents the lock-step barrier waits for: live, ready, with robots.
+    pub fn barrier_size(&self) -> usize {
+        self.agents.values().filter(|a| a.alive && a.ready && !a.robots.is_empty()).count()
+    }
+
+    /// Marks the agents that have not answered the current tick as lagging (called when the
+    /// lock-step deadline passes); returns how many.
+    pub fn mark_laggards(&mut self) -> usize {
+        let t = self.world.tick();
+        let mut n = 0;
+        for a in self.agents.values_mut().filter(|a| a.alive && a.ready && !a.robots.is_empty()) {
+            a.lagging = a.answered.is_none_or(|x| x < t);
+            n += a.lagging as usize;
+        }
+        n
+    }
+
+    /// Whether the run should step now (the caller adds the timing rule of its mode).
+    pub fn may_step(&self) -> bool {
+        self.state == RunState::Running || (self.state != RunState::Finished && self.single_steps > 0)
+    }
+
+    /// Starts the run if it is waiting for `wait_agents` ready agents and they are there.
+    pub fn start_when_ready(&mut self, wait_agents: usize) {
+        if self.state == RunState::Waiting && wait_agents > 0 && self.ready_agents() >= wait_agents {
+            self.state = RunState::Running;
+        }
+    }
+
+    /// Applies a run-control command; returns 0 when done, 2 for an unknown robot, 3 when the
+    /// command makes no sense now.
+    pub fn command(&mut self, command: Command, robot_id: u32) -> u32 {
+        match command {
+            Command::Start if self.state != RunState::Finished => self.state = RunState::Running,
+            Command::Pause if self.state == RunState::Running => self.state = RunState::Paused,
+            Command::Step if self.state != RunState::Finished && self.state != RunState::Running => {
+                self.single_steps += 1
+            }
+            Command::Stop => self.state = RunState::Finished,
+            Command::RemoveRobot => match self.robots.remove(&robot_id) {
+                Some(r) => {
+                    self.world.remove_robot(r.handle);
+                    if let Some(a) = self.agents.get_mut(&r.agent_id) {
+                        a.robots.retain(|&id| id != robot_id);
+                    }
+                }
+                None => return 2,
+            },
+            _ => return 3,
+        }
+        0
+    }
+
+    /// Rebuilds the world with its robots added in name order (id order among equal names):
+    /// registrations arrive in whatever order the agents' processes run, and the world's slot
+    /// order fixes the order of every random draw, so without this two runs with one seed
+    /// could differ. Names, not ids, because ids given out on request (id 0) also follow the
+    /// order in which agents happened to register.
+    fn settle_slots(&mut self) {
+        let mut world = match World::new(self.world.lab(), self.world.params().clone(), self.seed) {
+            Ok(w) => w,
+            Err(_) => return, // the same lab and parameters built once already
+        };
+        world.set_capacity(MAX_ROBOTS);
+        self.id_by_slot.clear();
+        let mut order: Vec<(String, u32)> = self
+            .robots
+            .iter()
+            .filter_map(|(&id, e)| Some((self.world.robot(e.handle)?.spec.name.clone(), id)))
+            .collect();
+        order.sort();
+        for (_, id) in order {
+            let Some(entry) = self.robots.get_mut(&id) else { continue };
+            let Some(r) = self.world.robot(entry.handle) else { continue };
+            let spec = RobotSpec { pose: r.pose, ..r.spec.clone() };
+            let frozen = r.frozen;
+            let Ok(handle) = world.add_robot(spec) else { continue };
+            world.set_frozen(handle, frozen);
+            entry.handle = handle;
+            let slot = handle.index() as usize;
+            if self.id_by_slot.len() <= slot {
+                self.id_by_slot.resize(slot + 1, 0);
+            }
+            self.id_by_slot[slot] = id;
+        }
+        self.world = world;
+    }
+
+    /// Steps the world once with the actions taken since the last step.
+    pub fn step(&mut self) {
+        if self.world.tick() == 0 && !self.settled {
+            self.settled = true;
+            let pending = std::mem::take(&mut self.pending);
+            // Pending actions name world handles: map them to ids and back across the rebuild.
+            let by_handle: BTreeMap<RobotHandle, u32> = self.robots.iter().map(|(&id, e)| (e.handle, id)).collect();
+            let ids: Vec<Option<u32>> = pending.iter().map(|a| by_handle.get(&a.robot).copied()).collect();
+            self.settle_slots();
+            self.pending = pending
+                .into_iter()
+                .zip(ids)
+                .filter_map(|(mut a, id)| {
+                    a.robot = self.robots.get(&id?)?.handle;
+                    Some(a)
+                })
+                .collect();
+        }
+        if self.state != RunState::Running {
+            self.single_steps = self.single_steps.saturating_sub(1);
+        }
+        let actions = std::mem::take(&mut self.pending);
+        let stats = self.world.step(&actions, self.dt_s);
+        if stats.unknown_robot_actions > 0 || stats.bad_values > 0 {
+            tracing::debug!(?stats, "tick {}", self.world.tick());
+        }
+        self.pending = actions;
+        self.pending.clear();
+        if self.tick_limit > 0 && self.world.tick() >= self.tick_limit {
+            self.state = RunState::Finished;
+        }
+    }
+
+    /// The world header for the current tick.
+    pub fn world_header(&self) -> WorldHeader {
+        WorldHeader {
+            tick: self.world.tick(),
+            sim_time_s: self.world.time_s(),
+            state_hash: self.world.state_hash(),
+            run_state: self.state as u32,
+            robot_count: self.robots.len() as u32,
+            agent_count: self.live_agents() as u32,
+            lockstep: (self.mode == Mode::LockStep) as u32,
+        }
+    }
+
+    /// Robots in the world.
+    pub fn robot_count(&self) -> usize {
+        self.robots.len()
+    }
+
+    /// The robot state of every robot, in id order.
+    pub fn robot_states(&self) -> impl Iterator<Item = RobotState> + '_ {
+        self.robots.iter().filter_map(|(&id, e)| {
+            let r = self.world.robot(e.handle)?;
+            let lagging = self.agents.get(&e.agent_id).is_some_and(|a| a.lagging);
+            Some(RobotState {
+                id,
+                kind: match r.spec.kind {
+                    RobotKind::Simulated => WireKind::Simulated,
+                    RobotKind::Real => WireKind::Real,
+                    RobotKind::Door => WireKind::Door,
+                } as u32,
+                flags: (r.collision as u32 * ROBOT_COLLISION)
+                    | (r.frozen as u32 * ROBOT_FROZEN)
+                    | (lagging as u32 * ROBOT_LAGGING),
+                collision_count: r.collision_count.min(u32::MAX as u64) as u32,
+                x_m: r.pose.x,
+                y_m: r.pose.y,
+                heading_deg: r.pose.heading_deg(),
+                width_m: r.spec.width_m as f32,
+                height_m: r.spec.height_m as f32,
+                com: r.spec.com as f32,
+                agent_id: e.agent_id,
+                motor_out: [r.motor_out[0] as f32, r.motor_out[1] as f32],
+                name: FixedName::new(&r.spec.name).unwrap_or(FixedName::EMPTY),
+                proximity_m: {
+                    let mut p = [f32::NAN; MAX_PROXIMITY];
+                    for (o, v) in p.iter_mut().zip(r.readings.proximity()) {
+                        *o = *v as f32;
+                    }
+                    p
+                },
+            })
+        })
+    }
+
+    /// Every robot's proximity-sensor geometry, in id order.
+    pub fn robot_sensors(&self) -> impl Iterator<Item = RobotSensors> + '_ {
+        let default_range = self.world.params().proximity_range_m;
+        self.robots.iter().filter_map(move |(&id, e)| {
+            let r = self.world.robot(e.handle)?;
+            let specs = if r.spec.sensors.is_empty() { r.spec.default_sensors() } else { r.spec.sensors.clone() };
+            let mut out = RobotSensors { robot_id: id, count: 0, sensors: [SensorGeometry::default(); MAX_PROXIMITY] };
+            for (o, s) in out.sensors.iter_mut().zip(&specs) {
+                *o = SensorGeometry {
+                    x_m: s.x_m as f32,
+                    y_m: s.y_m as f32,
+                    angle_deg: s.angle_rad.to_degrees() as f32,
+                    cone_deg: s.cone_rad.to_degrees() as f32,
+                    range_m: s.range_m.unwrap_or(default_range) as f32,
+                };
+                out.count += 1;
+            }
+            Some(out)
+        })
+    }
+
+    /// An agent's robot ids, in registration order.
+    pub fn agent_robots(&self, agent_id: u32) -> &[u32] {
+        self.agents.get(&agent_id).map_or(&[], |a| a.robots.as_slice())
+    }
+
+    /// The sensor block of a robot for the current tick.
+    pub fn sensor_block(&self, robot_id: u32) -> SensorBlock {
+        let mut b = SensorBlock::zeroed();
+        b.robot_id = robot_id;
+        b.tick = self.world.tick();
+        let Some(r) = self.robots.get(&robot_id).and_then(|e| self.world.robot(e.handle)) else { return b };
+        let rd = &r.readings;
+        b.proximity_count = rd.proximity_count as u32;
+        b.proximity_m[..rd.proximity().len()].copy_from_slice(rd.proximity());
+        if let Some(c) = rd.compass_deg {
+            b.present |= HAS_COMPASS;
+            b.compass_deg = c;
+        }
+        if let Some(g) = rd.gps {
+            b.present |= HAS_GPS;
+            (b.gps_x_m, b.gps_y_m, b.gps_heading_deg) = (g.x_m, g.y_m, g.heading_deg);
+        }
+        if let Some(t) = rd.ground {
+            b.present |= HAS_GROUND;
+            b.ground = t as u32;
+        }
+        if rd.collision {
+            b.present |= COLLISION;
+        }
+        b.beacon_count = rd.beacon_count as u32;
+        for (k, v) in rd.beacons().iter().enumerate() {
+            b.beacons_deg[k] = v.unwrap_or(f64::NAN);
+        }
+        b.encoder_ticks = rd.encoder_ticks;
+        b.pose = [r.pose.x, r.pose.y, r.pose.heading_deg()];
+        b.collision_count = r.collision_count.min(u32::MAX as u64) as u32;
+        let mut offset = 0usize;
+        for heard in &r.inbox {
+            let bytes = heard.message.as_bytes();
+            if b.inbox_count as usize >= MAX_INBOX_MESSAGES || offset + bytes.len() > b.inbox_bytes.len() {
+                b.inbox_dropped += 1;
+                continue;
+            }
+            let from_id = self.id_by_slot.get(heard.from.index() as usize).copied().unwrap_or(0);
+            b.inbox[b.inbox_count as usize] = InboxEntry { from_id, offset: offset as u16, len: bytes.len() as u16 };
+            b.inbox_bytes[offset..offset + bytes.len()].copy_from_slice(bytes);
+            offset += bytes.len();
+            b.inbox_count += 1;
+        }
+        b
+    }
+
+    fn hub_params(&self, deadline_ms: u32) -> HubParams {
+        let p = self.world.params();
+        let bit = |on: bool, b: u32| if on { b } else { 0 };
+        let r = &p.requests;
+        HubParams {
+            noise_proximity_m: p.noise.proximity_m,
+            noise_beacon_deg: p.noise.beacon_deg,
+            noise_compass_deg: p.noise.compass_deg,
+            noise_gps_pos_m: p.noise.gps_pos_m,
+            noise_gps_heading_deg: p.noise.gps_heading_deg,
+            noise_motors_pct: p.noise.motor_frac * 100.0,
+            beacon_aperture_rad: p.beacon_aperture_rad,
+            sim_time_ticks: self.tick_limit,
+            deadline_ms,
+            lockstep: (self.mode == Mode::LockStep) as u32,
+            sensors_on: bit(p.sensors.gps, SENSOR_GPS)
+                | bit(p.sensors.beacon, SENSOR_BEACON)
+                | bit(p.sensors.compass, SENSOR_COMPASS)
+                | SENSOR_OBSTACLE
+                | SENSOR_GROUND
+                | SENSOR_COLLISION,
+            requestable: bit(r.obstacle, SENSOR_OBSTACLE)
+                | bit(r.beacon, SENSOR_BEACON)
+                | bit(r.ground, SENSOR_GROUND)
+                | bit(r.compass, SENSOR_COMPASS)
+                | bit(r.collision, SENSOR_COLLISION),
+            requests_per_cycle: r.per_cycle,
+            latency: [
+                p.latency.proximity,
+                p.latency.beacon,
+                p.latency.ground,
+                p.latency.compass,
+                p.latency.collision,
+                p.latency.gps,
+            ],
+            _reserved: 0,
+            encoder_ticks_per_m: p.encoder_ticks_per_rev as f64 / (std::f64::consts::TAU * p.wheel_radius_m),
+        }
+    }
+
+    /// The map as a header and items, for agents and viewers; `deadline_ms` is the lock-step
+    /// deadline the process uses.
+    pub fn map_items(&self, cycle_ms: u32, deadline_ms: u32) -> (MapHeader, Vec<MapItem>) {
+        let lab = self.world.lab();
+        let mut items = Vec::new();
+        let item = |kind, index: usize, a, b, c| MapItem { kind, index: index as u32, a, b, c };
+        for (i, w) in lab.walls.iter().enumerate() {
+            let obstacle = if i >= self.obstacle_from { 1.0 } else { 0.0 };
+            items.push(item(MAP_WALL, i, w.height_m, w.corners.len() as f64, obstacle));
+            for c in &w.corners {
+                items.push(item(MAP_CORNER, i, c.x, c.y, 0.0));
+            }
+        }
+        for (i, b) in lab.beacons.iter().enumerate() {
+            items.push(item(MAP_BEACON, i, b.pos.x, b.pos.y, b.height_m));
+        }
+        for (i, t) in lab.targets.iter().enumerate() {
+            items.push(item(MAP_TARGET, i, t.pos.x, t.pos.y, t.radius_m));
+        }
+        for (i, p) in self.grid.poses.iter().enumerate() {
+            items.push(item(MAP_GRID, i, p.pos.x, p.pos.y, p.heading_deg));
+        }
+        for (i, [x, y, r]) in self.checkpoints.iter().enumerate() {
+            items.push(item(MAP_CHECKPOINT, i, *x, *y, *r));
+        }
+        let header = MapHeader {
+            width_m: lab.width_m,
+            height_m: lab.height_m,
+            item_count: items.len() as u32,
+            wall_count: lab.walls.len() as u32,
+            beacon_count: lab.beacons.len() as u32,
+            target_count: lab.targets.len() as u32,
+            grid_count: self.grid.poses.len() as u32,
+            cycle_ms,
+            name: FixedName::new(&lab.name).unwrap_or(FixedName::EMPTY),
+            params: self.hub_params(deadline_ms),
+        };
+        (header, items)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use world::map::builtin;
+
+    fn core(mode: Mode) -> HubCore {
+        let map = builtin::map("liacc").expect("built in");
+        let params = Params { noise: world::map::NoiseParams::NONE, ..Params::default() };
+        HubCore::new(&map.lab, map.grid, params, 1, mode, 0).expect("valid")
+    }
+
+    #[test]
+    fn registration_follows_ciber_rato_id_rules() {
+        let mut c = core(Mode::LockStep);
+        let a = c.hello(100).expect("room");
+        let reg = RobotRegistration::new("r");
+        assert_eq!(c.register(a, &reg).map(|r| r.0), Ok(1), "id 0 takes the first free slot");
+        let mut two = reg;
+        two.requested_id = 3;
+        assert_eq!(c.register(a, &two).map(|r| r.0), Ok(3));
+        assert_eq!(c.register(a, &two).map_err(|e| e.reason), Err(Refusal::DuplicateId));
+        two.requested_id = 99;
+        assert_eq!(c.register(a, &two).map_err(|e| e.reason), Err(Refusal::NoSuchSlot));
+        two.flags = REG_HAS_POSE;
+        two.pose = [20.0, 6.1, 0.0];
+        assert_eq!(c.register(a, &two).map(|r| r.0), Ok(99), "with a pose any id goes");
+        let mut bad = RobotRegistration::new("bad");
+        bad.com = 1.5;
+        let refused = c.register(a, &bad).expect_err("com out of range");
+        assert_eq!(refused.reason, Refusal::BadParameters);
+        assert!(refused.detail.contains("com"), "{}", refused.detail);
+        assert_eq!(c.register(77, &reg).map_err(|e| e.reason), Err(Refusal::UnknownAgent));
+        bad = reg;
+        bad.kind = 9;
+        assert_eq!(c.register(a, &bad).map_err(|e| e.reason), Err(Refusal::Malformed));
+    }
+
+    #[test]
+    fn the_barrier_waits_for_every_ready_agent_and_skips_dead_ones() {
+        let mut c = core(Mode::LockStep);
+        let a = c.hello(1).expect("room");
+        let b = c.hello(2).expect("room");
+        let ra = c.register(a, &RobotRegistration::new("a")).expect("ok").0;
+        let rb = c.register(b, &RobotRegistration::new("b")).expect("ok").0;
+        c.ready(a).expect("known");
+        c.ready(b).expect("known");
+        c.start_when_ready(2);
+        assert_eq!(c.state(), RunState::Running);
+        assert!(!c.all_answered());
+        c.actions(a, 0, &[ActionBlock::motors(ra, 1.0, 1.0)]);
+        assert!(!c.all_answered());
+        c.actions(b, 0, &[ActionBlock::motors(rb, 1.0, 1.0)]);
+        assert!(c.all_answered());
+        c.step();
+        assert!(!c.all_answered(), "tick 1 needs new answers");
+        c.actions(a, 1, &[ActionBlock::motors(ra, 1.0, 1.0)]);
+        assert_eq!(c.mark_laggards(), 1);
+        assert!(c.agent_died(b));
+        assert!(c.all_answered(), "a dead agent is not waited for");
+        c.step();
+        let frozen: Vec<_> = c.robot_states().filter(|s| s.flags & ROBOT_FROZEN != 0).map(|s| s.id).collect();
+        assert_eq!(frozen, vec![rb]);
+        assert!(c.agent_died(a));
+        assert!(!c.all_answered(), "with no live agent lock-step waits instead of racing");
+    }
+
+    #[test]
+    fn only_an_answer_to_the_tick_in_hand_counts_and_clears_lagging() {
+        let mut c = core(Mode::LockStep);
+        let a = c.hello(1).expect("room");
+        let ra = c.register(a, &RobotRegistration::new("a")).expect("ok").0;
+        c.ready(a).expect("known");
+        c.command(Command::Start, 0);
+        // A future tick excuses nothing.
+        c.actions(a, u64::MAX, &[ActionBlock::motors(ra, 1.0, 1.0)]);
+        assert!(!c.all_answered());
+        assert_eq!(c.mark_laggards(), 1);
+        assert_ne!(c.robot_states().next().expect("robot").flags & ipc_types::ROBOT_LAGGING, 0);
+        c.actions(a, 0, &[ActionBlock::motors(ra, 1.0, 1.0)]);
+        assert!(c.all_answered());
+        assert_eq!(
+            c.robot_states().next().expect("robot").flags & ipc_types::ROBOT_LAGGING,
+            0,
+            "answering clears the flag"
+        );
+    }
+
+    #[test]
+    fn agents_drive_only_their_own_robots() {
+        let mut c = core(Mode::LockStep);
+        let a = c.hello(1).expect("room");
+        let b = c.hello(2).expect("room");
+        let ra = c.register(a, &RobotRegistration::new("a")).expect("ok").0;
+        assert_eq!(c.actions(b, 0, &[ActionBlock::motors(ra, 1.0, 1.0)]), 1);
+        c.command(Command::Start, 0);
+        c.step();
+        assert_eq!(c.robot_states().next().expect("one").motor_out, [0.0, 0.0]);
+    }
+
+    #[test]
+    fn sensor_blocks_carry_readings_and_messages_with_speaker_ids() {
+        let mut c = core(Mode::LockStep);
+        let a = c.hello(1).expect("room");
+        let r1 = c.register(a, &RobotRegistration::new("a")).expect("ok").0;
+        let r2 = c.register(a, &RobotRegistration::new("b")).expect("ok").0;
+        c.command(Command::Start, 0);
+        let mut say = ActionBlock::motors(r1, 0.0, 0.0);
+        assert!(say.with_say(b"go first"));
+        c.actions(a, 0, &[say]);
+        c.step();
+        let b = c.sensor_block(r2);
+        assert_eq!((b.tick, b.robot_id, b.proximity_count), (1, r2, 4));
+        assert!(b.present & HAS_COMPASS != 0);
+        let heard: Vec<_> = b.messages().collect();
+        assert_eq!(heard, vec![(r1, &b"go first"[..])]);
+        assert_eq!(b.pose[0], 14.0, "grid slot 2 of LIACC");
+    }
+
+    #[test]
+    fn the_first_step_orders_robots_by_id_whatever_the_registration_order() {
+        let run = |first_b: bool| {
+            let mut c = core(Mode::LockStep);
+            let params = Params::default(); // noise on: slot order decides the draws
+            c = HubCore::new(c.world.lab(), c.grid.clone(), params, 5, Mode::LockStep, 0).expect("valid");
+            let a = c.hello(1).expect("room");
+            let b = c.hello(2).expect("room");
+            let mut ra = RobotRegistration::new("a");
+            ra.requested_id = 1;
+            let mut rb = RobotRegistration::new("b");
+            rb.requested_id = 2;
+            if first_b {
+                c.register(b, &rb).expect("ok");
+                c.register(a, &ra).expect("ok");
+            } else {
+                c.register(a, &ra).expect("ok");
+                c.register(b, &rb).expect("ok");
+            }
+            c.command(Command::Start, 0);
+            for t in 0..20 {
+                c.actions(a, t, &[ActionBlock::motors(1, 0.9, 0.4)]);
+                c.actions(b, t, &[ActionBlock::motors(2, 0.2, 0.8)]);
+                c.step();
+            }
+            c.world().state_hash()
+        };
+        assert_eq!(run(false), run(true));
+    }
+
+    #[test]
+    fn commands_drive_the_run_state() {
+        let mut c = core(Mode::RealTime);
+        assert!(!c.may_step());
+        assert_eq!(c.command(Command::Step, 0), 0);
+        assert!(c.may_step());
+        c.step();
+        assert!(!c.may_step(), "one step only");
+        assert_eq!(c.world().tick(), 1);
+        c.command(Command::Start, 0);
+        assert_eq!(c.command(Command::Pause, 0), 0);
+        assert_eq!(c.state(), RunState::Paused);
+        assert_eq!(c.command(Command::RemoveRobot, 42), 2);
+        c.command(Command::Stop, 0);
+        assert_eq!(c.state(), RunState::Finished);
+        assert!(!c.may_step());
+    }
+
+    #[test]
+    fn the_map_lists_every_wall_corner_and_grid_slot() {
+        let c = core(Mode::RealTime);
+        let (h, items) = c.map_items(100, 1000);
+        assert_eq!((h.wall_count, h.grid_count), (23, 9));
+        assert_eq!(items.iter().filter(|i| i.kind == MAP_CORNER).count(), 92);
+        assert_eq!(h.item_count as usize, items.len());
+        assert_eq!(h.name.as_str(), Some("IW_LIACC"));
+    }
+}

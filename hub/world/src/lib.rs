@@ -1,0 +1,883 @@
+//! The iwsim world model: maps, rectangular differential-drive bodies with motors, collisions,
+//! sensors, noise and robot-to-robot messages, stepped deterministically.
+//!
+//! The world is pure: it does no I/O, reads no clock and owns its only random generator, which
+//! is seeded when the world is built. Time enters as the duration of each step. The one place
+//! that reads a file is [`map::xml::read_text`].
+//!
+//! ```
+//! use world::map::builtin;
+//! use world::{Action, RobotSpec, World};
+//!
+//! let map = builtin::map("liacc").expect("built in");
+//! let mut world = World::new(&map.lab, world::map::Params::default(), 7).expect("valid lab");
+//! let chair = world.add_robot(RobotSpec::at(10.0, 6.1, 0.0)).expect("free start");
+//! for _ in 0..10 {
+//!     world.step(&[Action::motors(chair, 1.0, 1.0)], 0.1);
+//! }
+//! assert!(world.robot(chair).expect("alive").pose.x > 10.0);
+//! ```
+//!
+//! The world: robots on a lab, stepped by [`World::step`] with the tick's actions and duration.
+//!
+//! A tick runs in phases over all robots in slot order, so the result never depends on the
+//! order actions arrive in, and a seed fixes every random draw:
+//!
+//! 1. actions: motor inputs, pushed poses (Real robots), messages to say;
+//! 2. motors and kinematics: the filtered powers give each robot its *next* pose;
+//! 3. collisions: a next pose that meets a wall or another body (at its current or next pose)
+//!    is refused and the robot stays put; Real robots are never refused, only flagged;
+//! 4. commit, messages, then sensors (with noise and latency) on the new poses.
+
+#![warn(missing_docs)]
+
+mod geom;
+pub mod map;
+pub mod math;
+pub mod rng;
+
+mod body;
+mod collide;
+mod grid;
+mod readings;
+mod sensors;
+
+use std::collections::VecDeque;
+
+use nalgebra::{Point2, Vector2};
+use thiserror::Error;
+
+pub use body::{AddRobotError, MAX_NAME_LEN, MAX_PROXIMITY, ProximitySpec, RobotKind, RobotSpec};
+pub use grid::StaticBuildError;
+pub use readings::{
+    GpsReading, Heard, MAX_BEACONS, MAX_INBOX_BYTES, MAX_MESSAGE_BYTES, Message, MessageTooLong, SensorReadings,
+    ciber_rato_value,
+};
+
+use crate::geom::PlacedBox;
+use crate::map::{Lab, Params};
+use crate::math::{Pose, Real, normalize_angle};
+use crate::rng::Rng;
+use body::{BodyShape, PreparedSensor};
+use grid::{DynGrid, GridSpec, StaticIndex};
+
+/// How many robots a world holds unless told otherwise (the hub's capacity).
+pub const DEFAULT_CAPACITY: usize = 10_000;
+
+/// Cell size of the wall index, metres.
+const STATIC_CELL_M: Real = 4.0;
+/// Cell size of the robot index, metres (about one chair).
+const DYN_CELL_M: Real = 2.0;
+
+/// A robot in a world: an index and a generation, so a handle to a removed robot never
+/// reaches the robot that later takes its slot.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub struct RobotHandle {
+    index: u32,
+    generation: u32,
+}
+
+impl RobotHandle {
+    /// The slot index (dense, reused after removal).
+    pub fn index(&self) -> u32 {
+        self.index
+    }
+
+    /// The slot's generation.
+    pub fn generation(&self) -> u32 {
+        self.generation
+    }
+}
+
+/// What a robot's controller asks for in one tick. Fields left `None` keep their last value
+/// (motor inputs persist until changed, as in Ciber-Rato).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Action {
+    /// The robot.
+    pub robot: RobotHandle,
+    /// Left and right motor powers in [−1, 1] (clamped; NaN counts as 0).
+    pub motors: Option<[Real; 2]>,
+    /// The pose of a Real robot, measured by the chair itself.
+    pub pose: Option<Pose>,
+    /// A message to say this tick.
+    pub say: Option<Message>,
+}
+
+impl Action {
+    /// Sets the motor powers.
+    pub fn motors(robot: RobotHandle, left: Real, right: Real) -> Self {
+        Self { robot, motors: Some([left, right]), pose: None, say: None }
+    }
+
+    /// Pushes the pose of a Real robot.
+    pub fn pose(robot: RobotHandle, pose: Pose) -> Self {
+        Self { robot, motors: None, pose: Some(pose), say: None }
+    }
+
+    /// Says a message.
+    pub fn say(robot: RobotHandle, message: Message) -> Self {
+        Self { robot, motors: None, pose: None, say: Some(message) }
+    }
+}
+
+/// What a tick did, for logs and counters.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct StepStats {
+    /// Robots whose move was refused or that overlap something.
+    pub colliding: u32,
+    /// Actions naming a robot that is not in the world (ignored).
+    pub unknown_robot_actions: u32,
+    /// Actions with non-finite values (those values were ignored).
+    pub bad_values: u32,
+    /// Messages not delivered to some robot because its inbox was full.
+    pub dropped_messages: u32,
+}
+
+/// Why a world could not be built.
+#[derive(Debug, Clone, PartialEq, Error)]
+pub enum WorldBuildError {
+    /// The lab's geometry is unusable.
+    #[error(transparent)]
+    Static(#[from] StaticBuildError),
+    /// More beacons than the beacon sensor reports.
+    #[error("the lab has {count} beacons; at most {max} are supported")]
+    TooManyBeacons {
+        /// Beacons in the lab.
+        count: usize,
+        /// The limit.
+        max: usize,
+    },
+    /// A parameter is out of range.
+    #[error("parameter {name} = {value} is out of range: expected {expected}")]
+    BadParam {
+        /// Which parameter.
+        name: &'static str,
+        /// The value.
+        value: Real,
+        /// The allowed range.
+        expected: &'static str,
+    },
+}
+
+/// A robot's state as the world keeps it.
+#[derive(Debug, Clone)]
+pub struct Robot {
+    /// What it was registered with (the start pose is in `spec.pose`).
+    pub spec: RobotSpec,
+    /// Current pose.
+    pub pose: Pose,
+    /// Motor inputs in [−1, 1], left and right.
+    pub motor_in: [Real; 2],
+    /// Motor outputs after the acceleration filter (and noise), left and right.
+    pub motor_out: [Real; 2],
+    /// The last tick's move was refused (Real robots: it overlaps something).
+    pub collision: bool,
+    /// Rising edges of `collision`: contacts so far.
+    pub collision_count: u64,
+    /// The sensor readings reported this tick.
+    pub readings: SensorReadings,
+    /// Messages heard this tick, in the order of the speakers' slots.
+    pub inbox: Vec<Heard>,
+    /// A frozen robot does not move and its motors read zero (its controller is gone); it
+    /// is still an obstacle and still senses.
+    pub frozen: bool,
+    shape: BodyShape,
+    sensors: [PreparedSensor; MAX_PROXIMITY],
+    sensor_count: usize,
+    /// Radius around the centre of movement that every sensor's cone stays within.
+    reach: Real,
+    /// Radius around the centre of movement that every sensor's origin lies within.
+    sensor_radius: Real,
+    encoder_travel: [Real; 2],
+    history: VecDeque<SensorReadings>,
+    say: Option<Message>,
+    pushed: Option<Pose>,
+}
+
+impl Robot {
+    /// The robot's rectangle corners in world coordinates, counter-clockwise from front-right.
+    pub fn corners(&self) -> [Point2<Real>; 4] {
+        let (s, c) = self.pose.theta.sin_cos();
+        self.shape.corners_ccw(&self.pose, c, s)
+    }
+
+    /// Speeds implied by the motor outputs: linear (m/s) and angular (rad/s), thesis eqs.
+    /// 4.5–4.6.
+    pub fn velocity(&self) -> (Real, Real) {
+        let [l, r] = self.motor_out;
+        let v = self.spec.max_speed_mps * (r + l) / 2.0;
+        let w = self.spec.max_speed_mps * (r - l) / self.spec.height_m;
+        (v, w)
+    }
+}
+
+#[derive(Debug, Clone)]
+struct Slot {
+    generation: u32,
+    robot: Option<Robot>,
+}
+
+/// Per-slot data the collision phase reads for every neighbour: kept apart from `Robot` so the
+/// hot loops touch a small, dense array.
+#[derive(Debug, Clone, Copy)]
+struct Motion {
+    alive: bool,
+    moving: bool,
+    real: bool,
+    cur: PlacedBox,
+    next: PlacedBox,
+    cur_min: Point2<Real>,
+    cur_max: Point2<Real>,
+    next_min: Point2<Real>,
+    next_max: Point2<Real>,
+    next_pose: Pose,
+    /// Cosine and sine of the next heading.
+    next_cs: (Real, Real),
+}
+
+/// Per-slot committed geometry the sensors read for every neighbour.
+#[derive(Debug, Clone, Copy)]
+struct Geo {
+    alive: bool,
+    centre: Point2<Real>,
+    bound_radius: Real,
+    corners: [Point2<Real>; 4],
+    /// Outward normals of the edges front, left, rear, right; `normals[0]` is the heading's
+    /// (cos θ, sin θ).
+    normals: [Vector2<Real>; 4],
+    /// 1/length² of the front/rear and the side edges.
+    inv_len2: [Real; 2],
+}
+
+const DEAD_BOX: PlacedBox = PlacedBox {
+    iso: nalgebra::Isometry2 {
+        rotation: nalgebra::UnitComplex::new_unchecked(nalgebra::Complex { re: 1.0, im: 0.0 }),
+        translation: nalgebra::Translation2 { vector: Vector2::new(0.0, 0.0) },
+    },
+    half: Vector2::new(0.0, 0.0),
+};
+
+impl Motion {
+    const DEAD: Motion = Motion {
+        alive: false,
+        moving: false,
+        real: false,
+        cur: DEAD_BOX,
+        next: DEAD_BOX,
+        cur_min: Point2::new(0.0, 0.0),
+        cur_max: Point2::new(0.0, 0.0),
+        next_min: Point2::new(0.0, 0.0),
+        next_max: Point2::new(0.0, 0.0),
+        next_pose: Pose { x: 0.0, y: 0.0, theta: 0.0 },
+        next_cs: (1.0, 0.0),
+    };
+}
+
+impl Geo {
+    const DEAD: Geo = Geo {
+        alive: false,
+        centre: Point2::new(0.0, 0.0),
+        bound_radius: 0.0,
+        corners: [Point2::new(0.0, 0.0); 4],
+        normals: [Vector2::new(0.0, 0.0); 4],
+        inv_len2: [0.0; 2],
+    };
+
+    fn of(robot: &Robot) -> Geo {
+        let (s, c) = robot.pose.theta.sin_cos();
+        Self::of_cs(robot, c, s)
+    }
+
+    /// The geometry of a robot whose heading's cosine and sine are known.
+    fn of_cs(robot: &Robot, c: Real, s: Real) -> Geo {
+        let heading = Vector2::new(c, s);
+        let left = Vector2::new(-s, c);
+        Geo {
+            alive: true,
+            centre: robot.pose.position(),
+            bound_radius: robot.shape.bound_radius,
+            corners: robot.shape.corners_ccw(&robot.pose, c, s),
+            // Outward normals of the edges front, left, rear, right (corner i → i+1).
+            normals: [heading, left, -heading, -left],
+            inv_len2: [
+                1.0 / (4.0 * robot.shape.half.y * robot.shape.half.y),
+                1.0 / (4.0 * robot.shape.half.x * robot.shape.half.x),
+            ],
+        }
+    }
+}
+
+/// Reused buffers, so a warm tick allocates nothing.
+#[derive(Debug, Clone, Default)]
+struct Scratch {
+    segments: Vec<grid::Segment>,
+    local: Vec<sensors::LocalSegment>,
+    blocked: Vec<(bool, bool)>,
+    deliveries: Vec<(u32, Heard)>,
+    speakers: Vec<u32>,
+    listeners: Vec<u32>,
+}
+
+/// Box corners (min, max) of a placed rectangle.
+fn aabb(b: &PlacedBox) -> (Point2<Real>, Point2<Real>) {
+    let c = b.iso.rotation.re.abs();
+    let s = b.iso.rotation.im.abs();
+    let e = Vector2::new(c * b.half.x + s * b.half.y, s * b.half.x + c * b.half.y);
+    let t = Point2::from(b.iso.translation.vector);
+    (t - e, t + e)
+}
+
+#[inline]
+fn overlaps(amin: Point2<Real>, amax: Point2<Real>, bmin: Point2<Real>, bmax: Point2<Real>) -> bool {
+    amin.x <= bmax.x && bmin.x <= amax.x && amin.y <= bmax.y && bmin.y <= amax.y
+}
+
+/// The world model: a lab, its robots, one random generator and the clock.
+#[derive(Debug, Clone)]
+pub struct World {
+    lab: Lab,
+    params: Params,
+    statics: StaticIndex,
+    dyn_grid: DynGrid,
+    slots: Vec<Slot>,
+    motion: Vec<Motion>,
+    geo: Vec<Geo>,
+    free: Vec<u32>,
+    live: usize,
+    capacity: usize,
+    rng: Rng,
+    tick: u64,
+    time_s: Real,
+    scratch: Scratch,
+}
+
+impl World {
+    /// A world on `lab` with `params`, whose every random draw follows from `seed`.
+    pub fn new(lab: &Lab, params: Params, seed: u64) -> Result<Self, WorldBuildError> {
+        if lab.beacons.len() > MAX_BEACONS {
+            return Err(WorldBuildError::TooManyBeacons { count: lab.beacons.len(), max: MAX_BEACONS });
+        }
+        let positive = |name: &'static str, value: Real| {
+            if value.is_finite() && value > 0.0 {
+                Ok(())
+            } else {
+                Err(WorldBuildError::BadParam { name, value, expected: "> 0" })
+            }
+        };
+        positive("proximity_range_m", params.proximity_range_m)?;
+        positive("message_range_m", params.message_range_m)?;
+        positive("wheel_radius_m", params.wheel_radius_m)?;
+        positive("encoder_ticks_per_rev", params.encoder_ticks_per_rev as Real)?;
+        let n = &params.noise;
+        for (name, value) in [
+            ("noise.proximity_m", n.proximity_m),
+            ("noise.beacon_deg", n.beacon_deg),
+            ("noise.compass_deg", n.compass_deg),
+            ("noise.gps_pos_m", n.gps_pos_m),
+            ("noise.gps_heading_deg", n.gps_heading_deg),
+            ("noise.motor_frac", n.motor_frac),
+            ("noise.encoder_slip_frac", n.encoder_slip_frac),
+        ] {
+            if !(value.is_finite() && value >= 0.0) {
+                return Err(WorldBuildError::BadParam { name, value, expected: ">= 0" });
+            }
+        }
+        let statics = StaticIndex::build(lab, STATIC_CELL_M)?;
+        let dyn_spec = GridSpec::covering(
+            statics.spec.min,
+            statics.spec.min
+                + Vector2::new(
+                    statics.spec.nx as Real * statics.spec.cell,
+                    statics.spec.ny as Real * statics.spec.cell,
+                ),
+            DYN_CELL_M,
+        );
+        let scratch = Scratch::default();
+        Ok(Self {
+            lab: lab.clone(),
+            params,
+            statics,
+            dyn_grid: DynGrid::new(dyn_spec),
+            slots: Vec::new(),
+            motion: Vec::new(),
+            geo: Vec::new(),
+            free: Vec::new(),
+            live: 0,
+            capacity: DEFAULT_CAPACITY,
+            rng: Rng::seed_from_u64(seed),
+            tick: 0,
+            time_s: 0.0,
+            scratch,
+        })
+    }
+
+    /// Changes how many robots the world accepts.
+    pub fn set_capacity(&mut self, capacity: usize) {
+        self.capacity = capacity;
+    }
+
+    /// The lab.
+    pub fn lab(&self) -> &Lab {
+        &self.lab
+    }
+
+    /// The parameters.
+    pub fn params(&self) -> &Params {
+        &self.params
+    }
+
+    /// Ticks stepped so far.
+    pub fn tick(&self) -> u64 {
+        self.tick
+    }
+
+    /// Simulated seconds so far (the sum of the steps' durations).
+    pub fn time_s(&self) -> Real {
+        self.time_s
+    }
+
+    /// Robots in the world.
+    pub fn len(&self) -> usize {
+        self.live
+    }
+
+    /// Whether the world has no robots.
+    pub fn is_empty(&self) -> bool {
+        self.live == 0
+    }
+
+    /// Adds a robot at its spec's pose. The pose is not checked for room: see
+    /// [`World::is_free`].
+    pub fn add_robot(&mut self, spec: RobotSpec) -> Result<RobotHandle, AddRobotError> {
+        spec.validate()?;
+        if self.live >= self.capacity {
+            return Err(AddRobotError::Full { max: self.capacity });
+        }
+        let shape = BodyShape::new(&spec);
+        let specs = if spec.sensors.is_empty() { spec.default_sensors() } else { spec.sensors.clone() };
+        let mut sensors = [PreparedSensor::new(&specs[0], 1.0); MAX_PROXIMITY];
+        let (mut reach, mut sensor_radius): (Real, Real) = (0.0, 0.0);
+        for (k, s) in specs.iter().enumerate() {
+            sensors[k] = PreparedSensor::new(s, self.params.proximity_range_m);
+            reach = reach.max(sensors[k].origin.norm() + sensors[k].range);
+            sensor_radius = sensor_radius.max(sensors[k].origin.norm());
+        }
+        let readings = SensorReadings {
+            proximity_count: specs.len() as u8,
+            beacon_count: self.lab.beacons.len() as u8,
+            ..SensorReadings::EMPTY
+        };
+        let robot = Robot {
+            pose: Pose::new(spec.pose.x, spec.pose.y, spec.pose.theta),
+            spec,
+            motor_in: [0.0; 2],
+            motor_out: [0.0; 2],
+            collision: false,
+            collision_count: 0,
+            readings,
+            inbox: Vec::new(),
+            frozen: false,
+            shape,
+            sensors,
+            sensor_count: specs.len(),
+            reach,
+            sensor_radius,
+            encoder_travel: [0.0; 2],
+            history: VecDeque::new(),
+            say: None,
+            pushed: None,
+        };
+        let geo = Geo::of(&robot);
+        let index = match self.free.pop() {
+            Some(i) => i,
+            None => {
+                self.slots.push(Slot { generation: 0, robot: None });
+                self.motion.push(Motion::DEAD);
+                self.geo.push(Geo::DEAD);
+                (self.slots.len() - 1) as u32
+            }
+        };
+        let slot = &mut self.slots[index as usize];
+        slot.robot = Some(robot);
+        self.geo[index as usize] = geo;
+        self.live += 1;
+        Ok(RobotHandle { index, generation: slot.generation })
+    }
+
+    /// Removes a robot; returns false when the handle names no robot.
+    pub fn remove_robot(&mut self, handle: RobotHandle) -> bool {
+        let Some(slot) = self.slots.get_mut(handle.index as usize) else { return false };
+        if slot.generation != handle.generation || slot.robot.is_none() {
+            return false;
+        }
+        slot.robot = None;
+        slot.generation = slot.generation.wrapping_add(1);
+        self.geo[handle.index as usize] = Geo::DEAD;
+        self.motion[handle.index as usize] = Motion::DEAD;
+        self.free.push(handle.index);
+        self.live -= 1;
+        true
+    }
+
+    /// Freezes (or thaws) a robot; returns false when the handle names no robot.
+    pub fn set_frozen(&mut self, handle: RobotHandle, frozen: bool) -> bool {
+        match self.slots.get_mut(handle.index as usize) {
+            Some(Slot { generation, robot: Some(r) }) if *generation == handle.generation => {
+                r.frozen = frozen;
+                true
+            }
+            _ => false,
+        }
+    }
+
+    /// The robot a handle names.
+    pub fn robot(&self, handle: RobotHandle) -> Option<&Robot> {
+        let slot = self.slots.get(handle.index as usize)?;
+        if slot.generation != handle.generation {
+            return None;
+        }
+        slot.robot.as_ref()
+    }
+
+    /// Every robot, in slot order.
+    pub fn robots(&self) -> impl Iterator<Item = (RobotHandle, &Robot)> {
+        self.slots.iter().enumerate().filter_map(|(i, s)| {
+            s.robot.as_ref().map(|r| (RobotHandle { index: i as u32, generation: s.generation }, r))
+        })
+    }
+
+    /// Whether a robot of this spec, at the spec's pose, would touch no wall and no robot.
+    pub fn is_free(&self, spec: &RobotSpec) -> bool {
+        let placed = BodyShape::new(spec).placed(&spec.pose);
+        if self.box_hits_wall(&placed) {
+            return false;
+        }
+        let (min, max) = aabb(&placed);
+        // Every robot, not the grid: the grid was built at the last step and misses robots
+        // added since. A bounding-circle test keeps the parry calls to near neighbours.
+        self.slots.iter().zip(&self.geo).all(|(slot, g)| {
+            let Some(other) = &slot.robot else { return true };
+            let r = g.bound_radius;
+            let far =
+                g.centre.x + r < min.x || g.centre.x - r > max.x || g.centre.y + r < min.y || g.centre.y - r > max.y;
+            far || !crate::geom::boxes_intersect(&placed, &other.shape.placed(&other.pose))
+        })
+    }
+
+    /// Whether a robot of this spec, at the spec's pose, would touch no wall.
+    pub fn is_clear_of_walls(&self, spec: &RobotSpec) -> bool {
+        !self.box_hits_wall(&BodyShape::new(spec).placed(&spec.pose))
+    }
+
+    /// Measures every robot where it stands, exactly (no noise, no latency, no random draw), so
+    /// readings exist before the first step; stepping measures as usual afterwards.
+    pub fn refresh_sensors(&mut self) {
+        for (i, slot) in self.slots.iter().enumerate() {
+            let Some(r) = &slot.robot else { continue };
+            let cur = r.shape.placed(&r.pose);
+            let (min, max) = aabb(&cur);
+            self.motion[i] = Motion {
+                alive: true,
+                moving: false,
+                real: r.spec.kind == RobotKind::Real,
+                cur,
+                next: cur,
+                cur_min: min,
+                cur_max: max,
+                next_min: min,
+                next_max: max,
+                next_pose: r.pose,
+                next_cs: (self.geo[i].normals[0].x, self.geo[i].normals[0].y),
+            };
+        }
+        let motion = &self.motion;
+        self.dyn_grid.rebuild(motion.iter().enumerate().filter(|(_, m)| m.alive).map(|(i, m)| {
+            let centre = nalgebra::center(&m.cur_min, &m.cur_max);
+            let half = (m.cur_max.x - m.cur_min.x).max(m.cur_max.y - m.cur_min.y) / 2.0;
+            (i as u32, centre, half)
+        }));
+        self.sense_with(true);
+    }
+
+    /// Advances the world by one tick of `dt_s` simulated seconds with this tick's actions.
+    pub fn step(&mut self, actions: &[Action], dt_s: Real) -> StepStats {
+        let mut stats = StepStats::default();
+        let dt = if dt_s.is_finite() && dt_s > 0.0 { dt_s } else { 0.0 };
+        self.tick += 1;
+        self.time_s += dt;
+        self.apply_actions(actions, &mut stats);
+        self.drive(dt);
+        self.resolve_collisions(&mut stats);
+        self.commit(dt);
+        self.deliver_messages(&mut stats);
+        self.sense();
+        stats
+    }
+
+    fn apply_actions(&mut self, actions: &[Action], stats: &mut StepStats) {
+        self.scratch.speakers.clear();
+        for a in actions {
+            let Some(slot) = self.slots.get_mut(a.robot.index as usize) else {
+                stats.unknown_robot_actions += 1;
+                continue;
+            };
+            let Some(r) = slot.robot.as_mut().filter(|_| slot.generation == a.robot.generation) else {
+                stats.unknown_robot_actions += 1;
+                continue;
+            };
+            if let Some([l, rr]) = a.motors {
+                let clean = |p: Real| if p.is_nan() { 0.0 } else { p.clamp(-1.0, 1.0) };
+                if !(l.is_finite() && rr.is_finite()) {
+                    stats.bad_values += 1;
+                }
+                r.motor_in = [clean(l), clean(rr)];
+            }
+            if let Some(p) = a.pose {
+                if p.is_finite() {
+                    r.pushed = Some(Pose::new(p.x, p.y, p.theta));
+                } else {
+                    stats.bad_values += 1;
+                }
+            }
+            if a.say.is_some() {
+                if r.say.is_none() {
+                    self.scratch.speakers.push(a.robot.index);
+                }
+                r.say = a.say;
+            }
+        }
+    }
+
+    /// Motor filter (thesis eq. 4.4) and kinematics (eqs. 4.5–4.9, with 4.8's typo fixed):
+    /// every robot's next pose.
+    fn drive(&mut self, dt: Real) {
+        let motor_noise = self.params.noise.motor_frac;
+        for (i, slot) in self.slots.iter_mut().enumerate() {
+            let Some(r) = &mut slot.robot else { continue };
+            // The heading's cosine and sine as of the last commit.
+            let h = self.geo[i].normals[0];
+            let (co, s) = (h.x, h.y);
+            let next = match r.spec.kind {
+                _ if r.frozen => {
+                    r.pushed = None;
+                    r.motor_in = [0.0; 2];
+                    r.motor_out = [0.0; 2];
+                    r.pose
+                }
+                RobotKind::Real => {
+                    r.motor_out = [0.0; 2];
+                    r.pushed.take().unwrap_or(r.pose)
+                }
+                RobotKind::Simulated | RobotKind::Door => {
+                    // Only Real robots take pushed poses.
+                    r.pushed = None;
+                    let c = r.spec.accel_curve;
+                    for w in 0..2 {
+                        let out = (1.0 - c) * r.motor_in[w] + c * r.motor_out[w];
+                        r.motor_out[w] =
+                            if motor_noise > 0.0 { out * (1.0 + motor_noise * self.rng.gaussian()) } else { out };
+                    }
+                    let (v, omega) = r.velocity();
+                    Pose {
+                        x: r.pose.x + v * co * dt,
+                        y: r.pose.y + v * s * dt,
+                        theta: normalize_angle(r.pose.theta + omega * dt),
+                    }
+                }
+            };
+            let cur = r.shape.placed_cs(&r.pose, co, s);
+            let moving = next != r.pose;
+            let (next_cs, nb) = if !moving {
+                ((co, s), cur)
+            } else if next.theta == r.pose.theta {
+                ((co, s), r.shape.placed_cs(&next, co, s))
+            } else {
+                let (ns, nc) = next.theta.sin_cos();
+                ((nc, ns), r.shape.placed_cs(&next, nc, ns))
+            };
+            let (cur_min, cur_max) = aabb(&cur);
+            let (next_min, next_max) = if moving { aabb(&nb) } else { (cur_min, cur_max) };
+            self.motion[i] = Motion {
+                alive: true,
+                moving,
+                real: r.spec.kind == RobotKind::Real,
+                cur,
+                next: nb,
+                cur_min,
+                cur_max,
+                next_min,
+                next_max,
+                next_pose: next,
+                next_cs,
+            };
+        }
+        // Index every robot by the box that holds both its current and its next pose: the
+        // collision phase tests against both, and the sensors see the committed one, which is
+        // one of the two.
+        let motion = &self.motion;
+        self.dyn_grid.rebuild(motion.iter().enumerate().filter(|(_, m)| m.alive).map(|(i, m)| {
+            let min = Point2::new(m.cur_min.x.min(m.next_min.x), m.cur_min.y.min(m.next_min.y));
+            let max = Point2::new(m.cur_max.x.max(m.next_max.x), m.cur_max.y.max(m.next_max.y));
+            let centre = nalgebra::center(&min, &max);
+            let half = (max.x - min.x).max(max.y - min.y) / 2.0;
+            (i as u32, centre, half)
+        }));
+    }
+
+    fn commit(&mut self, dt: Real) {
+        let ticks_per_m =
+            self.params.encoder_ticks_per_rev as Real / (std::f64::consts::TAU * self.params.wheel_radius_m);
+        let slip = self.params.noise.encoder_slip_frac;
+        for (i, slot) in self.slots.iter_mut().enumerate() {
+            let Some(r) = &mut slot.robot else { continue };
+            let (hit, enforce) = self.scratch.blocked[i];
+            let m = &self.motion[i];
+            let moved = m.moving && !(hit && enforce);
+            if moved {
+                r.pose = m.next_pose;
+                if r.spec.kind != RobotKind::Real {
+                    for w in 0..2 {
+                        let mut travel = r.spec.max_speed_mps * r.motor_out[w] * dt;
+                        if slip > 0.0 {
+                            travel *= 1.0 + slip * self.rng.gaussian();
+                        }
+                        r.encoder_travel[w] += travel;
+                    }
+                    r.readings.encoder_ticks = [
+                        (r.encoder_travel[0] * ticks_per_m).floor() as i64,
+                        (r.encoder_travel[1] * ticks_per_m).floor() as i64,
+                    ];
+                }
+                self.geo[i] = Geo::of_cs(r, m.next_cs.0, m.next_cs.1);
+            }
+            if hit && !r.collision {
+                r.collision_count += 1;
+            }
+            r.collision = hit;
+        }
+    }
+
+    fn deliver_messages(&mut self, stats: &mut StepStats) {
+        // Last tick's listeners forget what they heard; only they have anything to forget.
+        for &j in &self.scratch.listeners {
+            if let Some(r) = self.slots[j as usize].robot.as_mut() {
+                r.inbox.clear();
+            }
+        }
+        self.scratch.listeners.clear();
+        if self.scratch.speakers.is_empty() {
+            return;
+        }
+        let range = self.params.message_range_m;
+        let deliveries = &mut self.scratch.deliveries;
+        deliveries.clear();
+        // Speakers in slot order, so every inbox lists speakers in slot order.
+        self.scratch.speakers.sort_unstable();
+        for &i in &self.scratch.speakers {
+            let slot = &mut self.slots[i as usize];
+            let Some(r) = slot.robot.as_mut() else { continue };
+            let Some(message) = r.say.take() else { continue };
+            let from = RobotHandle { index: i, generation: slot.generation };
+            let c = self.geo[i as usize].centre;
+            let e = Vector2::new(range, range);
+            let first = deliveries.len();
+            self.dyn_grid.query(c - e, c + e, |j| {
+                let g = &self.geo[j as usize];
+                if j != i && g.alive && (g.centre - c).norm_squared() <= range * range {
+                    deliveries.push((j, Heard { from, message }));
+                }
+            });
+            // The grid lists by cell; listeners in slot order keep drops deterministic.
+            deliveries[first..].sort_unstable_by_key(|(j, _)| *j);
+        }
+        for &(j, heard) in deliveries.iter() {
+            let Some(r) = self.slots[j as usize].robot.as_mut() else { continue };
+            let used: usize = r.inbox.iter().map(|h| h.message.len()).sum();
+            if used + heard.message.len() <= MAX_INBOX_BYTES {
+                if r.inbox.is_empty() {
+                    self.scratch.listeners.push(j);
+                }
+                r.inbox.push(heard);
+            } else {
+                stats.dropped_messages += 1;
+            }
+        }
+    }
+
+    /// A 64-bit FNV-1a hash of everything that evolves: clock, generator, every robot's pose,
+    /// motors, collisions, encoders and readings. Two runs agree on it only if they agree bit
+    /// for bit.
+    pub fn state_hash(&self) -> u64 {
+        let mut h = Fnv::new();
+        h.u64(self.tick);
+        h.f64(self.time_s);
+        for w in self.rng.state() {
+            h.u64(w);
+        }
+        for (i, slot) in self.slots.iter().enumerate() {
+            let Some(r) = &slot.robot else { continue };
+            h.u64(i as u64);
+            h.u64(slot.generation as u64);
+            for v in [r.pose.x, r.pose.y, r.pose.theta, r.motor_in[0], r.motor_in[1], r.motor_out[0], r.motor_out[1]] {
+                h.f64(v);
+            }
+            h.u64(r.collision as u64);
+            h.u64(r.collision_count);
+            let rd = &r.readings;
+            h.u64(rd.tick);
+            for &d in rd.proximity() {
+                h.f64(d);
+            }
+            h.f64(rd.compass_deg.unwrap_or(Real::NAN));
+            if let Some(g) = rd.gps {
+                h.f64(g.x_m);
+                h.f64(g.y_m);
+                h.f64(g.heading_deg);
+            }
+            for b in rd.beacons() {
+                h.f64(b.unwrap_or(Real::NAN));
+            }
+            h.u64(rd.ground.map_or(u64::MAX, u64::from));
+            h.u64(rd.encoder_ticks[0] as u64);
+            h.u64(rd.encoder_ticks[1] as u64);
+            for m in &r.inbox {
+                h.u64(m.from.index as u64);
+                h.bytes(m.message.as_bytes());
+            }
+        }
+        h.finish()
+    }
+}
+
+/// FNV-1a over 64-bit words (not bytes): the hub hashes every tick, and a word at a time is
+/// eight times fewer multiplications for the same sensitivity to any changed bit.
+struct Fnv(u64);
+
+impl Fnv {
+    fn new() -> Self {
+        Self(0xcbf2_9ce4_8422_2325)
+    }
+    fn bytes(&mut self, b: &[u8]) {
+        for chunk in b.chunks(8) {
+            let mut w = [0u8; 8];
+            w[..chunk.len()].copy_from_slice(chunk);
+            self.u64(u64::from_le_bytes(w));
+        }
+        self.u64(b.len() as u64);
+    }
+    fn u64(&mut self, v: u64) {
+        self.0 ^= v;
+        self.0 = self.0.wrapping_mul(0x0000_0100_0000_01b3);
+        // Fold the high bits down, which FNV's multiply alone never reaches.
+        self.0 ^= self.0 >> 29;
+    }
+    fn f64(&mut self, v: Real) {
+        self.u64(v.to_bits());
+    }
+    fn finish(&self) -> u64 {
+        self.0
+    }
+}
+
+#[cfg(test)]
+mod tests;
