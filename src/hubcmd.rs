@@ -6,6 +6,7 @@ use std::time::Duration;
 use anyhow::Context as _;
 use hub::HubConfig;
 use hub::core::Mode;
+use records::places::{Checkpoint, Obstacle};
 use world::map::builtin::{self, PREFIX};
 use world::map::xml::{parse_params, read_text};
 use world::map::{Grid, NoiseParams, Wall};
@@ -17,29 +18,18 @@ pub fn config(args: &HubArgs) -> anyhow::Result<HubConfig> {
     let mut lab = builtin::load_lab_spec(&args.lab).map_err(|e| anyhow::anyhow!("{}:{e}", args.lab))?;
     let obstacle_from = lab.walls.len();
     for spec in &args.obstacle {
-        let v = agent_sdk::args::numbers(spec, "an obstacle X0,Y0,X1,Y1[,H]", 4, 5)
+        let o = Obstacle::parse(spec)
+            .and_then(|o| o.check_inside(lab.width_m, lab.height_m).map(|()| o))
             .map_err(|e| anyhow::anyhow!("--obstacle {e}"))?;
-        let (x0, y0, x1, y1, h) = (v[0], v[1], v[2], v[3], v.get(4).copied().unwrap_or(1.0));
-        anyhow::ensure!(
-            x0 < x1 && y0 < y1 && h > 0.0,
-            "--obstacle {spec}: want X0 < X1, Y0 < Y1 and a positive height"
-        );
-        anyhow::ensure!(
-            x0 >= 0.0 && y0 >= 0.0 && x1 <= lab.width_m && y1 <= lab.height_m,
-            "--obstacle {spec}: outside the {} x {} m lab",
-            lab.width_m,
-            lab.height_m
-        );
-        lab.walls.push(Wall::rectangle(x0, y0, x1, y1, h));
+        lab.walls.push(Wall::rectangle(o.x0, o.y0, o.x1, o.y1, o.height));
     }
-    let mut checkpoints = Vec::new();
-    for spec in &args.checkpoint {
-        let v = agent_sdk::args::numbers(spec, "a checkpoint X,Y[,R]", 2, 3)
-            .map_err(|e| anyhow::anyhow!("--checkpoint {e}"))?;
-        let r = v.get(2).copied().unwrap_or(0.5);
-        anyhow::ensure!(r > 0.0, "--checkpoint {spec}: the radius must be positive");
-        checkpoints.push([v[0], v[1], r]);
-    }
+    let checkpoints = args
+        .checkpoint
+        .iter()
+        .map(|spec| {
+            Checkpoint::parse(spec).map(|c| [c.x, c.y, c.radius]).map_err(|e| anyhow::anyhow!("--checkpoint {e}"))
+        })
+        .collect::<anyhow::Result<_>>()?;
     let grid = match (&args.grid, args.lab.strip_prefix(PREFIX)) {
         (Some(g), _) => builtin::load_grid_spec(g).map_err(|e| anyhow::anyhow!("{g}:{e}"))?,
         (None, Some(name)) => builtin::map(name).map(|m| m.grid).unwrap_or_default(),
@@ -88,28 +78,15 @@ pub fn run(args: &HubArgs) -> anyhow::Result<ExitCode> {
     );
     let out = hub::run(cfg).context("hub")?;
     if args.json {
-        let robots: Vec<String> = out
-            .robots
-            .iter()
-            .map(|(id, x, y, h, f)| {
-                format!("{{\"id\":{id},\"x_m\":{x},\"y_m\":{y},\"heading_deg\":{h},\"flags\":{f}}}")
-            })
-            .collect();
-        println!(
-            "{{\"ticks\":{},\"run_s\":{:.6},\"state_hash\":\"{:016x}\",\"agents_seen\":{},\"agents_died\":{},\"interrupted\":{},\"robots\":[{}]}}",
-            out.ticks,
-            out.run_s,
-            out.state_hash,
-            out.agents_seen,
-            out.agents_died,
-            out.interrupted,
-            robots.join(",")
-        );
+        println!("{}", out.json_line());
     } else {
-        println!("tick {} state hash {:016x}", out.ticks, out.state_hash);
+        println!("tick {} state hash {}", out.ticks, out.state_hash);
         println!("agents: {} connected, {} died", out.agents_seen, out.agents_died);
-        for (id, x, y, h, f) in &out.robots {
-            println!("robot {id}: x {x:.4} m, y {y:.4} m, heading {h:.2} deg, flags {f}");
+        for r in &out.robots {
+            println!(
+                "robot {}: x {:.4} m, y {:.4} m, heading {:.2} deg, flags {}",
+                r.id, r.x_m, r.y_m, r.heading_deg, r.flags
+            );
         }
         if out.interrupted {
             println!("stopped by a termination signal");

@@ -566,130 +566,160 @@ impl HubCore {
 
     /// The sensor block of a robot for the current tick.
     pub fn sensor_block(&self, robot_id: u32) -> SensorBlock {
-        let mut b = SensorBlock::zeroed();
-        b.robot_id = robot_id;
-        b.tick = self.world.tick();
-        let Some(r) = self.robots.get(&robot_id).and_then(|e| self.world.robot(e.handle)) else { return b };
-        let rd = &r.readings;
-        b.proximity_count = rd.proximity_count as u32;
-        b.proximity_m[..rd.proximity().len()].copy_from_slice(rd.proximity());
-        if let Some(c) = rd.compass_deg {
-            b.present |= HAS_COMPASS;
-            b.compass_deg = c;
-        }
-        if let Some(g) = rd.gps {
-            b.present |= HAS_GPS;
-            (b.gps_x_m, b.gps_y_m, b.gps_heading_deg) = (g.x_m, g.y_m, g.heading_deg);
-        }
-        if let Some(t) = rd.ground {
-            b.present |= HAS_GROUND;
-            b.ground = t as u32;
-        }
-        if rd.collision {
-            b.present |= COLLISION;
-        }
-        b.beacon_count = rd.beacon_count as u32;
-        for (k, v) in rd.beacons().iter().enumerate() {
-            b.beacons_deg[k] = v.unwrap_or(f64::NAN);
-        }
-        b.encoder_ticks = rd.encoder_ticks;
-        b.pose = [r.pose.x, r.pose.y, r.pose.heading_deg()];
-        b.collision_count = r.collision_count.min(u32::MAX as u64) as u32;
-        let mut offset = 0usize;
-        for heard in &r.inbox {
-            let bytes = heard.message.as_bytes();
-            if b.inbox_count as usize >= MAX_INBOX_MESSAGES || offset + bytes.len() > b.inbox_bytes.len() {
-                b.inbox_dropped += 1;
-                continue;
+        let tick = self.world.tick();
+        match self.robots.get(&robot_id).and_then(|e| self.world.robot(e.handle)) {
+            Some(r) => {
+                pack_sensor_block(r, robot_id, tick, |h| self.id_by_slot.get(h.index() as usize).copied().unwrap_or(0))
             }
-            let from_id = self.id_by_slot.get(heard.from.index() as usize).copied().unwrap_or(0);
-            b.inbox[b.inbox_count as usize] = InboxEntry { from_id, offset: offset as u16, len: bytes.len() as u16 };
-            b.inbox_bytes[offset..offset + bytes.len()].copy_from_slice(bytes);
-            offset += bytes.len();
-            b.inbox_count += 1;
-        }
-        b
-    }
-
-    fn hub_params(&self, deadline_ms: u32) -> HubParams {
-        let p = self.world.params();
-        let bit = |on: bool, b: u32| if on { b } else { 0 };
-        let r = &p.requests;
-        HubParams {
-            noise_proximity_m: p.noise.proximity_m,
-            noise_beacon_deg: p.noise.beacon_deg,
-            noise_compass_deg: p.noise.compass_deg,
-            noise_gps_pos_m: p.noise.gps_pos_m,
-            noise_gps_heading_deg: p.noise.gps_heading_deg,
-            noise_motors_pct: p.noise.motor_frac * 100.0,
-            beacon_aperture_rad: p.beacon_aperture_rad,
-            sim_time_ticks: self.tick_limit,
-            deadline_ms,
-            lockstep: (self.mode == Mode::LockStep) as u32,
-            sensors_on: bit(p.sensors.gps, SENSOR_GPS)
-                | bit(p.sensors.beacon, SENSOR_BEACON)
-                | bit(p.sensors.compass, SENSOR_COMPASS)
-                | SENSOR_OBSTACLE
-                | SENSOR_GROUND
-                | SENSOR_COLLISION,
-            requestable: bit(r.obstacle, SENSOR_OBSTACLE)
-                | bit(r.beacon, SENSOR_BEACON)
-                | bit(r.ground, SENSOR_GROUND)
-                | bit(r.compass, SENSOR_COMPASS)
-                | bit(r.collision, SENSOR_COLLISION),
-            requests_per_cycle: r.per_cycle,
-            latency: [
-                p.latency.proximity,
-                p.latency.beacon,
-                p.latency.ground,
-                p.latency.compass,
-                p.latency.collision,
-                p.latency.gps,
-            ],
-            _reserved: 0,
-            encoder_ticks_per_m: p.encoder_ticks_per_rev as f64 / (std::f64::consts::TAU * p.wheel_radius_m),
+            None => SensorBlock { robot_id, tick, ..SensorBlock::zeroed() },
         }
     }
 
     /// The map as a header and items, for agents and viewers; `deadline_ms` is the lock-step
     /// deadline the process uses.
     pub fn map_items(&self, cycle_ms: u32, deadline_ms: u32) -> (MapHeader, Vec<MapItem>) {
-        let lab = self.world.lab();
-        let mut items = Vec::new();
-        let item = |kind, index: usize, a, b, c| MapItem { kind, index: index as u32, a, b, c };
-        for (i, w) in lab.walls.iter().enumerate() {
-            let obstacle = if i >= self.obstacle_from { 1.0 } else { 0.0 };
-            items.push(item(MAP_WALL, i, w.height_m, w.corners.len() as f64, obstacle));
-            for c in &w.corners {
-                items.push(item(MAP_CORNER, i, c.x, c.y, 0.0));
-            }
-        }
-        for (i, b) in lab.beacons.iter().enumerate() {
-            items.push(item(MAP_BEACON, i, b.pos.x, b.pos.y, b.height_m));
-        }
-        for (i, t) in lab.targets.iter().enumerate() {
-            items.push(item(MAP_TARGET, i, t.pos.x, t.pos.y, t.radius_m));
-        }
-        for (i, p) in self.grid.poses.iter().enumerate() {
-            items.push(item(MAP_GRID, i, p.pos.x, p.pos.y, p.heading_deg));
-        }
-        for (i, [x, y, r]) in self.checkpoints.iter().enumerate() {
-            items.push(item(MAP_CHECKPOINT, i, *x, *y, *r));
-        }
-        let header = MapHeader {
-            width_m: lab.width_m,
-            height_m: lab.height_m,
-            item_count: items.len() as u32,
-            wall_count: lab.walls.len() as u32,
-            beacon_count: lab.beacons.len() as u32,
-            target_count: lab.targets.len() as u32,
-            grid_count: self.grid.poses.len() as u32,
-            cycle_ms,
-            name: FixedName::new(&lab.name).unwrap_or(FixedName::EMPTY),
-            params: self.hub_params(deadline_ms),
-        };
-        (header, items)
+        let params = hub_params(self.world.params(), self.mode, self.tick_limit, deadline_ms);
+        pack_map(self.world.lab(), &self.grid, self.obstacle_from, &self.checkpoints, cycle_ms, params)
     }
+}
+
+/// A robot's readings packed into the block its agent reads: what [`HubCore::sensor_block`]
+/// publishes, public so that closed-loop tests drive agents with the hub's own packing.
+/// `speaker_id` gives the robot id of a message's speaker.
+pub fn pack_sensor_block(
+    r: &world::Robot,
+    robot_id: u32,
+    tick: u64,
+    speaker_id: impl Fn(world::RobotHandle) -> u32,
+) -> SensorBlock {
+    let mut b = SensorBlock::zeroed();
+    b.robot_id = robot_id;
+    b.tick = tick;
+    let rd = &r.readings;
+    b.proximity_count = rd.proximity_count as u32;
+    b.proximity_m[..rd.proximity().len()].copy_from_slice(rd.proximity());
+    if let Some(c) = rd.compass_deg {
+        b.present |= HAS_COMPASS;
+        b.compass_deg = c;
+    }
+    if let Some(g) = rd.gps {
+        b.present |= HAS_GPS;
+        (b.gps_x_m, b.gps_y_m, b.gps_heading_deg) = (g.x_m, g.y_m, g.heading_deg);
+    }
+    if let Some(t) = rd.ground {
+        b.present |= HAS_GROUND;
+        b.ground = t as u32;
+    }
+    if rd.collision {
+        b.present |= COLLISION;
+    }
+    b.beacon_count = rd.beacon_count as u32;
+    for (k, v) in rd.beacons().iter().enumerate() {
+        b.beacons_deg[k] = v.unwrap_or(f64::NAN);
+    }
+    b.encoder_ticks = rd.encoder_ticks;
+    b.pose = [r.pose.x, r.pose.y, r.pose.heading_deg()];
+    b.collision_count = r.collision_count.min(u32::MAX as u64) as u32;
+    let mut offset = 0usize;
+    for heard in &r.inbox {
+        let bytes = heard.message.as_bytes();
+        if b.inbox_count as usize >= MAX_INBOX_MESSAGES || offset + bytes.len() > b.inbox_bytes.len() {
+            b.inbox_dropped += 1;
+            continue;
+        }
+        let from_id = speaker_id(heard.from);
+        b.inbox[b.inbox_count as usize] = InboxEntry { from_id, offset: offset as u16, len: bytes.len() as u16 };
+        b.inbox_bytes[offset..offset + bytes.len()].copy_from_slice(bytes);
+        offset += bytes.len();
+        b.inbox_count += 1;
+    }
+    b
+}
+
+/// The run parameters agents learn from the map header.
+pub fn hub_params(p: &Params, mode: Mode, tick_limit: u64, deadline_ms: u32) -> HubParams {
+    let bit = |on: bool, b: u32| if on { b } else { 0 };
+    let r = &p.requests;
+    HubParams {
+        noise_proximity_m: p.noise.proximity_m,
+        noise_beacon_deg: p.noise.beacon_deg,
+        noise_compass_deg: p.noise.compass_deg,
+        noise_gps_pos_m: p.noise.gps_pos_m,
+        noise_gps_heading_deg: p.noise.gps_heading_deg,
+        noise_motors_pct: p.noise.motor_frac * 100.0,
+        beacon_aperture_rad: p.beacon_aperture_rad,
+        sim_time_ticks: tick_limit,
+        deadline_ms,
+        lockstep: (mode == Mode::LockStep) as u32,
+        sensors_on: bit(p.sensors.gps, SENSOR_GPS)
+            | bit(p.sensors.beacon, SENSOR_BEACON)
+            | bit(p.sensors.compass, SENSOR_COMPASS)
+            | SENSOR_OBSTACLE
+            | SENSOR_GROUND
+            | SENSOR_COLLISION,
+        requestable: bit(r.obstacle, SENSOR_OBSTACLE)
+            | bit(r.beacon, SENSOR_BEACON)
+            | bit(r.ground, SENSOR_GROUND)
+            | bit(r.compass, SENSOR_COMPASS)
+            | bit(r.collision, SENSOR_COLLISION),
+        requests_per_cycle: r.per_cycle,
+        latency: [
+            p.latency.proximity,
+            p.latency.beacon,
+            p.latency.ground,
+            p.latency.compass,
+            p.latency.collision,
+            p.latency.gps,
+        ],
+        _reserved: 0,
+        encoder_ticks_per_m: sim_model::encoder_ticks_per_m(p.encoder_ticks_per_rev as f64, p.wheel_radius_m),
+    }
+}
+
+/// The map as [`HubCore::map_items`] publishes it: the lab's walls (from `obstacle_from` on
+/// flagged as a scenario's obstacles), beacons, targets, grid and checkpoints.
+pub fn pack_map(
+    lab: &Lab,
+    grid: &Grid,
+    obstacle_from: usize,
+    checkpoints: &[[f64; 3]],
+    cycle_ms: u32,
+    params: HubParams,
+) -> (MapHeader, Vec<MapItem>) {
+    let mut items = Vec::new();
+    let item = |kind, index: usize, a, b, c| MapItem { kind, index: index as u32, a, b, c };
+    for (i, w) in lab.walls.iter().enumerate() {
+        let obstacle = if i >= obstacle_from { 1.0 } else { 0.0 };
+        items.push(item(MAP_WALL, i, w.height_m, w.corners.len() as f64, obstacle));
+        for c in &w.corners {
+            items.push(item(MAP_CORNER, i, c.x, c.y, 0.0));
+        }
+    }
+    for (i, b) in lab.beacons.iter().enumerate() {
+        items.push(item(MAP_BEACON, i, b.pos.x, b.pos.y, b.height_m));
+    }
+    for (i, t) in lab.targets.iter().enumerate() {
+        items.push(item(MAP_TARGET, i, t.pos.x, t.pos.y, t.radius_m));
+    }
+    for (i, p) in grid.poses.iter().enumerate() {
+        items.push(item(MAP_GRID, i, p.pos.x, p.pos.y, p.heading_deg));
+    }
+    for (i, [x, y, r]) in checkpoints.iter().enumerate() {
+        items.push(item(MAP_CHECKPOINT, i, *x, *y, *r));
+    }
+    let header = MapHeader {
+        width_m: lab.width_m,
+        height_m: lab.height_m,
+        item_count: items.len() as u32,
+        wall_count: lab.walls.len() as u32,
+        beacon_count: lab.beacons.len() as u32,
+        target_count: lab.targets.len() as u32,
+        grid_count: grid.poses.len() as u32,
+        cycle_ms,
+        name: FixedName::new(&lab.name).unwrap_or(FixedName::EMPTY),
+        params,
+    };
+    (header, items)
 }
 
 #[cfg(test)]

@@ -72,24 +72,8 @@ pub enum HubError {
     Ipc(String),
 }
 
-/// How a hub run ended.
-#[derive(Debug, Clone, PartialEq)]
-pub struct HubOutcome {
-    /// Ticks stepped.
-    pub ticks: u64,
-    /// The world's state hash at the end.
-    pub state_hash: u64,
-    /// Agents that said hello.
-    pub agents_seen: usize,
-    /// Agents noticed dead (their robots were frozen).
-    pub agents_died: usize,
-    /// Stopped by SIGINT/SIGTERM.
-    pub interrupted: bool,
-    /// Wall-clock seconds from the first step to the end of the run.
-    pub run_s: f64,
-    /// Robots at the end: (id, x, y, heading in degrees, flags).
-    pub robots: Vec<(u32, f64, f64, f64, u32)>,
-}
+/// How a hub run ended: the type `iwsim hub --json` prints, defined once with its JSON form.
+pub use records::outcome::{HubOutcome, RobotAtEnd, StateHash};
 
 fn ipc<E: std::fmt::Debug>(what: &str) -> impl FnOnce(E) -> HubError + '_ {
     move |e| HubError::Ipc(format!("{what}: {e:?}"))
@@ -205,15 +189,7 @@ pub fn run(cfg: HubConfig) -> Result<HubOutcome, HubError> {
 
     let hub_pid = std::process::id();
     let mut agents: BTreeMap<u32, AgentPorts> = BTreeMap::new();
-    let mut outcome = HubOutcome {
-        ticks: 0,
-        state_hash: 0,
-        agents_seen: 0,
-        agents_died: 0,
-        interrupted: false,
-        run_s: 0.0,
-        robots: vec![],
-    };
+    let mut outcome = HubOutcome::default();
     let mut first_step: Option<Instant> = None;
     let mut states: Vec<RobotState> = Vec::new();
     let mut blocks: Vec<SensorBlock> = Vec::new();
@@ -476,8 +452,11 @@ pub fn run(cfg: HubConfig) -> Result<HubOutcome, HubError> {
     }
     outcome.ticks = core.world().tick();
     outcome.run_s = first_step.map_or(0.0, |t| t.elapsed().as_secs_f64());
-    outcome.state_hash = core.world().state_hash();
-    outcome.robots = core.robot_states().map(|s| (s.id, s.x_m, s.y_m, s.heading_deg, s.flags)).collect();
+    outcome.state_hash = StateHash(core.world().state_hash());
+    outcome.robots = core
+        .robot_states()
+        .map(|s| RobotAtEnd { id: s.id, x_m: s.x_m, y_m: s.y_m, heading_deg: s.heading_deg, flags: s.flags })
+        .collect();
     drop((agents, world_pub, map_pub, roster, actions_sub, register_server, control_server, tick_notifier, doorbell));
     drop((world_svc, map_svc, sensors_svc, actions_svc, register_svc, control_svc, tick_svc, doorbell_svc, node));
     session.release_if_unused();
@@ -539,7 +518,7 @@ fn publish_tick(
         };
         let mut sample = sample.write_from_slice(blocks);
         // Stamped last, so the latency figure starts at the send itself.
-        sample.user_header_mut().t_pub_ns = ipc_types::monotonic_ns();
+        sample.user_header_mut().t_pub_ns = ipc_services::monotonic_ns();
         sample.send().map_err(ipc("send sensor blocks"))?;
     }
     Ok(())

@@ -23,7 +23,7 @@ use iceoryx2::prelude::{AllocationStrategy, NodeName, SemanticString, ServiceNam
 use iceoryx2::service::ipc;
 use iceoryx2::service::port_factory::{event, publish_subscribe, request_response};
 use ipc_types::{
-    ActionBlock, ActionHeader, ControlRequest, ControlResponse, MAX_AGENTS, MapHeader, MapItem, RegisterRequest,
+    ActionBlock, ActionHeader, ControlRequest, ControlResponse, MAX_AGENTS, MapHeader, MapItem, Ping, RegisterRequest,
     RegisterResponse, RobotSensors, RobotState, SensorBlock, TickHeader, WorldHeader, service,
 };
 
@@ -47,6 +47,24 @@ pub type RegisterService = request_response::PortFactory<Svc, RegisterRequest, (
 pub type ControlService = request_response::PortFactory<Svc, ControlRequest, (), ControlResponse, ()>;
 /// A doorbell.
 pub type EventService = event::PortFactory<Svc>;
+/// The latency benchmark's pings, driver to peer.
+pub type PingService = publish_subscribe::PortFactory<Svc, Ping, ()>;
+/// The latency benchmark's pongs (the ping's `seq`), peer to driver.
+pub type PongService = publish_subscribe::PortFactory<Svc, u64, ()>;
+
+/// The four services of `iwsim bench latency`'s raw iceoryx2 ping-pong, the baseline the
+/// hub's latency is compared with: what a bare publish + notify costs, with no hub between.
+#[derive(Debug)]
+pub struct RawPingPong {
+    /// Pings, driver to peer.
+    pub ping: PingService,
+    /// The peer's doorbell.
+    pub ping_event: EventService,
+    /// Pongs, peer to driver.
+    pub pong: PongService,
+    /// The driver's doorbell.
+    pub pong_event: EventService,
+}
 
 /// Extra processes, beyond agents, that may attach to a session (viewers, bridges, CLI).
 pub const MAX_OBSERVERS: usize = 16;
@@ -313,6 +331,30 @@ impl Session {
         self.event(node, role, service::ACTIONS, MAX_AGENTS + MAX_OBSERVERS, 1)
     }
 
+    /// The raw ping-pong of `iwsim bench latency`: the driver creates it (`Role::Hub`), the
+    /// peer opens it (`Role::Client`). One-deep queues that drop their oldest, and otherwise
+    /// iceoryx2's default limits: it is the plain baseline, not tuned for iwsim.
+    pub fn raw_ping_pong(&self, node: &Node<Svc>, role: Role) -> Result<RawPingPong, ServicesError> {
+        let ping = node
+            .service_builder(&self.iox_name(service::BENCH_PING)?)
+            .publish_subscribe::<Ping>()
+            .subscriber_max_buffer_size(1)
+            .enable_safe_overflow(true);
+        let ping_event = node.service_builder(&self.iox_name(service::BENCH_PING)?).event();
+        let pong = node
+            .service_builder(&self.iox_name(service::BENCH_PONG)?)
+            .publish_subscribe::<u64>()
+            .subscriber_max_buffer_size(1)
+            .enable_safe_overflow(true);
+        let pong_event = node.service_builder(&self.iox_name(service::BENCH_PONG)?).event();
+        Ok(RawPingPong {
+            ping: finish!(self, ping, role, service::BENCH_PING)?,
+            ping_event: finish!(self, ping_event, role, service::BENCH_PING)?,
+            pong: finish!(self, pong, role, service::BENCH_PONG)?,
+            pong_event: finish!(self, pong_event, role, service::BENCH_PONG)?,
+        })
+    }
+
     fn event(
         &self,
         node: &Node<Svc>,
@@ -335,6 +377,9 @@ impl Session {
     /// Called by each process after it dropped its node: when no live node of the session
     /// remains, removes the session's last file (iceoryx2's per-domain node counter), so a
     /// finished run leaves nothing in /dev/shm. Returns whether it was removed.
+    ///
+    /// A process of the session may start between the check and the removal; see
+    /// `remove_node_counter` (private) for why that costs nothing.
     pub fn release_if_unused(&self) -> bool {
         use iceoryx2::node::NodeState;
         let mut live = 0;
@@ -350,13 +395,55 @@ impl Session {
         if live > 0 {
             return false;
         }
-        #[allow(unsafe_code)]
-        // SAFETY: iceoryx2 requires that no other process uses the domain. The domain is this
-        // session's own prefix and no node of it is alive; a process starting this very
-        // instant would recreate the counter on open_or_create.
-        let removed = unsafe { iceoryx2::testing::remove_global_mgmt_segment::<Svc>(&self.config) };
-        removed.unwrap_or(false)
+        remove_node_counter(&self.config)
     }
+}
+
+/// Removes the domain's node counter: the one shared-memory file iceoryx2 0.10 keeps per domain
+/// (`<prefix>…_node.0_10_0.global_mgmt` in /dev/shm, here one domain per session) and never
+/// removes. It holds only a counter that node creation opens, increments into the new node's
+/// id, and closes again. iceoryx2 0.10 (and its main branch) offers no way to remove it other
+/// than `iceoryx2::testing::remove_global_mgmt_segment`, so this function is the only place
+/// that names iceoryx2's `testing` API.
+///
+/// The race: iceoryx2 asks that no other process use the domain while it is removed, and the
+/// caller can check only that no node was alive a moment ago. Another process of the session
+/// (an agent joining as the last one leaves, a hub restarted at once) may start in between.
+/// That loses nothing: no node, port or service holds the counter, and the services' own files
+/// are not touched, so a live session keeps working. A node being created at that instant
+/// either has the counter mapped already (it increments the unlinked copy) or finds it gone and
+/// creates a fresh one; iceoryx2's open-or-create retries either way. A counter that restarts
+/// at zero cannot repeat a node id, which also holds the process id and the creation time. The
+/// worst outcome is a fresh counter file left until that process leaves and cleans up in turn.
+/// `tests::a_live_session_survives_the_counter_removal_of_a_leaving_process` and
+/// `tests::nodes_created_while_the_counter_is_removed_all_start_with_distinct_ids` check this.
+///
+/// Returns whether a counter was there and is now gone; a failed removal is logged and leaves
+/// the file, which costs a few bytes of /dev/shm and nothing else.
+fn remove_node_counter(config: &Config) -> bool {
+    #[allow(unsafe_code)]
+    // SAFETY: iceoryx2's contract is that no other process uses the domain. Callers check that
+    // no node of the session is alive; one that starts after the check can only have opened the
+    // counter, which stays valid for it after the unlink (see the race above).
+    let removed = unsafe { iceoryx2::testing::remove_global_mgmt_segment::<Svc>(config) };
+    removed.unwrap_or_else(|e| {
+        tracing::warn!("could not remove the session's iceoryx2 node counter: {e:?}");
+        false
+    })
+}
+
+/// CLOCK_MONOTONIC in nanoseconds: one clock for every process on the machine, so a
+/// timestamp written by one process (`TickHeader::t_pub_ns`) can be compared by another.
+#[cfg(target_os = "linux")]
+pub fn monotonic_ns() -> u64 {
+    // std's Instant is this clock but opaque; only a raw reading crosses processes.
+    let mut ts = libc::timespec { tv_sec: 0, tv_nsec: 0 };
+    #[allow(unsafe_code)]
+    // SAFETY: clock_gettime writes the timespec we pass, which lives on our stack.
+    unsafe {
+        libc::clock_gettime(libc::CLOCK_MONOTONIC, &mut ts);
+    }
+    ts.tv_sec as u64 * 1_000_000_000 + ts.tv_nsec as u64
 }
 
 /// Allocation for slice publishers: start small and grow by powers of two, so a hub with ten
@@ -382,6 +469,179 @@ pub fn clean_dead_nodes(session: &Session) -> usize {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use std::collections::HashSet;
+    use std::sync::atomic::{AtomicBool, Ordering};
+    use std::time::{Duration, Instant};
+
+    /// A session no other test (or run of this test binary) shares.
+    fn unique_session(tag: &str) -> Session {
+        Session::new(&format!("ipc-services-test-{tag}-{}", std::process::id())).expect("a valid session name")
+    }
+
+    /// Releases the session when dropped, last of a test's locals, so a failing test leaves
+    /// nothing behind either.
+    struct ReleaseOnDrop(Session);
+
+    impl Drop for ReleaseOnDrop {
+        fn drop(&mut self) {
+            self.0.release_if_unused();
+        }
+    }
+
+    /// The session's files in /dev/shm.
+    fn shm_files_of(session: &Session) -> Vec<String> {
+        let prefix = Session::prefix_of(session.name());
+        std::fs::read_dir("/dev/shm")
+            .expect("/dev/shm is readable")
+            .filter_map(|e| e.ok()?.file_name().into_string().ok())
+            .filter(|name| name.starts_with(&prefix))
+            .collect()
+    }
+
+    /// The hub's side of a session: its node, world and tick services, publisher and notifier.
+    struct TestHub {
+        publisher: iceoryx2::port::publisher::Publisher<Svc, [RobotState], WorldHeader>,
+        notifier: iceoryx2::port::notifier::Notifier<Svc>,
+        _world: WorldService,
+        _tick: EventService,
+        node: Node<Svc>,
+    }
+
+    impl TestHub {
+        fn start(session: &Session) -> Self {
+            let node = session.node("hub").expect("a hub node");
+            let world = session.world(&node, Role::Hub).expect("the hub creates the world");
+            let tick = session.tick_event(&node, Role::Hub).expect("the hub creates the doorbell");
+            let publisher = world
+                .publisher_builder()
+                .initial_max_slice_len(1)
+                .allocation_strategy(SLICE_ALLOCATION)
+                .create()
+                .expect("a publisher");
+            let notifier = tick.notifier_builder().create().expect("a notifier");
+            Self { publisher, notifier, _world: world, _tick: tick, node }
+        }
+
+        /// Publishes the world snapshot of tick `n` and rings the tick doorbell.
+        fn publish_tick(&self, n: u64) {
+            let sample = self.publisher.loan_slice_uninit(1).expect("a sample");
+            let mut sample = sample.write_from_fn(|_| <RobotState as bytemuck::Zeroable>::zeroed());
+            *sample.user_header_mut() = WorldHeader { tick: n, ..WorldHeader::default() };
+            sample.send().expect("sent");
+            self.notifier.notify().expect("rung");
+        }
+    }
+
+    /// In a thread of its own (as another process would be): a client node opens the world and
+    /// tick services, says it is ready, and waits for the snapshot of tick `n`. Returns its
+    /// node's id.
+    fn client_waiting_for_tick(
+        session: Session,
+        n: u64,
+        ready: std::sync::mpsc::Sender<()>,
+    ) -> std::thread::JoinHandle<iceoryx2::identifiers::UniqueNodeId> {
+        std::thread::spawn(move || {
+            let node = session.node("client").expect("a client node after the removal");
+            let world = session.world(&node, Role::Client).expect("the hub's world service still opens");
+            let tick = session.tick_event(&node, Role::Client).expect("the hub's tick event still opens");
+            let subscriber = world.subscriber_builder().create().expect("a subscriber");
+            let listener = tick.listener_builder().create().expect("a listener");
+            ready.send(()).expect("the test waits");
+            let deadline = Instant::now() + Duration::from_secs(10);
+            loop {
+                if let Some(sample) = subscriber.receive().expect("receive")
+                    && sample.user_header().tick == n
+                {
+                    return *node.id();
+                }
+                assert!(Instant::now() < deadline, "the snapshot of tick {n} never arrived");
+                listener.timed_wait(|_| {}, Duration::from_millis(100)).expect("wait");
+            }
+        })
+    }
+
+    #[test]
+    fn a_live_session_survives_the_counter_removal_of_a_leaving_process() {
+        let session = unique_session("survives");
+        let _release = ReleaseOnDrop(session.clone());
+        let hub = TestHub::start(&session);
+
+        // The usual path: a leaving process sees the hub alive and keeps the counter.
+        assert!(!session.release_if_unused());
+        // The race: a leaving process saw no live node just before the hub started, and its
+        // removal runs now, with the hub's services in use.
+        let before = shm_files_of(&session);
+        assert!(remove_node_counter(&session.config), "the counter existed, so the removal ran");
+        let after = shm_files_of(&session);
+        let gone: Vec<_> = before.iter().filter(|f| !after.contains(f)).collect();
+        assert!(
+            gone.len() == 1 && gone[0].contains("global_mgmt") && after.iter().all(|f| before.contains(f)),
+            "the removal takes the counter and nothing else: {before:?} -> {after:?}"
+        );
+
+        let (ready_tx, ready_rx) = std::sync::mpsc::channel();
+        let client = client_waiting_for_tick(session.clone(), 7, ready_tx);
+        ready_rx.recv_timeout(Duration::from_secs(10)).expect("the client connected");
+        hub.publish_tick(7);
+        let client_id = client.join().expect("the client received the hub's snapshot");
+        assert_ne!(client_id, *hub.node.id(), "a fresh counter must not repeat a node id");
+
+        drop(hub);
+        assert!(session.release_if_unused(), "the last process removes the counter the client recreated");
+        assert_eq!(shm_files_of(&session), Vec::<String>::new());
+    }
+
+    #[test]
+    fn nodes_created_while_the_counter_is_removed_all_start_with_distinct_ids() {
+        let session = unique_session("churn");
+        let _release = ReleaseOnDrop(session.clone());
+        let hub = TestHub::start(&session);
+
+        let creators_done = AtomicBool::new(false);
+        let (ids, removals) = std::thread::scope(|scope| {
+            // Removes the counter over and over while nodes are created, and at least once
+            // (after the creators, the counter they made is there to remove).
+            let remover = scope.spawn(|| {
+                let mut removals = 0;
+                while !(creators_done.load(Ordering::Acquire) && removals > 0) {
+                    if remove_node_counter(&session.config) {
+                        removals += 1;
+                    }
+                    std::thread::yield_now();
+                }
+                removals
+            });
+            let creators: Vec<_> = (0..4)
+                .map(|t| {
+                    let session = &session;
+                    scope.spawn(move || {
+                        (0..20)
+                            .map(|i| session.node(&format!("churn-{t}-{i}")).map(|node| *node.id()))
+                            .collect::<Result<Vec<_>, _>>()
+                    })
+                })
+                .collect();
+            let ids: Vec<_> = creators
+                .into_iter()
+                .flat_map(|c| c.join().expect("no panic").expect("every node is created"))
+                .collect();
+            creators_done.store(true, Ordering::Release);
+            (ids, remover.join().expect("no panic"))
+        });
+        assert!(removals > 0);
+        assert_eq!(ids.iter().collect::<HashSet<_>>().len(), 80, "node ids repeat: {ids:?}");
+
+        // The hub's services outlived it all.
+        let (ready_tx, ready_rx) = std::sync::mpsc::channel();
+        let client = client_waiting_for_tick(session.clone(), 3, ready_tx);
+        ready_rx.recv_timeout(Duration::from_secs(10)).expect("the client connected");
+        hub.publish_tick(3);
+        client.join().expect("the client received the hub's snapshot");
+
+        drop(hub);
+        session.release_if_unused();
+        assert_eq!(shm_files_of(&session), Vec::<String>::new());
+    }
 
     #[test]
     fn session_names_are_checked() {

@@ -1,11 +1,16 @@
 //! The fixed-layout types that cross process boundaries in iwsim: world snapshots, per-robot
-//! sensor blocks, actions, registration, run control and the map, as iceoryx2 zero-copy
-//! payloads.
+//! sensor blocks, actions, registration, run control, the map, and the latency benchmark's
+//! ping, as iceoryx2 zero-copy payloads.
 //!
 //! Every type is `#[repr(C)]`, made of fixed-width scalars and fixed arrays, has an explicit
 //! versioned iceoryx2 type name, spells its padding out as `_reserved` (bytemuck's `Pod`
-//! derive refuses hidden padding), and has its size asserted at compile time. Units are SI and
-//! degrees, as on every iwsim wire; the unit is in the field name where it is not obvious.
+//! derive refuses hidden padding), and has its size and alignment asserted at compile time
+//! (processes built apart map the same bytes, so a layout may change only together with its
+//! versioned type name, never by accident). Units are SI and degrees, as on every iwsim wire;
+//! the unit is in the field name where it is not obvious.
+//!
+//! The crate is `no_std` and free of iceoryx2 proper and of any clock: the services and
+//! `monotonic_ns` live in `ipc-services`.
 //!
 //! ```
 //! use ipc_types::{FixedName, RobotRegistration, RobotKind};
@@ -59,6 +64,12 @@ pub mod service {
     /// Every robot's proximity-sensor geometry (pub/sub with history, slice of
     /// [`crate::RobotSensors`]), republished when the set of robots changes.
     pub const ROBOT_SENSORS: &str = "robot-sensors";
+    /// `iwsim bench latency`'s raw ping-pong, driver to peer: pub/sub of [`crate::Ping`], and
+    /// its doorbell (event) under the same name.
+    pub const BENCH_PING: &str = "ping";
+    /// `iwsim bench latency`'s raw ping-pong, peer to driver: pub/sub of the ping's `seq` as
+    /// `u64`, and its doorbell (event) under the same name.
+    pub const BENCH_PONG: &str = "pong";
 }
 
 /// A name in a fixed buffer: UTF-8, zero-padded, at most `NAME_BYTES − 1` bytes.
@@ -70,6 +81,7 @@ pub struct FixedName {
     pub bytes: [u8; NAME_BYTES],
 }
 const _: () = assert!(core::mem::size_of::<FixedName>() == 32);
+const _: () = assert!(core::mem::align_of::<FixedName>() == 1);
 
 impl FixedName {
     /// The empty name.
@@ -177,6 +189,7 @@ pub struct WorldHeader {
     pub lockstep: u32,
 }
 const _: () = assert!(core::mem::size_of::<WorldHeader>() == 40);
+const _: () = assert!(core::mem::align_of::<WorldHeader>() == 8);
 
 /// `RobotState::flags`: the last move was refused (or a Real robot overlaps something).
 pub const ROBOT_COLLISION: u32 = 1;
@@ -221,6 +234,7 @@ pub struct RobotState {
     pub proximity_m: [f32; MAX_PROXIMITY],
 }
 const _: () = assert!(core::mem::size_of::<RobotState>() == 128);
+const _: () = assert!(core::mem::align_of::<RobotState>() == 8);
 
 /// One proximity sensor's geometry, as viewers draw it.
 #[repr(C)]
@@ -238,6 +252,8 @@ pub struct SensorGeometry {
     /// Readings are capped at this distance, metres.
     pub range_m: f32,
 }
+const _: () = assert!(core::mem::size_of::<SensorGeometry>() == 20);
+const _: () = assert!(core::mem::align_of::<SensorGeometry>() == 4);
 
 /// A robot's proximity sensors. The hub publishes every robot's, with history, whenever the
 /// set of robots changes, so the world snapshot stays small.
@@ -253,6 +269,7 @@ pub struct RobotSensors {
     pub sensors: [SensorGeometry; MAX_PROXIMITY],
 }
 const _: () = assert!(core::mem::size_of::<RobotSensors>() == 168);
+const _: () = assert!(core::mem::align_of::<RobotSensors>() == 4);
 
 /// `SensorBlock::present`: compass reading present.
 pub const HAS_COMPASS: u32 = 1;
@@ -275,6 +292,8 @@ pub struct InboxEntry {
     /// Length in bytes.
     pub len: u16,
 }
+const _: () = assert!(core::mem::size_of::<InboxEntry>() == 8);
+const _: () = assert!(core::mem::align_of::<InboxEntry>() == 4);
 
 /// One robot's sensor readings for one tick.
 #[repr(C)]
@@ -321,6 +340,7 @@ pub struct SensorBlock {
     pub inbox_bytes: [u8; INBOX_BYTES],
 }
 const _: () = assert!(core::mem::size_of::<SensorBlock>() == 832);
+const _: () = assert!(core::mem::align_of::<SensorBlock>() == 8);
 
 impl SensorBlock {
     /// The messages heard: (speaker id, bytes).
@@ -349,20 +369,7 @@ pub struct TickHeader {
     pub t_pub_ns: u64,
 }
 const _: () = assert!(core::mem::size_of::<TickHeader>() == 32);
-
-/// CLOCK_MONOTONIC in nanoseconds: one clock for every process on the machine, so a
-/// timestamp written by one process can be compared by another.
-#[cfg(target_os = "linux")]
-pub fn monotonic_ns() -> u64 {
-    // std's Instant is this clock but opaque; only a raw reading crosses processes.
-    let mut ts = libc::timespec { tv_sec: 0, tv_nsec: 0 };
-    #[allow(unsafe_code)]
-    // SAFETY: clock_gettime writes the timespec we pass, which lives on our stack.
-    unsafe {
-        libc::clock_gettime(libc::CLOCK_MONOTONIC, &mut ts);
-    }
-    ts.tv_sec as u64 * 1_000_000_000 + ts.tv_nsec as u64
-}
+const _: () = assert!(core::mem::align_of::<TickHeader>() == 8);
 
 /// `ActionBlock::flags`: set the motor powers.
 pub const ACT_MOTORS: u32 = 1;
@@ -400,6 +407,7 @@ pub struct ActionBlock {
     pub _reserved: [u8; 4],
 }
 const _: () = assert!(core::mem::size_of::<ActionBlock>() == 160);
+const _: () = assert!(core::mem::align_of::<ActionBlock>() == 8);
 
 impl ActionBlock {
     /// Motor powers for a robot.
@@ -437,6 +445,7 @@ pub struct ActionHeader {
     pub count: u32,
 }
 const _: () = assert!(core::mem::size_of::<ActionHeader>() == 16);
+const _: () = assert!(core::mem::align_of::<ActionHeader>() == 8);
 
 /// One proximity sensor at registration (thesis Table 4.4).
 #[repr(C)]
@@ -454,6 +463,8 @@ pub struct SensorSpec {
     /// Range, metres; 0 takes the hub's default.
     pub range_m: f64,
 }
+const _: () = assert!(core::mem::size_of::<SensorSpec>() == 40);
+const _: () = assert!(core::mem::align_of::<SensorSpec>() == 8);
 
 /// `RobotRegistration::flags`: the registration gives a start pose (else the grid slot's).
 pub const REG_HAS_POSE: u32 = 1;
@@ -489,6 +500,7 @@ pub struct RobotRegistration {
     pub name: FixedName,
 }
 const _: () = assert!(core::mem::size_of::<RobotRegistration>() == 432);
+const _: () = assert!(core::mem::align_of::<RobotRegistration>() == 8);
 
 impl RobotRegistration {
     /// A simulated robot with the thesis defaults (1 m × 1 m, COM 0.5, 0.5 m/s, curve 0.5),
@@ -528,6 +540,7 @@ pub struct RegisterRequest {
     pub robot: RobotRegistration,
 }
 const _: () = assert!(core::mem::size_of::<RegisterRequest>() == 448);
+const _: () = assert!(core::mem::align_of::<RegisterRequest>() == 8);
 
 /// What a register request asks for.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -619,6 +632,7 @@ pub struct RegisterResponse {
     pub detail: [u8; 64],
 }
 const _: () = assert!(core::mem::size_of::<RegisterResponse>() == 88);
+const _: () = assert!(core::mem::align_of::<RegisterResponse>() == 4);
 
 impl RegisterResponse {
     /// The detail text (empty when accepted).
@@ -678,6 +692,8 @@ pub struct ControlRequest {
     /// Robot for `RemoveRobot`.
     pub robot_id: u32,
 }
+const _: () = assert!(core::mem::size_of::<ControlRequest>() == 8);
+const _: () = assert!(core::mem::align_of::<ControlRequest>() == 4);
 
 /// The hub's answer to a control request.
 #[repr(C)]
@@ -691,6 +707,8 @@ pub struct ControlResponse {
     /// The tick after the command.
     pub tick: u64,
 }
+const _: () = assert!(core::mem::size_of::<ControlResponse>() == 16);
+const _: () = assert!(core::mem::align_of::<ControlResponse>() == 8);
 
 /// The run's parameters as the hub has them (the UDP bridge reports them to Ciber-Rato
 /// clients in its registration reply).
@@ -733,6 +751,7 @@ pub struct HubParams {
     pub encoder_ticks_per_m: f64,
 }
 const _: () = assert!(core::mem::size_of::<HubParams>() == 120);
+const _: () = assert!(core::mem::align_of::<HubParams>() == 8);
 
 /// `HubParams` sensor bit: GPS.
 pub const SENSOR_GPS: u32 = 1;
@@ -774,6 +793,7 @@ pub struct MapHeader {
     pub params: HubParams,
 }
 const _: () = assert!(core::mem::size_of::<MapHeader>() == 192);
+const _: () = assert!(core::mem::align_of::<MapHeader>() == 8);
 
 /// `MapItem::kind`: a wall starts; `a` = height in metres, `b` = corner count, `c` = 1 for a
 /// scenario's obstacle (a static body placed by the run, not part of the map file), else 0;
@@ -808,6 +828,28 @@ pub struct MapItem {
     pub c: f64,
 }
 const _: () = assert!(core::mem::size_of::<MapItem>() == 32);
+const _: () = assert!(core::mem::align_of::<MapItem>() == 8);
+
+/// Bytes of a [`Ping`] after its header, so a ping is as large as a [`SensorBlock`].
+pub const PING_PAYLOAD_BYTES: usize = 816;
+
+/// The sample of `iwsim bench latency`'s raw iceoryx2 ping-pong, the baseline the hub's
+/// latency is compared with. Only the benchmark sends it; it is as large as a sensor block so
+/// both measurements move the same bytes.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Pod, Zeroable, ZeroCopySend)]
+#[type_name("iwsim::bench::Ping.v1")]
+pub struct Ping {
+    /// Sequence number; the peer answers with it.
+    pub seq: u64,
+    /// CLOCK_MONOTONIC nanoseconds when the driver published the ping.
+    pub t_pub_ns: u64,
+    /// Filler.
+    pub payload: [u8; PING_PAYLOAD_BYTES],
+}
+const _: () = assert!(core::mem::size_of::<Ping>() == 832);
+const _: () = assert!(core::mem::align_of::<Ping>() == 8);
+const _: () = assert!(core::mem::size_of::<Ping>() == core::mem::size_of::<SensorBlock>());
 
 /// The iceoryx2 type name of a payload type (as other processes must spell it).
 pub fn type_name_of<T: ZeroCopySend>() -> &'static str {
@@ -833,6 +875,7 @@ mod tests {
         assert_eq!(type_name_of::<ActionBlock>(), "iwsim::ActionBlock.v1");
         assert_eq!(type_name_of::<RegisterRequest>(), "iwsim::RegisterRequest.v1");
         assert_eq!(type_name_of::<MapItem>(), "iwsim::MapItem.v1");
+        assert_eq!(type_name_of::<Ping>(), "iwsim::bench::Ping.v1");
     }
 
     #[test]

@@ -109,15 +109,6 @@ pub fn text(b: &[u8]) -> String {
     String::from_utf8_lossy(b).into_owned()
 }
 
-/// The value of `"key":` in a one-line JSON object (numbers and strings).
-pub fn json_field<'a>(json: &'a str, key: &str) -> &'a str {
-    let k = format!("\"{key}\":");
-    let start = json.find(&k).unwrap_or_else(|| panic!("{key} missing in {json}")) + k.len();
-    let rest = &json[start..];
-    let end = rest.find([',', '}', ']']).unwrap_or(rest.len());
-    rest[..end].trim_matches('"')
-}
-
 /// Connects as an observer (an agent without robots) and waits until the hub's world has
 /// reached `tick`.
 pub fn wait_for_tick(session: &str, tick: u64, timeout: Duration) -> Agent {

@@ -3,10 +3,11 @@
 
 use std::time::{Duration, Instant};
 
-use super::common::{Proc, assert_no_shared_memory_left, json_field, session, text, wait_for_tick};
+use super::common::{Proc, assert_no_shared_memory_left, session, text, wait_for_tick};
 
 use agent_sdk::{Agent, AgentError, control};
 use ipc_types::{Command as Cmd, REG_HAS_POSE, ROBOT_FROZEN, Refusal, RobotRegistration};
+use records::outcome::{HubOutcome, StateHash};
 use world::map::{NoiseParams, Params, builtin};
 use world::{Action, RobotSpec, World};
 
@@ -30,6 +31,7 @@ fn an_agent_drives_and_the_hubs_pose_matches_the_world_model() {
     let json = text(&out.stdout);
     assert!(out.status.success(), "{json}{}", text(&out.stderr));
     assert!(agent.wait(Duration::from_secs(10)).status.success());
+    let outcome = HubOutcome::from_stdout(&json).expect("the hub's JSON line");
 
     // The same robot and actions stepped in this process.
     let map = builtin::map("liacc").expect("built in");
@@ -39,10 +41,11 @@ fn an_agent_drives_and_the_hubs_pose_matches_the_world_model() {
         world.step(&[Action::motors(r, 1.0, 0.6)], 0.1);
     }
     let pose = world.robot(r).expect("alive").pose;
-    assert_eq!(json_field(&json, "ticks"), "40");
-    assert_eq!(json_field(&json, "x_m").parse::<f64>().expect("number"), pose.x, "{json}");
-    assert_eq!(json_field(&json, "y_m").parse::<f64>().expect("number"), pose.y, "{json}");
-    assert_eq!(json_field(&json, "state_hash"), format!("{:016x}", world.state_hash()));
+    assert_eq!(outcome.ticks, 40);
+    assert_eq!((outcome.robots.len(), outcome.robots[0].x_m, outcome.robots[0].y_m), (1, pose.x, pose.y), "{json}");
+    assert_eq!(outcome.state_hash, StateHash(world.state_hash()));
+    // Compared by eye across runs and machines: 16 hex digits, as a string.
+    assert!(json.contains(&format!("\"state_hash\":\"{:016x}\"", world.state_hash())), "{json}");
 }
 
 fn lockstep_hash(seed: u64) -> String {
@@ -66,9 +69,9 @@ fn lockstep_hash(seed: u64) -> String {
     assert!(out.status.success(), "{}", text(&out.stderr));
     assert!(a.wait(Duration::from_secs(10)).status.success());
     assert!(b.wait(Duration::from_secs(10)).status.success());
-    let json = text(&out.stdout);
-    assert_eq!(json_field(&json, "ticks"), "60");
-    json_field(&json, "state_hash").to_owned()
+    let outcome = HubOutcome::from_stdout(&text(&out.stdout)).expect("the hub's JSON line");
+    assert_eq!(outcome.ticks, 60);
+    outcome.state_hash.to_string()
 }
 
 #[test]
@@ -109,7 +112,7 @@ fn a_killed_agent_is_frozen_and_flagged_and_the_run_goes_on() {
     let out = hub.wait(Duration::from_secs(10));
     let json = text(&out.stdout);
     assert!(out.status.success(), "{json}{}", text(&out.stderr));
-    assert_eq!(json_field(&json, "agents_died"), "1");
+    assert_eq!(HubOutcome::from_stdout(&json).expect("the hub's JSON line").agents_died, 1);
     assert!(a.wait(Duration::from_secs(10)).status.success());
 }
 
@@ -156,8 +159,10 @@ fn two_sessions_side_by_side_do_not_interfere() {
     let g2 = Proc::spawn(&["agent", "wheelchair", "--session", &s2, "--pose", "10,6.1,0", "--powers", "-1,-1"]);
     let (o1, o2) = (h1.wait(Duration::from_secs(30)), h2.wait(Duration::from_secs(30)));
     let (j1, j2) = (text(&o1.stdout), text(&o2.stdout));
-    assert_eq!((json_field(&j1, "agents_seen"), json_field(&j2, "agents_seen")), ("1", "1"));
-    let (x1, x2): (f64, f64) = (json_field(&j1, "x_m").parse().expect("x"), json_field(&j2, "x_m").parse().expect("x"));
+    let outcome = |j: &str| HubOutcome::from_stdout(j).unwrap_or_else(|e| panic!("{e}: {j}"));
+    let (o1, o2) = (outcome(&j1), outcome(&j2));
+    assert_eq!((o1.agents_seen, o2.agents_seen), (1, 1));
+    let (x1, x2) = (o1.robots[0].x_m, o2.robots[0].x_m);
     assert!(x1 > 10.5 && x2 < 9.9 || x2 < 10.0, "forward in one, backward in the other: {x1} {x2}");
     assert!(x1 > 10.5, "{j1}");
     assert!(g1.wait(Duration::from_secs(10)).status.success());
@@ -260,7 +265,7 @@ fn a_hung_agent_is_stepped_past_at_the_deadline_and_flagged_lagging() {
     assert_eq!(control(&s, Cmd::Stop, 0).expect("hub answers").status, 0);
     let out = hub.wait(Duration::from_secs(10));
     assert!(out.status.success(), "{}", text(&out.stderr));
-    assert_eq!(json_field(&text(&out.stdout), "agents_died"), "0");
+    assert_eq!(HubOutcome::from_stdout(&text(&out.stdout)).expect("the hub's JSON line").agents_died, 0);
     assert!(a.wait(Duration::from_secs(10)).status.success());
     let b_out = b.wait(Duration::from_secs(10));
     assert!(b_out.status.success(), "{}", text(&b_out.stderr));

@@ -1,5 +1,6 @@
 //! End-to-end tests: the `iwsim` binary in real processes, talking over real shared memory.
 
+mod architecture;
 mod browser;
 mod cli;
 mod common;

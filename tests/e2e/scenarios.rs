@@ -6,6 +6,7 @@ use std::time::Duration;
 
 use agent_sdk::{Agent, Wait};
 use ipc_types::{ActionBlock, REG_HAS_POSE, RobotKind, RobotRegistration};
+use records::summary::{RobotSummary, RunSummary};
 
 use super::common::{Proc, session, text};
 
@@ -19,18 +20,12 @@ fn iwsim(args: &[&str], timeout: Duration) -> (bool, String, String) {
     (out.status.success(), text(&out.stdout), text(&out.stderr))
 }
 
-fn summary(dir: &Path) -> serde_json::Value {
-    let s = std::fs::read_to_string(dir.join("summary.json")).expect("summary.json written");
-    serde_json::from_str(&s).expect("summary.json is JSON")
+fn summary(dir: &Path) -> RunSummary {
+    RunSummary::read(&dir.join("summary.json")).unwrap_or_else(|e| panic!("{e}"))
 }
 
-fn robot<'a>(summary: &'a serde_json::Value, name: &str) -> &'a serde_json::Value {
-    summary["robots"]
-        .as_array()
-        .expect("robots")
-        .iter()
-        .find(|r| r["name"] == name)
-        .unwrap_or_else(|| panic!("{name} in {summary}"))
+fn robot<'a>(summary: &'a RunSummary, name: &str) -> &'a RobotSummary {
+    summary.robots.iter().find(|r| r.name == name).unwrap_or_else(|| panic!("{name} in {summary:?}"))
 }
 
 #[test]
@@ -44,14 +39,16 @@ fn builtin_dynamics_reports_the_thesis_top_speed_and_rise_time() {
     assert!(out.contains("expected outcome: PASS"), "{out}");
     let s = summary(&dir);
     let c = robot(&s, "chair1");
-    let top = c["top_speed_mps"].as_f64().expect("top speed");
+    let top = c.top_speed_mps;
     assert!((top - 0.49).abs() <= 0.0049, "top speed {top} within 1 % of 0.49");
-    assert_eq!(c["rise_time_s"].as_f64(), Some(1.2), "{c}");
-    assert_eq!(c["collisions"], 0);
-    // The log has one line per tick with the units in the header.
+    assert_eq!(c.rise_time_s, 1.2, "{c:?}");
+    assert_eq!(c.collisions, 0);
+    // The log has one line per tick with the units in the header: ticks 0 to 99 answered, and
+    // tick 100, where the 10 s run ends.
     let log = std::fs::read_to_string(dir.join("chair1.csv")).expect("log");
     assert!(log.starts_with("tick,time_s,encoder_left_ticks,encoder_right_ticks,proximity0_m"), "{log}");
-    assert_eq!(log.lines().count(), 1 + 100);
+    assert_eq!(log.lines().count(), 1 + 101);
+    assert!(log.lines().last().is_some_and(|l| l.starts_with("100,10.000,")), "{log}");
     let _ = std::fs::remove_dir_all(dir);
 }
 
@@ -66,10 +63,10 @@ fn builtin_door_lets_the_chair_through_for_every_seed() {
     assert!(out.contains("success rate 3/3 (100 %)") && out.contains("collisions 0 in all"), "{out}");
     for seed in 1..=3 {
         let s = summary(&dir.join(format!("seed-{seed}")));
-        assert_eq!(s["passed"], true, "{s}");
-        assert_eq!(robot(&s, "chair1")["checkpoints_reached"], 1);
+        assert!(s.passed && s.failures.is_empty(), "{s:?}");
+        assert_eq!(robot(&s, "chair1").checkpoints_reached, 1);
         // Shut again at the end: the leaf back across the doorway.
-        let h = robot(&s, "door1")["final_pose"][2].as_f64().expect("heading");
+        let h = robot(&s, "door1").final_pose[2];
         assert!((h - 90.0).abs() < 1.5, "door heading {h}");
     }
     let _ = std::fs::remove_dir_all(dir);
@@ -98,7 +95,7 @@ fn the_same_seed_in_lock_step_gives_the_same_run() {
             assert!(ok, "{out}\n{err}");
         }
         let (sa, sb) = (summary(&a), summary(&b));
-        assert_eq!(sa["state_hash"], sb["state_hash"], "{scenario}");
+        assert_eq!(sa.state_hash, sb.state_hash, "{scenario}");
         for log in logs {
             assert_eq!(
                 std::fs::read(a.join(log)).expect("log a"),
@@ -274,7 +271,7 @@ fn builtin_slalom_reaches_checkpoint_2_without_contact_for_three_seeds_with_nois
     for seed in 1..=3 {
         let s = summary(&dir.join(format!("seed-{seed}")));
         let c = robot(&s, "chair1");
-        assert_eq!((c["checkpoints_reached"].as_u64(), c["collisions"].as_u64()), (Some(2), Some(0)), "{c}");
+        assert_eq!((c.checkpoints_reached, c.collisions), (2, 0), "{c:?}");
         // It went round obstacle A below it and B above it: between x 17 and 17.6 it was
         // under y 6.1, between 19.4 and 20 above 5.9 (the log has every tick).
         let track = trajectory(&dir.join(format!("seed-{seed}/chair1.csv")));
@@ -306,7 +303,7 @@ fn builtin_corridor_swap_both_chairs_pass_each_other_without_contact_for_two_see
         let s = summary(&run);
         for name in ["chair1", "chair2"] {
             let c = robot(&s, name);
-            assert_eq!((c["checkpoints_reached"].as_u64(), c["collisions"].as_u64()), (Some(1), Some(0)), "{c}");
+            assert_eq!((c.checkpoints_reached, c.collisions), (1, 0), "{c:?}");
         }
         // They went by each other side by side: chair2, which yields (its name sorts last),
         // had pulled over to its right (north) and stood still while chair1 went by south

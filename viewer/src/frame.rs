@@ -11,11 +11,8 @@
 
 use std::fmt::Write as _;
 
-use agent_sdk::MapData;
-use ipc_types::{
-    MAP_BEACON, MAP_CHECKPOINT, MAP_CORNER, MAP_GRID, MAP_TARGET, MAP_WALL, MAX_PROXIMITY, RobotSensors, RobotState,
-    WorldHeader,
-};
+use agent_sdk::map::{Circle, Map};
+use ipc_types::{MAX_PROXIMITY, RobotSensors, RobotState, WorldHeader};
 
 /// Frame magic.
 pub const MAGIC: &[u8; 4] = b"IWVF";
@@ -149,43 +146,28 @@ pub fn json_str(s: &str) -> String {
 }
 
 /// The map as the JSON text message a page gets first.
-pub fn map_json(map: &MapData) -> String {
-    let h = &map.header;
-    /// Height, whether a scenario obstacle, corners.
-    type WallItems = (f64, bool, Vec<(f64, f64)>);
-    let mut walls: Vec<WallItems> = Vec::new();
-    let (mut beacons, mut targets, mut grid, mut checkpoints) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
-    for i in &map.items {
-        match i.kind {
-            MAP_WALL => walls.push((i.a, i.c == 1.0, Vec::new())),
-            MAP_CORNER => {
-                if let Some(w) = walls.last_mut() {
-                    w.2.push((i.a, i.b));
-                }
-            }
-            MAP_CHECKPOINT => checkpoints.push(format!("[{},{},{}]", i.a, i.b, i.c)),
-            MAP_BEACON => beacons.push(format!("[{},{},{}]", i.a, i.b, i.c)),
-            MAP_TARGET => targets.push(format!("[{},{},{}]", i.a, i.b, i.c)),
-            MAP_GRID => grid.push(format!("[{},{},{}]", i.a, i.b, i.c)),
-            _ => {}
-        }
-    }
-    let walls: Vec<String> = walls
+pub fn map_json(map: &Map) -> String {
+    let triple = |a: f64, b: f64, c: f64| format!("[{a},{b},{c}]");
+    let circles = |cs: &[Circle]| cs.iter().map(|t| triple(t.pos.x, t.pos.y, t.radius_m)).collect::<Vec<_>>();
+    let walls: Vec<String> = map
+        .walls
         .iter()
-        .map(|(height, obstacle, c)| {
-            let pts: Vec<String> = c.iter().map(|(x, y)| format!("[{x},{y}]")).collect();
-            format!("{{\"height\":{height},\"obstacle\":{obstacle},\"corners\":[{}]}}", pts.join(","))
+        .map(|w| {
+            let pts: Vec<String> = w.corners.iter().map(|p| format!("[{},{}]", p.x, p.y)).collect();
+            format!("{{\"height\":{},\"obstacle\":{},\"corners\":[{}]}}", w.height_m, w.obstacle, pts.join(","))
         })
         .collect();
+    let beacons: Vec<String> = map.beacons.iter().map(|b| triple(b.pos.x, b.pos.y, b.height_m)).collect();
+    let grid: Vec<String> = map.grid.iter().map(|g| triple(g.pos.x, g.pos.y, g.heading_deg)).collect();
     format!(
         "{{\"type\":\"map\",\"name\":{},\"width\":{},\"height\":{},\"walls\":[{}],\"beacons\":[{}],\"targets\":[{}],\"checkpoints\":[{}],\"grid\":[{}]}}",
-        json_str(h.name.as_str().unwrap_or("")),
-        h.width_m,
-        h.height_m,
+        json_str(&map.name),
+        map.width_m,
+        map.height_m,
         walls.join(","),
         beacons.join(","),
-        targets.join(","),
-        checkpoints.join(","),
+        circles(&map.targets).join(","),
+        circles(&map.checkpoints).join(","),
         grid.join(",")
     )
 }
@@ -272,6 +254,43 @@ mod tests {
         assert_eq!(decode(&b), None);
         assert_eq!(decode(b"IWVX"), None);
         assert_eq!(decode(&[]), None);
+    }
+
+    #[test]
+    fn the_map_message_carries_every_item_of_the_hubs_map() {
+        use ipc_types::{MAP_BEACON, MAP_CHECKPOINT, MAP_CORNER, MAP_GRID, MAP_TARGET, MAP_WALL, MapHeader, MapItem};
+        let item = |kind, index, a, b, c| MapItem { kind, index, a, b, c };
+        let mut items = vec![item(MAP_WALL, 0, 2.5, 4.0, 0.0)];
+        for (x, y) in [(1.0, 1.0), (2.0, 1.0), (2.0, 2.0), (1.0, 2.0)] {
+            items.push(item(MAP_CORNER, 0, x, y, 0.0));
+        }
+        items.push(item(MAP_WALL, 1, 1.0, 3.0, 1.0));
+        for (x, y) in [(5.0, 5.0), (6.5, 5.0), (6.0, 6.25)] {
+            items.push(item(MAP_CORNER, 1, x, y, 0.0));
+        }
+        items.push(item(MAP_BEACON, 0, 9.0, 7.0, 2.0));
+        items.push(item(MAP_TARGET, 0, 4.0, 4.0, 0.4));
+        items.push(item(MAP_GRID, 0, 3.0, 3.0, -90.0));
+        items.push(item(MAP_CHECKPOINT, 0, 8.0, 2.0, 0.5));
+        let header = MapHeader {
+            width_m: 10.0,
+            height_m: 7.5,
+            item_count: items.len() as u32,
+            wall_count: 2,
+            beacon_count: 1,
+            target_count: 1,
+            grid_count: 1,
+            name: FixedName::new("lab \"B\"").expect("fits"),
+            ..MapHeader::default()
+        };
+        let map = Map::decode(&header, &items).expect("a valid map");
+        assert_eq!(
+            map_json(&map),
+            "{\"type\":\"map\",\"name\":\"lab \\\"B\\\"\",\"width\":10,\"height\":7.5,\"walls\":[\
+             {\"height\":2.5,\"obstacle\":false,\"corners\":[[1,1],[2,1],[2,2],[1,2]]},\
+             {\"height\":1,\"obstacle\":true,\"corners\":[[5,5],[6.5,5],[6,6.25]]}],\
+             \"beacons\":[[9,7,2]],\"targets\":[[4,4,0.4]],\"checkpoints\":[[8,2,0.5]],\"grid\":[[3,3,-90]]}"
+        );
     }
 
     #[test]

@@ -8,6 +8,7 @@
 
 use std::fmt::Write as _;
 
+use agent_sdk::map::Map;
 use quick_xml::XmlVersion;
 use quick_xml::events::attributes::AttrError;
 use quick_xml::events::{BytesStart, Event};
@@ -646,37 +647,27 @@ pub fn encode_viewer_robot(r: &ViewerRobot) -> Vec<u8> {
     finish(s)
 }
 
-/// The lab as a map viewer wants it.
-#[derive(Debug, Clone, PartialEq, Default)]
-pub struct LabData {
-    /// Name.
-    pub name: String,
-    /// Width, height.
-    pub size: (f64, f64),
-    /// Beacons: x, y, height.
-    pub beacons: Vec<(f64, f64, f64)>,
-    /// Targets: x, y, radius.
-    pub targets: Vec<(f64, f64, f64)>,
-    /// Walls: height and corners.
-    pub walls: Vec<(f64, Vec<(f64, f64)>)>,
-    /// Grid: x, y, dir.
-    pub grid: Vec<(f64, f64, f64)>,
-}
-
-/// `<Lab>` as the simulator sends it to viewers (no border wall, polygons not rows).
-pub fn encode_lab(l: &LabData) -> Vec<u8> {
+/// `<Lab>` as the simulator sends it to viewers (no border wall, polygons not rows). A
+/// scenario's obstacles are sent as walls: a Ciber-Rato viewer has no other way to draw them.
+pub fn encode_lab(map: &Map) -> Vec<u8> {
     let mut s = String::with_capacity(4096);
-    let _ = writeln!(s, "<Lab Name=\"{}\" Height=\"{}\" Width=\"{}\">", xml_escape(&l.name), g(l.size.1), g(l.size.0));
-    for (x, y, h) in &l.beacons {
-        let _ = writeln!(s, "\t<Beacon X=\"{}\" Y=\"{}\" Height=\"{}\"/>", g(*x), g(*y), g(*h));
+    let _ = writeln!(
+        s,
+        "<Lab Name=\"{}\" Height=\"{}\" Width=\"{}\">",
+        xml_escape(&map.name),
+        g(map.height_m),
+        g(map.width_m)
+    );
+    for b in &map.beacons {
+        let _ = writeln!(s, "\t<Beacon X=\"{}\" Y=\"{}\" Height=\"{}\"/>", g(b.pos.x), g(b.pos.y), g(b.height_m));
     }
-    for (x, y, r) in &l.targets {
-        let _ = writeln!(s, "\t<Target X=\"{}\" Y=\"{}\" Radius=\"{}\"/>", g(*x), g(*y), g(*r));
+    for t in &map.targets {
+        let _ = writeln!(s, "\t<Target X=\"{}\" Y=\"{}\" Radius=\"{}\"/>", g(t.pos.x), g(t.pos.y), g(t.radius_m));
     }
-    for (h, corners) in &l.walls {
-        let _ = writeln!(s, "\t<Wall Height=\"{}\">", g(*h));
-        for (x, y) in corners {
-            let _ = writeln!(s, "\t\t<Corner X=\"{}\" Y=\"{}\"/>", g(*x), g(*y));
+    for w in &map.walls {
+        let _ = writeln!(s, "\t<Wall Height=\"{}\">", g(w.height_m));
+        for c in &w.corners {
+            let _ = writeln!(s, "\t\t<Corner X=\"{}\" Y=\"{}\"/>", g(c.x), g(c.y));
         }
         s.push_str("\t</Wall>\n");
     }
@@ -685,10 +676,10 @@ pub fn encode_lab(l: &LabData) -> Vec<u8> {
 }
 
 /// `<Grid>` as the simulator sends it.
-pub fn encode_grid(l: &LabData) -> Vec<u8> {
+pub fn encode_grid(map: &Map) -> Vec<u8> {
     let mut s = String::from("<Grid>\n");
-    for (x, y, d) in &l.grid {
-        let _ = writeln!(s, "\t<Position X=\"{}\" Y=\"{}\" Dir=\"{}\"/>", g(*x), g(*y), g(*d));
+    for p in &map.grid {
+        let _ = writeln!(s, "\t<Position X=\"{}\" Y=\"{}\" Dir=\"{}\"/>", g(p.pos.x), g(p.pos.y), g(p.heading_deg));
     }
     s.push_str("</Grid>");
     finish(s)

@@ -236,13 +236,23 @@ fn viewer_robots_carry_the_intellwheels_body() {
 
 #[test]
 fn lab_and_grid_replies_are_byte_exact() {
-    let l = LabData {
+    use agent_sdk::map::{Beacon, Circle, GridPose, Point, Wall};
+    let l = Map {
         name: "ThesisExampleMap".into(),
-        size: (28.0, 14.0),
-        beacons: vec![(25.0, 7.0, 30.0)],
-        targets: vec![(25.0, 7.0, 1.5)],
-        walls: vec![(2.5, vec![(11.5, 11.5), (11.5, 2.5), (13.5, 2.5)])],
-        grid: vec![(3.0, 11.0, 0.0), (5.0, 7.0, 90.0)],
+        width_m: 28.0,
+        height_m: 14.0,
+        beacons: vec![Beacon { pos: Point::new(25.0, 7.0), height_m: 30.0 }],
+        targets: vec![Circle { pos: Point::new(25.0, 7.0), radius_m: 1.5 }],
+        walls: vec![Wall {
+            height_m: 2.5,
+            corners: vec![Point::new(11.5, 11.5), Point::new(11.5, 2.5), Point::new(13.5, 2.5)],
+            obstacle: false,
+        }],
+        grid: vec![
+            GridPose { pos: Point::new(3.0, 11.0), heading_deg: 0.0 },
+            GridPose { pos: Point::new(5.0, 7.0), heading_deg: 90.0 },
+        ],
+        ..Map::default()
     };
     let want = "<Lab Name=\"ThesisExampleMap\" Height=\"14\" Width=\"28\">\n\t<Beacon X=\"25\" Y=\"7\" Height=\"30\"/>\n\t<Target X=\"25\" Y=\"7\" Radius=\"1.5\"/>\n\t<Wall Height=\"2.5\">\n\t\t<Corner X=\"11.5\" Y=\"11.5\"/>\n\t\t<Corner X=\"11.5\" Y=\"2.5\"/>\n\t\t<Corner X=\"13.5\" Y=\"2.5\"/>\n\t</Wall>\n</Lab>\n\0";
     assert_eq!(text(&encode_lab(&l)), want);

@@ -13,17 +13,15 @@ use std::net::{IpAddr, SocketAddr, UdpSocket};
 use std::os::fd::AsRawFd;
 use std::time::{Duration, Instant};
 
-use agent_sdk::{Agent, AgentError, MapData};
+use agent_sdk::map::Map;
+use agent_sdk::{Agent, AgentError};
 use ipc_types::{
     ACT_MOTORS, ACT_POSE, ActionBlock, COLLISION, Command, HAS_COMPASS, HAS_GPS, HAS_GROUND, LED_END, LED_RETURNING,
-    LED_VISITING, MAP_BEACON, MAP_CORNER, MAP_GRID, MAP_TARGET, MAP_WALL, REG_HAS_POSE, RobotKind, RunState,
-    SENSOR_BEACON, SENSOR_COLLISION, SENSOR_COMPASS, SENSOR_GPS, SENSOR_GROUND, SENSOR_OBSTACLE, SensorBlock,
-    SensorSpec,
+    LED_VISITING, REG_HAS_POSE, RobotKind, RunState, SENSOR_BEACON, SENSOR_COLLISION, SENSOR_COMPASS, SENSOR_GPS,
+    SENSOR_GROUND, SENSOR_OBSTACLE, SensorBlock, SensorSpec,
 };
 
-use crate::codec::{
-    self, Actions, LabData, MeasuresData, Registration, ReplyParams, RobotType, ViewerCommand, ViewerRobot,
-};
+use crate::codec::{self, Actions, MeasuresData, Registration, ReplyParams, RobotType, ViewerCommand, ViewerRobot};
 
 /// Ciber-Rato's motor power limit: powers are clamped to ±0.15 and 0.15 means full power.
 pub const MAX_POWER: f64 = 0.15;
@@ -119,35 +117,7 @@ fn send(socket: &UdpSocket, peer: SocketAddr, datagram: &[u8]) {
     }
 }
 
-/// The Ciber-Rato obstacle value: 1/d rounded to 0.1, 100 at d ≤ 0.01.
-pub fn ir_value(distance_m: f64) -> f64 {
-    if distance_m > 0.01 { ((1.0 / distance_m) * 10.0).round() / 10.0 } else { 100.0 }
-}
-
-fn lab_data(map: &MapData) -> LabData {
-    let mut l = LabData {
-        name: map.header.name.as_str().unwrap_or("").to_owned(),
-        size: (map.header.width_m, map.header.height_m),
-        ..LabData::default()
-    };
-    for item in &map.items {
-        match item.kind {
-            MAP_WALL => l.walls.push((item.a, Vec::new())),
-            MAP_CORNER => {
-                if let Some(w) = l.walls.last_mut() {
-                    w.1.push((item.a, item.b));
-                }
-            }
-            MAP_BEACON => l.beacons.push((item.a, item.b, item.c)),
-            MAP_TARGET => l.targets.push((item.a, item.b, item.c)),
-            MAP_GRID => l.grid.push((item.a, item.b, item.c)),
-            _ => {}
-        }
-    }
-    l
-}
-
-fn reply_params(map: &MapData) -> ReplyParams {
+fn reply_params(map: &Map) -> ReplyParams {
     let p = &map.header.params;
     let req = |bit: u32| p.requestable & bit != 0;
     ReplyParams {
@@ -269,7 +239,7 @@ pub fn measures(
     state: RunState,
     ir_ids: &[u32],
     leds: [bool; 3],
-    map: &MapData,
+    map: &Map,
     requested: &[String],
 ) -> MeasuresData {
     let p = &map.header.params;
@@ -293,7 +263,7 @@ pub fn measures(
         if let (Some(slot), Some(&d)) = (m.ir.get_mut(id as usize), b.proximity_m.get(k))
             && (p.requestable & SENSOR_OBSTACLE == 0 || asked(&format!("IRSensor{id}")))
         {
-            *slot = Some(ir_value(d));
+            *slot = Some(sim_model::ir_value(d));
         }
     }
     if p.sensors_on & SENSOR_BEACON != 0 {
@@ -316,8 +286,7 @@ pub fn measures(
 pub struct Bridge {
     cfg: BridgeConfig,
     agent: Agent,
-    map: MapData,
-    lab: LabData,
+    map: Map,
     reg: UdpSocket,
     clients: Vec<Client>,
     /// The hub tick the clients' actions answer, and when it arrived.
@@ -346,7 +315,6 @@ impl Bridge {
         let reg = UdpSocket::bind((cfg.bind, cfg.port)).map_err(io(format!("bind UDP {}:{}", cfg.bind, cfg.port)))?;
         reg.set_nonblocking(true).map_err(io("make the registration socket non-blocking"))?;
         Ok(Self {
-            lab: lab_data(&map),
             cfg,
             agent,
             map,
@@ -562,8 +530,8 @@ impl Bridge {
 
     fn viewer_command(&mut self, socket: &UdpSocket, peer: SocketAddr, cmd: ViewerCommand) {
         match cmd {
-            ViewerCommand::LabReq => send(socket, peer, &codec::encode_lab(&self.lab)),
-            ViewerCommand::GridReq => send(socket, peer, &codec::encode_grid(&self.lab)),
+            ViewerCommand::LabReq => send(socket, peer, &codec::encode_lab(&self.map)),
+            ViewerCommand::GridReq => send(socket, peer, &codec::encode_grid(&self.map)),
             ViewerCommand::Start => self.command(Command::Start, 0),
             ViewerCommand::Stop => self.command(Command::Pause, 0),
             ViewerCommand::RemoveRobot(id) => {

@@ -20,6 +20,10 @@
 
 pub use records::{args, log};
 
+pub mod cli;
+pub mod logs;
+pub mod map;
+
 use std::time::{Duration, Instant};
 
 use ipc_services::iceoryx2::node::Node;
@@ -81,6 +85,9 @@ pub enum AgentError {
     /// iceoryx2 failed.
     #[error("iceoryx2 failed to {0}")]
     Ipc(String),
+    /// The hub's map did not decode.
+    #[error("the hub's map is malformed: {0}")]
+    Map(#[from] map::MapDecodeError),
 }
 
 fn ipc<E: std::fmt::Debug>(what: &str) -> impl FnOnce(E) -> AgentError + '_ {
@@ -199,19 +206,9 @@ impl Observer {
         Ok(newest)
     }
 
-    /// The map (waits up to 5 s for the hub's kept sample).
-    pub fn map(&self) -> Result<MapData, AgentError> {
-        let sub = self.map_svc.subscriber_builder().create().map_err(ipc("create a map subscriber"))?;
-        let start = Instant::now();
-        loop {
-            if let Some(s) = sub.receive().map_err(ipc("receive the map"))? {
-                return Ok(MapData { header: *s.user_header(), items: s.payload().to_vec() });
-            }
-            if start.elapsed() > ANSWER_TIMEOUT {
-                return Err(AgentError::NoAnswer(self.session.name().to_owned()));
-            }
-            std::thread::sleep(Duration::from_millis(1));
-        }
+    /// The map, decoded (waits up to 5 s for the hub's kept sample).
+    pub fn map(&self) -> Result<map::Map, AgentError> {
+        receive_map(&self.map_svc, &self.session, || Ok(()))
     }
 
     /// The session.
@@ -282,13 +279,26 @@ impl ControlClient {
     }
 }
 
-/// The map as the hub published it.
-#[derive(Debug, Clone)]
-pub struct MapData {
-    /// Lab size and counts.
-    pub header: MapHeader,
-    /// Walls, corners, beacons, targets, grid slots.
-    pub items: Vec<MapItem>,
+/// Waits up to 5 s for the map sample the hub keeps for late subscribers and decodes it;
+/// `alive` is asked between polls so a caller can give up early when the hub is gone.
+fn receive_map(
+    svc: &ipc_services::MapService,
+    session: &Session,
+    mut alive: impl FnMut() -> Result<(), AgentError>,
+) -> Result<map::Map, AgentError> {
+    let sub: Subscriber<Svc, [MapItem], MapHeader> =
+        svc.subscriber_builder().create().map_err(ipc("create a map subscriber"))?;
+    let start = Instant::now();
+    loop {
+        if let Some(s) = sub.receive().map_err(ipc("receive the map"))? {
+            return Ok(map::Map::decode(s.user_header(), s.payload())?);
+        }
+        alive()?;
+        if start.elapsed() > ANSWER_TIMEOUT {
+            return Err(AgentError::NoAnswer(session.name().to_owned()));
+        }
+        std::thread::sleep(Duration::from_millis(1));
+    }
 }
 
 /// A connection to a hub.
@@ -616,7 +626,7 @@ impl Agent {
         let Some(sub) = &self.sensors else { return Ok(false) };
         let mut fresh = false;
         while let Some(sample) = sub.receive().map_err(ipc("receive sensor blocks"))? {
-            let received_ns = ipc_types::monotonic_ns();
+            let received_ns = ipc_services::monotonic_ns();
             let h = *sample.user_header();
             if self.last_tick.is_some_and(|t| h.tick <= t)
                 && RunState::from_u32(h.run_state) != Some(RunState::Finished)
@@ -695,20 +705,9 @@ impl Agent {
         }
     }
 
-    /// The map, as the hub published it.
-    pub fn map(&self) -> Result<MapData, AgentError> {
+    /// The map, decoded (waits up to 5 s for the hub's kept sample).
+    pub fn map(&self) -> Result<map::Map, AgentError> {
         let svc = self.session.map(&self.node, Role::Client)?;
-        let sub = svc.subscriber_builder().create().map_err(ipc("create a map subscriber"))?;
-        let start = Instant::now();
-        loop {
-            if let Some(s) = sub.receive().map_err(ipc("receive the map"))? {
-                return Ok(MapData { header: *s.user_header(), items: s.payload().to_vec() });
-            }
-            self.check()?;
-            if start.elapsed() > ANSWER_TIMEOUT {
-                return Err(AgentError::NoAnswer(self.session.name().to_owned()));
-            }
-            std::thread::sleep(Duration::from_millis(1));
-        }
+        receive_map(&svc, &self.session, || self.check())
     }
 }

@@ -13,11 +13,13 @@
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
-use agent_sdk::log::RobotLog;
+use agent_sdk::cli::CommonArgs;
+use agent_sdk::logs::RobotLogs;
 use agent_sdk::{Agent, Wait};
 use anyhow::Context as _;
 use ipc_types::{ActionBlock, COLLISION, REG_HAS_POSE, RobotKind, RobotRegistration, SensorBlock, SensorSpec};
 use serde::Deserialize;
+use sim_model::wrap_rad;
 
 /// Options of `iwsim agent door`.
 #[derive(Debug, clap::Args, Clone)]
@@ -27,19 +29,15 @@ see something within --trigger metres, or when a robot says \\\"door open NAME\\
 it closes after --quiet seconds with nothing seen, and on contact it stops, waits --retry seconds and \\
 tries again. Several doors come from --config FILE with one [[doors]] table each, taking the same \\
 keys as the options (name, preset, pose, body, max_speed, open, trigger, quiet, retry).")]
+#[command(mut_arg("log", |a| a.help("Write one CSV log per door into this directory").value_name("LOG")))]
+#[command(mut_arg("connect_timeout", |a| a.help("Seconds to wait for the hub to come up").value_name("CONNECT_TIMEOUT")))]
 pub struct DoorArgs {
-    /// Session of the hub to join.
-    #[arg(long, default_value = "default")]
-    pub session: String,
+    /// `--session`, `--connect-timeout`, `--log` (one CSV log per door).
+    #[command(flatten)]
+    pub common: CommonArgs,
     /// Doors from a TOML file ([[doors]] tables); the door options below are then ignored.
     #[arg(long)]
     pub config: Option<PathBuf>,
-    /// Write one CSV log per door into this directory.
-    #[arg(long)]
-    pub log: Option<PathBuf>,
-    /// Seconds to wait for the hub to come up.
-    #[arg(long, default_value_t = 5.0)]
-    pub connect_timeout: f64,
     /// Name (robots address it in messages).
     #[arg(long, default_value = "door1")]
     pub name: String,
@@ -204,10 +202,6 @@ fn turn_powers(err: f64) -> [f64; 2] {
     [-u, u]
 }
 
-fn wrap(a: f64) -> f64 {
-    (a + std::f64::consts::PI).rem_euclid(std::f64::consts::TAU) - std::f64::consts::PI
-}
-
 impl Door {
     /// A closed door.
     pub fn new(cfg: DoorConfig) -> Self {
@@ -304,7 +298,7 @@ impl Door {
     fn progress(&self, pose: [f64; 3]) -> f64 {
         let [x0, y0, h0] = self.cfg.pose;
         match self.cfg.preset {
-            Preset::Normal | Preset::Rotating => wrap(pose[2].to_radians() - h0.to_radians()),
+            Preset::Normal | Preset::Rotating => wrap_rad(pose[2].to_radians() - h0.to_radians()),
             Preset::Sliding => (pose[0] - x0) * h0.to_radians().cos() + (pose[1] - y0) * h0.to_radians().sin(),
         }
     }
@@ -313,7 +307,7 @@ impl Door {
     fn drive_to(&self, pose: [f64; 3], target: f64) -> Option<[f64; 2]> {
         let err = target - self.progress(pose);
         match self.cfg.preset {
-            Preset::Normal => (err.abs() > 1f64.to_radians()).then(|| turn_powers(wrap(err))),
+            Preset::Normal => (err.abs() > 1f64.to_radians()).then(|| turn_powers(wrap_rad(err))),
             Preset::Sliding => (err.abs() > 0.01).then(|| {
                 let u = (3.0 * err).clamp(-0.6, 0.6);
                 let u = if u.abs() < 0.05 { 0.05 * u.signum() } else { u };
@@ -376,7 +370,7 @@ impl Door {
                 } else if self.cfg.preset == Preset::Rotating {
                     // A revolving leaf stops square with its frame, either way round.
                     let p = self.progress(b.pose);
-                    let to_square = wrap(2.0 * p) / 2.0;
+                    let to_square = wrap_rad(2.0 * p) / 2.0;
                     if to_square.abs() < 1f64.to_radians() {
                         self.state = DoorState::Closed;
                         [0.0, 0.0]
@@ -445,9 +439,8 @@ fn doors_from(args: &DoorArgs) -> anyhow::Result<Vec<DoorConfig>> {
 /// `iwsim agent door`.
 pub fn run(args: &DoorArgs) -> anyhow::Result<ExitCode> {
     let doors: Vec<Door> = doors_from(args)?.into_iter().map(Door::new).collect();
-    let timeout = std::time::Duration::from_secs_f64(args.connect_timeout.max(0.0));
-    let mut agent = Agent::connect_within(&args.session, &format!("door-{}", std::process::id()), timeout)?;
-    let result = serve(&mut agent, doors, args.log.as_deref());
+    let mut agent = args.common.connect("door")?;
+    let result = serve(&mut agent, doors, args.common.log.as_deref());
     agent.close();
     result
 }
@@ -458,8 +451,10 @@ fn serve(agent: &mut Agent, mut doors: Vec<Door>, log: Option<&Path>) -> anyhow:
         ids.push(agent.register(&d.registration()).with_context(|| format!("registering {}", d.cfg.name))?);
     }
     agent.ready()?;
-    // Logs open at the first tick, when the sensor blocks are there.
-    let mut logs: Vec<Option<RobotLog>> = doors.iter().map(|_| None).collect();
+    let mut logs = RobotLogs::new(log);
+    for (d, &id) in doors.iter().zip(&ids) {
+        logs.add(id, &d.cfg.name);
+    }
     let mut actions = Vec::with_capacity(doors.len());
     while let Some(tick) = agent.wait_tick(Wait::Blocking)? {
         actions.clear();
@@ -470,21 +465,12 @@ fn serve(agent: &mut Agent, mut doors: Vec<Door>, log: Option<&Path>) -> anyhow:
             if let Some(s) = changed {
                 eprintln!("door {}: {} at t {:.1} s", door.cfg.name, s.label(), tick.sim_time_s);
             }
-            if let Some(dir) = log {
-                if logs[k].is_none() {
-                    logs[k] = Some(RobotLog::create(dir, &door.cfg.name, b.proximity_count as usize)?);
-                }
-                if let Some(l) = logs[k].as_mut() {
-                    l.row(b, tick.sim_time_s, powers)?;
-                }
-            }
+            logs.row(b, tick.sim_time_s, powers)?;
             actions.push(ActionBlock::motors(id, powers[0], powers[1]));
         }
         agent.send(tick.tick, &actions)?;
     }
-    for l in logs.iter_mut().flatten() {
-        l.flush()?;
-    }
+    logs.finish(agent)?;
     Ok(ExitCode::SUCCESS)
 }
 
@@ -621,6 +607,17 @@ mod tests {
         assert_eq!(c, vec![DoorState::Closing]);
         assert_eq!(run(&mut d, &mut t, 1, [0.0, 0.0, 150.0], None).1, vec![]);
         assert_eq!(run(&mut d, &mut t, 1, [0.0, 0.0, 179.5], None).1, vec![DoorState::Closed]);
+    }
+
+    #[test]
+    fn a_half_turned_leaf_reads_plus_180_degrees_as_everywhere_else() {
+        // The project's one angle convention, (−180°, 180°]: a leaf turned half a turn either
+        // way is +π from closed, never −π.
+        let d = door(Preset::Normal);
+        for heading in [180.0, -180.0, 540.0] {
+            assert_eq!(d.progress([0.0, 0.0, heading]), std::f64::consts::PI, "{heading}°");
+        }
+        assert_eq!(d.progress([0.0, 0.0, -90.0]), -std::f64::consts::FRAC_PI_2);
     }
 
     #[test]

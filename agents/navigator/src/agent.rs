@@ -2,9 +2,8 @@
 //! navigator's wheel powers.
 
 use std::process::ExitCode;
-use std::time::Duration;
 
-use agent_sdk::log::RobotLog;
+use agent_sdk::logs::RobotLogs;
 use agent_sdk::{Agent, Wait};
 use anyhow::Context as _;
 use ipc_types::{ActionBlock, MAX_PROXIMITY, REG_HAS_POSE, RobotRegistration, SENSOR_GPS, SensorSpec};
@@ -24,9 +23,8 @@ pub fn run(args: &NavigatorArgs) -> anyhow::Result<ExitCode> {
     let source = sensor_source(args.mode)?;
     anyhow::ensure!(args.cruise > 0.0 && args.cruise <= 1.0, "--cruise {} is not in (0, 1]", args.cruise);
     anyhow::ensure!(args.arrive > 0.0, "--arrive {} must be positive", args.arrive);
-    let timeout = Duration::from_secs_f64(args.connect_timeout.max(0.0));
-    let mut agent = Agent::connect_within(&args.session, &format!("navigator-{}", std::process::id()), timeout)
-        .with_context(|| format!("joining session {:?}", args.session))?;
+    let session = &args.common.session;
+    let mut agent = args.common.connect("navigator").with_context(|| format!("joining session {session:?}"))?;
     // Close on every path, errors included: the last process of a session removes its files.
     let result = drive(&mut agent, args, source);
     agent.close();
@@ -83,7 +81,7 @@ fn drive(
     mut source: Box<dyn crate::sensors::SensorSource>,
 ) -> anyhow::Result<ExitCode> {
     let map_data = agent.map()?;
-    let map = NavMap::from_items(&map_data.header, &map_data.items).context("reading the hub's map")?;
+    let map = NavMap::new(&map_data);
     let cfg = config(args, &map_data.header)?;
     let name = &args.name;
 
@@ -108,19 +106,15 @@ fn drive(
     let cycle_s = cfg.cycle_s;
     eprintln!(
         "navigator {name}: robot {id} in session {:?} on {:?}, from ({:.2}, {:.2}, {:.0}°) through {} checkpoint(s)",
-        args.session,
+        args.common.session,
         map.name,
         cfg.start.x,
         cfg.start.y,
         cfg.start.theta.to_degrees(),
         checkpoints.len()
     );
-    let mut log = match &args.log {
-        Some(dir) => {
-            Some(RobotLog::create(dir, name, cfg.sensors.len()).with_context(|| format!("log in {}", dir.display()))?)
-        }
-        None => None,
-    };
+    let mut logs = RobotLogs::new(args.common.log.as_deref());
+    logs.add(id, name);
     let mut pilot = Pilot::new(name, Navigator::new(map, cfg));
     let mut contacts = 0u32;
     let mut last_time = 0.0;
@@ -149,18 +143,13 @@ fn drive(
             eprintln!("navigator {name}: message of {} bytes too long to say: {say}", say.len());
         }
         agent.send(tick.tick, &[action])?;
-        if let Some(log) = &mut log {
-            log.row(&block, time_s, out.powers)?;
-        }
+        logs.row(&block, time_s, out.powers)?;
     }
-    // The run's final readings, for a complete log.
-    if let (Some(log), Some(block)) = (&mut log, agent.sensors().iter().find(|b| b.robot_id == id)) {
-        log.row(block, block.tick as f64 * cycle_s, [0.0, 0.0])?;
+    // The run's final readings: the last contacts, and the log's last row.
+    if let Some(block) = agent.sensors().iter().find(|b| b.robot_id == id) {
         contacts = block.collision_count;
     }
-    if let Some(log) = &mut log {
-        log.flush()?;
-    }
+    logs.finish(agent)?;
     let nav = pilot.navigator();
     let reached = nav.next_checkpoint().min(checkpoints.len());
     if nav.finished() {

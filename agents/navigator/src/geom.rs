@@ -1,24 +1,11 @@
 //! Plane geometry for the navigator: points, poses, the chair's rectangle and proximity cones.
 //!
 //! Angles are radians here and degrees only on the wire (the SDK's blocks and the command
-//! line); [`wrap`] is the one function that normalises them.
+//! line); `sim_model`'s [`wrap_rad`] is the one function that normalises them.
 
-use std::f64::consts::{PI, TAU};
 use std::ops::{Add, Mul, Neg, Sub};
 
-/// Wraps an angle in radians to (−π, π].
-pub fn wrap(a: f64) -> f64 {
-    if a > -PI && a <= PI {
-        return a;
-    }
-    let mut r = a % TAU;
-    if r <= -PI {
-        r += TAU;
-    } else if r > PI {
-        r -= TAU;
-    }
-    r
-}
+pub use sim_model::wrap_rad;
 
 /// A point or vector in the lab frame (metres).
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
@@ -114,7 +101,7 @@ pub struct Pose {
 impl Pose {
     /// A pose (the heading is wrapped).
     pub fn new(x: f64, y: f64, theta: f64) -> Self {
-        Self { x, y, theta: wrap(theta) }
+        Self { x, y, theta: wrap_rad(theta) }
     }
 
     /// A pose from metres and a heading in degrees.
@@ -324,7 +311,7 @@ impl Cone {
         if v.norm2() == 0.0 {
             return true;
         }
-        wrap(v.y.atan2(v.x) - self.dir).abs() <= self.half
+        wrap_rad(v.y.atan2(v.x) - self.dir).abs() <= self.half
     }
 
     /// Distance from the apex to the part of the segment `a`–`b` inside the cone, if any of
@@ -369,14 +356,6 @@ impl Cone {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn angles_wrap_into_minus_pi_to_pi() {
-        assert!((wrap(3.0 * PI) - PI).abs() < 1e-12);
-        assert!((wrap(-PI) - PI).abs() < 1e-12);
-        assert!((wrap(0.5) - 0.5).abs() < 1e-12);
-        assert!((wrap(-7.0) - (-7.0 + TAU)).abs() < 1e-12);
-    }
 
     #[test]
     fn a_rear_axle_chair_has_most_of_its_body_ahead() {

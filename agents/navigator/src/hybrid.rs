@@ -7,12 +7,11 @@
 //! margin, and is guided by the grid's cost-to-go, so it explores little where the way is
 //! easy and finds S-bends like the slalom's where it is not.
 
-use std::cmp::Ordering;
 use std::collections::{BinaryHeap, HashMap};
 
-use crate::geom::{Pose, V2, wrap};
+use crate::geom::{Pose, V2, wrap_rad};
 use crate::model::WorldModel;
-use crate::plan::CostToGo;
+use crate::plan::{CostToGo, Open};
 
 /// How a pose was reached.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -193,26 +192,6 @@ struct Node {
     parent: u32,
 }
 
-#[derive(Debug, Clone, Copy, PartialEq)]
-struct Open {
-    f: f64,
-    i: u32,
-}
-
-impl Eq for Open {}
-
-impl Ord for Open {
-    fn cmp(&self, o: &Self) -> Ordering {
-        o.f.total_cmp(&self.f).then_with(|| o.i.cmp(&self.i))
-    }
-}
-
-impl PartialOrd for Open {
-    fn partial_cmp(&self, o: &Self) -> Option<Ordering> {
-        Some(self.cmp(o))
-    }
-}
-
 /// The pose after an arc of length `ds` (negative: backwards) and curvature `k`.
 pub fn arc(p: &Pose, ds: f64, k: f64) -> Pose {
     let th = p.theta;
@@ -252,7 +231,7 @@ pub fn plan(
         let ix = (p.x / params.xy_res).floor() as i64 as u64 & 0xFFFFF;
         let iy = (p.y / params.xy_res).floor() as i64 as u64 & 0xFFFFF;
         let bins = params.heading_bins as f64;
-        let it = ((wrap(p.theta) + std::f64::consts::PI) / std::f64::consts::TAU * bins).round() as u64
+        let it = ((wrap_rad(p.theta) + std::f64::consts::PI) / std::f64::consts::TAU * bins).round() as u64
             % params.heading_bins as u64;
         (ix << 40) | (iy << 20) | it
     };

@@ -70,7 +70,7 @@ pub mod sensors;
 pub mod track;
 pub mod traffic;
 
-use std::path::PathBuf;
+use agent_sdk::cli::CommonArgs;
 
 pub use agent::run;
 pub use navigator::{Body, Checkpoint, NavConfig, NavEvent, NavStats, Navigator, Output};
@@ -86,10 +86,13 @@ pub use sensors::Mode;
 /// drives from the first checkpoint (its start, heading towards the second) to the second,
 /// and stops there.
 #[derive(Debug, clap::Args, Clone)]
+#[command(mut_arg("log", |a| a.help(
+    "Write the chair's CSV log (one row per tick, thesis Annex C columns) into this directory"
+)))]
 pub struct NavigatorArgs {
-    /// Session of the hub to join.
-    #[arg(long, default_value = "default")]
-    pub session: String,
+    /// `--session`, `--connect-timeout`, `--log` (the chair's CSV log, one row per tick).
+    #[command(flatten)]
+    pub common: CommonArgs,
     /// The chair's name (at most 31 bytes); also its log file's name.
     #[arg(long, default_value = "chair1")]
     pub name: String,
@@ -140,21 +143,11 @@ pub struct NavigatorArgs {
     /// not built yet.
     #[arg(long, value_enum, default_value_t = Mode::Virtual)]
     pub mode: Mode,
-    /// Write the chair's CSV log (one row per tick, thesis Annex C columns) into this
-    /// directory.
-    #[arg(long, value_name = "DIR")]
-    pub log: Option<PathBuf>,
-    /// Seconds to wait for the hub to start serving the session.
-    #[arg(long, value_name = "S", default_value_t = 5.0)]
-    pub connect_timeout: f64,
 }
 
 fn parse_checkpoint(s: &str) -> Result<[f64; 3], String> {
-    let v = agent_sdk::args::fixed::<3>(s, "a checkpoint X,Y[,R]", Some(0.5))?;
-    if v[2] <= 0.0 {
-        return Err(format!("the radius in {s:?} must be positive"));
-    }
-    Ok(v)
+    let c = records::places::Checkpoint::parse(s).map_err(|e| e.to_string())?;
+    Ok([c.x, c.y, c.radius])
 }
 
 fn parse_body(s: &str) -> Result<[f64; 3], String> {

@@ -1,7 +1,8 @@
 //! The navigator's map: the lab's size and its walls as polygons, built from the items the
 //! hub publishes (so the navigator never parses map files and never depends on the hub).
 
-use ipc_types::{MAP_CHECKPOINT, MAP_CORNER, MAP_WALL, MapHeader, MapItem};
+use agent_sdk::map::{Map, MapDecodeError};
+use ipc_types::{MapHeader, MapItem};
 
 use crate::geom::{Seg, V2};
 
@@ -73,99 +74,41 @@ pub struct NavMap {
     pub checkpoints: Vec<MapCheckpoint>,
 }
 
-/// Why the hub's map items could not be read.
-#[derive(Debug, Clone, PartialEq, thiserror::Error)]
-pub enum MapBuildError {
-    /// The lab's size is not a positive finite number.
-    #[error("the lab's size {width} x {height} m is not usable")]
-    BadSize {
-        /// Width given.
-        width: f64,
-        /// Height given.
-        height: f64,
-    },
-    /// A corner came before any wall.
-    #[error("map item {item}: a corner before any wall")]
-    CornerWithoutWall {
-        /// Index of the item.
-        item: usize,
-    },
-    /// A wall ended with fewer corners than it announced, or fewer than three.
-    #[error("wall {wall} has {got} corners; {expected} were announced (at least 3 needed)")]
-    MissingCorners {
-        /// The wall's index.
-        wall: u32,
-        /// Corners announced.
-        expected: usize,
-        /// Corners received.
-        got: usize,
-    },
-    /// A value was not a finite number.
-    #[error("map item {item} holds a value that is not a finite number")]
-    NotFinite {
-        /// Index of the item.
-        item: usize,
-    },
-}
-
 impl NavMap {
     /// A map of an empty lab.
     pub fn empty(width_m: f64, height_m: f64) -> Self {
         Self { name: String::new(), width_m, height_m, walls: Vec::new(), checkpoints: Vec::new() }
     }
 
-    /// Reads the map as the hub publishes it: `MAP_WALL` items (a = height, b = corner count,
-    /// c = 1 for a scenario obstacle) each followed by its `MAP_CORNER` items, and
-    /// `MAP_CHECKPOINT` items. Other kinds (beacons, targets, grid) are not needed here.
-    pub fn from_items(header: &MapHeader, items: &[MapItem]) -> Result<Self, MapBuildError> {
-        let (width, height) = (header.width_m, header.height_m);
-        if !(width.is_finite() && height.is_finite() && width > 0.0 && height > 0.0) {
-            return Err(MapBuildError::BadSize { width, height });
+    /// The navigator's view of the hub's decoded map: its walls and obstacles as polygons and
+    /// its checkpoints (beacons, targets and the grid are not needed here).
+    pub fn new(map: &Map) -> Self {
+        let point = |p: &agent_sdk::map::Point| V2::new(p.x, p.y);
+        Self {
+            name: map.name.clone(),
+            width_m: map.width_m,
+            height_m: map.height_m,
+            walls: map
+                .walls
+                .iter()
+                .map(|w| MapWall {
+                    corners: w.corners.iter().map(point).collect(),
+                    height_m: w.height_m,
+                    obstacle: w.obstacle,
+                })
+                .collect(),
+            checkpoints: map
+                .checkpoints
+                .iter()
+                .map(|c| MapCheckpoint { pos: point(&c.pos), radius_m: c.radius_m })
+                .collect(),
         }
-        let mut map = Self::empty(width, height);
-        map.name = header.name.as_str().unwrap_or("").to_owned();
-        // (wall index, corners announced) of the wall being read.
-        let mut open: Option<(u32, usize)> = None;
-        let close = |map: &NavMap, open: Option<(u32, usize)>| -> Result<(), MapBuildError> {
-            if let Some((wall, expected)) = open {
-                let got = map.walls.last().map_or(0, |w| w.corners.len());
-                if got != expected || got < 3 {
-                    return Err(MapBuildError::MissingCorners { wall, expected, got });
-                }
-            }
-            Ok(())
-        };
-        for (i, it) in items.iter().enumerate() {
-            if !(it.a.is_finite() && it.b.is_finite() && it.c.is_finite()) {
-                return Err(MapBuildError::NotFinite { item: i });
-            }
-            match it.kind {
-                MAP_WALL => {
-                    close(&map, open.take())?;
-                    let expected = if it.b >= 0.0 && it.b < 1e6 { it.b as usize } else { 0 };
-                    map.walls.push(MapWall {
-                        corners: Vec::with_capacity(expected.min(64)),
-                        height_m: it.a,
-                        obstacle: it.c != 0.0,
-                    });
-                    open = Some((it.index, expected));
-                }
-                MAP_CORNER => {
-                    let wall = match (&open, map.walls.last_mut()) {
-                        (Some(_), Some(w)) => w,
-                        _ => return Err(MapBuildError::CornerWithoutWall { item: i }),
-                    };
-                    wall.corners.push(V2::new(it.a, it.b));
-                }
-                MAP_CHECKPOINT => {
-                    close(&map, open.take())?;
-                    map.checkpoints.push(MapCheckpoint { pos: V2::new(it.a, it.b), radius_m: it.c });
-                }
-                _ => close(&map, open.take())?,
-            }
-        }
-        close(&map, open.take())?;
-        Ok(map)
+    }
+
+    /// Decodes the hub's map items with [`Map::decode`] (the one decoder every client shares)
+    /// and builds the navigator's view of them, for callers that hold the raw items.
+    pub fn from_items(header: &MapHeader, items: &[MapItem]) -> Result<Self, MapDecodeError> {
+        Map::decode(header, items).map(|m| Self::new(&m))
     }
 
     /// The walls the navigator plans on: every wall that is not a scenario obstacle.
@@ -197,31 +140,30 @@ impl NavMap {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use bytemuck::Zeroable as _;
+    use agent_sdk::map::{Circle, Point, Wall};
 
-    fn header(w: f64, h: f64) -> MapHeader {
-        MapHeader { width_m: w, height_m: h, ..MapHeader::zeroed() }
-    }
-
-    fn item(kind: u32, index: u32, a: f64, b: f64, c: f64) -> MapItem {
-        MapItem { kind, index, a, b, c }
+    fn wall(corners: &[(f64, f64)], obstacle: bool) -> Wall {
+        Wall { height_m: 1.0, corners: corners.iter().map(|&(x, y)| Point::new(x, y)).collect(), obstacle }
     }
 
     #[test]
-    fn walls_obstacles_and_checkpoints_are_read_from_the_hubs_items() {
-        let mut items = vec![item(MAP_WALL, 0, 2.5, 4.0, 0.0)];
-        for (x, y) in [(1.0, 1.0), (2.0, 1.0), (2.0, 2.0), (1.0, 2.0)] {
-            items.push(item(MAP_CORNER, 0, x, y, 0.0));
-        }
-        items.push(item(MAP_WALL, 1, 1.0, 3.0, 1.0));
-        for (x, y) in [(5.0, 5.0), (6.0, 5.0), (6.0, 6.0)] {
-            items.push(item(MAP_CORNER, 1, x, y, 0.0));
-        }
-        items.push(item(ipc_types::MAP_GRID, 0, 3.0, 3.0, 0.0));
-        items.push(item(MAP_CHECKPOINT, 0, 8.0, 2.0, 0.5));
-        let map = NavMap::from_items(&header(10.0, 8.0), &items).expect("valid");
+    fn walls_obstacles_and_checkpoints_come_from_the_hubs_map() {
+        let map = Map {
+            name: "lab".into(),
+            width_m: 10.0,
+            height_m: 8.0,
+            walls: vec![
+                wall(&[(1.0, 1.0), (2.0, 1.0), (2.0, 2.0), (1.0, 2.0)], false),
+                wall(&[(5.0, 5.0), (6.0, 5.0), (6.0, 6.0)], true),
+            ],
+            checkpoints: vec![Circle { pos: Point::new(8.0, 2.0), radius_m: 0.5 }],
+            ..Map::default()
+        };
+        let map = NavMap::new(&map);
+        assert_eq!((map.name.as_str(), map.width_m, map.height_m), ("lab", 10.0, 8.0));
         assert_eq!(map.walls.len(), 2);
         assert!(!map.walls[0].obstacle && map.walls[1].obstacle);
+        assert_eq!(map.walls[1].corners[2], V2::new(6.0, 6.0));
         assert_eq!(map.known_walls().count(), 1);
         assert_eq!(map.known_segments().len(), 4 + 4, "the border and the one known wall");
         assert_eq!(map.checkpoints, vec![MapCheckpoint { pos: V2::new(8.0, 2.0), radius_m: 0.5 }]);
@@ -229,19 +171,11 @@ mod tests {
     }
 
     #[test]
-    fn malformed_items_are_refused_with_a_reason() {
-        let corner = item(MAP_CORNER, 0, 1.0, 1.0, 0.0);
-        assert_eq!(
-            NavMap::from_items(&header(10.0, 8.0), &[corner]),
-            Err(MapBuildError::CornerWithoutWall { item: 0 })
-        );
-        let short = [item(MAP_WALL, 3, 1.0, 4.0, 0.0), corner, corner, corner];
-        assert_eq!(
-            NavMap::from_items(&header(10.0, 8.0), &short),
-            Err(MapBuildError::MissingCorners { wall: 3, expected: 4, got: 3 })
-        );
-        assert!(matches!(NavMap::from_items(&header(-1.0, 8.0), &[]), Err(MapBuildError::BadSize { .. })));
-        let nan = item(MAP_CHECKPOINT, 0, f64::NAN, 1.0, 0.5);
-        assert_eq!(NavMap::from_items(&header(10.0, 8.0), &[nan]), Err(MapBuildError::NotFinite { item: 0 }));
+    fn raw_items_go_through_the_sdks_decoder() {
+        use bytemuck::Zeroable as _;
+        let header = MapHeader { width_m: -1.0, height_m: 8.0, ..MapHeader::zeroed() };
+        assert_eq!(NavMap::from_items(&header, &[]), Err(MapDecodeError::BadSize { width: -1.0, height: 8.0 }));
+        let header = MapHeader { width_m: 10.0, ..header };
+        assert_eq!(NavMap::from_items(&header, &[]), Ok(NavMap::empty(10.0, 8.0)));
     }
 }

@@ -114,7 +114,7 @@ impl WorldModel {
     pub fn set_parked(&mut self, bodies: &[(Pose, Footprint)]) -> bool {
         let same = bodies.len() == self.parked_bodies.len()
             && bodies.iter().zip(&self.parked_bodies).all(|((p, f), (q, g))| {
-                f == g && (p.pos() - q.pos()).norm() < 0.01 && crate::geom::wrap(p.theta - q.theta).abs() < 0.01
+                f == g && (p.pos() - q.pos()).norm() < 0.01 && crate::geom::wrap_rad(p.theta - q.theta).abs() < 0.01
             });
         if same {
             return false;

@@ -101,7 +101,7 @@ impl NavConfig {
             cycle_s: 0.1,
             proximity_latency: 0,
             pose_source: PoseSourceKind::Odometry,
-            encoder_ticks_per_m: 1024.0 / (std::f64::consts::TAU * 0.17),
+            encoder_ticks_per_m: sim_model::encoder_ticks_per_m(1024.0, 0.17),
         }
     }
 }

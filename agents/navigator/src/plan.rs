@@ -113,22 +113,41 @@ impl Costmap {
     }
 }
 
+/// An entry of an A* or Dijkstra open list: a node index `i` and its key `f` (`f32` on the
+/// grid, `f64` in the hybrid search). The grid and hybrid planners share it.
 #[derive(Debug, Clone, Copy, PartialEq)]
-struct Open {
-    f: f32,
-    i: u32,
+pub(crate) struct Open<F> {
+    pub(crate) f: F,
+    pub(crate) i: u32,
 }
 
-impl Eq for Open {}
+/// Keys an open list can order totally (NaN included), so the heap never panics or wobbles.
+pub(crate) trait TotalKey: Copy + PartialEq {
+    fn total_cmp(&self, other: &Self) -> Ordering;
+}
 
-impl Ord for Open {
+impl TotalKey for f32 {
+    fn total_cmp(&self, other: &Self) -> Ordering {
+        f32::total_cmp(self, other)
+    }
+}
+
+impl TotalKey for f64 {
+    fn total_cmp(&self, other: &Self) -> Ordering {
+        f64::total_cmp(self, other)
+    }
+}
+
+impl<F: TotalKey> Eq for Open<F> {}
+
+impl<F: TotalKey> Ord for Open<F> {
     fn cmp(&self, o: &Self) -> Ordering {
         // BinaryHeap is a max-heap: the smallest f first, ties by index for determinism.
         o.f.total_cmp(&self.f).then_with(|| o.i.cmp(&self.i))
     }
 }
 
-impl PartialOrd for Open {
+impl<F: TotalKey> PartialOrd for Open<F> {
     fn partial_cmp(&self, o: &Self) -> Option<Ordering> {
         Some(self.cmp(o))
     }

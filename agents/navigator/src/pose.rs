@@ -1,7 +1,7 @@
 //! Where the chair thinks it is: wheel-encoder odometry (the default), GPS, or the two fused.
 //! Never the hub's ground truth (`SensorBlock::pose`), which is for logs only.
 
-use crate::geom::{Pose, V2, wrap};
+use crate::geom::{Pose, V2, wrap_rad};
 use crate::sensors::Input;
 
 /// A source of the pose estimate.
@@ -115,7 +115,7 @@ impl PoseSource for Fused {
             && g.y_m.is_finite()
         {
             let pos = p.pos() + (V2::new(g.x_m, g.y_m) - p.pos()) * self.gain;
-            p = Pose::new(pos.x, pos.y, wrap(p.theta));
+            p = Pose::new(pos.x, pos.y, wrap_rad(p.theta));
             self.odometry.pose = p;
         }
         p
@@ -185,7 +185,10 @@ mod tests {
             o.advance([(l * 1e9).round() as i64, (r * 1e9).round() as i64]);
         }
         let p = o.pose();
-        assert!((p.pos() - truth.pos()).norm() < 1e-6 && wrap(p.theta - truth.theta).abs() < 1e-6, "{p:?} {truth:?}");
+        assert!(
+            (p.pos() - truth.pos()).norm() < 1e-6 && wrap_rad(p.theta - truth.theta).abs() < 1e-6,
+            "{p:?} {truth:?}"
+        );
     }
 
     #[test]

@@ -2,7 +2,7 @@
 //! feedback on the lateral and heading errors), turns on the spot where the path has them,
 //! and the wheel powers that make the chair's filtered motors do what is asked.
 
-use crate::geom::{Pose, V2, wrap};
+use crate::geom::{Pose, V2, wrap_rad};
 use crate::hybrid::{Motion, PathPose};
 
 /// What one stretch of a path asks for.
@@ -186,7 +186,7 @@ impl Tracker {
             };
             if run.kind == RunKind::Spin {
                 let target = run.poses[run.poses.len() - 1].theta;
-                let e = wrap(target - pose.theta);
+                let e = wrap_rad(target - pose.theta);
                 if e.abs() <= p.heading_tolerance {
                     self.next_run();
                     continue;
@@ -226,11 +226,11 @@ impl Tracker {
             }
             // Reference pose and curvature at the projection.
             let (a, b) = (run.poses[k], run.poses[k + 1]);
-            let ref_theta = a.theta + wrap(b.theta - a.theta) * t;
+            let ref_theta = a.theta + wrap_rad(b.theta - a.theta) * t;
             let kappa = run.kappa[k + 1];
             let tangent = V2::unit(ref_theta);
             let on_path = a.pos() + (b.pos() - a.pos()) * t;
-            let e_th = wrap(ref_theta - pose.theta);
+            let e_th = wrap_rad(ref_theta - pose.theta);
             let vmax = run.vmax[k].min(run.vmax[k + 1]);
             let brake = (2.0 * p.decel * remaining).sqrt();
             let mut speed = vmax.min(brake).max(p.v_min.min(vmax));

@@ -178,7 +178,7 @@ fn across(me: Pose, other: Pose) -> f64 {
 }
 
 fn facing(a: Pose, b: Pose) -> bool {
-    crate::geom::wrap(a.theta - b.theta).abs() > 2.4 // more than about 137° apart
+    crate::geom::wrap_rad(a.theta - b.theta).abs() > 2.4 // more than about 137° apart
 }
 
 impl Traffic {

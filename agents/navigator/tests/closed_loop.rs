@@ -9,15 +9,12 @@
 //! estimated pose, powers, unexplained readings, each plan with the sensed map around the
 //! slalom); by default the seeds are the fixed ones each test names.
 
-use bytemuck::Zeroable as _;
-use ipc_types::{
-    COLLISION, HAS_COMPASS, HAS_GPS, MAP_CHECKPOINT, MAP_CORNER, MAP_WALL, MapHeader, MapItem, SensorBlock,
-};
+use ipc_types::{MapHeader, MapItem, SensorBlock};
 use navigator::geom::{Footprint, Pose, V2};
 use navigator::map::NavMap;
 use navigator::sensors::{SensorSource, VirtualSensors};
 use navigator::{Body, Checkpoint, NavConfig, NavEvent, Navigator, PoseSourceKind};
-use world::map::{Lab, Params, Wall, builtin};
+use world::map::{Grid, Lab, Params, Wall, builtin};
 use world::{Action, ProximitySpec, Robot, RobotSpec, World};
 
 /// A run to simulate.
@@ -67,53 +64,16 @@ struct Outcome {
     expansions: u64,
 }
 
-/// The map as `HubCore::map_items` publishes it: walls from `obstacle_from` on are flagged.
-fn map_items(lab: &Lab, obstacle_from: usize, checkpoints: &[[f64; 3]]) -> (MapHeader, Vec<MapItem>) {
-    let mut items = Vec::new();
-    for (i, w) in lab.walls.iter().enumerate() {
-        let obstacle = if i >= obstacle_from { 1.0 } else { 0.0 };
-        items.push(MapItem { kind: MAP_WALL, index: i as u32, a: w.height_m, b: w.corners.len() as f64, c: obstacle });
-        for c in &w.corners {
-            items.push(MapItem { kind: MAP_CORNER, index: i as u32, a: c.x, b: c.y, c: 0.0 });
-        }
-    }
-    for (i, [x, y, r]) in checkpoints.iter().enumerate() {
-        items.push(MapItem { kind: MAP_CHECKPOINT, index: i as u32, a: *x, b: *y, c: *r });
-    }
-    let header = MapHeader {
-        width_m: lab.width_m,
-        height_m: lab.height_m,
-        item_count: items.len() as u32,
-        wall_count: lab.walls.len() as u32,
-        cycle_ms: 100,
-        ..MapHeader::zeroed()
-    };
-    (header, items)
+/// The map exactly as the hub publishes it (`hub::core::pack_map`): walls from `obstacle_from`
+/// on are flagged as the scenario's obstacles.
+fn map_items(lab: &Lab, params: &Params, obstacle_from: usize, checkpoints: &[[f64; 3]]) -> (MapHeader, Vec<MapItem>) {
+    let hub_params = hub::core::hub_params(params, hub::core::Mode::LockStep, 0, 1000);
+    hub::core::pack_map(lab, &Grid::default(), obstacle_from, checkpoints, 100, hub_params)
 }
 
-/// A robot's readings as `HubCore::sensor_block` packs them.
+/// A robot's sensor block exactly as the hub packs it (`hub::core::pack_sensor_block`).
 fn sensor_block(r: &Robot, tick: u64) -> SensorBlock {
-    let mut b = SensorBlock::zeroed();
-    let rd = &r.readings;
-    b.tick = tick;
-    b.robot_id = 1;
-    b.proximity_count = rd.proximity_count as u32;
-    b.proximity_m[..rd.proximity().len()].copy_from_slice(rd.proximity());
-    if let Some(c) = rd.compass_deg {
-        b.present |= HAS_COMPASS;
-        b.compass_deg = c;
-    }
-    if let Some(g) = rd.gps {
-        b.present |= HAS_GPS;
-        (b.gps_x_m, b.gps_y_m, b.gps_heading_deg) = (g.x_m, g.y_m, g.heading_deg);
-    }
-    if rd.collision {
-        b.present |= COLLISION;
-    }
-    b.encoder_ticks = rd.encoder_ticks;
-    b.pose = [r.pose.x, r.pose.y, r.pose.heading_deg()];
-    b.collision_count = r.collision_count as u32;
-    b
+    hub::core::pack_sensor_block(r, 1, tick, |_| 2)
 }
 
 /// The chair's true clearance to every wall and obstacle of the lab.
@@ -194,8 +154,10 @@ fn simulate(s: &Scenario, seed: u64) -> Outcome {
         params.sensors.gps = true;
         (params.noise.gps_pos_m, params.noise.gps_heading_deg) = (pos_m, heading_deg);
     }
-    let ticks_per_m = params.encoder_ticks_per_rev as f64 / (std::f64::consts::TAU * params.wheel_radius_m);
     let mut world = World::new(&lab, params, seed).expect("a valid world");
+    let (header, items) = map_items(&lab, world.params(), known, &s.checkpoints);
+    // The scale the navigator agent reads from the hub's map header.
+    let ticks_per_m = header.params.encoder_ticks_per_m;
     let base = NavConfig::intellwheels();
     let cfg = NavConfig {
         body: s.body,
@@ -208,7 +170,6 @@ fn simulate(s: &Scenario, seed: u64) -> Outcome {
     };
     let handle = world.add_robot(chair_spec(&cfg, "chair")).expect("a valid chair");
     world.refresh_sensors();
-    let (header, items) = map_items(&lab, known, &s.checkpoints);
     let nav_map = NavMap::from_items(&header, &items).expect("the published map reads back");
     let fp = s.body.footprint();
     let mut nav = Navigator::new(nav_map, cfg);
@@ -483,12 +444,12 @@ mod corridor_swap {
         let trace = std::env::var_os("NAV_TRACE").is_some();
         let lab = builtin::map("liacc").expect("a built-in map").lab.clone();
         let params = Params::default();
-        let ticks_per_m = params.encoder_ticks_per_rev as f64 / (std::f64::consts::TAU * params.wheel_radius_m);
         let mut world = World::new(&lab, params, seed).expect("a valid world");
         let body = Body::INTELLWHEELS;
         let fp = body.footprint();
         let checkpoints: Vec<[f64; 3]> = chairs.iter().map(|c| [c.goal[0], c.goal[1], 0.5]).collect();
-        let (header, items) = map_items(&lab, lab.walls.len(), &checkpoints);
+        let (header, items) = map_items(&lab, world.params(), lab.walls.len(), &checkpoints);
+        let ticks_per_m = header.params.encoder_ticks_per_m;
         let mut fleet = Vec::new();
         for c in chairs {
             let cfg = NavConfig {

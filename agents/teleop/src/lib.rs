@@ -33,11 +33,11 @@ pub mod view;
 
 use std::io::Write as _;
 use std::os::fd::AsRawFd as _;
-use std::path::PathBuf;
 use std::process::ExitCode;
 use std::time::{Duration, Instant};
 
-use agent_sdk::log::RobotLog;
+use agent_sdk::cli::CommonArgs;
+use agent_sdk::logs::RobotLogs;
 use agent_sdk::{Agent, AgentError, Tick};
 use anyhow::Context as _;
 use ipc_types::{ActionBlock, REG_HAS_POSE, RobotRegistration, RunState, SensorBlock};
@@ -72,10 +72,14 @@ of the redrawn block.";
 /// Options of `iwsim agent teleop`.
 #[derive(Debug, clap::Args, Clone)]
 #[command(after_help = AFTER_HELP)]
+#[command(mut_arg("log", |a| a.help(
+    "Write the chair's log (one CSV line per tick: sensors, pose, powers) into this folder"
+)))]
+#[command(mut_arg("connect_timeout", |a| a.value_name("CONNECT_TIMEOUT")))]
 pub struct TeleopArgs {
-    /// Session of the hub to join.
-    #[arg(long, default_value = "default")]
-    pub session: String,
+    /// `--session`, `--connect-timeout`, `--log` (the chair's log, one CSV line per tick).
+    #[command(flatten)]
+    pub common: CommonArgs,
     /// Name of the chair.
     #[arg(long, default_value = "chair1")]
     pub name: String,
@@ -100,12 +104,6 @@ pub struct TeleopArgs {
     /// Acceleration curve: the motor filter's memory per tick, [0, 1) (higher is smoother).
     #[arg(long, default_value_t = 0.83)]
     pub accel_curve: f64,
-    /// Write the chair's log (one CSV line per tick: sensors, pose, powers) into this folder.
-    #[arg(long, value_name = "DIR")]
-    pub log: Option<PathBuf>,
-    /// Seconds to wait for the hub to start serving the session.
-    #[arg(long, default_value_t = 5.0)]
-    pub connect_timeout: f64,
 }
 
 /// What a batch of key bytes did.
@@ -326,9 +324,8 @@ impl Drop for Display {
 
 /// Runs the agent until the driver quits, the run ends or the hub goes away (an error).
 pub fn run(args: &TeleopArgs) -> anyhow::Result<ExitCode> {
-    let timeout = Duration::try_from_secs_f64(args.connect_timeout.max(0.0)).unwrap_or(Duration::MAX);
-    let mut agent = Agent::connect_within(&args.session, &format!("teleop-{}", std::process::id()), timeout)
-        .with_context(|| format!("cannot join session {:?}", args.session))?;
+    let mut agent =
+        args.common.connect("teleop").with_context(|| format!("cannot join session {:?}", args.common.session))?;
     // Close the agent on every path, errors included: the last process of a session removes
     // its files, even when the hub died first.
     let result = drive(&mut agent, args);
@@ -366,14 +363,14 @@ fn drive(agent: &mut Agent, args: &TeleopArgs) -> anyhow::Result<ExitCode> {
     };
     let mut display = Display::new(term::is_tty(&std::io::stdout()));
     let mut teleop = Teleop::new(id);
-    let mut log: Option<RobotLog> = None;
+    let mut logs = RobotLogs::new(args.common.log.as_deref());
+    logs.add(id, &args.name);
 
-    let end = drive_loop(agent, args, stdin_fd, &mut teleop, &mut display, &mut log);
-    if let Some(log) = &mut log {
-        log.flush().context("cannot write the log")?;
-    }
+    let end = drive_loop(agent, args, stdin_fd, &mut teleop, &mut display, &mut logs);
+    // The run's final tick when the hub ended the run; what was logged in any case.
+    logs.finish(agent).context("cannot write the log")?;
     let end = end?;
-    display.draw(&teleop.status(&args.name, &args.session), Instant::now(), true);
+    display.draw(&teleop.status(&args.name, &args.common.session), Instant::now(), true);
     display.close(end.message());
     Ok(ExitCode::SUCCESS)
 }
@@ -384,7 +381,7 @@ fn drive_loop(
     stdin_fd: i32,
     teleop: &mut Teleop,
     display: &mut Display,
-    log: &mut Option<RobotLog>,
+    logs: &mut RobotLogs,
 ) -> anyhow::Result<End> {
     let mut keyboard = Some(stdin_fd);
     let mut buf = [0u8; 256];
@@ -423,10 +420,13 @@ fn drive_loop(
         match agent.try_tick() {
             Ok(Some(tick)) => {
                 let action = teleop.on_tick(tick, agent.sensors());
+                // The final tick (unanswered) is logged by `RobotLogs::finish`, as in every agent.
                 if let Some(action) = action {
                     agent.send(tick.tick, &[action]).context("cannot send the powers to the hub")?;
+                    if let Some(block) = teleop.block() {
+                        logs.row(block, tick.sim_time_s, action.motors).context("cannot write the log")?;
+                    }
                 }
-                write_log(log, args, teleop)?;
                 display.dirty = true;
             }
             Ok(None) => {}
@@ -441,21 +441,8 @@ fn drive_loop(
             Err(AgentError::Interrupted) => return Ok(End::Interrupted),
             Err(e) => return Err(e).context("the teleop lost its hub"),
         }
-        display.draw(&teleop.status(&args.name, &args.session), Instant::now(), false);
+        display.draw(&teleop.status(&args.name, &args.common.session), Instant::now(), false);
     }
-}
-
-fn write_log(log: &mut Option<RobotLog>, args: &TeleopArgs, teleop: &Teleop) -> anyhow::Result<()> {
-    let (Some(dir), Some(block), Some(tick)) = (&args.log, teleop.block(), teleop.tick()) else { return Ok(()) };
-    if log.is_none() {
-        let created = RobotLog::create(dir, &args.name, block.proximity_count as usize)
-            .with_context(|| format!("cannot create a log in {}", dir.display()))?;
-        *log = Some(created);
-    }
-    if let Some(log) = log {
-        log.row(block, tick.sim_time_s, teleop.drive().powers()).context("cannot write the log")?;
-    }
-    Ok(())
 }
 
 #[cfg(test)]

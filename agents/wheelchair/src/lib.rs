@@ -5,7 +5,8 @@
 use std::path::Path;
 use std::process::ExitCode;
 
-use agent_sdk::log::RobotLog;
+use agent_sdk::cli::CommonArgs;
+use agent_sdk::logs::RobotLogs;
 use agent_sdk::{Agent, Wait};
 use anyhow::Context as _;
 use ipc_types::{ActionBlock, COLLISION, MAX_PROXIMITY, REG_HAS_POSE, RobotKind, RobotRegistration, SensorSpec};
@@ -35,16 +36,17 @@ With --config FILE the chairs come from a TOML file, one [[chairs]] table each:
   start_s = 0.0                  # wait this long before moving
 
 Without --config, the options below describe --robots identical chairs.")]
+#[command(mut_arg("log", |a| a.help("Write one CSV log per chair into this directory").value_name("LOG")))]
+#[command(mut_arg("connect_timeout", |a| {
+    a.help("Wait this many seconds for the hub to start serving the session").value_name("CONNECT_TIMEOUT")
+}))]
 pub struct WheelchairArgs {
-    /// Session of the hub to join.
-    #[arg(long, default_value = "default")]
-    pub session: String,
+    /// `--session`, `--connect-timeout`, `--log` (one CSV log per chair).
+    #[command(flatten)]
+    pub common: CommonArgs,
     /// Chairs from a TOML file (see above); the body and script options below are ignored.
     #[arg(long)]
     pub config: Option<PathBuf>,
-    /// Write one CSV log per chair into this directory.
-    #[arg(long)]
-    pub log: Option<PathBuf>,
     /// Robots to register.
     #[arg(long, default_value_t = 1)]
     pub robots: usize,
@@ -89,9 +91,6 @@ pub struct WheelchairArgs {
     /// Spin on shared memory instead of sleeping between ticks.
     #[arg(long)]
     pub busy_poll: bool,
-    /// Wait this many seconds for the hub to start serving the session.
-    #[arg(long, default_value_t = 5.0)]
-    pub connect_timeout: f64,
     /// At the end, print the hub-publish → agent-has-it latency percentiles as JSON.
     #[arg(long)]
     pub report_latency: bool,
@@ -249,17 +248,15 @@ impl OwnMotion {
     }
 
     /// One tick of `dt` seconds with `powers`; returns the new pose as x, y, heading degrees.
+    /// The formulas are the hub's own (`sim_model`), so only the hub's noise tells the two apart.
     pub fn step(&mut self, c: &ChairConfig, powers: [f64; 2], dt: f64) -> [f64; 3] {
         for (out, p) in self.out.iter_mut().zip(powers) {
-            *out = (1.0 - c.accel_curve) * p.clamp(-1.0, 1.0) + c.accel_curve * *out;
+            *out = sim_model::motor_filter(p.clamp(-1.0, 1.0), *out, c.accel_curve);
         }
-        let [l, r] = self.out;
-        let v = c.max_speed * (r + l) / 2.0;
-        let w = c.max_speed * (r - l) / c.body[1];
-        let [x, y, th] = self.pose;
-        let th2 = (th + w * dt + std::f64::consts::PI).rem_euclid(std::f64::consts::TAU) - std::f64::consts::PI;
-        self.pose = [x + v * th.cos() * dt, y + v * th.sin() * dt, th2];
-        [self.pose[0], self.pose[1], th2.to_degrees()]
+        let (v, omega) = sim_model::velocity(c.max_speed, c.body[1], self.out);
+        let (sin, cos) = self.pose[2].sin_cos();
+        self.pose = sim_model::advance(self.pose, v, omega, cos, sin, dt);
+        [self.pose[0], self.pose[1], self.pose[2].to_degrees()]
     }
 }
 
@@ -270,8 +267,7 @@ pub fn toward(pose: [f64; 3], goal: [f64; 2], speed: f64) -> Option<[f64; 2]> {
     if dx.hypot(dy) < 0.15 {
         return None;
     }
-    let mut err = dy.atan2(dx) - pose[2].to_radians();
-    err = (err + std::f64::consts::PI).rem_euclid(std::f64::consts::TAU) - std::f64::consts::PI;
+    let err = sim_model::wrap_rad(dy.atan2(dx) - pose[2].to_radians());
     if err.abs() > 0.6 {
         let t = 0.3 * err.signum();
         return Some([-t, t]);
@@ -286,8 +282,7 @@ pub fn run(args: &WheelchairArgs) -> anyhow::Result<ExitCode> {
         Some(path) => read_config(path)?,
         None => chairs_from_args(args),
     };
-    let timeout = std::time::Duration::from_secs_f64(args.connect_timeout.max(0.0));
-    let mut agent = Agent::connect_within(&args.session, &format!("wheelchair-{}", std::process::id()), timeout)?;
+    let mut agent = args.common.connect("wheelchair")?;
     // Close the agent on every path, errors included: the last process of a session removes
     // its files, even when the hub died first.
     let result = drive(&mut agent, args, &chairs);
@@ -301,10 +296,11 @@ fn drive(agent: &mut Agent, args: &WheelchairArgs, chairs: &[ChairConfig]) -> an
         ids.push(agent.register(&registration(c)).with_context(|| format!("registering {}", c.name))?);
     }
     agent.ready()?;
-    eprintln!("wheelchair: agent {} drives robots {:?} in session {:?}", agent.id(), ids, args.session);
-    // Logs are opened at the first tick, when the sensor blocks say how many sensors each
-    // chair has.
-    let mut logs: Vec<Option<RobotLog>> = chairs.iter().map(|_| None).collect();
+    eprintln!("wheelchair: agent {} drives robots {:?} in session {:?}", agent.id(), ids, args.common.session);
+    let mut logs = RobotLogs::new(args.common.log.as_deref());
+    for (c, &id) in chairs.iter().zip(&ids) {
+        logs.add(id, &c.name);
+    }
     let wait = if args.busy_poll { Wait::BusyPoll } else { Wait::Blocking };
     let mut next_waypoint = vec![0usize; chairs.len()];
     // Real chairs move themselves by the simulated time since the tick they last answered
@@ -345,17 +341,7 @@ fn drive(agent: &mut Agent, args: &WheelchairArgs, chairs: &[ChairConfig]) -> an
                     }
                 }
             };
-            if let Some(dir) = &args.log {
-                if logs[k].is_none() {
-                    logs[k] = Some(
-                        RobotLog::create(dir, &c.name, b.proximity_count as usize)
-                            .with_context(|| format!("creating a log in {}", dir.display()))?,
-                    );
-                }
-                if let Some(log) = logs[k].as_mut() {
-                    log.row(b, tick.sim_time_s, powers)?;
-                }
-            }
+            logs.row(b, tick.sim_time_s, powers)?;
             actions.push(match c.kind {
                 ChairKind::Simulated => ActionBlock::motors(id, powers[0], powers[1]),
                 ChairKind::Real => {
@@ -379,9 +365,8 @@ fn drive(agent: &mut Agent, args: &WheelchairArgs, chairs: &[ChairConfig]) -> an
             break;
         }
     }
-    for log in logs.iter_mut().flatten() {
-        log.flush()?;
-    }
+    // The run's final tick too, when the hub ended the run (not after `--ticks`).
+    logs.finish(agent)?;
     eprintln!("wheelchair: answered {answered} ticks");
     if args.report_latency {
         // The first ticks include connection set-up; they are not the steady state.

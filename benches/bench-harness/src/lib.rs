@@ -30,6 +30,8 @@ use std::time::{Duration, Instant};
 use crate::tiled::TiledWorld;
 
 use anyhow::Context as _;
+use ipc_services::{RawPingPong, Role};
+use ipc_types::{PING_PAYLOAD_BYTES, Ping};
 
 use crate::args::{BenchLatencyArgs, BenchLockstepArgs, BenchWorldArgs, RawPeerArgs, Transport, UdpClientArgs};
 
@@ -107,6 +109,7 @@ pub fn world(args: &BenchWorldArgs) -> anyhow::Result<ExitCode> {
 }
 
 pub use records::latency::Percentiles;
+use records::outcome::HubOutcome;
 
 fn iwsim_exe() -> anyhow::Result<std::path::PathBuf> {
     std::env::current_exe().context("finding the iwsim executable")
@@ -165,7 +168,8 @@ fn raw_latency(samples: u64, busy: bool) -> anyhow::Result<Percentiles> {
     use ipc_services::iceoryx2::prelude::*;
     let session = ipc_services::Session::new(&format!("bench-raw-{}-{}", std::process::id(), busy as u8))?;
     let node = session.node("raw-driver")?;
-    let (ping, ping_ev, pong, pong_ev) = raw::services(&session, &node, true)?;
+    let RawPingPong { ping, ping_event: ping_ev, pong, pong_event: pong_ev } =
+        session.raw_ping_pong(&node, Role::Hub)?;
     let publisher = ping.publisher_builder().create().map_err(|e| anyhow::anyhow!("{e:?}"))?;
     let notifier = ping_ev.notifier_builder().create().map_err(|e| anyhow::anyhow!("{e:?}"))?;
     let subscriber = pong.subscriber_builder().create().map_err(|e| anyhow::anyhow!("{e:?}"))?;
@@ -186,8 +190,8 @@ fn raw_latency(samples: u64, busy: bool) -> anyhow::Result<Percentiles> {
     }
     for seq in 0..samples + 100 {
         let mut sample = publisher.loan_uninit().map_err(|e| anyhow::anyhow!("{e:?}"))?;
-        let mut ping_msg = raw::Ping { seq, t_pub_ns: 0, payload: [0; raw::PAYLOAD] };
-        ping_msg.t_pub_ns = ipc_types::monotonic_ns();
+        let mut ping_msg = Ping { seq, t_pub_ns: 0, payload: [0; PING_PAYLOAD_BYTES] };
+        ping_msg.t_pub_ns = ipc_services::monotonic_ns();
         sample.payload_mut().write(ping_msg);
         #[allow(unsafe_code)]
         // SAFETY: the payload was written in full on the line above.
@@ -217,7 +221,8 @@ fn raw_latency(samples: u64, busy: bool) -> anyhow::Result<Percentiles> {
 pub fn raw_peer(args: &RawPeerArgs) -> anyhow::Result<ExitCode> {
     let session = ipc_services::Session::new(&args.session)?;
     let node = session.node("raw-peer")?;
-    let (ping, ping_ev, pong, pong_ev) = raw::services(&session, &node, false)?;
+    let RawPingPong { ping, ping_event: ping_ev, pong, pong_event: pong_ev } =
+        session.raw_ping_pong(&node, Role::Client)?;
     let subscriber = ping.subscriber_builder().create().map_err(|e| anyhow::anyhow!("{e:?}"))?;
     let listener = ping_ev.listener_builder().create().map_err(|e| anyhow::anyhow!("{e:?}"))?;
     let publisher = pong.publisher_builder().create().map_err(|e| anyhow::anyhow!("{e:?}"))?;
@@ -227,7 +232,7 @@ pub fn raw_peer(args: &RawPeerArgs) -> anyhow::Result<ExitCode> {
     while (lat.len() as u64) < args.samples {
         anyhow::ensure!(Instant::now() < deadline, "the raw driver stopped sending");
         if let Some(p) = subscriber.receive().map_err(|e| anyhow::anyhow!("{e:?}"))? {
-            let now = ipc_types::monotonic_ns();
+            let now = ipc_services::monotonic_ns();
             lat.push(now.saturating_sub(p.payload().t_pub_ns));
             publisher.send_copy(p.payload().seq).map_err(|e| anyhow::anyhow!("{e:?}"))?;
             notifier.notify().map_err(|e| anyhow::anyhow!("{e:?}"))?;
@@ -239,68 +244,6 @@ pub fn raw_peer(args: &RawPeerArgs) -> anyhow::Result<ExitCode> {
     drop((subscriber, listener, publisher, notifier, ping, ping_ev, pong, pong_ev, node));
     session.release_if_unused();
     Ok(ExitCode::SUCCESS)
-}
-
-mod raw {
-    use ipc_services::iceoryx2::node::Node;
-    use ipc_services::iceoryx2::prelude::ZeroCopySend;
-    use ipc_services::{EventService, Session, Svc};
-
-    /// Bytes after the header, so a ping is as large as a sensor block.
-    pub const PAYLOAD: usize = 816;
-
-    /// A ping of the size of a sensor block.
-    #[repr(C)]
-    #[derive(Debug, Clone, Copy, ZeroCopySend)]
-    #[type_name("iwsim::bench::Ping.v1")]
-    pub struct Ping {
-        pub seq: u64,
-        pub t_pub_ns: u64,
-        pub payload: [u8; PAYLOAD],
-    }
-    const _: () = assert!(core::mem::size_of::<Ping>() == core::mem::size_of::<ipc_types::SensorBlock>());
-
-    type PingService = ipc_services::iceoryx2::service::port_factory::publish_subscribe::PortFactory<Svc, Ping, ()>;
-    type PongService = ipc_services::iceoryx2::service::port_factory::publish_subscribe::PortFactory<Svc, u64, ()>;
-
-    pub fn services(
-        session: &Session,
-        node: &Node<Svc>,
-        create: bool,
-    ) -> anyhow::Result<(PingService, EventService, PongService, EventService)> {
-        let name = |p: &str| {
-            ipc_services::iceoryx2::prelude::ServiceName::new(&session.service_name(p))
-                .map_err(|e| anyhow::anyhow!("{e:?}"))
-        };
-        let ping = node
-            .service_builder(&name("ping")?)
-            .publish_subscribe::<Ping>()
-            .subscriber_max_buffer_size(1)
-            .enable_safe_overflow(true);
-        let pong = node
-            .service_builder(&name("pong")?)
-            .publish_subscribe::<u64>()
-            .subscriber_max_buffer_size(1)
-            .enable_safe_overflow(true);
-        let ping_ev = node.service_builder(&name("ping")?).event();
-        let pong_ev = node.service_builder(&name("pong")?).event();
-        let e = |e: &dyn std::fmt::Debug| anyhow::anyhow!("{e:?}");
-        Ok(if create {
-            (
-                ping.create().map_err(|x| e(&x))?,
-                ping_ev.create().map_err(|x| e(&x))?,
-                pong.create().map_err(|x| e(&x))?,
-                pong_ev.create().map_err(|x| e(&x))?,
-            )
-        } else {
-            (
-                ping.open().map_err(|x| e(&x))?,
-                ping_ev.open().map_err(|x| e(&x))?,
-                pong.open().map_err(|x| e(&x))?,
-                pong_ev.open().map_err(|x| e(&x))?,
-            )
-        })
-    }
 }
 
 /// `iwsim bench latency`.
@@ -454,14 +397,9 @@ pub fn measure_lockstep(
         finish(b, "bridge")?;
     }
     let _ = std::fs::remove_dir_all(&dir);
-    let field = |k: &str| -> Option<f64> {
-        let key = format!("\"{k}\":");
-        let rest = &out[out.find(&key)? + key.len()..];
-        rest[..rest.find([',', '}'])?].parse().ok()
-    };
-    let run_s = field("run_s").context("hub printed no run time")?;
-    let ticks_done = field("ticks").context("hub printed no tick count")? as u64;
-    Ok(LockstepBench { agents, robots_per_agent, ticks: ticks_done, ticks_per_s: ticks_done as f64 / run_s.max(1e-9) })
+    let hub_out = HubOutcome::from_stdout(&out).context("reading how the hub's run ended")?;
+    let ticks_per_s = hub_out.ticks as f64 / hub_out.run_s.max(1e-9);
+    Ok(LockstepBench { agents, robots_per_agent, ticks: hub_out.ticks, ticks_per_s })
 }
 
 /// Reads the bridge's "registrations on ADDR" line from its stderr.

@@ -5,6 +5,7 @@ use std::process::{Child, ExitCode};
 use std::time::Duration;
 
 use anyhow::Context as _;
+use records::outcome::HubOutcome;
 use viewer::browser::Browser;
 
 use crate::args::BenchViewerArgs;
@@ -242,14 +243,8 @@ pub fn measure_hub_cost(robots: usize, ticks: u64, watcher: Watcher) -> anyhow::
         anyhow::ensure!(frames > 0, "the viewer sent no frames");
     }
     let _ = std::fs::remove_dir_all(&dir);
-    let field = |k: &str| -> Option<f64> {
-        let key = format!("\"{k}\":");
-        let rest = &out[out.find(&key)? + key.len()..];
-        rest[..rest.find([',', '}'])?].parse().ok()
-    };
-    let run_s = field("run_s").context("hub printed no run time")?;
-    let done = field("ticks").context("hub printed no tick count")?;
-    Ok(done / run_s.max(1e-9))
+    let hub_out = HubOutcome::from_stdout(&out).context("reading how the hub's run ended")?;
+    Ok(hub_out.ticks as f64 / hub_out.run_s.max(1e-9))
 }
 
 /// `iwsim bench viewer`.

@@ -35,7 +35,8 @@ pub struct RobotLog {
 }
 
 impl RobotLog {
-    /// Creates `dir/<name>.csv` (and `dir`) for a robot with `proximity` sensors.
+    /// Creates `dir/<stem>.csv` (and `dir`) for a robot with `proximity` sensors, `<stem>`
+    /// being [`file_stem`] of its name.
     pub fn create(dir: &Path, name: &str, proximity: usize) -> std::io::Result<Self> {
         std::fs::create_dir_all(dir)?;
         let path = dir.join(format!("{}.csv", file_stem(name)));
@@ -80,11 +81,66 @@ impl RobotLog {
     }
 }
 
-/// A robot name as a file stem: letters, digits, `-` and `_` kept, anything else `_`.
+/// A robot name as a file stem, one to one: ASCII letters, digits, `-` and `_` stay as they
+/// are (so a plain name is its own stem: `chair1` → `chair1.csv`), and every other byte of the
+/// name's UTF-8, `%` included, becomes `%XX` in upper-case hex (`chair 1` → `chair%201`).
+/// Two robots of a run therefore never share a log file, and [`robot_name`] gives the name
+/// back. The empty name, which no hub accepts, is `%` (a stem no other name has).
 pub fn file_stem(name: &str) -> String {
-    let s: String =
-        name.chars().map(|c| if c.is_ascii_alphanumeric() || c == '-' || c == '_' { c } else { '_' }).collect();
-    if s.is_empty() { "robot".into() } else { s }
+    if name.is_empty() {
+        return "%".into();
+    }
+    let mut stem = String::with_capacity(name.len());
+    for b in name.bytes() {
+        if b.is_ascii_alphanumeric() || b == b'-' || b == b'_' {
+            stem.push(char::from(b));
+        } else {
+            stem.push_str(&format!("%{b:02X}"));
+        }
+    }
+    stem
+}
+
+/// The robot name a log's file stem stands for: the inverse of [`file_stem`]. `None` when the
+/// stem is not one [`file_stem`] makes (a file renamed or written by hand), so a caller can
+/// fall back to the stem itself.
+pub fn robot_name(stem: &str) -> Option<String> {
+    if stem == "%" {
+        return Some(String::new());
+    }
+    let bytes = stem.as_bytes();
+    let mut name = Vec::with_capacity(bytes.len());
+    let mut k = 0;
+    while k < bytes.len() {
+        let b = bytes[k];
+        if b == b'%' {
+            let hex = stem.get(k + 1..k + 3)?;
+            // Only upper-case hex, as written: a second spelling of one byte would make two
+            // stems for one name.
+            if !hex.bytes().all(|h| h.is_ascii_digit() || (b'A'..=b'F').contains(&h)) {
+                return None;
+            }
+            let byte = u8::from_str_radix(hex, 16).ok()?;
+            if byte.is_ascii_alphanumeric() || byte == b'-' || byte == b'_' {
+                return None;
+            }
+            name.push(byte);
+            k += 3;
+        } else if b.is_ascii_alphanumeric() || b == b'-' || b == b'_' {
+            name.push(b);
+            k += 1;
+        } else {
+            return None;
+        }
+    }
+    String::from_utf8(name).ok().filter(|n| !n.is_empty())
+}
+
+/// The robot whose log `path` is: [`robot_name`] of its file stem, or the stem itself for a
+/// file [`RobotLog`] did not name (a log renamed by hand keeps its new name).
+pub fn robot_name_of(path: &Path) -> String {
+    let stem = path.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
+    robot_name(&stem).unwrap_or(stem)
 }
 
 /// The columns the writer fills with numbers (and `proximityK_m`): a reader insists on
@@ -320,16 +376,41 @@ mod tests {
         log.row(&b, 0.3, [0.5, -0.5]).expect("row");
         log.row(&b, 0.3, [0.5, -0.5]).expect("repeat skipped");
         log.flush().expect("flush");
-        let text = std::fs::read_to_string(dir.join("chair_1.csv")).expect("file");
+        assert_eq!(log.path(), dir.join("chair%201.csv"));
+        let text = std::fs::read_to_string(log.path()).expect("file");
         assert_eq!(
             text,
             "tick,time_s,encoder_left_ticks,encoder_right_ticks,proximity0_m,proximity1_m,heading_deg,x_m,y_m,collision,contacts,power_left,power_right\n\
              3,0.300,10,-4,0.5000,1.2500,90.000,10.5000,6.1000,1,2,0.500,-0.500\n"
         );
-        let table = LogTable::read(&dir.join("chair_1.csv")).expect("reads back");
+        let table = LogTable::read(&dir.join("chair%201.csv")).expect("reads back");
         assert_eq!(table.rows.len(), 1);
         assert_eq!(table.rows[0][table.column("x_m").expect("x")], 10.5);
         let _ = std::fs::remove_dir_all(dir);
+    }
+
+    #[test]
+    fn file_stems_keep_plain_names_and_never_collide() {
+        for plain in ["chair1", "door-2", "A_b", "B"] {
+            assert_eq!(file_stem(plain), plain);
+            assert_eq!(robot_name(plain).as_deref(), Some(plain));
+        }
+        // The names that used to share `a_b.csv`, and others a file system would mangle.
+        let names = ["a b", "a_b", "a%20b", "a.b", "../x", ".hidden", "é", "a/b", "", "%", "x%"];
+        let stems: Vec<String> = names.iter().map(|n| file_stem(n)).collect();
+        assert_eq!(stems[..4], ["a%20b", "a_b", "a%2520b", "a%2Eb"]);
+        for (k, (name, stem)) in names.iter().zip(&stems).enumerate() {
+            assert!(!stems[..k].contains(stem), "{name:?} shares {stem:?}");
+            assert!(stem.bytes().all(|b| b.is_ascii_alphanumeric() || b"-_%".contains(&b)), "{stem:?}");
+            assert_eq!(robot_name(stem).as_deref(), Some(*name), "{stem:?}");
+        }
+        // Stems no name maps to: a hand-made file is not mistaken for a robot.
+        for odd in ["a b", "a%2", "a%zz", "a%2e", "a%41", "a.csv", "%C3"] {
+            assert_eq!(robot_name(odd), None, "{odd:?}");
+        }
+        assert_eq!(robot_name_of(Path::new("runs/chair%201.csv")), "chair 1");
+        assert_eq!(robot_name_of(Path::new("runs/chair1.csv")), "chair1");
+        assert_eq!(robot_name_of(Path::new("runs/my run.csv")), "my run", "a hand-named file keeps its name");
     }
 
     #[test]

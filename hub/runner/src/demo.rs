@@ -60,5 +60,5 @@ pub fn run(args: &DemoArgs) -> anyhow::Result<ExitCode> {
     println!(
         "  dynamic characteristic (thesis 7.2: MaxSpeed 0.49, AccelerationCurve 0.83, 100 ms): top speed {top:.3} m/s, 10-90% rise time {rise:.1} s"
     );
-    Ok(if summary.passed() { ExitCode::SUCCESS } else { ExitCode::FAILURE })
+    Ok(if summary.passed { ExitCode::SUCCESS } else { ExitCode::FAILURE })
 }

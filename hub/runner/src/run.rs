@@ -13,62 +13,11 @@ use std::time::{Duration, Instant};
 
 use agent_sdk::log::LogTable;
 use anyhow::Context as _;
+use records::outcome::HubOutcome;
+pub use records::summary::{RobotSummary, RunSummary};
 
 use crate::args::RunArgs;
 use crate::scenario::{Scenario, option_flags};
-
-/// One robot's outcome, from its log.
-#[derive(Debug, Clone, PartialEq)]
-pub struct RobotSummary {
-    /// Robot name (its log's file stem).
-    pub name: String,
-    /// Log file name.
-    pub log: String,
-    /// Its route, checkpoint numbers.
-    pub route: Vec<usize>,
-    /// Checkpoints of the route reached, in order.
-    pub reached: usize,
-    /// Simulated time at each reached checkpoint, seconds.
-    pub reached_at_s: Vec<f64>,
-    /// Contacts.
-    pub collisions: u64,
-    /// Ticks logged.
-    pub ticks: usize,
-    /// Distance driven, metres.
-    pub distance_m: f64,
-    /// Top speed, m/s.
-    pub top_speed_mps: f64,
-    /// 10–90 % rise time of the speed, seconds.
-    pub rise_time_s: f64,
-    /// Final pose: x, y metres, heading degrees.
-    pub final_pose: [f64; 3],
-}
-
-/// One run's outcome.
-#[derive(Debug, Clone)]
-pub struct RunSummary {
-    /// Scenario name.
-    pub scenario: String,
-    /// Seed.
-    pub seed: u64,
-    /// Ticks the hub ran.
-    pub ticks: u64,
-    /// The hub's final state hash.
-    pub state_hash: String,
-    /// Wall-clock seconds.
-    pub wall_s: f64,
-    /// Robots, by name.
-    pub robots: Vec<RobotSummary>,
-    /// Expectations that failed (empty: passed).
-    pub failures: Vec<String>,
-}
-
-impl RunSummary {
-    /// Whether the expected outcome held.
-    pub fn passed(&self) -> bool {
-        self.failures.is_empty()
-    }
-}
 
 /// Reads a robot's log and measures what the summary reports.
 pub fn summarise_log(path: &Path, route: &[usize], scenario: &Scenario) -> anyhow::Result<RobotSummary> {
@@ -76,11 +25,13 @@ pub fn summarise_log(path: &Path, route: &[usize], scenario: &Scenario) -> anyho
     let col = |n: &str| t.column(n);
     let (ct, cx, cy, ch, cc) = (col("time_s")?, col("x_m")?, col("y_m")?, col("heading_deg")?, col("contacts")?);
     let mut s = RobotSummary {
-        name: path.file_stem().map(|f| f.to_string_lossy().into_owned()).unwrap_or_default(),
+        name: records::log::robot_name_of(path),
         log: path.file_name().map(|f| f.to_string_lossy().into_owned()).unwrap_or_default(),
         route: route.to_vec(),
-        reached: 0,
+        checkpoints_reached: 0,
+        checkpoints_total: route.len(),
         reached_at_s: Vec::new(),
+        time_s: None,
         collisions: 0,
         ticks: t.rows.len(),
         distance_m: 0.0,
@@ -91,12 +42,11 @@ pub fn summarise_log(path: &Path, route: &[usize], scenario: &Scenario) -> anyho
     let mut speeds: Vec<(f64, f64)> = Vec::new();
     let mut last: Option<&Vec<f64>> = None;
     for row in &t.rows {
-        if let Some(&n) = route.get(s.reached) {
-            let c = scenario.checkpoints[n - 1];
-            if (row[cx] - c.x).hypot(row[cy] - c.y) <= c.radius {
-                s.reached += 1;
-                s.reached_at_s.push(row[ct]);
-            }
+        if let Some(&n) = route.get(s.checkpoints_reached)
+            && scenario.checkpoints[n - 1].contains(row[cx], row[cy])
+        {
+            s.checkpoints_reached += 1;
+            s.reached_at_s.push(row[ct]);
         }
         if let Some(prev) = last {
             let d = (row[cx] - prev[cx]).hypot(row[cy] - prev[cy]);
@@ -110,6 +60,7 @@ pub fn summarise_log(path: &Path, route: &[usize], scenario: &Scenario) -> anyho
         s.final_pose = [row[cx], row[cy], row[ch]];
         last = Some(row);
     }
+    s.time_s = s.reached_at_s.last().copied();
     s.top_speed_mps = speeds.iter().map(|&(_, v)| v).fold(0.0, f64::max);
     let first = |f: f64| speeds.iter().find(|&&(_, v)| v >= f * s.top_speed_mps).map(|&(t, _)| t);
     if let (Some(t10), Some(t90)) = (first(0.1), first(0.9)) {
@@ -132,8 +83,8 @@ fn check(scenario: &Scenario, robots: &[RobotSummary]) -> Vec<String> {
             failures.push(format!("{name}: no log (did its agent start?)"));
             continue;
         };
-        if e.route && r.reached < r.route.len() {
-            failures.push(format!("{name}: reached {} of {} checkpoints", r.reached, r.route.len()));
+        if e.route && r.checkpoints_reached < r.checkpoints_total {
+            failures.push(format!("{name}: reached {} of {} checkpoints", r.checkpoints_reached, r.checkpoints_total));
         }
         for (what, value, range) in [
             ("top speed", r.top_speed_mps, e.top_speed_mps),
@@ -275,10 +226,10 @@ pub fn run_once(scenario: &Scenario, seed: u64, out: &Path, opts: &RunOptions) -
         hub_args.push(s("--no-noise"));
     }
     for o in &scenario.obstacles {
-        hub_args.extend([s("--obstacle"), format!("{},{},{},{},{}", o.x0, o.y0, o.x1, o.y1, o.height)]);
+        hub_args.extend([s("--obstacle"), o.to_string()]);
     }
     for c in &scenario.checkpoints {
-        hub_args.extend([s("--checkpoint"), format!("{},{},{}", c.x, c.y, c.radius)]);
+        hub_args.extend([s("--checkpoint"), c.to_string()]);
     }
     let started = Instant::now();
     let (tx, rx) = std::sync::mpsc::channel::<String>();
@@ -348,11 +299,7 @@ pub fn run_once(scenario: &Scenario, seed: u64, out: &Path, opts: &RunOptions) -
     // not the runner: the summary still says what happened.
     let agent_failures: Vec<String> =
         agent_results.into_iter().filter_map(|r| r.err().map(|e| e.to_string())).collect();
-    let field = |k: &str| -> Option<String> {
-        let key = format!("\"{k}\":");
-        let rest = &hub_out[hub_out.find(&key)? + key.len()..];
-        Some(rest[..rest.find([',', '}'])?].trim_matches('"').to_owned())
-    };
+    let hub_outcome = HubOutcome::from_stdout(&hub_out).context("reading how the hub's run ended")?;
     let mut robots = Vec::new();
     let mut logs: Vec<PathBuf> = std::fs::read_dir(out)?
         .flatten()
@@ -361,7 +308,7 @@ pub fn run_once(scenario: &Scenario, seed: u64, out: &Path, opts: &RunOptions) -
         .collect();
     logs.sort();
     for log in logs {
-        let name = log.file_stem().map(|f| f.to_string_lossy().into_owned()).unwrap_or_default();
+        let name = records::log::robot_name_of(&log);
         let route = scenario.routes.get(&name).cloned().unwrap_or_default();
         robots.push(summarise_log(&log, &route, scenario)?);
     }
@@ -370,13 +317,17 @@ pub fn run_once(scenario: &Scenario, seed: u64, out: &Path, opts: &RunOptions) -
     let summary = RunSummary {
         scenario: scenario.name.clone(),
         seed,
-        ticks: field("ticks").and_then(|t| t.parse().ok()).unwrap_or(0),
-        state_hash: field("state_hash").unwrap_or_default(),
+        ticks: hub_outcome.ticks,
+        state_hash: hub_outcome.state_hash,
         wall_s: started.elapsed().as_secs_f64(),
-        robots,
+        passed: failures.is_empty(),
         failures,
+        lab: scenario.lab_spec(),
+        obstacles: scenario.obstacles.clone(),
+        checkpoints: scenario.checkpoints.clone(),
+        robots,
     };
-    std::fs::write(out.join("summary.json"), summary_json(scenario, &summary))?;
+    std::fs::write(out.join("summary.json"), summary.to_json())?;
     Ok(summary)
 }
 
@@ -426,57 +377,6 @@ fn progress_loop(session: &str, ticks: u64, stop: &std::sync::mpsc::Receiver<()>
     obs.close();
 }
 
-fn json_str(s: &str) -> String {
-    serde_json::Value::String(s.to_owned()).to_string()
-}
-
-/// `summary.json`: the run, the scenario's map overlay (for `iwsim plot`) and every robot.
-pub fn summary_json(scenario: &Scenario, s: &RunSummary) -> String {
-    let robots: Vec<String> = s
-        .robots
-        .iter()
-        .map(|r| {
-            format!(
-                "{{\"name\":{},\"log\":{},\"route\":{:?},\"checkpoints_reached\":{},\"checkpoints_total\":{},\"reached_at_s\":{:?},\"time_s\":{},\"collisions\":{},\"ticks\":{},\"distance_m\":{:.3},\"top_speed_mps\":{:.4},\"rise_time_s\":{:.2},\"final_pose\":[{:.4},{:.4},{:.2}]}}",
-                json_str(&r.name),
-                json_str(&r.log),
-                r.route,
-                r.reached,
-                r.route.len(),
-                r.reached_at_s,
-                r.reached_at_s.last().map_or("null".to_owned(), |t| format!("{t}")),
-                r.collisions,
-                r.ticks,
-                r.distance_m,
-                r.top_speed_mps,
-                r.rise_time_s,
-                r.final_pose[0],
-                r.final_pose[1],
-                r.final_pose[2]
-            )
-        })
-        .collect();
-    let obstacles: Vec<String> =
-        scenario.obstacles.iter().map(|o| format!("[{},{},{},{},{}]", o.x0, o.y0, o.x1, o.y1, o.height)).collect();
-    let checkpoints: Vec<String> =
-        scenario.checkpoints.iter().map(|c| format!("[{},{},{}]", c.x, c.y, c.radius)).collect();
-    let failures: Vec<String> = s.failures.iter().map(|f| json_str(f)).collect();
-    format!(
-        "{{\"scenario\":{},\"seed\":{},\"ticks\":{},\"state_hash\":{},\"wall_s\":{:.3},\"passed\":{},\"failures\":[{}],\"lab\":{},\"obstacles\":[{}],\"checkpoints\":[{}],\"robots\":[{}]}}\n",
-        json_str(&s.scenario),
-        s.seed,
-        s.ticks,
-        json_str(&s.state_hash),
-        s.wall_s,
-        s.passed(),
-        failures.join(","),
-        json_str(&scenario.lab_spec()),
-        obstacles.join(","),
-        checkpoints.join(","),
-        robots.join(",")
-    )
-}
-
 /// Prints a run's summary table.
 pub fn print_summary(s: &RunSummary, out: &Path) {
     println!(
@@ -491,7 +391,7 @@ pub fn print_summary(s: &RunSummary, out: &Path) {
         println!(
             "  {:<10} {:>11} {:>9} {:>10} {:>9.2} {:>10.3} {:>9.1}",
             r.name,
-            format!("{}/{}", r.reached, r.route.len()),
+            format!("{}/{}", r.checkpoints_reached, r.checkpoints_total),
             r.reached_at_s.last().map_or("-".to_owned(), |t| format!("{t:.1}")),
             r.collisions,
             r.distance_m,
@@ -499,7 +399,7 @@ pub fn print_summary(s: &RunSummary, out: &Path) {
             r.rise_time_s
         );
     }
-    if s.passed() {
+    if s.passed {
         println!("  expected outcome: PASS");
     } else {
         for f in &s.failures {
@@ -543,7 +443,7 @@ pub fn run(args: &RunArgs) -> anyhow::Result<ExitCode> {
         );
         let s = run_once(&scenario, seed, &out, &opts)?;
         print_summary(&s, &out);
-        return Ok(if s.passed() { ExitCode::SUCCESS } else { ExitCode::FAILURE });
+        return Ok(if s.passed { ExitCode::SUCCESS } else { ExitCode::FAILURE });
     };
     let seeds = parse_seeds(seeds).map_err(anyhow::Error::msg)?;
     let mut table = String::new();
@@ -556,14 +456,14 @@ pub fn run(args: &RunArgs) -> anyhow::Result<ExitCode> {
     for seed in seeds {
         let dir = out.join(format!("seed-{seed}"));
         let s = run_once(&scenario, seed, &dir, &RunOptions { verbose: false, ..opts.clone() })?;
-        let reached: usize = s.robots.iter().map(|r| r.reached).sum();
-        let total: usize = s.robots.iter().map(|r| r.route.len()).sum();
+        let reached: usize = s.robots.iter().map(|r| r.checkpoints_reached).sum();
+        let total: usize = s.robots.iter().map(|r| r.checkpoints_total).sum();
         let contacts: u64 = s.robots.iter().map(|r| r.collisions).sum();
         let time = s.robots.iter().filter_map(|r| r.reached_at_s.last().copied()).fold(f64::NAN, f64::max);
         let line = format!(
             "  {:>6} {:>6} {:>11} {:>10} {:>9}  {}",
             seed,
-            if s.passed() { "yes" } else { "NO" },
+            if s.passed { "yes" } else { "NO" },
             format!("{reached}/{total}"),
             contacts,
             if time.is_nan() { "-".into() } else { format!("{time:.1}") },
@@ -576,7 +476,7 @@ pub fn run(args: &RunArgs) -> anyhow::Result<ExitCode> {
         table.push('\n');
         all.push(s);
     }
-    let passed = all.iter().filter(|s| s.passed()).count();
+    let passed = all.iter().filter(|s| s.passed).count();
     // A run's time is its last robot's arrival, as in the table's rows.
     let times: Vec<f64> = all
         .iter()
@@ -601,7 +501,7 @@ pub fn run(args: &RunArgs) -> anyhow::Result<ExitCode> {
             format!("{:.1} s", times.iter().sum::<f64>() / times.len() as f64)
         }
     );
-    for s in all.iter().filter(|s| !s.passed()) {
+    for s in all.iter().filter(|s| !s.passed) {
         for f in &s.failures {
             println!("  seed {}: {f}", s.seed);
         }

@@ -43,6 +43,7 @@
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
+pub use records::places::{Checkpoint, Obstacle};
 use serde::Deserialize;
 
 /// The built-in scenarios, by name.
@@ -80,10 +81,10 @@ pub struct Scenario {
     /// Seed, unless the command line gives one.
     #[serde(default = "one")]
     pub seed: u64,
-    /// Checkpoints, numbered from 1.
+    /// Checkpoints, numbered from 1 (checked as they are read).
     #[serde(default)]
     pub checkpoints: Vec<Checkpoint>,
-    /// Static obstacles.
+    /// Static obstacles (checked as they are read; whether they fit the lab, the hub checks).
     #[serde(default)]
     pub obstacles: Vec<Obstacle>,
     /// Agent processes.
@@ -111,46 +112,6 @@ fn yes() -> bool {
 fn one() -> u64 {
     1
 }
-fn half() -> f64 {
-    0.5
-}
-fn metre() -> f64 {
-    1.0
-}
-
-/// A checkpoint.
-#[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct Checkpoint {
-    /// Centre x, metres.
-    pub x: f64,
-    /// Centre y, metres.
-    pub y: f64,
-    /// Reached within this distance of the centre of movement, metres.
-    #[serde(default = "half")]
-    pub radius: f64,
-}
-
-/// A static box.
-#[derive(Debug, Clone, PartialEq, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct Obstacle {
-    /// Label.
-    #[serde(default)]
-    pub name: String,
-    /// Lower-left x.
-    pub x0: f64,
-    /// Lower-left y.
-    pub y0: f64,
-    /// Upper-right x.
-    pub x1: f64,
-    /// Upper-right y.
-    pub y1: f64,
-    /// Height, metres.
-    #[serde(default = "metre")]
-    pub height: f64,
-}
-
 /// One agent process.
 #[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -271,20 +232,6 @@ impl Scenario {
         }
         if s.agents.is_empty() {
             return Err(bad("no [[agents]]: a run needs at least one".into()));
-        }
-        for (k, c) in s.checkpoints.iter().enumerate() {
-            if ![c.x, c.y, c.radius].iter().all(|v| v.is_finite()) || c.radius <= 0.0 {
-                return Err(bad(format!("checkpoint {}: x, y must be numbers and radius positive", k + 1)));
-            }
-        }
-        for (k, o) in s.obstacles.iter().enumerate() {
-            if !(o.x0 < o.x1 && o.y0 < o.y1 && o.height > 0.0) {
-                return Err(bad(format!(
-                    "obstacle {} ({}): want x0 < x1, y0 < y1 and a positive height",
-                    k + 1,
-                    o.name
-                )));
-            }
         }
         for (robot, route) in &s.routes {
             if let Some(n) = route.iter().find(|&&n| n == 0 || n > s.checkpoints.len()) {
@@ -427,5 +374,28 @@ mod tests {
             Scenario::parse("name = \"x\"\nseconds = 1\n[[agents]]\nkind = \"robot\"\n", "x.toml", Path::new("."))
                 .expect_err("kind");
         assert!(err.to_string().contains("agent kind \"robot\""), "{err}");
+    }
+
+    #[test]
+    fn obstacles_and_checkpoints_are_checked_where_they_are_written() {
+        let head = "name = \"x\"\nseconds = 1\n[[agents]]\nkind = \"navigator\"\n";
+        let parse = |tail: &str| Scenario::parse(&format!("{head}{tail}"), "x.toml", Path::new("."));
+        let s = parse(
+            "[[obstacles]]\nname = \"A\"\nx0 = 17\ny0 = 6.1\nx1 = 17.6\ny1 = 6.4\n[[checkpoints]]\nx = 1\ny = 2\n",
+        )
+        .expect("valid");
+        assert_eq!(s.obstacles, [Obstacle { name: "A".into(), ..Obstacle::new(17.0, 6.1, 17.6, 6.4, 1.0) }]);
+        assert_eq!(s.checkpoints, [Checkpoint { x: 1.0, y: 2.0, radius: 0.5 }]);
+        let msg = parse("[[obstacles]]\nname = \"B\"\nx0 = 3\ny0 = 2\nx1 = 1\ny1 = 4\n")
+            .expect_err("upside down")
+            .to_string();
+        assert!(
+            msg.starts_with("x.toml: ") && msg.contains("line 5") && msg.contains("B \"3,2,1,4,1\": want X0 < X1"),
+            "{msg}"
+        );
+        let msg = parse("[[checkpoints]]\nx = 1\ny = 2\nradius = 0\n").expect_err("radius").to_string();
+        assert!(msg.contains("line 5") && msg.contains("positive radius"), "{msg}");
+        let msg = parse("[[checkpoints]]\nx = 1\ny = 2\nr = 1\n").expect_err("unknown key").to_string();
+        assert!(msg.contains("unknown field `r`"), "{msg}");
     }
 }

@@ -90,6 +90,8 @@ mod tests {
         assert_eq!(wire_deg(-PI), 180.0);
         assert_eq!(wire_deg(-PI + 1e-17), 180.0);
         assert!((wire_deg(-3.0 * PI / 2.0) - 90.0).abs() < 1e-9);
+        assert!((wire_deg(190f64.to_radians()) + 170.0).abs() < 1e-9);
+        assert!((wrap_rad(100.0 * TAU + 0.25) - 0.25).abs() < 1e-9);
     }
 
     #[test]
@@ -113,7 +115,11 @@ mod tests {
 
     #[test]
     fn ir_values_follow_ciber_rato() {
+        assert_eq!(ir_value(1.0), 1.0);
         assert_eq!(ir_value(0.5), 2.0);
+        assert_eq!(ir_value(0.3), 3.3);
+        assert_eq!(ir_value(0.01), 100.0);
+        assert_eq!(ir_value(0.0), 100.0);
         assert_eq!(ir_value(3.0), 0.3);
         assert_eq!(ir_value(0.005), 100.0);
         assert!((encoder_ticks_per_m(1024.0, 0.17) - 958.67).abs() < 0.01);

@@ -51,12 +51,11 @@ pub use body::{AddRobotError, MAX_NAME_LEN, MAX_PROXIMITY, ProximitySpec, RobotK
 pub use grid::StaticBuildError;
 pub use readings::{
     GpsReading, Heard, MAX_BEACONS, MAX_INBOX_BYTES, MAX_MESSAGE_BYTES, Message, MessageTooLong, SensorReadings,
-    ciber_rato_value,
 };
 
 use crate::geom::PlacedBox;
 use crate::map::{Lab, Params};
-use crate::math::{Pose, Real, normalize_angle};
+use crate::math::{Pose, Real};
 use crate::rng::Rng;
 use body::{BodyShape, PreparedSensor};
 use grid::{DynGrid, GridSpec, StaticIndex};
@@ -204,10 +203,7 @@ impl Robot {
     /// Speeds implied by the motor outputs: linear (m/s) and angular (rad/s), thesis eqs.
     /// 4.5–4.6.
     pub fn velocity(&self) -> (Real, Real) {
-        let [l, r] = self.motor_out;
-        let v = self.spec.max_speed_mps * (r + l) / 2.0;
-        let w = self.spec.max_speed_mps * (r - l) / self.spec.height_m;
-        (v, w)
+        sim_model::velocity(self.spec.max_speed_mps, self.spec.height_m, self.motor_out)
     }
 }
 
@@ -673,16 +669,13 @@ impl World {
                     r.pushed = None;
                     let c = r.spec.accel_curve;
                     for w in 0..2 {
-                        let out = (1.0 - c) * r.motor_in[w] + c * r.motor_out[w];
+                        let out = sim_model::motor_filter(r.motor_in[w], r.motor_out[w], c);
                         r.motor_out[w] =
                             if motor_noise > 0.0 { out * (1.0 + motor_noise * self.rng.gaussian()) } else { out };
                     }
                     let (v, omega) = r.velocity();
-                    Pose {
-                        x: r.pose.x + v * co * dt,
-                        y: r.pose.y + v * s * dt,
-                        theta: normalize_angle(r.pose.theta + omega * dt),
-                    }
+                    let [x, y, theta] = sim_model::advance([r.pose.x, r.pose.y, r.pose.theta], v, omega, co, s, dt);
+                    Pose { x, y, theta }
                 }
             };
             let cur = r.shape.placed_cs(&r.pose, co, s);
@@ -726,7 +719,7 @@ impl World {
 
     fn commit(&mut self, dt: Real) {
         let ticks_per_m =
-            self.params.encoder_ticks_per_rev as Real / (std::f64::consts::TAU * self.params.wheel_radius_m);
+            sim_model::encoder_ticks_per_m(self.params.encoder_ticks_per_rev as Real, self.params.wheel_radius_m);
         let slip = self.params.noise.encoder_slip_frac;
         for (i, slot) in self.slots.iter_mut().enumerate() {
             let Some(r) = &mut slot.robot else { continue };

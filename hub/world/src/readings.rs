@@ -77,12 +77,6 @@ impl SensorReadings {
     }
 }
 
-/// The Ciber-Rato obstacle value of a distance: 1/d rounded to 0.1, saturating at 100 when
-/// d ≤ 0.01 (the UDP bridge sends this as `IRSensor Value`).
-pub fn ciber_rato_value(distance_m: Real) -> Real {
-    if distance_m > 0.01 { ((1.0 / distance_m) * 10.0).round() / 10.0 } else { 100.0 }
-}
-
 /// A message of at most [`MAX_MESSAGE_BYTES`] bytes.
 #[derive(Clone, Copy, PartialEq, Eq)]
 pub struct Message {
@@ -143,16 +137,6 @@ pub struct Heard {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn ciber_rato_values_are_inverse_distances_rounded_to_a_tenth() {
-        assert_eq!(ciber_rato_value(1.0), 1.0);
-        assert_eq!(ciber_rato_value(0.5), 2.0);
-        assert_eq!(ciber_rato_value(0.3), 3.3);
-        assert_eq!(ciber_rato_value(3.0), 0.3);
-        assert_eq!(ciber_rato_value(0.01), 100.0);
-        assert_eq!(ciber_rato_value(0.0), 100.0);
-    }
 
     #[test]
     fn messages_over_a_hundred_bytes_are_refused() {

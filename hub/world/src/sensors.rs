@@ -7,7 +7,7 @@ use super::body::PreparedSensor;
 use super::grid::{DynGrid, Segment, StaticIndex};
 use super::{Geo, MAX_PROXIMITY, Robot, SensorReadings, World};
 use crate::map::{Lab, Params};
-use crate::math::{Real, cross, normalize_angle, rotate, wire_deg};
+use crate::math::{Real, cross, rotate, wire_deg, wrap_rad};
 use crate::rng::Rng;
 
 /// What the measuring of one robot reads (borrowed apart from the robots and the generator).
@@ -123,7 +123,7 @@ impl Scene<'_> {
         if self.params.sensors.beacon {
             for (b, beacon) in self.lab.beacons.iter().enumerate() {
                 let v = beacon.pos - pos;
-                let bearing = normalize_angle(v.y.atan2(v.x) - r.pose.theta);
+                let bearing = wrap_rad(v.y.atan2(v.x) - r.pose.theta);
                 let visible = bearing.abs() <= self.params.beacon_aperture_rad
                     && !self.statics.segment_blocked(pos, beacon.pos, beacon.height_m);
                 out.beacons_deg[b] = visible.then(|| noisy_deg(rng, bearing, noise.beacon_deg));

@@ -316,8 +316,8 @@ fn draw_map(
     }
     let cp = CHECKPOINT;
     for (k, c) in scene.checkpoints.iter().enumerate() {
-        let r = px(c.radius_m).max(3);
-        let at = (c.x_m, c.y_m);
+        let r = px(c.radius).max(3);
+        let at = (c.x, c.y);
         chart.draw_series([Circle::new(at, r, cp.mix(0.12).filled()), Circle::new(at, r, cp.stroke_width(2))])?;
         let number = format!("{}", k + 1);
         let label = if r >= 9 {

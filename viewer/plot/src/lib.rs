@@ -34,7 +34,7 @@ use std::process::ExitCode;
 use anyhow::Context as _;
 
 use crate::log::RunLog;
-use crate::scene::{Checkpoint, Obstacle, Scene, Summary};
+use crate::scene::{Checkpoint, Obstacle, Scene, SummaryScene};
 
 /// Name of the run summary read from the log's directory.
 pub const SUMMARY_FILE: &str = "summary.json";
@@ -104,12 +104,7 @@ pub fn plot(args: &PlotArgs) -> anyhow::Result<PathBuf> {
     let scene = scene(args)?;
     let file_name = |p: &Path| p.file_name().map_or_else(|| p.display().to_string(), |n| n.to_string_lossy().into());
     let title = args.log.iter().map(|p| file_name(p)).collect::<Vec<_>>().join(", ");
-    let named = args
-        .log
-        .iter()
-        .zip(&logs)
-        .map(|(p, l)| (p.file_stem().map_or_else(|| file_name(p), |s| s.to_string_lossy().into()), l))
-        .collect();
+    let named = args.log.iter().zip(&logs).map(|(p, l)| (records::log::robot_name_of(p), l)).collect();
     let svg = draw::render(&draw::Figure { title, logs: named, scene: &scene })?;
     std::fs::write(&out, svg).with_context(|| format!("{}: cannot write the SVG", out.display()))?;
     Ok(out)
@@ -119,8 +114,11 @@ pub fn plot(args: &PlotArgs) -> anyhow::Result<PathBuf> {
 fn scene(args: &PlotArgs) -> anyhow::Result<Scene> {
     let dir = args.first_log()?.parent().filter(|d| !d.as_os_str().is_empty()).unwrap_or(Path::new("."));
     let summary_path = dir.join(SUMMARY_FILE);
-    let summary =
-        if !args.no_summary && summary_path.is_file() { Summary::read(&summary_path)? } else { Summary::default() };
+    let summary = if !args.no_summary && summary_path.is_file() {
+        SummaryScene::read(&summary_path)?
+    } else {
+        SummaryScene::default()
+    };
     let lab = match (&args.lab, &summary.lab) {
         (Some(spec), _) => Some(load_lab(spec, None)?),
         (None, Some(spec)) => {

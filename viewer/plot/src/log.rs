@@ -1,13 +1,13 @@
 //! A run log as the plot uses it: the per-robot CSV the agents write (read by
-//! [`agent_sdk::log::LogTable`], the project's one log reader, whose errors name the file,
+//! [`records::log::LogTable`], the project's one log reader, whose errors name the file,
 //! line and column), turned into samples of tick, time, position, heading and collision.
 //! The plot needs `tick`, `time_s`, `x_m` and `y_m`; the tick must be a whole number and the
 //! clock and position finite.
 
 use std::path::Path;
 
-pub use agent_sdk::log::LogReadError;
-use agent_sdk::log::LogTable;
+pub use records::log::LogReadError;
+use records::log::LogTable;
 
 /// Columns a log must have: the plot cannot be drawn without them.
 pub const REQUIRED_COLUMNS: [&str; 4] = ["tick", "time_s", "x_m", "y_m"];

@@ -248,6 +248,32 @@ fn the_command_line_overrides_the_summary() {
 }
 
 #[test]
+fn a_bad_summary_or_place_is_an_error_naming_where_it_is() {
+    let dir = TempDir::new("bad-summary");
+    let (log, _) = write_run(&dir.0);
+    let summary = dir.0.join("summary.json");
+    std::fs::write(&summary, "{\n  \"lab\": builtin }").expect("written");
+    let text = format!("{:#}", plot::plot(&args(&log)).expect_err("not JSON"));
+    assert!(text.contains(&format!("{}:2:", summary.display())) && text.contains("not JSON"), "{text}");
+    std::fs::write(&summary, r#"{"obstacles":[[1,1,2,2],[3,3,1,4]]}"#).expect("written");
+    let text = format!("{:#}", plot::plot(&args(&log)).expect_err("upside down"));
+    assert!(text.contains("key `obstacles[1]`: \"3,3,1,4,1\": want X0 < X1"), "{text}");
+
+    let mut a = args(&log);
+    a.no_summary = true;
+    a.obstacle = vec!["1,2,3".into()];
+    let text = format!("{:#}", plot::plot(&a).expect_err("three numbers"));
+    assert!(
+        text.contains("--obstacle \"1,2,3\" is not an obstacle X0,Y0,X1,Y1[,H]: expected 4 to 5 numbers"),
+        "{text}"
+    );
+    a.obstacle.clear();
+    a.checkpoint = vec!["1,2,-1".into()];
+    let text = format!("{:#}", plot::plot(&a).expect_err("negative radius"));
+    assert!(text.contains("--checkpoint \"1,2,-1\": want finite X, Y and a positive radius R"), "{text}");
+}
+
+#[test]
 fn a_bad_log_is_an_error_naming_file_line_and_column() {
     let dir = TempDir::new("bad");
     let log = dir.0.join("broken.csv");

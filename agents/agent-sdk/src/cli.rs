@@ -1,0 +1,96 @@
+//! The command-line options every agent takes, declared once: which session to join, how long
+//! to wait for its hub, and where to write the robots' logs. An agent flattens [`CommonArgs`]
+//! into its own options:
+//!
+//! ```
+//! use clap::Parser as _;
+//!
+//! #[derive(clap::Parser)]
+//! struct MyAgent {
+//!     #[command(flatten)]
+//!     common: agent_sdk::cli::CommonArgs,
+//!     /// Top speed, m/s.
+//!     #[arg(long, default_value_t = 0.5)]
+//!     max_speed: f64,
+//! }
+//!
+//! let a = MyAgent::parse_from(["my-agent", "--session", "s1", "--log", "runs"]);
+//! assert_eq!((a.common.session.as_str(), a.common.connect_timeout), ("s1", 5.0));
+//! assert_eq!(a.common.log.as_deref(), Some(std::path::Path::new("runs")));
+//! ```
+//!
+//! Options whose default differs between agents (a robot's name, top speed, motor filter) stay
+//! with each agent. An agent that describes a shared option in its own words (what it logs,
+//! say) overrides the help with `#[command(mut_arg("log", |a| a.help("…")))]`; the name,
+//! type, default and meaning stay the ones declared here.
+
+use std::path::PathBuf;
+use std::time::Duration;
+
+use crate::{Agent, AgentError};
+
+/// The options every agent takes (`--session`, `--connect-timeout`, `--log`).
+#[derive(Debug, Clone, PartialEq, clap::Args)]
+pub struct CommonArgs {
+    /// Session of the hub to join.
+    #[arg(long, default_value = "default")]
+    pub session: String,
+    /// Seconds to wait for the hub to start serving the session.
+    #[arg(long, value_name = "S", default_value_t = 5.0)]
+    pub connect_timeout: f64,
+    /// Write one CSV log per robot (one row per tick, thesis Annex C columns) into this
+    /// directory.
+    #[arg(long, value_name = "DIR")]
+    pub log: Option<PathBuf>,
+}
+
+impl CommonArgs {
+    /// `--connect-timeout` as a duration: negative or NaN is no wait, too large or infinite
+    /// waits for ever (rather than failing on a value the user meant as "long").
+    pub fn timeout(&self) -> Duration {
+        Duration::try_from_secs_f64(self.connect_timeout.max(0.0)).unwrap_or(Duration::MAX)
+    }
+
+    /// Joins the session, waiting up to `--connect-timeout` for its hub. The agent's name is
+    /// `role` and the process id (`navigator-4711`), unique on the machine.
+    pub fn connect(&self, role: &str) -> Result<Agent, AgentError> {
+        Agent::connect_within(&self.session, &format!("{role}-{}", std::process::id()), self.timeout())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clap::Parser as _;
+
+    #[derive(Debug, clap::Parser)]
+    #[command(mut_arg("log", |a| a.help("Write the door's log here.").value_name("LOG")))]
+    struct Cli {
+        #[command(flatten)]
+        common: CommonArgs,
+    }
+
+    #[test]
+    fn defaults_and_values_parse() {
+        let c = Cli::parse_from(["agent"]).common;
+        assert_eq!(c, CommonArgs { session: "default".into(), connect_timeout: 5.0, log: None });
+        assert_eq!(c.timeout(), Duration::from_secs(5));
+        let c = Cli::parse_from(["agent", "--session", "s", "--connect-timeout", "0.25", "--log", "d"]).common;
+        assert_eq!((c.session.as_str(), c.timeout(), c.log), ("s", Duration::from_millis(250), Some("d".into())));
+        assert!(Cli::try_parse_from(["agent", "--connect-timeout", "soon"]).is_err());
+    }
+
+    #[test]
+    fn odd_timeouts_do_not_panic() {
+        let t = |s: f64| CommonArgs { session: String::new(), connect_timeout: s, log: None }.timeout();
+        assert_eq!((t(-1.0), t(f64::NAN), t(f64::INFINITY)), (Duration::ZERO, Duration::ZERO, Duration::MAX));
+    }
+
+    #[test]
+    fn an_agent_may_word_a_shared_option_its_own_way() {
+        use clap::CommandFactory as _;
+        let help = Cli::command().render_long_help().to_string();
+        assert!(help.contains("--log <LOG>") && help.contains("Write the door's log here."), "{help}");
+        assert!(help.contains("--connect-timeout <S>") && help.contains("[default: 5]"), "{help}");
+    }
+}

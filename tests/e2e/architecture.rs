@@ -1,0 +1,351 @@
+//! The rules ARCHITECTURE.md states, checked against the dependency graph `cargo metadata`
+//! resolves and against the source tree (in the spirit of rust-analyzer's tidy tests). Each
+//! test names the "Architecture invariant" it keeps; breaking one (say, adding `hub` to an
+//! agent's dependencies) fails here with the path that breaks it.
+
+use std::collections::{BTreeMap, BTreeSet};
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+/// The workspace's dependency graph: package names by id, and each package's resolved
+/// normal (linked) and dev dependencies.
+struct Graph {
+    names: BTreeMap<String, String>,
+    members: BTreeSet<String>,
+    normal: BTreeMap<String, Vec<String>>,
+    dev: BTreeMap<String, Vec<String>>,
+}
+
+fn root() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+}
+
+fn graph() -> Graph {
+    let cargo = option_env!("CARGO").unwrap_or("cargo");
+    let out = Command::new(cargo)
+        .args(["metadata", "--format-version", "1", "--locked"])
+        .current_dir(root())
+        .output()
+        .expect("cargo metadata runs");
+    assert!(out.status.success(), "cargo metadata: {}", String::from_utf8_lossy(&out.stderr));
+    let m: serde_json::Value = serde_json::from_slice(&out.stdout).expect("cargo metadata prints JSON");
+    let mut g =
+        Graph { names: BTreeMap::new(), members: BTreeSet::new(), normal: BTreeMap::new(), dev: BTreeMap::new() };
+    for p in m["packages"].as_array().expect("packages") {
+        g.names.insert(p["id"].as_str().expect("id").to_owned(), p["name"].as_str().expect("name").to_owned());
+    }
+    for id in m["workspace_members"].as_array().expect("members") {
+        g.members.insert(id.as_str().expect("member id").to_owned());
+    }
+    for node in m["resolve"]["nodes"].as_array().expect("resolve") {
+        let id = node["id"].as_str().expect("node id").to_owned();
+        for dep in node["deps"].as_array().expect("deps") {
+            let pkg = dep["pkg"].as_str().expect("dep pkg").to_owned();
+            for k in dep["dep_kinds"].as_array().expect("dep kinds") {
+                match k["kind"].as_str() {
+                    None => g.normal.entry(id.clone()).or_default().push(pkg.clone()),
+                    Some("dev") => g.dev.entry(id.clone()).or_default().push(pkg.clone()),
+                    // Build dependencies run at build time; they link nothing into the crate.
+                    Some(_) => {}
+                }
+            }
+        }
+    }
+    g
+}
+
+impl Graph {
+    fn id(&self, name: &str) -> String {
+        let found: Vec<&String> =
+            self.members.iter().filter(|id| self.names.get(*id).is_some_and(|n| n == name)).collect();
+        assert_eq!(found.len(), 1, "workspace package {name:?}");
+        found[0].clone()
+    }
+
+    /// Every package `name` links, with the chain that brings each in.
+    fn linked(&self, name: &str) -> BTreeMap<String, Vec<String>> {
+        let start = self.id(name);
+        let mut seen: BTreeMap<String, Vec<String>> = BTreeMap::new();
+        let mut todo = vec![(start.clone(), vec![name.to_owned()])];
+        while let Some((id, chain)) = todo.pop() {
+            for dep in self.normal.get(&id).into_iter().flatten() {
+                let dep_name = self.names[dep].clone();
+                if seen.contains_key(&dep_name) {
+                    continue;
+                }
+                let mut c = chain.clone();
+                c.push(dep_name.clone());
+                seen.insert(dep_name, c.clone());
+                todo.push((dep.clone(), c));
+            }
+        }
+        seen
+    }
+
+    fn direct(&self, name: &str, kinds: &BTreeMap<String, Vec<String>>) -> Vec<String> {
+        kinds.get(&self.id(name)).into_iter().flatten().map(|d| self.names[d].clone()).collect()
+    }
+
+    fn member_names(&self) -> Vec<String> {
+        self.members.iter().map(|id| self.names[id].clone()).collect()
+    }
+}
+
+/// Fails with every forbidden package `name` links and the chain that links it.
+fn assert_links_none(g: &Graph, name: &str, forbidden: impl Fn(&str) -> bool, rule: &str) {
+    let bad: Vec<String> =
+        g.linked(name).into_iter().filter(|(dep, _)| forbidden(dep)).map(|(_, chain)| chain.join(" -> ")).collect();
+    assert!(bad.is_empty(), "{rule}, but:\n  {}", bad.join("\n  "));
+}
+
+#[test]
+fn the_world_model_links_no_iceoryx2_and_nothing_of_the_hub_server() {
+    // Architecture invariant: the world crate depends on no iceoryx2 crate (and no IPC crate).
+    let g = graph();
+    assert_links_none(
+        &g,
+        "world",
+        |d| d.starts_with("iceoryx2") || ["ipc-types", "ipc-services", "hub", "agent-sdk", "libc"].contains(&d),
+        "the world model is pure: no iceoryx2, no IPC, no libc",
+    );
+}
+
+#[test]
+fn agents_adapters_and_the_viewer_never_link_the_hub_or_the_world() {
+    // Architecture invariant: agents, adapters and the viewer know the world only through the
+    // hub's services; only the closed-loop tests listed here may use the model in-process.
+    let g = graph();
+    let clients = ["agent-sdk", "navigator", "door", "teleop", "wheelchair", "udp-bridge", "viewer"];
+    let allowed_dev: BTreeMap<&str, &[&str]> = BTreeMap::from([
+        ("navigator", &["world", "hub"][..]),
+        // Their logs end with the run's final tick: checked against a hub in the test process.
+        ("door", &["world", "hub"][..]),
+        ("wheelchair", &["world", "hub"][..]),
+    ]);
+    for c in clients {
+        assert_links_none(&g, c, |d| d == "hub" || d == "world", &format!("{c} must not link hub or world"));
+        for dev in g.direct(c, &g.dev) {
+            if dev == "hub" || dev == "world" {
+                assert!(
+                    allowed_dev.get(c).is_some_and(|ok| ok.contains(&dev.as_str())),
+                    "{c} has {dev} as a dev-dependency, which only listed closed-loop tests may"
+                );
+            }
+        }
+    }
+    // Every client crate of the workspace is in the list above: a new agent or adapter is
+    // checked from its first commit.
+    for m in g.member_names() {
+        let is_client =
+            ["navigator", "door", "teleop", "wheelchair", "udp-bridge", "viewer", "agent-sdk"].contains(&m.as_str());
+        let known_other = [
+            "iwsim",
+            "ipc-types",
+            "ipc-services",
+            "hub",
+            "world",
+            "sim-model",
+            "records",
+            "runner",
+            "plot",
+            "bench-harness",
+        ]
+        .contains(&m.as_str());
+        assert!(is_client || known_other, "new workspace package {m:?}: add it to ARCHITECTURE.md and to this test");
+    }
+}
+
+#[test]
+fn ipc_types_depends_on_nothing_in_the_workspace() {
+    // Architecture invariant: ipc-types depends on nothing in this workspace, and on no
+    // iceoryx2 runtime (only the two no_std crates that define ZeroCopySend and its derive).
+    let g = graph();
+    let members: BTreeSet<String> = g.member_names().into_iter().collect();
+    assert_links_none(&g, "ipc-types", |d| members.contains(d), "ipc-types depends on nothing in the workspace");
+    let direct: BTreeSet<String> = g.direct("ipc-types", &g.normal).into_iter().collect();
+    let allowed: BTreeSet<String> = ["bytemuck", "iceoryx2-bb-elementary-traits", "iceoryx2-bb-derive-macros"]
+        .iter()
+        .map(|s| s.to_string())
+        .collect();
+    assert!(direct.is_subset(&allowed), "ipc-types depends on {direct:?}; allowed: {allowed:?}");
+}
+
+#[test]
+fn the_shared_formulas_and_formats_link_no_ipc_runtime() {
+    // Architecture invariant: sim-model depends on nothing; records, plot and the world link
+    // no iceoryx2 runtime, so drawing a log or checking a map never needs shared memory.
+    let g = graph();
+    assert!(
+        g.direct("sim-model", &g.normal).is_empty(),
+        "sim-model has dependencies: {:?}",
+        g.direct("sim-model", &g.normal)
+    );
+    for c in ["records", "plot", "world"] {
+        assert_links_none(&g, c, |d| d == "iceoryx2" || d == "ipc-services", &format!("{c} links no iceoryx2 runtime"));
+    }
+}
+
+#[test]
+fn only_ipc_services_depends_on_iceoryx2() {
+    // Architecture invariant: every iceoryx2 service is built in ipc-services; no other crate
+    // even depends on iceoryx2 directly.
+    let g = graph();
+    for m in g.member_names() {
+        if m != "ipc-services" {
+            assert!(!g.direct(&m, &g.normal).contains(&"iceoryx2".to_owned()), "{m} depends on iceoryx2 directly");
+        }
+    }
+}
+
+/// Every `.rs` file of the workspace's own source (not `target/`, not the fuzz package).
+fn sources() -> Vec<PathBuf> {
+    fn walk(dir: &Path, out: &mut Vec<PathBuf>) {
+        let Ok(entries) = std::fs::read_dir(dir) else { return };
+        for e in entries.flatten() {
+            let p = e.path();
+            let name = e.file_name().to_string_lossy().into_owned();
+            if p.is_dir() {
+                if !["target", "fuzz", ".git", "node_modules"].contains(&name.as_str()) {
+                    walk(&p, out);
+                }
+            } else if name.ends_with(".rs") {
+                out.push(p);
+            }
+        }
+    }
+    let mut out = Vec::new();
+    walk(&root(), &mut out);
+    out.sort();
+    out
+}
+
+/// The lines of a file before its unit tests (`#[cfg(test)]`), comments dropped: the code a
+/// release build contains.
+fn production_lines(path: &Path) -> Vec<(usize, String)> {
+    let text = std::fs::read_to_string(path).expect("readable source");
+    let mut out = Vec::new();
+    for (i, line) in text.lines().enumerate() {
+        let t = line.trim_start();
+        if t.starts_with("#[cfg(test)]") {
+            break;
+        }
+        if t.starts_with("//") {
+            continue;
+        }
+        out.push((i + 1, line.to_owned()));
+    }
+    out
+}
+
+fn rel(p: &Path) -> String {
+    p.strip_prefix(root()).unwrap_or(p).display().to_string()
+}
+
+/// Every production line of the tree containing one of `needles`, outside the files `allowed`.
+fn offending(needles: &[&str], allowed: impl Fn(&str) -> bool) -> Vec<String> {
+    let mut bad = Vec::new();
+    for f in sources() {
+        let r = rel(&f);
+        if allowed(&r) || r.starts_with("tests/") || r.contains("/tests/") || r.starts_with("benches/world.rs") {
+            continue;
+        }
+        for (n, line) in production_lines(&f) {
+            if needles.iter().any(|k| line.contains(k)) {
+                bad.push(format!("{r}:{n}: {}", line.trim()));
+            }
+        }
+    }
+    bad
+}
+
+#[test]
+fn only_ipc_services_names_iceoryx2_service_builders() {
+    // Architecture invariant: every iceoryx2 service is built in ipc-services, nowhere else.
+    let bad =
+        offending(&[".service_builder(", ".publish_subscribe::<", ".request_response::<", "iceoryx2::testing"], |r| {
+            r.starts_with("ipc-services/")
+        });
+    assert!(bad.is_empty(), "iceoryx2 services built outside ipc-services:\n  {}", bad.join("\n  "));
+}
+
+#[test]
+fn parry2d_is_met_in_one_module_and_quick_xml_in_two() {
+    // Architecture invariant: parry2d and glam types appear only in hub/world/src/geom.rs.
+    let bad = offending(&["parry2d::", "glam::"], |r| r == "hub/world/src/geom.rs");
+    assert!(bad.is_empty(), "parry2d outside the world's boundary module:\n  {}", bad.join("\n  "));
+    // Architecture invariant: quick-xml appears only in the map reader and the UDP codec.
+    let bad = offending(&["quick_xml"], |r| r == "hub/world/src/map/xml.rs" || r == "adapters/udp-bridge/src/codec.rs");
+    assert!(bad.is_empty(), "quick-xml outside its two modules:\n  {}", bad.join("\n  "));
+}
+
+#[test]
+fn the_world_model_does_no_io_and_reads_no_clock() {
+    // Architecture invariant: the world model never does I/O, never reads a clock and owns no
+    // global state; the one function that reads a file is `world::map::xml::read_text`.
+    let needles =
+        ["std::fs", "std::net", "std::process", "std::thread", "std::env", "Instant", "SystemTime", "static mut"];
+    let mut bad = Vec::new();
+    for f in sources().into_iter().filter(|f| rel(f).starts_with("hub/world/src/")) {
+        let r = rel(&f);
+        for (n, line) in production_lines(&f) {
+            if needles.iter().any(|k| line.contains(k)) {
+                let boundary = r == "hub/world/src/map/xml.rs" && line.contains("std::fs::read_to_string(path)");
+                if !boundary {
+                    bad.push(format!("{r}:{n}: {}", line.trim()));
+                }
+            }
+        }
+    }
+    assert!(bad.is_empty(), "I/O or clocks in the world model:\n  {}", bad.join("\n  "));
+}
+
+#[test]
+fn the_cli_crate_only_parses_arguments_and_calls_libraries() {
+    // Architecture invariant: the `iwsim` binary's src/ is thin (well under 1,000 lines).
+    let lines: usize = std::fs::read_dir(root().join("src"))
+        .expect("src/")
+        .flatten()
+        .filter(|e| e.path().extension().is_some_and(|x| x == "rs"))
+        .map(|e| std::fs::read_to_string(e.path()).expect("readable").lines().count())
+        .sum();
+    assert!(lines < 1000, "src/ has {lines} lines: move logic into a library crate");
+}
+
+#[test]
+fn every_ipc_payload_asserts_its_size_and_alignment() {
+    // Architecture invariant: every type that crosses processes has a compile-time size and
+    // alignment assert, so a layout change is a compile error until its .vN name is bumped.
+    let text = std::fs::read_to_string(root().join("ipc-types/src/lib.rs")).expect("ipc-types");
+    let mut missing = Vec::new();
+    let mut repr_c = false;
+    for line in text.lines() {
+        let t = line.trim();
+        if t.starts_with("#[repr(C") {
+            repr_c = true;
+        } else if repr_c && t.starts_with("pub struct ") {
+            let name: String =
+                t["pub struct ".len()..].chars().take_while(|c| c.is_alphanumeric() || *c == '_').collect();
+            for what in ["size_of", "align_of"] {
+                if !text.contains(&format!("{what}::<{name}>()")) {
+                    missing.push(format!("{what}::<{name}>()"));
+                }
+            }
+            repr_c = false;
+        } else if !t.starts_with("#[") && !t.starts_with("///") && !t.is_empty() {
+            repr_c = false;
+        }
+    }
+    assert!(missing.is_empty(), "ipc-types lacks compile-time asserts: {missing:?}");
+    assert!(text.contains("#![no_std]"), "ipc-types is no_std");
+}
+
+#[test]
+fn only_the_sdk_decodes_the_hubs_map_stream() {
+    // Architecture invariant: the map's item kinds are named only where the hub writes them
+    // and where the SDK decodes them; every client builds on `agent_sdk::map::Map`.
+    let kinds = ["MAP_WALL", "MAP_CORNER", "MAP_BEACON", "MAP_TARGET", "MAP_GRID", "MAP_CHECKPOINT"];
+    let bad = offending(&kinds, |r| {
+        r == "ipc-types/src/lib.rs" || r == "hub/src/core.rs" || r == "agents/agent-sdk/src/map.rs"
+    });
+    assert!(bad.is_empty(), "the hub's map stream decoded outside agent_sdk::map:\n  {}", bad.join("\n  "));
+}
