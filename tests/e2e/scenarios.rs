@@ -4,11 +4,12 @@
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 
+use agent_sdk::log::LogTable;
 use agent_sdk::{Agent, Wait};
 use ipc_types::{ActionBlock, REG_HAS_POSE, RobotKind, RobotRegistration};
 use records::summary::{RobotSummary, RunSummary};
 
-use super::common::{Proc, session, text};
+use super::common::{Proc, assert_no_shared_memory_left, session, text};
 
 fn out_dir(tag: &str) -> PathBuf {
     std::env::temp_dir().join(format!("iwsim-e2e-{tag}-{}", std::process::id()))
@@ -320,5 +321,41 @@ fn builtin_corridor_swap_both_chairs_pass_each_other_without_contact_for_two_see
         let moved = still.iter().map(|r| (r[1] - b[1]).hypot(r[2] - b[2])).fold(0.0, f64::max);
         assert!(moved < 0.01, "seed {seed}: chair2 moved {moved} m while chair1 went by");
     }
+    let _ = std::fs::remove_dir_all(dir);
+}
+
+#[test]
+fn every_agents_log_ends_with_the_runs_final_tick_under_a_name_no_other_robot_shares() {
+    // A door and two scripted chairs in one lock-step run of 5 ticks, each agent its own
+    // process: every log holds ticks 0 to 4, answered with the agent's powers, then tick 5, the
+    // run's end, which nobody answers (zero powers) but which the log still records.
+    let s = session("final-tick");
+    let dir = std::env::temp_dir().join(format!("iwsim-e2e-final-tick-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    let log_dir = dir.to_str().expect("utf-8 temp dir");
+    let hub = Proc::spawn(&["hub", "--session", &s, "--lockstep", "--ticks", "5", "--wait-agents", "2", "--json"]);
+    let door =
+        Proc::spawn(&["agent", "door", "--session", &s, "--name", "front door", "--pose", "12,6,0", "--log", log_dir]);
+    let chairs = Proc::spawn(&["agent", "wheelchair", "--session", &s, "--robots", "2", "--log", log_dir]);
+    let out = hub.wait(Duration::from_secs(30));
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    assert!(door.wait(Duration::from_secs(20)).status.success(), "the door agent ends with the run");
+    assert!(chairs.wait(Duration::from_secs(20)).status.success(), "the wheelchair agent ends with the run");
+    // The door's name has a space: its file escapes it rather than turning it into a `_`
+    // that a robot named `front_door` would share.
+    for (file, scripted) in [("front%20door.csv", None), ("chair1.csv", Some(0.5)), ("chair2.csv", Some(0.5))] {
+        let log = LogTable::read(&dir.join(file)).unwrap_or_else(|e| panic!("{file}: {e}"));
+        assert_eq!(records::log::robot_name_of(&dir.join(file)), file.trim_end_matches(".csv").replace("%20", " "));
+        let col = |c: &str| log.column(c).expect("a column");
+        let ticks: Vec<f64> = log.rows.iter().map(|r| r[col("tick")]).collect();
+        assert_eq!(ticks, [0.0, 1.0, 2.0, 3.0, 4.0, 5.0], "{file}");
+        let last = &log.rows[5];
+        assert_eq!([last[col("power_left")], last[col("power_right")]], [0.0, 0.0], "{file}: the end is unanswered");
+        assert!((last[col("time_s")] - 0.5).abs() < 1e-9, "{file}: the final tick's own time");
+        if let Some(p) = scripted {
+            assert_eq!(log.rows[4][col("power_left")], p, "{file}: answered ticks carry the script's powers");
+        }
+    }
+    assert_no_shared_memory_left(&s);
     let _ = std::fs::remove_dir_all(dir);
 }
