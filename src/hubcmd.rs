@@ -26,9 +26,7 @@ pub fn config(args: &HubArgs) -> anyhow::Result<HubConfig> {
     let checkpoints = args
         .checkpoint
         .iter()
-        .map(|spec| {
-            Checkpoint::parse(spec).map(|c| [c.x, c.y, c.radius]).map_err(|e| anyhow::anyhow!("--checkpoint {e}"))
-        })
+        .map(|spec| Checkpoint::parse(spec).map_err(|e| anyhow::anyhow!("--checkpoint {e}")))
         .collect::<anyhow::Result<_>>()?;
     let grid = match (&args.grid, args.lab.strip_prefix(PREFIX)) {
         (Some(g), _) => builtin::load_grid_spec(g).map_err(|e| anyhow::anyhow!("{g}:{e}"))?,

@@ -14,6 +14,7 @@ use ipc_types::{
     SensorGeometry, WorldHeader,
 };
 
+use records::places::Checkpoint;
 use world::map::{Grid, Lab, Params};
 use world::math::Pose;
 use world::{Action, Message, ProximitySpec, RobotHandle, RobotKind, RobotSpec, World, WorldBuildError};
@@ -82,8 +83,8 @@ pub struct HubCore {
     single_steps: u32,
     /// Walls from this index on are a scenario's obstacles (the map's walls come first).
     obstacle_from: usize,
-    /// A scenario's checkpoints: x, y, radius in metres.
-    checkpoints: Vec<[f64; 3]>,
+    /// A scenario's checkpoints.
+    checkpoints: Vec<Checkpoint>,
 }
 
 impl HubCore {
@@ -127,7 +128,7 @@ impl HubCore {
 
     /// Marks the lab's walls from `obstacle_from` on as a scenario's obstacles and sets its
     /// checkpoints; both are only published in the map (the walls are already in the world).
-    pub fn set_scenario(&mut self, obstacle_from: usize, checkpoints: Vec<[f64; 3]>) {
+    pub fn set_scenario(&mut self, obstacle_from: usize, checkpoints: Vec<Checkpoint>) {
         self.obstacle_from = obstacle_from;
         self.checkpoints = checkpoints;
     }
@@ -682,7 +683,7 @@ pub fn pack_map(
     lab: &Lab,
     grid: &Grid,
     obstacle_from: usize,
-    checkpoints: &[[f64; 3]],
+    checkpoints: &[Checkpoint],
     cycle_ms: u32,
     params: HubParams,
 ) -> (MapHeader, Vec<MapItem>) {
@@ -704,8 +705,8 @@ pub fn pack_map(
     for (i, p) in grid.poses.iter().enumerate() {
         items.push(item(MAP_GRID, i, p.pos.x, p.pos.y, p.heading_deg));
     }
-    for (i, [x, y, r]) in checkpoints.iter().enumerate() {
-        items.push(item(MAP_CHECKPOINT, i, *x, *y, *r));
+    for (i, c) in checkpoints.iter().enumerate() {
+        items.push(item(MAP_CHECKPOINT, i, c.x, c.y, c.radius));
     }
     let header = MapHeader {
         width_m: lab.width_m,

@@ -54,8 +54,8 @@ pub struct HubConfig {
     pub max_robots: usize,
     /// The lab's walls from this index on are a scenario's obstacles (`lab.walls.len()`: none).
     pub obstacle_from: usize,
-    /// A scenario's checkpoints, x, y, radius in metres, published in the map for viewers.
-    pub checkpoints: Vec<[f64; 3]>,
+    /// A scenario's checkpoints, published in the map for viewers and agents.
+    pub checkpoints: Vec<records::places::Checkpoint>,
 }
 
 /// Why the hub stopped with an error.

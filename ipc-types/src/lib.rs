@@ -521,6 +521,34 @@ impl RobotRegistration {
             ..Zeroable::zeroed()
         }
     }
+
+    /// With the rectangle `width_m` (along the heading) × `height_m` and the centre of
+    /// movement `com` ∈ (0, 1) (thesis Table 4.1).
+    pub fn body(mut self, width_m: f64, height_m: f64, com: f64) -> Self {
+        (self.width_m, self.height_m, self.com) = (width_m, height_m, com);
+        self
+    }
+
+    /// With motors of top speed `max_speed_mps` and acceleration curve `accel_curve`.
+    pub fn motors(mut self, max_speed_mps: f64, accel_curve: f64) -> Self {
+        (self.max_speed_mps, self.accel_curve) = (max_speed_mps, accel_curve);
+        self
+    }
+
+    /// Asking for grid slot `id` (1-based; 0: the first free one).
+    pub fn id(mut self, id: u32) -> Self {
+        self.requested_id = id;
+        self
+    }
+
+    /// Starting at `pose` (x, y metres, heading degrees) when given, else at its grid slot.
+    pub fn at(mut self, pose: Option<[f64; 3]>) -> Self {
+        if let Some(p) = pose {
+            self.flags |= REG_HAS_POSE;
+            self.pose = p;
+        }
+        self
+    }
 }
 
 /// What an agent sends on the register service.

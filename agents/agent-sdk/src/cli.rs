@@ -19,8 +19,9 @@
 //! assert_eq!(a.common.log.as_deref(), Some(std::path::Path::new("runs")));
 //! ```
 //!
-//! Options whose default differs between agents (a robot's name, top speed, motor filter) stay
-//! with each agent. An agent that describes a shared option in its own words (what it logs,
+//! [`RobotArgs`] (`--name`, `--id`, `--pose`) and [`BodyArgs`] (`--width`, `--height`, `--com`)
+//! serve the agents that take them in that form. Options whose default differs between agents
+//! (top speed, motor filter) stay with each agent. An agent that describes a shared option in its own words (what it logs,
 //! say) overrides the help with `#[command(mut_arg("log", |a| a.help("…")))]`; the name,
 //! type, default and meaning stay the ones declared here.
 
@@ -56,6 +57,37 @@ impl CommonArgs {
     pub fn connect(&self, role: &str) -> Result<Agent, AgentError> {
         Agent::connect_within(&self.session, &format!("{role}-{}", std::process::id()), self.timeout())
     }
+}
+
+/// One robot's name, requested id and start pose (`--name`, `--id`, `--pose`), as the agents
+/// that drive one chair take them. An agent that means more by one of them says so in its
+/// own help with `mut_arg`.
+#[derive(Debug, Clone, PartialEq, clap::Args)]
+pub struct RobotArgs {
+    /// Name of the chair.
+    #[arg(long, default_value = "chair1")]
+    pub name: String,
+    /// Requested id, the 1-based grid slot (0: the first free one).
+    #[arg(long, default_value_t = 0)]
+    pub id: u32,
+    /// Start pose as X,Y,DIR (metres, degrees); without it the chair takes its grid slot.
+    #[arg(long, value_name = "X,Y,DIR", value_parser = crate::args::pose, allow_hyphen_values = true)]
+    pub pose: Option<[f64; 3]>,
+}
+
+/// A rectangular body (thesis Table 4.1) as separate options: `--width` (length along the
+/// heading), `--height` (size across it) and `--com` (where the wheel axle sits).
+#[derive(Debug, Clone, Copy, PartialEq, clap::Args)]
+pub struct BodyArgs {
+    /// Length along the heading, metres.
+    #[arg(long, default_value_t = 1.0)]
+    pub width: f64,
+    /// Size across the heading, metres.
+    #[arg(long, default_value_t = 1.0)]
+    pub height: f64,
+    /// Centre of movement, (0, 1).
+    #[arg(long, default_value_t = 0.5)]
+    pub com: f64,
 }
 
 #[cfg(test)]

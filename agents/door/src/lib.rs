@@ -17,7 +17,7 @@ use agent_sdk::cli::CommonArgs;
 use agent_sdk::logs::RobotLogs;
 use agent_sdk::{Agent, Wait};
 use anyhow::Context as _;
-use ipc_types::{ActionBlock, COLLISION, REG_HAS_POSE, RobotKind, RobotRegistration, SensorBlock, SensorSpec};
+use ipc_types::{ActionBlock, COLLISION, RobotKind, RobotRegistration, SensorBlock, SensorSpec};
 use serde::Deserialize;
 use sim_model::wrap_rad;
 
@@ -254,13 +254,11 @@ impl Door {
     /// Its registration: body, slow motors, and two sensors on each face looking out.
     pub fn registration(&self) -> RobotRegistration {
         let [w, h, com] = self.body;
-        let mut reg = RobotRegistration::new(&self.cfg.name);
+        let mut reg = RobotRegistration::new(&self.cfg.name)
+            .body(w, h, com)
+            .motors(self.cfg.max_speed.unwrap_or(0.1), 0.5)
+            .at(Some(self.cfg.pose));
         reg.kind = RobotKind::Door as u32;
-        (reg.width_m, reg.height_m, reg.com) = (w, h, com);
-        reg.max_speed_mps = self.cfg.max_speed.unwrap_or(0.1);
-        reg.accel_curve = 0.5;
-        reg.flags |= REG_HAS_POSE;
-        reg.pose = self.cfg.pose;
         // Along the leaf at a quarter and three quarters of its length, on both faces; narrow
         // cones so an open door does not keep seeing its own frame.
         // The leaf runs from (1 − COM)·W behind its centre of movement to COM·W ahead of it

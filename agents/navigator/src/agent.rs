@@ -6,7 +6,7 @@ use std::process::ExitCode;
 use agent_sdk::logs::RobotLogs;
 use agent_sdk::{Agent, Wait};
 use anyhow::Context as _;
-use ipc_types::{ActionBlock, MAX_PROXIMITY, REG_HAS_POSE, RobotRegistration, SENSOR_GPS, SensorSpec};
+use ipc_types::{ActionBlock, MAX_PROXIMITY, RobotRegistration, SENSOR_GPS, SensorSpec};
 
 use crate::NavigatorArgs;
 use crate::geom::{Pose, V2};
@@ -38,7 +38,7 @@ fn config(args: &NavigatorArgs, header: &ipc_types::MapHeader) -> anyhow::Result
     let checkpoints: Vec<Checkpoint> =
         args.checkpoints.iter().map(|&[x, y, r]| Checkpoint { pos: V2::new(x, y), radius_m: r }).collect();
     let first = checkpoints.first().context("at least one --checkpoint is needed")?;
-    let start = match args.pose {
+    let start = match args.robot.pose {
         Some([x, y, dir]) => Pose::from_deg(x, y, dir),
         None => {
             let toward = checkpoints.get(1).map_or(0.0, |c| {
@@ -83,17 +83,13 @@ fn drive(
     let map_data = agent.map()?;
     let map = NavMap::new(&map_data);
     let cfg = config(args, &map_data.header)?;
-    let name = &args.name;
+    let name = &args.robot.name;
 
-    let mut reg = RobotRegistration::new(name);
-    reg.requested_id = args.id;
-    reg.width_m = cfg.body.width_m;
-    reg.height_m = cfg.body.height_m;
-    reg.com = cfg.body.com;
-    reg.max_speed_mps = cfg.max_speed_mps;
-    reg.accel_curve = cfg.accel_curve;
-    reg.flags |= REG_HAS_POSE;
-    reg.pose = [cfg.start.x, cfg.start.y, cfg.start.theta.to_degrees()];
+    let mut reg = RobotRegistration::new(name)
+        .id(args.robot.id)
+        .body(cfg.body.width_m, cfg.body.height_m, cfg.body.com)
+        .motors(cfg.max_speed_mps, cfg.accel_curve)
+        .at(Some([cfg.start.x, cfg.start.y, cfg.start.theta.to_degrees()]));
     let mut sensors = [SensorSpec { x_m: 0.0, y_m: 0.0, angle_deg: 0.0, cone_deg: 0.0, range_m: 0.0 }; MAX_PROXIMITY];
     for (slot, mount) in sensors.iter_mut().zip(&cfg.sensors) {
         *slot = mount.spec();

@@ -70,7 +70,7 @@ pub mod sensors;
 pub mod track;
 pub mod traffic;
 
-use agent_sdk::cli::CommonArgs;
+use agent_sdk::cli::{CommonArgs, RobotArgs};
 
 pub use agent::run;
 pub use navigator::{Body, Checkpoint, NavConfig, NavEvent, NavStats, Navigator, Output};
@@ -89,20 +89,19 @@ pub use sensors::Mode;
 #[command(mut_arg("log", |a| a.help(
     "Write the chair's CSV log (one row per tick, thesis Annex C columns) into this directory"
 )))]
+#[command(mut_arg("name", |a| a.help("The chair's name (at most 31 bytes); also its log file's name")))]
+#[command(mut_arg("id", |a| a.help("Requested robot id (a grid slot of the hub); 0 takes the first free one")))]
+#[command(mut_arg("pose", |a| a.help(
+    "Start pose X,Y,DIR in metres and degrees. Default: the first checkpoint, heading towards the second"
+)))]
 pub struct NavigatorArgs {
     /// `--session`, `--connect-timeout`, `--log` (the chair's CSV log, one row per tick).
     #[command(flatten)]
     pub common: CommonArgs,
-    /// The chair's name (at most 31 bytes); also its log file's name.
-    #[arg(long, default_value = "chair1")]
-    pub name: String,
-    /// Requested robot id (a grid slot of the hub); 0 takes the first free one.
-    #[arg(long, default_value_t = 0)]
-    pub id: u32,
-    /// Start pose X,Y,DIR in metres and degrees. Default: the first checkpoint, heading
-    /// towards the second.
-    #[arg(long, value_name = "X,Y,DIR", value_parser = agent_sdk::args::pose, allow_hyphen_values = true)]
-    pub pose: Option<[f64; 3]>,
+    /// `--name`, `--id`, `--pose` (the default pose: the first checkpoint, heading towards the
+    /// second).
+    #[command(flatten)]
+    pub robot: RobotArgs,
     /// A checkpoint X,Y or X,Y,R in metres; passing within R (default 0.5 m) counts. Repeat it in
     /// driving order (at least one); the chair stops at the last, within --arrive.
     #[arg(
@@ -185,7 +184,7 @@ mod tests {
         .expect("valid");
         let a = cli.args;
         assert_eq!(a.checkpoints, vec![[10.0, 6.1, 0.5], [20.0, -6.1, 0.3]]);
-        assert_eq!(a.pose, Some([-1.0, 2.0, -90.0]));
+        assert_eq!(a.robot.pose, Some([-1.0, 2.0, -90.0]));
         assert_eq!(a.body, [1.1, 0.65, 0.8]);
         assert_eq!((a.max_speed, a.accel_curve, a.mode), (0.49, 0.83, Mode::Virtual));
         assert_eq!(a.pose_source, PoseSourceKind::Fused);

@@ -68,7 +68,9 @@ struct Outcome {
 /// on are flagged as the scenario's obstacles.
 fn map_items(lab: &Lab, params: &Params, obstacle_from: usize, checkpoints: &[[f64; 3]]) -> (MapHeader, Vec<MapItem>) {
     let hub_params = hub::core::hub_params(params, hub::core::Mode::LockStep, 0, 1000);
-    hub::core::pack_map(lab, &Grid::default(), obstacle_from, checkpoints, 100, hub_params)
+    let checkpoints: Vec<records::places::Checkpoint> =
+        checkpoints.iter().map(|&[x, y, radius]| records::places::Checkpoint { x, y, radius }).collect();
+    hub::core::pack_map(lab, &Grid::default(), obstacle_from, &checkpoints, 100, hub_params)
 }
 
 /// A robot's sensor block exactly as the hub packs it (`hub::core::pack_sensor_block`).

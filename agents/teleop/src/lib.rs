@@ -36,11 +36,11 @@ use std::os::fd::AsRawFd as _;
 use std::process::ExitCode;
 use std::time::{Duration, Instant};
 
-use agent_sdk::cli::CommonArgs;
+use agent_sdk::cli::{BodyArgs, CommonArgs, RobotArgs};
 use agent_sdk::logs::RobotLogs;
 use agent_sdk::{Agent, AgentError, Tick};
 use anyhow::Context as _;
-use ipc_types::{ActionBlock, REG_HAS_POSE, RobotRegistration, RunState, SensorBlock};
+use ipc_types::{ActionBlock, RobotRegistration, RunState, SensorBlock};
 
 use crate::drive::Drive;
 use crate::keys::{Key, KeyParser};
@@ -80,24 +80,12 @@ pub struct TeleopArgs {
     /// `--session`, `--connect-timeout`, `--log` (the chair's log, one CSV line per tick).
     #[command(flatten)]
     pub common: CommonArgs,
-    /// Name of the chair.
-    #[arg(long, default_value = "chair1")]
-    pub name: String,
-    /// Requested id, the 1-based grid slot (0: the first free one).
-    #[arg(long, default_value_t = 0)]
-    pub id: u32,
-    /// Start pose as X,Y,DIR (metres, degrees); without it the chair takes its grid slot.
-    #[arg(long, value_name = "X,Y,DIR", value_parser = agent_sdk::args::pose, allow_hyphen_values = true)]
-    pub pose: Option<[f64; 3]>,
-    /// Length along the heading, metres.
-    #[arg(long, default_value_t = 1.0)]
-    pub width: f64,
-    /// Size across the heading, metres.
-    #[arg(long, default_value_t = 1.0)]
-    pub height: f64,
-    /// Centre of movement, (0, 1).
-    #[arg(long, default_value_t = 0.5)]
-    pub com: f64,
+    /// `--name`, `--id`, `--pose`.
+    #[command(flatten)]
+    pub robot: RobotArgs,
+    /// `--width`, `--height`, `--com`.
+    #[command(flatten)]
+    pub body: BodyArgs,
     /// Top speed at full power, m/s.
     #[arg(long, default_value_t = 0.49)]
     pub max_speed: f64,
@@ -334,18 +322,12 @@ pub fn run(args: &TeleopArgs) -> anyhow::Result<ExitCode> {
 }
 
 fn registration(args: &TeleopArgs) -> RobotRegistration {
-    let mut reg = RobotRegistration::new(&args.name);
-    reg.requested_id = args.id;
-    reg.width_m = args.width;
-    reg.height_m = args.height;
-    reg.com = args.com;
-    reg.max_speed_mps = args.max_speed;
-    reg.accel_curve = args.accel_curve;
-    if let Some(pose) = args.pose {
-        reg.flags |= REG_HAS_POSE;
-        reg.pose = pose;
-    }
-    reg
+    let b = args.body;
+    RobotRegistration::new(&args.robot.name)
+        .id(args.robot.id)
+        .body(b.width, b.height, b.com)
+        .motors(args.max_speed, args.accel_curve)
+        .at(args.robot.pose)
 }
 
 fn drive(agent: &mut Agent, args: &TeleopArgs) -> anyhow::Result<ExitCode> {
@@ -364,13 +346,13 @@ fn drive(agent: &mut Agent, args: &TeleopArgs) -> anyhow::Result<ExitCode> {
     let mut display = Display::new(term::is_tty(&std::io::stdout()));
     let mut teleop = Teleop::new(id);
     let mut logs = RobotLogs::new(args.common.log.as_deref());
-    logs.add(id, &args.name);
+    logs.add(id, &args.robot.name);
 
     let end = drive_loop(agent, args, stdin_fd, &mut teleop, &mut display, &mut logs);
     // The run's final tick when the hub ended the run; what was logged in any case.
     logs.finish(agent).context("cannot write the log")?;
     let end = end?;
-    display.draw(&teleop.status(&args.name, &args.common.session), Instant::now(), true);
+    display.draw(&teleop.status(&args.robot.name, &args.common.session), Instant::now(), true);
     display.close(end.message());
     Ok(ExitCode::SUCCESS)
 }
@@ -441,13 +423,14 @@ fn drive_loop(
             Err(AgentError::Interrupted) => return Ok(End::Interrupted),
             Err(e) => return Err(e).context("the teleop lost its hub"),
         }
-        display.draw(&teleop.status(&args.name, &args.common.session), Instant::now(), false);
+        display.draw(&teleop.status(&args.robot.name, &args.common.session), Instant::now(), false);
     }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use ipc_types::REG_HAS_POSE;
 
     fn tick(n: u64, run_state: RunState) -> Tick {
         Tick { tick: n, sim_time_s: n as f64 * 0.02, run_state, latency_ns: 0 }

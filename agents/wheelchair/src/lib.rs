@@ -5,11 +5,11 @@
 use std::path::Path;
 use std::process::ExitCode;
 
-use agent_sdk::cli::CommonArgs;
+use agent_sdk::cli::{BodyArgs, CommonArgs};
 use agent_sdk::logs::RobotLogs;
 use agent_sdk::{Agent, Wait};
 use anyhow::Context as _;
-use ipc_types::{ActionBlock, COLLISION, MAX_PROXIMITY, REG_HAS_POSE, RobotKind, RobotRegistration, SensorSpec};
+use ipc_types::{ActionBlock, COLLISION, MAX_PROXIMITY, RobotKind, RobotRegistration, SensorSpec};
 use serde::Deserialize;
 
 use clap::Args;
@@ -70,15 +70,9 @@ pub struct WheelchairArgs {
     /// tells the hub their poses, standing in for physical chairs).
     #[arg(long, value_enum, default_value = "simulated")]
     pub kind: ChairKind,
-    /// Length along the heading, metres.
-    #[arg(long, default_value_t = 1.0)]
-    pub width: f64,
-    /// Size across the heading, metres.
-    #[arg(long, default_value_t = 1.0)]
-    pub height: f64,
-    /// Centre of movement, (0, 1).
-    #[arg(long, default_value_t = 0.5)]
-    pub com: f64,
+    /// `--width`, `--height`, `--com`.
+    #[command(flatten)]
+    pub body: BodyArgs,
     /// Top speed, m/s.
     #[arg(long, default_value_t = 0.5)]
     pub max_speed: f64,
@@ -196,7 +190,7 @@ fn chairs_from_args(args: &WheelchairArgs) -> Vec<ChairConfig> {
                 .pose
                 .map(|[x, y, dir]| [x + args.spacing * (k % 10) as f64, y + args.spacing * (k / 10) as f64, dir]),
             kind: args.kind,
-            body: [args.width, args.height, args.com],
+            body: [args.body.width, args.body.height, args.body.com],
             max_speed: args.max_speed,
             accel_curve: args.accel_curve,
             sensors: Vec::new(),
@@ -209,19 +203,13 @@ fn chairs_from_args(args: &WheelchairArgs) -> Vec<ChairConfig> {
 }
 
 fn registration(c: &ChairConfig) -> RobotRegistration {
-    let mut reg = RobotRegistration::new(&c.name);
-    reg.requested_id = c.id;
-    [reg.width_m, reg.height_m, reg.com] = c.body;
-    reg.max_speed_mps = c.max_speed;
-    reg.accel_curve = c.accel_curve;
+    let [w, h, com] = c.body;
+    let mut reg =
+        RobotRegistration::new(&c.name).id(c.id).body(w, h, com).motors(c.max_speed, c.accel_curve).at(c.pose);
     reg.kind = match c.kind {
         ChairKind::Simulated => RobotKind::Simulated,
         ChairKind::Real => RobotKind::Real,
     } as u32;
-    if let Some(p) = c.pose {
-        reg.flags |= REG_HAS_POSE;
-        reg.pose = p;
-    }
     for (k, [x_m, y_m, angle_deg, cone_deg, range_m]) in c.sensors.iter().copied().enumerate() {
         reg.sensors[k] = SensorSpec { x_m, y_m, angle_deg, cone_deg, range_m };
     }
