@@ -3,10 +3,7 @@
 #![warn(missing_docs)]
 
 pub mod cli;
-pub mod hubcmd;
 pub mod mapcheck;
-pub mod udpcmd;
-pub mod viewcmd;
 
 use std::process::ExitCode;
 
@@ -39,9 +36,9 @@ pub fn run(cli: Cli) -> anyhow::Result<ExitCode> {
         Command::Map { command: MapCommand::Check { file } } => mapcheck::check(&file),
         Command::Bench { command } => bench_harness::run(&command),
         Command::Demo(args) => runner::demo::run(&args),
-        Command::Hub(args) => hubcmd::run(&args),
-        Command::Udp(args) => udpcmd::run(&args),
-        Command::View(args) => viewcmd::run(&args),
+        Command::Hub(args) => hub::cli::run(&args),
+        Command::Udp(args) => udp_bridge::cli::run(&args),
+        Command::View(args) => viewer::cli::run(&args),
         Command::Agent { agent: AgentCommand::Wheelchair(args) } => wheelchair::run(&args),
         Command::Agent { agent: AgentCommand::Navigator(args) } => navigator::run(&args),
         Command::Agent { agent: AgentCommand::Teleop(args) } => teleop::run(&args),

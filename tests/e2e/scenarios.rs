@@ -326,24 +326,30 @@ fn builtin_corridor_swap_both_chairs_pass_each_other_without_contact_for_two_see
 
 #[test]
 fn every_agents_log_ends_with_the_runs_final_tick_under_a_name_no_other_robot_shares() {
-    // A door and two scripted chairs in one lock-step run of 5 ticks, each agent its own
-    // process: every log holds ticks 0 to 4, answered with the agent's powers, then tick 5, the
-    // run's end, which nobody answers (zero powers) but which the log still records.
+    // A door, two scripted chairs and a navigator in one lock-step run of 5 ticks, each agent
+    // its own process: every log holds ticks 0 to 4, answered with the agent's powers, then
+    // tick 5, the run's end, which nobody answers (zero powers) but which the log still records.
     let s = session("final-tick");
     let dir = std::env::temp_dir().join(format!("iwsim-e2e-final-tick-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
     let log_dir = dir.to_str().expect("utf-8 temp dir");
-    let hub = Proc::spawn(&["hub", "--session", &s, "--lockstep", "--ticks", "5", "--wait-agents", "2", "--json"]);
+    let hub = Proc::spawn(&["hub", "--session", &s, "--lockstep", "--ticks", "5", "--wait-agents", "3", "--json"]);
     let door =
         Proc::spawn(&["agent", "door", "--session", &s, "--name", "front door", "--pose", "12,6,0", "--log", log_dir]);
     let chairs = Proc::spawn(&["agent", "wheelchair", "--session", &s, "--robots", "2", "--log", log_dir]);
+    let nav_args = ["--name", "nav 1", "--pose", "20,6.1,0", "--checkpoint", "22,6.1", "--log", log_dir];
+    let nav = Proc::spawn(&[&["agent", "navigator", "--session", &s][..], &nav_args[..]].concat());
     let out = hub.wait(Duration::from_secs(30));
     assert!(out.status.success(), "{}", text(&out.stderr));
     assert!(door.wait(Duration::from_secs(20)).status.success(), "the door agent ends with the run");
     assert!(chairs.wait(Duration::from_secs(20)).status.success(), "the wheelchair agent ends with the run");
+    // The navigator has not arrived in half a second, which it reports with exit code 1.
+    assert_eq!(nav.wait(Duration::from_secs(20)).status.code(), Some(1), "the navigator ends with the run");
     // The door's name has a space: its file escapes it rather than turning it into a `_`
     // that a robot named `front_door` would share.
-    for (file, scripted) in [("front%20door.csv", None), ("chair1.csv", Some(0.5)), ("chair2.csv", Some(0.5))] {
+    let logs =
+        [("front%20door.csv", None), ("chair1.csv", Some(0.5)), ("chair2.csv", Some(0.5)), ("nav%201.csv", None)];
+    for (file, scripted) in logs {
         let log = LogTable::read(&dir.join(file)).unwrap_or_else(|e| panic!("{file}: {e}"));
         assert_eq!(records::log::robot_name_of(&dir.join(file)), file.trim_end_matches(".csv").replace("%20", " "));
         let col = |c: &str| log.column(c).expect("a column");

@@ -159,6 +159,7 @@ pub fn map_json(map: &Map) -> String {
         .collect();
     let beacons: Vec<String> = map.beacons.iter().map(|b| triple(b.pos.x, b.pos.y, b.height_m)).collect();
     let grid: Vec<String> = map.grid.iter().map(|g| triple(g.pos.x, g.pos.y, g.heading_deg)).collect();
+    let checkpoints: Vec<String> = map.checkpoints.iter().map(|c| triple(c.x, c.y, c.radius)).collect();
     format!(
         "{{\"type\":\"map\",\"name\":{},\"width\":{},\"height\":{},\"walls\":[{}],\"beacons\":[{}],\"targets\":[{}],\"checkpoints\":[{}],\"grid\":[{}]}}",
         json_str(&map.name),
@@ -167,7 +168,7 @@ pub fn map_json(map: &Map) -> String {
         walls.join(","),
         beacons.join(","),
         circles(&map.targets).join(","),
-        circles(&map.checkpoints).join(","),
+        checkpoints.join(","),
         grid.join(",")
     )
 }

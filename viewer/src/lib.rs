@@ -3,6 +3,7 @@
 #![warn(missing_docs)]
 
 pub mod browser;
+pub mod cli;
 pub mod frame;
 pub mod server;
 

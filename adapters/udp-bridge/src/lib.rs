@@ -2,6 +2,7 @@
 //! viewers, and drives their robots on a hub through the agent SDK.
 #![warn(missing_docs)]
 
+pub mod cli;
 pub mod codec;
 pub mod server;
 

@@ -15,7 +15,7 @@
 //! }
 //!
 //! let a = MyAgent::parse_from(["my-agent", "--session", "s1", "--log", "runs"]);
-//! assert_eq!((a.common.session.as_str(), a.common.connect_timeout), ("s1", 5.0));
+//! assert_eq!((a.common.hub.session.as_str(), a.common.hub.connect_timeout), ("s1", 5.0));
 //! assert_eq!(a.common.log.as_deref(), Some(std::path::Path::new("runs")));
 //! ```
 //!
@@ -30,15 +30,32 @@ use std::time::Duration;
 
 use crate::{Agent, AgentError};
 
-/// The options every agent takes (`--session`, `--connect-timeout`, `--log`).
+/// Which hub to join and how long to wait for it (`--session`, `--connect-timeout`): what
+/// every client of a hub takes, agents, the UDP bridge and the viewer alike.
 #[derive(Debug, Clone, PartialEq, clap::Args)]
-pub struct CommonArgs {
+pub struct SessionArgs {
     /// Session of the hub to join.
     #[arg(long, default_value = "default")]
     pub session: String,
     /// Seconds to wait for the hub to start serving the session.
     #[arg(long, value_name = "S", default_value_t = 5.0)]
     pub connect_timeout: f64,
+}
+
+impl SessionArgs {
+    /// `--connect-timeout` as a duration: negative or NaN is no wait, too large or infinite
+    /// waits for ever (rather than failing on a value the user meant as "long").
+    pub fn timeout(&self) -> Duration {
+        Duration::try_from_secs_f64(self.connect_timeout.max(0.0)).unwrap_or(Duration::MAX)
+    }
+}
+
+/// The options every agent takes (`--session`, `--connect-timeout`, `--log`).
+#[derive(Debug, Clone, PartialEq, clap::Args)]
+pub struct CommonArgs {
+    /// `--session`, `--connect-timeout`.
+    #[command(flatten)]
+    pub hub: SessionArgs,
     /// Write one CSV log per robot (one row per tick, thesis Annex C columns) into this
     /// directory.
     #[arg(long, value_name = "DIR")]
@@ -46,16 +63,10 @@ pub struct CommonArgs {
 }
 
 impl CommonArgs {
-    /// `--connect-timeout` as a duration: negative or NaN is no wait, too large or infinite
-    /// waits for ever (rather than failing on a value the user meant as "long").
-    pub fn timeout(&self) -> Duration {
-        Duration::try_from_secs_f64(self.connect_timeout.max(0.0)).unwrap_or(Duration::MAX)
-    }
-
     /// Joins the session, waiting up to `--connect-timeout` for its hub. The agent's name is
     /// `role` and the process id (`navigator-4711`), unique on the machine.
     pub fn connect(&self, role: &str) -> Result<Agent, AgentError> {
-        Agent::connect_within(&self.session, &format!("{role}-{}", std::process::id()), self.timeout())
+        Agent::connect_within(&self.hub.session, &format!("{role}-{}", std::process::id()), self.hub.timeout())
     }
 }
 
@@ -105,16 +116,20 @@ mod tests {
     #[test]
     fn defaults_and_values_parse() {
         let c = Cli::parse_from(["agent"]).common;
-        assert_eq!(c, CommonArgs { session: "default".into(), connect_timeout: 5.0, log: None });
-        assert_eq!(c.timeout(), Duration::from_secs(5));
+        let hub = SessionArgs { session: "default".into(), connect_timeout: 5.0 };
+        assert_eq!(c, CommonArgs { hub, log: None });
+        assert_eq!(c.hub.timeout(), Duration::from_secs(5));
         let c = Cli::parse_from(["agent", "--session", "s", "--connect-timeout", "0.25", "--log", "d"]).common;
-        assert_eq!((c.session.as_str(), c.timeout(), c.log), ("s", Duration::from_millis(250), Some("d".into())));
+        assert_eq!(
+            (c.hub.session.as_str(), c.hub.timeout(), c.log),
+            ("s", Duration::from_millis(250), Some("d".into()))
+        );
         assert!(Cli::try_parse_from(["agent", "--connect-timeout", "soon"]).is_err());
     }
 
     #[test]
     fn odd_timeouts_do_not_panic() {
-        let t = |s: f64| CommonArgs { session: String::new(), connect_timeout: s, log: None }.timeout();
+        let t = |s: f64| SessionArgs { session: String::new(), connect_timeout: s }.timeout();
         assert_eq!((t(-1.0), t(f64::NAN), t(f64::INFINITY)), (Duration::ZERO, Duration::ZERO, Duration::MAX));
     }
 

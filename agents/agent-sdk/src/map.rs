@@ -9,12 +9,13 @@
 //! let header = MapHeader { width_m: 10.0, height_m: 8.0, item_count: 1, ..MapHeader::default() };
 //! let items = [MapItem { kind: MAP_CHECKPOINT, index: 0, a: 8.0, b: 2.0, c: 0.5 }];
 //! let map = Map::decode(&header, &items).expect("a valid map");
-//! assert_eq!(map.checkpoints[0].radius_m, 0.5);
+//! assert_eq!(map.checkpoints[0].radius, 0.5);
 //! let lying = MapHeader { item_count: 2, ..header };
 //! assert_eq!(Map::decode(&lying, &items), Err(MapDecodeError::ItemCount { announced: 2, got: 1 }));
 //! ```
 
 use ipc_types::{MAP_BEACON, MAP_CHECKPOINT, MAP_CORNER, MAP_GRID, MAP_TARGET, MAP_WALL, MapHeader, MapItem};
+use records::places::Checkpoint;
 
 /// A point on the floor, metres.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
@@ -52,7 +53,7 @@ pub struct Beacon {
     pub height_m: f64,
 }
 
-/// A target area (seen by the ground sensor), or a scenario checkpoint (drawn and logged only).
+/// A target area (seen by the ground sensor).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Circle {
     /// Centre.
@@ -89,8 +90,9 @@ pub struct Map {
     pub beacons: Vec<Beacon>,
     /// Targets, by index.
     pub targets: Vec<Circle>,
-    /// The scenario's checkpoints, by index.
-    pub checkpoints: Vec<Circle>,
+    /// The scenario's checkpoints, by index, in the project's one checkpoint type (the hub
+    /// publishes its own `records::places::Checkpoint`s; the radius is passed on as sent).
+    pub checkpoints: Vec<Checkpoint>,
     /// Grid start poses, by slot.
     pub grid: Vec<GridPose>,
 }
@@ -293,7 +295,7 @@ impl Map {
                 ItemKind::Beacon => map.beacons.push(Beacon { pos, height_m: it.c }),
                 ItemKind::Target => map.targets.push(Circle { pos, radius_m: it.c }),
                 ItemKind::Grid => map.grid.push(GridPose { pos, heading_deg: it.c }),
-                ItemKind::Checkpoint => map.checkpoints.push(Circle { pos, radius_m: it.c }),
+                ItemKind::Checkpoint => map.checkpoints.push(Checkpoint { x: it.a, y: it.b, radius: it.c }),
             }
         }
         map.close_wall(open)?;
@@ -388,7 +390,7 @@ mod tests {
         assert_eq!(map.beacons, [Beacon { pos: Point::new(9.0, 7.0), height_m: 2.0 }]);
         assert_eq!(map.targets, [Circle { pos: Point::new(4.0, 4.0), radius_m: 0.4 }]);
         assert_eq!(map.grid, [GridPose { pos: Point::new(3.0, 3.0), heading_deg: 90.0 }]);
-        assert_eq!(map.checkpoints, [Circle { pos: Point::new(8.0, 2.0), radius_m: 0.5 }]);
+        assert_eq!(map.checkpoints, [Checkpoint { x: 8.0, y: 2.0, radius: 0.5 }]);
     }
 
     #[test]

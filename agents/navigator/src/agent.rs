@@ -23,7 +23,7 @@ pub fn run(args: &NavigatorArgs) -> anyhow::Result<ExitCode> {
     let source = sensor_source(args.mode)?;
     anyhow::ensure!(args.cruise > 0.0 && args.cruise <= 1.0, "--cruise {} is not in (0, 1]", args.cruise);
     anyhow::ensure!(args.arrive > 0.0, "--arrive {} must be positive", args.arrive);
-    let session = &args.common.session;
+    let session = &args.common.hub.session;
     let mut agent = args.common.connect("navigator").with_context(|| format!("joining session {session:?}"))?;
     // Close on every path, errors included: the last process of a session removes its files.
     let result = drive(&mut agent, args, source);
@@ -35,8 +35,7 @@ pub fn run(args: &NavigatorArgs) -> anyhow::Result<ExitCode> {
 fn config(args: &NavigatorArgs, header: &ipc_types::MapHeader) -> anyhow::Result<NavConfig> {
     let [w, h, com] = args.body;
     let body = Body { width_m: w, height_m: h, com };
-    let checkpoints: Vec<Checkpoint> =
-        args.checkpoints.iter().map(|&[x, y, r]| Checkpoint { pos: V2::new(x, y), radius_m: r }).collect();
+    let checkpoints: Vec<Checkpoint> = args.checkpoints.iter().map(Checkpoint::from).collect();
     let first = checkpoints.first().context("at least one --checkpoint is needed")?;
     let start = match args.robot.pose {
         Some([x, y, dir]) => Pose::from_deg(x, y, dir),
@@ -56,8 +55,9 @@ fn config(args: &NavigatorArgs, header: &ipc_types::MapHeader) -> anyhow::Result
             args.pose_source
         );
     }
+    // A hub that does not say gets the thesis's encoders: 1024 ticks a turn of a 0.17 m wheel.
     let ticks_per_m =
-        if p.encoder_ticks_per_m > 0.0 { p.encoder_ticks_per_m } else { 1024.0 / (std::f64::consts::TAU * 0.17) };
+        if p.encoder_ticks_per_m > 0.0 { p.encoder_ticks_per_m } else { sim_model::encoder_ticks_per_m(1024.0, 0.17) };
     Ok(NavConfig {
         body,
         max_speed_mps: args.max_speed,
@@ -89,7 +89,7 @@ fn drive(
         .id(args.robot.id)
         .body(cfg.body.width_m, cfg.body.height_m, cfg.body.com)
         .motors(cfg.max_speed_mps, cfg.accel_curve)
-        .at(Some([cfg.start.x, cfg.start.y, cfg.start.theta.to_degrees()]));
+        .at(Some([cfg.start.x, cfg.start.y, sim_model::wire_deg(cfg.start.theta)]));
     let mut sensors = [SensorSpec { x_m: 0.0, y_m: 0.0, angle_deg: 0.0, cone_deg: 0.0, range_m: 0.0 }; MAX_PROXIMITY];
     for (slot, mount) in sensors.iter_mut().zip(&cfg.sensors) {
         *slot = mount.spec();
@@ -102,11 +102,11 @@ fn drive(
     let cycle_s = cfg.cycle_s;
     eprintln!(
         "navigator {name}: robot {id} in session {:?} on {:?}, from ({:.2}, {:.2}, {:.0}°) through {} checkpoint(s)",
-        args.common.session,
+        args.common.hub.session,
         map.name,
         cfg.start.x,
         cfg.start.y,
-        cfg.start.theta.to_degrees(),
+        sim_model::wire_deg(cfg.start.theta),
         checkpoints.len()
     );
     let mut logs = RobotLogs::new(args.common.log.as_deref());

@@ -104,6 +104,14 @@ impl Pose {
         Self { x, y, theta: wrap_rad(theta) }
     }
 
+    /// The pose after `dt` seconds at speed `v` (m/s) and turn rate `w` (rad/s), moved as the
+    /// hub moves a chair in one tick ([`sim_model::advance`]: along the heading it starts with).
+    pub fn advanced(&self, v: f64, w: f64, dt: f64) -> Pose {
+        let [x, y, theta] =
+            sim_model::advance([self.x, self.y, self.theta], v, w, self.theta.cos(), self.theta.sin(), dt);
+        Self { x, y, theta }
+    }
+
     /// A pose from metres and a heading in degrees.
     pub fn from_deg(x: f64, y: f64, heading_deg: f64) -> Self {
         Self::new(x, y, heading_deg.to_radians())

@@ -3,6 +3,7 @@
 
 use agent_sdk::map::{Map, MapDecodeError};
 use ipc_types::{MapHeader, MapItem};
+use records::places::Checkpoint;
 
 use crate::geom::{Seg, V2};
 
@@ -50,15 +51,6 @@ impl MapWall {
     }
 }
 
-/// A scenario checkpoint as the hub publishes it.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct MapCheckpoint {
-    /// Centre, metres.
-    pub pos: V2,
-    /// Radius, metres.
-    pub radius_m: f64,
-}
-
 /// The lab as the navigator knows it.
 #[derive(Debug, Clone, PartialEq)]
 pub struct NavMap {
@@ -71,7 +63,7 @@ pub struct NavMap {
     /// Interior walls and scenario obstacles.
     pub walls: Vec<MapWall>,
     /// The scenario's checkpoints, if the hub has any.
-    pub checkpoints: Vec<MapCheckpoint>,
+    pub checkpoints: Vec<Checkpoint>,
 }
 
 impl NavMap {
@@ -97,11 +89,7 @@ impl NavMap {
                     obstacle: w.obstacle,
                 })
                 .collect(),
-            checkpoints: map
-                .checkpoints
-                .iter()
-                .map(|c| MapCheckpoint { pos: point(&c.pos), radius_m: c.radius_m })
-                .collect(),
+            checkpoints: map.checkpoints.clone(),
         }
     }
 
@@ -140,7 +128,7 @@ impl NavMap {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use agent_sdk::map::{Circle, Point, Wall};
+    use agent_sdk::map::{Point, Wall};
 
     fn wall(corners: &[(f64, f64)], obstacle: bool) -> Wall {
         Wall { height_m: 1.0, corners: corners.iter().map(|&(x, y)| Point::new(x, y)).collect(), obstacle }
@@ -156,7 +144,7 @@ mod tests {
                 wall(&[(1.0, 1.0), (2.0, 1.0), (2.0, 2.0), (1.0, 2.0)], false),
                 wall(&[(5.0, 5.0), (6.0, 5.0), (6.0, 6.0)], true),
             ],
-            checkpoints: vec![Circle { pos: Point::new(8.0, 2.0), radius_m: 0.5 }],
+            checkpoints: vec![Checkpoint { x: 8.0, y: 2.0, radius: 0.5 }],
             ..Map::default()
         };
         let map = NavMap::new(&map);
@@ -166,7 +154,7 @@ mod tests {
         assert_eq!(map.walls[1].corners[2], V2::new(6.0, 6.0));
         assert_eq!(map.known_walls().count(), 1);
         assert_eq!(map.known_segments().len(), 4 + 4, "the border and the one known wall");
-        assert_eq!(map.checkpoints, vec![MapCheckpoint { pos: V2::new(8.0, 2.0), radius_m: 0.5 }]);
+        assert_eq!(map.checkpoints, vec![Checkpoint { x: 8.0, y: 2.0, radius: 0.5 }]);
         assert!(!map.is_open(V2::new(1.5, 1.5)) && map.is_open(V2::new(5.8, 5.5)), "obstacles are not known");
     }
 

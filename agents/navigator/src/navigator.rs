@@ -42,13 +42,21 @@ impl Body {
     }
 }
 
-/// A checkpoint to pass (or, the last one, to stop at).
+/// A checkpoint to pass (or, the last one, to stop at), as the planner uses it: the
+/// project's one checkpoint type, [`records::places::Checkpoint`], with its centre as a
+/// vector.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Checkpoint {
     /// Centre, metres.
     pub pos: V2,
     /// Passing within this counts, metres.
     pub radius_m: f64,
+}
+
+impl From<&records::places::Checkpoint> for Checkpoint {
+    fn from(c: &records::places::Checkpoint) -> Self {
+        Self { pos: V2::new(c.x, c.y), radius_m: c.radius }
+    }
 }
 
 /// Everything the navigator is set up with.
@@ -556,12 +564,7 @@ impl Navigator {
         }
         // Plan from where the chair will be in a moment: its motors lag.
         let (v, w) = self.drive.velocity();
-        let dt = 0.15;
-        let start = Pose::new(
-            self.pose.x + v * self.pose.theta.cos() * dt,
-            self.pose.y + v * self.pose.theta.sin() * dt,
-            self.pose.theta + w * dt,
-        );
+        let start = self.pose.advanced(v, w, 0.15);
         let m = self.cfg.margin_m;
         // (margin from walls, extra margin from sensed obstacles): sensed obstacles are kept
         // further off while there is room, since only their seen faces are known.
@@ -739,7 +742,7 @@ impl Navigator {
         let dt = 0.1;
         let mut p = pose;
         for k in 1..=10 {
-            p = Pose::new(p.x + v * p.theta.cos() * dt, p.y + v * p.theta.sin() * dt, p.theta + w * dt);
+            p = p.advanced(v, w, dt);
             if points.iter().any(|q| self.model.body_contains(&p, *q, 0.03)) {
                 let ttc = k as f64 * dt;
                 return Some(if ttc <= 0.3 { (0.0, 0.0, true) } else { (v * ttc.clamp(0.3, 1.0), w, false) });
@@ -769,13 +772,13 @@ mod tests {
         fn step(&mut self, powers: [f64; 2]) {
             let (c, dt, vmax, track) = (0.83, 0.1, 0.49, 0.65);
             for ((out, travel), power) in self.out.iter_mut().zip(&mut self.travel).zip(powers) {
-                *out = (1.0 - c) * power.clamp(-1.0, 1.0) + c * *out;
+                *out = sim_model::motor_filter(power.clamp(-1.0, 1.0), *out, c);
                 *travel += vmax * *out * dt;
             }
-            let v = vmax * (self.out[0] + self.out[1]) / 2.0;
-            let w = vmax * (self.out[1] - self.out[0]) / track;
+            let (v, w) = sim_model::velocity(vmax, track, self.out);
             let p = self.pose;
-            self.pose = Pose::new(p.x + v * p.theta.cos() * dt, p.y + v * p.theta.sin() * dt, p.theta + w * dt);
+            let [x, y, theta] = sim_model::advance([p.x, p.y, p.theta], v, w, p.theta.cos(), p.theta.sin(), dt);
+            self.pose = Pose::new(x, y, theta);
         }
 
         fn input(&self, tick: u64, pole: Option<V2>) -> Input {

@@ -47,8 +47,9 @@ impl Odometry {
             let dr = (ticks[1] - last[1]) as f64 / self.ticks_per_m;
             let ds = (dl + dr) / 2.0;
             let dth = (dr - dl) / self.track_m;
-            let (s, c) = self.pose.theta.sin_cos();
-            self.pose = Pose::new(self.pose.x + ds * c, self.pose.y + ds * s, self.pose.theta + dth);
+            // The hub's step (sim_model::advance), the tick's distance and turn taken as speeds
+            // over one unit of time: along the heading the tick began with.
+            self.pose = self.pose.advanced(ds, dth, 1.0);
         }
         self.last = Some(ticks);
         self.pose
@@ -175,11 +176,7 @@ mod tests {
         let (mut l, mut r) = (0.0, 0.0);
         o.advance([0, 0]);
         for _ in 0..50 {
-            truth = Pose::new(
-                truth.x + v * truth.theta.cos() * dt,
-                truth.y + v * truth.theta.sin() * dt,
-                truth.theta + w * dt,
-            );
+            truth = truth.advanced(v, w, dt);
             l += (v - w * track / 2.0) * dt;
             r += (v + w * track / 2.0) * dt;
             o.advance([(l * 1e9).round() as i64, (r * 1e9).round() as i64]);

@@ -46,7 +46,7 @@ impl SensorMount {
         SensorSpec {
             x_m: self.x_m,
             y_m: self.y_m,
-            angle_deg: self.angle_rad.to_degrees(),
+            angle_deg: sim_model::wire_deg(self.angle_rad),
             cone_deg: self.cone_rad.to_degrees(),
             range_m: self.range_m,
         }

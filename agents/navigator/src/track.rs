@@ -285,15 +285,13 @@ impl Drive {
 
     /// Current speed and turn rate as the model has them.
     pub fn velocity(&self) -> (f64, f64) {
-        let [l, r] = self.out;
-        (self.max_speed * (l + r) / 2.0, self.max_speed * (r - l) / self.track)
+        sim_model::velocity(self.max_speed, self.track, self.out)
     }
 
     /// Records powers sent as they are (the model's outputs follow them).
     pub fn powers_raw(&mut self, powers: [f64; 2]) {
-        let c = self.accel_curve;
         for (out, p) in self.out.iter_mut().zip(powers) {
-            *out = (1.0 - c) * p + c * *out;
+            *out = sim_model::motor_filter(p, *out, self.accel_curve);
         }
     }
 
@@ -309,9 +307,10 @@ impl Drive {
         let c = self.accel_curve;
         let mut powers = [0.0; 2];
         for k in 0..2 {
+            // The filter inverted: the power whose output is `want` one tick from now.
             let p = if c < 1.0 { ((want[k] - c * self.out[k]) / (1.0 - c)).clamp(-1.0, 1.0) } else { 0.0 };
             powers[k] = p;
-            self.out[k] = (1.0 - c) * p + c * self.out[k];
+            self.out[k] = sim_model::motor_filter(p, self.out[k], c);
         }
         powers
     }
@@ -343,7 +342,7 @@ mod tests {
         for _ in 0..30 {
             let p = d.powers(0.3, 0.0);
             for k in 0..2 {
-                out[k] = 0.17 * p[k] + 0.83 * out[k];
+                out[k] = sim_model::motor_filter(p[k], out[k], 0.83);
             }
         }
         assert!((out[0] * 0.49 - 0.3).abs() < 1e-9 && (out[1] - out[0]).abs() < 1e-12);
@@ -369,11 +368,7 @@ mod tests {
         let mut ticks = 0;
         while !t.finished() && ticks < 400 {
             let c = t.command(&pose);
-            pose = Pose::new(
-                pose.x + c.v * pose.theta.cos() * dt,
-                pose.y + c.v * pose.theta.sin() * dt,
-                pose.theta + c.w * dt,
-            );
+            pose = pose.advanced(c.v, c.w, dt);
             ticks += 1;
         }
         assert!(t.finished(), "{pose:?}");

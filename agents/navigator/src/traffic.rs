@@ -86,7 +86,7 @@ pub fn encode(name: &str, pose: Pose, state: State, body: &crate::Body) -> Strin
         "nav {name} {:.3} {:.3} {:.1} {} {:.2} {:.2} {:.2}",
         pose.x,
         pose.y,
-        pose.theta.to_degrees(),
+        sim_model::wire_deg(pose.theta),
         state.word(),
         body.width_m,
         body.height_m,

@@ -24,7 +24,7 @@ struct Scenario {
     /// Scenario obstacles: boxes x0, y0, x1, y1 (1 m tall), unknown to the navigator.
     obstacles: Vec<[f64; 4]>,
     start: [f64; 3],
-    checkpoints: Vec<[f64; 3]>,
+    checkpoints: Vec<records::places::Checkpoint>,
     body: Body,
     time_limit_s: f64,
     /// Where the navigator's pose comes from.
@@ -41,7 +41,10 @@ impl Scenario {
             map,
             obstacles: vec![],
             start,
-            checkpoints: checkpoints.to_vec(),
+            checkpoints: checkpoints
+                .iter()
+                .map(|&[x, y, radius]| records::places::Checkpoint { x, y, radius })
+                .collect(),
             body: Body::INTELLWHEELS,
             time_limit_s,
             pose_source: PoseSourceKind::Odometry,
@@ -66,11 +69,14 @@ struct Outcome {
 
 /// The map exactly as the hub publishes it (`hub::core::pack_map`): walls from `obstacle_from`
 /// on are flagged as the scenario's obstacles.
-fn map_items(lab: &Lab, params: &Params, obstacle_from: usize, checkpoints: &[[f64; 3]]) -> (MapHeader, Vec<MapItem>) {
+fn map_items(
+    lab: &Lab,
+    params: &Params,
+    obstacle_from: usize,
+    checkpoints: &[records::places::Checkpoint],
+) -> (MapHeader, Vec<MapItem>) {
     let hub_params = hub::core::hub_params(params, hub::core::Mode::LockStep, 0, 1000);
-    let checkpoints: Vec<records::places::Checkpoint> =
-        checkpoints.iter().map(|&[x, y, radius]| records::places::Checkpoint { x, y, radius }).collect();
-    hub::core::pack_map(lab, &Grid::default(), obstacle_from, &checkpoints, 100, hub_params)
+    hub::core::pack_map(lab, &Grid::default(), obstacle_from, checkpoints, 100, hub_params)
 }
 
 /// A robot's sensor block exactly as the hub packs it (`hub::core::pack_sensor_block`).
@@ -106,7 +112,7 @@ fn chair_spec(cfg: &NavConfig, name: &str) -> RobotSpec {
             range_m: Some(m.range_m),
         })
         .collect();
-    RobotSpec::at(cfg.start.x, cfg.start.y, cfg.start.theta.to_degrees())
+    RobotSpec::at(cfg.start.x, cfg.start.y, sim_model::wire_deg(cfg.start.theta))
         .body(cfg.body.width_m, cfg.body.height_m, cfg.body.com)
         .motors(cfg.max_speed_mps, cfg.accel_curve)
         .sensors(sensors)
@@ -164,7 +170,7 @@ fn simulate(s: &Scenario, seed: u64) -> Outcome {
     let cfg = NavConfig {
         body: s.body,
         sensors: navigator::sensors::default_layout(&s.body.footprint()),
-        checkpoints: s.checkpoints.iter().map(|&[x, y, r]| Checkpoint { pos: V2::new(x, y), radius_m: r }).collect(),
+        checkpoints: s.checkpoints.iter().map(Checkpoint::from).collect(),
         start: Pose::from_deg(s.start[0], s.start[1], s.start[2]),
         encoder_ticks_per_m: ticks_per_m,
         pose_source: s.pose_source,
@@ -338,8 +344,8 @@ mod untuned_maps {
         for o in outcomes {
             assert!(o.finished && o.reached == s.checkpoints.len(), "seed {} did not arrive: {o:?}", o.seed);
             assert_eq!(o.contacts, 0, "seed {} touched something: {o:?}", o.seed);
-            let [x, y, _] = s.checkpoints[s.checkpoints.len() - 1];
-            assert!((o.end - V2::new(x, y)).norm() <= 0.25, "seed {} stopped at {:?}", o.seed, o.end);
+            let last = s.checkpoints[s.checkpoints.len() - 1];
+            assert!((o.end - V2::new(last.x, last.y)).norm() <= 0.25, "seed {} stopped at {:?}", o.seed, o.end);
         }
     }
 
@@ -449,13 +455,14 @@ mod corridor_swap {
         let mut world = World::new(&lab, params, seed).expect("a valid world");
         let body = Body::INTELLWHEELS;
         let fp = body.footprint();
-        let checkpoints: Vec<[f64; 3]> = chairs.iter().map(|c| [c.goal[0], c.goal[1], 0.5]).collect();
+        let checkpoints: Vec<records::places::Checkpoint> =
+            chairs.iter().map(|c| records::places::Checkpoint { x: c.goal[0], y: c.goal[1], radius: 0.5 }).collect();
         let (header, items) = map_items(&lab, world.params(), lab.walls.len(), &checkpoints);
         let ticks_per_m = header.params.encoder_ticks_per_m;
         let mut fleet = Vec::new();
-        for c in chairs {
+        for (c, goal) in chairs.iter().zip(&checkpoints) {
             let cfg = NavConfig {
-                checkpoints: vec![Checkpoint { pos: V2::new(c.goal[0], c.goal[1]), radius_m: 0.5 }],
+                checkpoints: vec![Checkpoint::from(goal)],
                 start: Pose::from_deg(c.start[0], c.start[1], c.start[2]),
                 encoder_ticks_per_m: ticks_per_m,
                 ..NavConfig::intellwheels()

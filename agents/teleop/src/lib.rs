@@ -313,7 +313,7 @@ impl Drop for Display {
 /// Runs the agent until the driver quits, the run ends or the hub goes away (an error).
 pub fn run(args: &TeleopArgs) -> anyhow::Result<ExitCode> {
     let mut agent =
-        args.common.connect("teleop").with_context(|| format!("cannot join session {:?}", args.common.session))?;
+        args.common.connect("teleop").with_context(|| format!("cannot join session {:?}", args.common.hub.session))?;
     // Close the agent on every path, errors included: the last process of a session removes
     // its files, even when the hub died first.
     let result = drive(&mut agent, args);
@@ -352,7 +352,7 @@ fn drive(agent: &mut Agent, args: &TeleopArgs) -> anyhow::Result<ExitCode> {
     // The run's final tick when the hub ended the run; what was logged in any case.
     logs.finish(agent).context("cannot write the log")?;
     let end = end?;
-    display.draw(&teleop.status(&args.robot.name, &args.common.session), Instant::now(), true);
+    display.draw(&teleop.status(&args.robot.name, &args.common.hub.session), Instant::now(), true);
     display.close(end.message());
     Ok(ExitCode::SUCCESS)
 }
@@ -423,7 +423,7 @@ fn drive_loop(
             Err(AgentError::Interrupted) => return Ok(End::Interrupted),
             Err(e) => return Err(e).context("the teleop lost its hub"),
         }
-        display.draw(&teleop.status(&args.robot.name, &args.common.session), Instant::now(), false);
+        display.draw(&teleop.status(&args.robot.name, &args.common.hub.session), Instant::now(), false);
     }
 }
 

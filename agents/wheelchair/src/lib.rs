@@ -284,7 +284,7 @@ fn drive(agent: &mut Agent, args: &WheelchairArgs, chairs: &[ChairConfig]) -> an
         ids.push(agent.register(&registration(c)).with_context(|| format!("registering {}", c.name))?);
     }
     agent.ready()?;
-    eprintln!("wheelchair: agent {} drives robots {:?} in session {:?}", agent.id(), ids, args.common.session);
+    eprintln!("wheelchair: agent {} drives robots {:?} in session {:?}", agent.id(), ids, args.common.hub.session);
     let mut logs = RobotLogs::new(args.common.log.as_deref());
     for (c, &id) in chairs.iter().zip(&ids) {
         logs.add(id, &c.name);

@@ -84,8 +84,8 @@ impl RobotLog {
 /// A robot name as a file stem, one to one: ASCII letters, digits, `-` and `_` stay as they
 /// are (so a plain name is its own stem: `chair1` → `chair1.csv`), and every other byte of the
 /// name's UTF-8, `%` included, becomes `%XX` in upper-case hex (`chair 1` → `chair%201`).
-/// Two robots of a run therefore never share a log file, and [`robot_name`] gives the name
-/// back. The empty name, which no hub accepts, is `%` (a stem no other name has).
+/// Two different names therefore never share a log file, and [`robot_name`] gives the name
+/// back (two robots with the same name, which the hub allows, still do). The empty name, which no hub accepts, is `%` (a stem no other name has).
 pub fn file_stem(name: &str) -> String {
     if name.is_empty() {
         return "%".into();

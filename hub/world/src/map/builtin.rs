@@ -7,7 +7,7 @@
 //! - `maze`: a 28 m × 14 m maze of 2 m cells in Ciber-Rato's `<Row Pos Pattern>` shorthand,
 //!   with one beacon and one target.
 //!
-//! The XML files live in `hub/maps/`; they are compiled in, so the binary needs no data files.
+//! The XML files live in `hub/world/maps/`; they are compiled in, so the binary needs no data files.
 
 use std::path::Path;
 

@@ -1,17 +1,71 @@
-//! `iwsim hub`: loads the map and parameters, runs the hub, prints how the run ended.
+//! `iwsim hub`'s command line: the options, the configuration they make (map, parameters,
+//! scenario obstacles and checkpoints), and the run, printing how it ended.
 
+use std::path::PathBuf;
 use std::process::ExitCode;
 use std::time::Duration;
 
+use crate::HubConfig;
+use crate::core::Mode;
 use anyhow::Context as _;
-use hub::HubConfig;
-use hub::core::Mode;
 use records::places::{Checkpoint, Obstacle};
 use world::map::builtin::{self, PREFIX};
 use world::map::xml::{parse_params, read_text};
 use world::map::{Grid, NoiseParams, Wall};
 
-use crate::cli::HubArgs;
+/// Options of `iwsim hub`.
+#[derive(Debug, clap::Args, Clone)]
+pub struct HubArgs {
+    /// Lab file, or builtin:liacc, builtin:thesis, builtin:maze.
+    #[arg(long, default_value = "builtin:liacc")]
+    pub lab: String,
+    /// Grid file (start poses); a built-in lab brings its own grid.
+    #[arg(long)]
+    pub grid: Option<String>,
+    /// Parameters file (Ciber-Rato `<Parameters>`).
+    #[arg(long)]
+    pub param: Option<PathBuf>,
+    /// Session name: hubs, agents and viewers of one run share it.
+    #[arg(long, default_value = "default")]
+    pub session: String,
+    /// Tick period in milliseconds (real time; also the simulated step in lock-step).
+    #[arg(long)]
+    pub cycle_ms: Option<u32>,
+    /// Step as soon as every agent has answered, instead of every cycle.
+    #[arg(long)]
+    pub lockstep: bool,
+    /// Lock-step: step without an agent that has not answered after this long.
+    #[arg(long, default_value_t = 1000)]
+    pub deadline_ms: u64,
+    /// Seed of the world's random generator.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Stop after this many ticks (0: run until stopped).
+    #[arg(long, default_value_t = 0)]
+    pub ticks: u64,
+    /// Switch every sensor and motor noise off.
+    #[arg(long)]
+    pub no_noise: bool,
+    /// Start tick 0 once this many agents are ready.
+    #[arg(long, default_value_t = 0)]
+    pub wait_agents: usize,
+    /// Wait for a Start command before tick 0.
+    #[arg(long)]
+    pub start_on_command: bool,
+    /// Robots the hub accepts (at most 10,000).
+    #[arg(long, default_value_t = ipc_types::MAX_ROBOTS)]
+    pub max_robots: usize,
+    /// Print the end-of-run summary as one JSON object.
+    #[arg(long)]
+    pub json: bool,
+    /// A scenario obstacle: a static box X0,Y0,X1,Y1 (metres) of height H (default 1.0 m),
+    /// sensed and collided with like a wall. Repeatable.
+    #[arg(long, value_name = "X0,Y0,X1,Y1[,H]", allow_hyphen_values = true)]
+    pub obstacle: Vec<String>,
+    /// A scenario checkpoint X,Y with radius R (default 0.5 m), shown by viewers. Repeatable.
+    #[arg(long, value_name = "X,Y[,R]", allow_hyphen_values = true)]
+    pub checkpoint: Vec<String>,
+}
 
 /// Builds the hub's configuration from the command line.
 pub fn config(args: &HubArgs) -> anyhow::Result<HubConfig> {
@@ -74,7 +128,7 @@ pub fn run(args: &HubArgs) -> anyhow::Result<ExitCode> {
         if cfg.mode == Mode::LockStep { "lock-step" } else { "real-time" },
         if cfg.tick_limit > 0 { format!(", {} ticks", cfg.tick_limit) } else { String::new() }
     );
-    let out = hub::run(cfg).context("hub")?;
+    let out = crate::run(cfg).context("hub")?;
     if args.json {
         println!("{}", out.json_line());
     } else {

@@ -1,0 +1,37 @@
+//! `iwsim view`: the viewer's command line and its run.
+
+use std::process::ExitCode;
+
+use agent_sdk::cli::SessionArgs;
+
+use crate::{Viewer, ViewerConfig};
+
+/// Options of `iwsim view`.
+#[derive(Debug, clap::Args, Clone)]
+#[command(mut_arg("session", |a| a.help("Session of the hub to show")))]
+#[command(mut_arg("connect_timeout", |a| a.help("Seconds to wait for the hub to come up").value_name("CONNECT_TIMEOUT")))]
+pub struct ViewArgs {
+    /// `--session`, `--connect-timeout`.
+    #[command(flatten)]
+    pub hub: SessionArgs,
+    /// Address to serve the page on: loopback unless the LAN is wanted (0.0.0.0:8080).
+    #[arg(long, default_value = "127.0.0.1:8080")]
+    pub http: std::net::SocketAddr,
+    /// Let pages start, pause, step and stop the run.
+    #[arg(long)]
+    pub allow_control: bool,
+}
+
+/// Serves the viewer until the hub ends the run.
+pub fn run(args: &ViewArgs) -> anyhow::Result<ExitCode> {
+    let v = Viewer::start(ViewerConfig {
+        session: args.hub.session.clone(),
+        http: args.http,
+        allow_control: args.allow_control,
+        connect_timeout: args.hub.timeout(),
+    })?;
+    let addr = v.local_addr().unwrap_or(args.http);
+    eprintln!("iwsim view: session {:?}, open http://{addr}/", args.hub.session);
+    v.run()?;
+    Ok(ExitCode::SUCCESS)
+}
