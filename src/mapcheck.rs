@@ -20,7 +20,7 @@ pub fn check(spec: &str) -> anyhow::Result<ExitCode> {
         None => match read_text(std::path::Path::new(spec)) {
             Ok(t) => t,
             Err(err) => {
-                eprintln!("{err}");
+                eprintln!("{}", err.in_file(spec));
                 return Ok(ExitCode::FAILURE);
             }
         },
@@ -39,7 +39,7 @@ pub fn check(spec: &str) -> anyhow::Result<ExitCode> {
             Ok(ExitCode::SUCCESS)
         }
         Err(err) => {
-            eprintln!("{spec}:{err}");
+            eprintln!("{}", err.in_file(spec));
             Ok(ExitCode::FAILURE)
         }
     }

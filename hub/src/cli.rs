@@ -13,6 +13,10 @@ use world::map::builtin::{self, PREFIX};
 use world::map::xml::{parse_params, read_text};
 use world::map::{Grid, NoiseParams, Wall};
 
+/// The longest `--deadline-ms`: a day. Longer could not be told apart from "wait for ever", and
+/// the map header carries the deadline as 32-bit milliseconds.
+pub const MAX_DEADLINE_MS: u64 = 86_400_000;
+
 /// Options of `iwsim hub`.
 #[derive(Debug, clap::Args, Clone)]
 pub struct HubArgs {
@@ -29,13 +33,13 @@ pub struct HubArgs {
     #[arg(long, default_value = "default")]
     pub session: String,
     /// Tick period in milliseconds (real time; also the simulated step in lock-step).
-    #[arg(long)]
+    #[arg(long, value_parser = clap::value_parser!(u32).range(1..))]
     pub cycle_ms: Option<u32>,
     /// Step as soon as every agent has answered, instead of every cycle.
     #[arg(long)]
     pub lockstep: bool,
     /// Lock-step: step without an agent that has not answered after this long.
-    #[arg(long, default_value_t = 1000)]
+    #[arg(long, default_value_t = 1000, value_parser = clap::value_parser!(u64).range(1..=MAX_DEADLINE_MS))]
     pub deadline_ms: u64,
     /// Seed of the world's random generator.
     #[arg(long, default_value_t = 1)]
@@ -47,13 +51,13 @@ pub struct HubArgs {
     #[arg(long)]
     pub no_noise: bool,
     /// Start tick 0 once this many agents are ready.
-    #[arg(long, default_value_t = 0)]
+    #[arg(long, default_value_t = 0, value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(0..=ipc_types::MAX_AGENTS as u64))]
     pub wait_agents: usize,
     /// Wait for a Start command before tick 0.
     #[arg(long)]
     pub start_on_command: bool,
     /// Robots the hub accepts (at most 10,000).
-    #[arg(long, default_value_t = ipc_types::MAX_ROBOTS)]
+    #[arg(long, default_value_t = ipc_types::MAX_ROBOTS, value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..=ipc_types::MAX_ROBOTS as u64))]
     pub max_robots: usize,
     /// Print the end-of-run summary as one JSON object.
     #[arg(long)]
@@ -69,7 +73,7 @@ pub struct HubArgs {
 
 /// Builds the hub's configuration from the command line.
 pub fn config(args: &HubArgs) -> anyhow::Result<HubConfig> {
-    let mut lab = builtin::load_lab_spec(&args.lab).map_err(|e| anyhow::anyhow!("{}:{e}", args.lab))?;
+    let mut lab = builtin::load_lab_spec(&args.lab).map_err(|e| anyhow::anyhow!("{}", e.in_file(&args.lab)))?;
     let obstacle_from = lab.walls.len();
     for spec in &args.obstacle {
         let o = Obstacle::parse(spec)
@@ -83,14 +87,15 @@ pub fn config(args: &HubArgs) -> anyhow::Result<HubConfig> {
         .map(|spec| Checkpoint::parse(spec).map_err(|e| anyhow::anyhow!("--checkpoint {e}")))
         .collect::<anyhow::Result<_>>()?;
     let grid = match (&args.grid, args.lab.strip_prefix(PREFIX)) {
-        (Some(g), _) => builtin::load_grid_spec(g).map_err(|e| anyhow::anyhow!("{g}:{e}"))?,
+        (Some(g), _) => builtin::load_grid_spec(g, &lab).map_err(|e| anyhow::anyhow!("{}", e.in_file(g)))?,
         (None, Some(name)) => builtin::map(name).map(|m| m.grid).unwrap_or_default(),
         (None, None) => Grid::default(),
     };
     let mut params = match &args.param {
         Some(path) => {
-            let text = read_text(path).map_err(|e| anyhow::anyhow!("{e}"))?;
-            parse_params(&text).map_err(|e| anyhow::anyhow!("{}:{e}", path.display()))?
+            let file = path.display().to_string();
+            let text = read_text(path).map_err(|e| anyhow::anyhow!("{}", e.in_file(&file)))?;
+            parse_params(&text).map_err(|e| anyhow::anyhow!("{}", e.in_file(&file)))?
         }
         None => world::map::Params::default(),
     };
@@ -121,7 +126,7 @@ pub fn config(args: &HubArgs) -> anyhow::Result<HubConfig> {
 /// `iwsim hub`.
 pub fn run(args: &HubArgs) -> anyhow::Result<ExitCode> {
     let cfg = config(args)?;
-    eprintln!(
+    ipc_services::report!(
         "iwsim hub: session {:?}, lab {:?}, {} mode{}",
         cfg.session,
         cfg.lab.name,
@@ -145,4 +150,51 @@ pub fn run(args: &HubArgs) -> anyhow::Result<ExitCode> {
         }
     }
     Ok(ExitCode::SUCCESS)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clap::Parser as _;
+
+    #[derive(Debug, clap::Parser)]
+    struct Cli {
+        #[command(flatten)]
+        hub: HubArgs,
+    }
+
+    /// The one-line error clap gives for `args`, or `None` when they parse.
+    fn refusal(args: &[&str]) -> Option<String> {
+        let argv = std::iter::once("hub").chain(args.iter().copied());
+        Cli::try_parse_from(argv).err().map(|e| e.to_string().lines().next().unwrap_or_default().to_owned())
+    }
+
+    #[test]
+    fn values_the_hub_cannot_honour_are_refused_with_the_option_and_its_range() {
+        for (args, range) in [
+            (&["--deadline-ms", "0"][..], "1..=86400000"),
+            (&["--deadline-ms", "86400001"][..], "1..=86400000"),
+            (&["--wait-agents", "129"][..], "0..=128"),
+            (&["--max-robots", "0"][..], "1..=10000"),
+            (&["--max-robots", "10001"][..], "1..=10000"),
+            (&["--cycle-ms", "0"][..], "1..=4294967295"),
+        ] {
+            let line = refusal(args).unwrap_or_else(|| panic!("{args:?} was accepted"));
+            assert!(line.contains(args[0]) && line.contains(range), "{args:?}: {line}");
+        }
+    }
+
+    #[test]
+    fn the_limits_themselves_are_accepted() {
+        for args in [
+            &["--deadline-ms", "1"][..],
+            &["--deadline-ms", "86400000"][..],
+            &["--wait-agents", "128"][..],
+            &["--max-robots", "1"][..],
+            &["--max-robots", "10000"][..],
+            &["--cycle-ms", "1"][..],
+        ] {
+            assert_eq!(refusal(args), None, "{args:?}");
+        }
+    }
 }

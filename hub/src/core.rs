@@ -717,7 +717,7 @@ pub fn pack_map(
         target_count: lab.targets.len() as u32,
         grid_count: grid.poses.len() as u32,
         cycle_ms,
-        name: FixedName::new(&lab.name).unwrap_or(FixedName::EMPTY),
+        name: FixedName::truncated(&lab.name),
         params,
     };
     (header, items)
@@ -732,6 +732,18 @@ mod tests {
         let map = builtin::map("liacc").expect("built in");
         let params = Params { noise: world::map::NoiseParams::NONE, ..Params::default() };
         HubCore::new(&map.lab, map.grid, params, 1, mode, 0).expect("valid")
+    }
+
+    #[test]
+    fn a_lab_name_too_long_for_the_header_reaches_agents_cut_like_a_robot_name() {
+        let mut map = builtin::map("liacc").expect("built in");
+        // 30 ASCII bytes, then "é" (2 bytes) straddles the 31-byte limit: the cut drops it whole.
+        map.lab.name = format!("{}éé and more", "L".repeat(30));
+        let c = HubCore::new(&map.lab, map.grid, Params::default(), 1, Mode::LockStep, 0).expect("valid");
+        let (header, _) = c.map_items(100, 0);
+        assert_eq!(header.name.as_str(), Some("L".repeat(30).as_str()));
+        assert_eq!(FixedName::truncated("short lab").as_str(), Some("short lab"));
+        assert_eq!(FixedName::truncated("nul\0after").as_str(), Some("nul"));
     }
 
     #[test]

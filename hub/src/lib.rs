@@ -18,7 +18,7 @@ use std::time::{Duration, Instant};
 use ipc_services::iceoryx2::port::publisher::Publisher;
 use ipc_services::iceoryx2::port::update_connections::UpdateConnections as _;
 use ipc_services::iceoryx2::prelude::FileDescriptorBased;
-use ipc_services::{Role, SLICE_ALLOCATION, ServicesError, Session, Svc, clean_dead_nodes};
+use ipc_services::{HUB_NODE_NAME, Role, SLICE_ALLOCATION, ServicesError, Session, Svc, clean_dead_nodes};
 use ipc_types::{
     Command, ControlResponse, Refusal, RegisterKind, RegisterResponse, RobotSensors, RobotState, RunState, SensorBlock,
     TickHeader,
@@ -80,6 +80,10 @@ fn ipc<E: std::fmt::Debug>(what: &str) -> impl FnOnce(E) -> HubError + '_ {
     move |e| HubError::Ipc(format!("{what}: {e:?}"))
 }
 
+/// The longest the loop sleeps: how often it looks for a termination signal and for
+/// subscribers that joined without ringing.
+const IDLE_POLL: Duration = Duration::from_millis(50);
+
 /// A Linux pidfd: readable once the process has exited.
 #[derive(Debug)]
 struct PidFd(OwnedFd);
@@ -136,11 +140,14 @@ struct AgentPorts {
 pub fn run(cfg: HubConfig) -> Result<HubOutcome, HubError> {
     raise_fd_limit();
     let session = Session::new(&cfg.session)?;
+    // Dropped last, on every way out (a refused lab, a failed port, the end of the run): the
+    // last process of a session leaves nothing in /dev/shm.
+    let _release = session.release_on_drop();
     let cleaned = clean_dead_nodes(&session);
     if cleaned > 0 {
         tracing::info!("removed {cleaned} dead iceoryx2 nodes left by an earlier run of session {}", cfg.session);
     }
-    let node = session.node("iwsim-hub")?;
+    let node = session.node(HUB_NODE_NAME)?;
     let mut core = HubCore::new(&cfg.lab, cfg.grid.clone(), cfg.params.clone(), cfg.seed, cfg.mode, cfg.tick_limit)?;
     core.set_max_robots(cfg.max_robots);
     core.set_scenario(cfg.obstacle_from, cfg.checkpoints.clone());
@@ -241,10 +248,14 @@ pub fn run(cfg: HubConfig) -> Result<HubOutcome, HubError> {
         } else {
             match core.mode() {
                 Mode::RealTime => next_tick_at.saturating_duration_since(now),
+                // With no ready agent the deadline means nothing (there is no one to step
+                // without), and once passed it would make every poll return at once: sleep
+                // until a client rings instead.
+                Mode::LockStep if core.ready_agents() == 0 => IDLE_POLL,
                 Mode::LockStep => deadline_at.saturating_duration_since(now),
             }
         }
-        .min(Duration::from_millis(50));
+        .min(IDLE_POLL);
         fds.clear();
         fd_agents.clear();
         fds.push(doorbell_fd);
@@ -460,7 +471,6 @@ pub fn run(cfg: HubConfig) -> Result<HubOutcome, HubError> {
         .collect();
     drop((agents, world_pub, map_pub, roster, actions_sub, register_server, control_server, tick_notifier, doorbell));
     drop((world_svc, map_svc, sensors_svc, actions_svc, register_svc, control_svc, tick_svc, doorbell_svc, node));
-    session.release_if_unused();
     Ok(outcome)
 }
 

@@ -68,6 +68,37 @@ pub struct RawPingPong {
 
 /// Extra processes, beyond agents, that may attach to a session (viewers, bridges, CLI).
 pub const MAX_OBSERVERS: usize = 16;
+/// The name of the hub's iceoryx2 node: clients that never say hello (viewers) find the hub's
+/// process by it.
+pub const HUB_NODE_NAME: &str = "iwsim-hub";
+
+/// Writes a line to stderr like `eprintln!`, but a closed or broken stderr (the reader of a
+/// pipe went away) is ignored instead of panicking: what a process reports about itself is
+/// never a reason for it to fail.
+///
+/// ```
+/// ipc_services::report!("agent {}: ready", 7);
+/// ```
+#[macro_export]
+macro_rules! report {
+    ($($arg:tt)*) => {{
+        use ::std::io::Write as _;
+        let _ = ::std::writeln!(::std::io::stderr().lock(), $($arg)*);
+    }};
+}
+
+/// Whether process `pid` still runs: it exists and is not a zombie (a killed process whose
+/// parent has not reaped it yet has exited all the same).
+pub fn process_alive(pid: u32) -> bool {
+    match std::fs::read_to_string(format!("/proc/{pid}/stat")) {
+        // The state follows the command name, which is in parentheses and may hold anything.
+        Ok(stat) => stat
+            .rsplit_once(')')
+            .and_then(|(_, rest)| rest.split_whitespace().next())
+            .is_none_or(|state| state != "Z" && state != "X"),
+        Err(_) => false,
+    }
+}
 /// Nodes one service admits: every agent, every observer, the hub.
 pub const MAX_NODES: usize = MAX_AGENTS + MAX_OBSERVERS + 1;
 
@@ -373,7 +404,43 @@ impl Session {
     }
 }
 
+/// Removes the session's last file when dropped, if no live node of the session remains
+/// ([`Session::release_if_unused`]). Held as the last field of a client (or the first local of a
+/// function), it runs after every port and node of its owner is gone, on every way out: a
+/// return, an error, a panic's unwinding.
+#[derive(Debug)]
+pub struct SessionRelease(Session);
+
+impl Drop for SessionRelease {
+    fn drop(&mut self) {
+        self.0.release_if_unused();
+    }
+}
+
 impl Session {
+    /// A guard that releases the session when dropped; see [`SessionRelease`].
+    pub fn release_on_drop(&self) -> SessionRelease {
+        SessionRelease(self.clone())
+    }
+
+    /// The process id of the hub serving this session, found by its node's name; `None` when
+    /// no live hub node is listed.
+    pub fn hub_pid(&self) -> Option<u32> {
+        use iceoryx2::node::{NodeState, NodeView as _};
+        let mut pid = None;
+        let _ = Node::<Svc>::list(&self.config, |state| {
+            if let NodeState::Alive(view) = state
+                && let Some(details) = view.details()
+                && details.name().as_str() == HUB_NODE_NAME
+            {
+                pid = u32::try_from(details.process_id().value()).ok();
+                return iceoryx2::prelude::CallbackProgression::Stop;
+            }
+            iceoryx2::prelude::CallbackProgression::Continue
+        });
+        pid
+    }
+
     /// Called by each process after it dropped its node: when no live node of the session
     /// remains, removes the session's last file (iceoryx2's per-domain node counter), so a
     /// finished run leaves nothing in /dev/shm. Returns whether it was removed.
@@ -641,6 +708,52 @@ mod tests {
         drop(hub);
         session.release_if_unused();
         assert_eq!(shm_files_of(&session), Vec::<String>::new());
+    }
+
+    #[test]
+    fn a_zombie_or_reaped_process_is_not_alive() {
+        assert!(process_alive(std::process::id()));
+        let mut child = std::process::Command::new("true").spawn().expect("true runs");
+        // Exited but not reaped: a zombie, which /proc still lists.
+        let pid = child.id();
+        let until = Instant::now() + Duration::from_secs(10);
+        while process_alive(pid) {
+            assert!(Instant::now() < until, "`true` never exited");
+            std::thread::yield_now();
+        }
+        assert!(std::path::Path::new(&format!("/proc/{pid}")).exists(), "a zombie is still listed");
+        child.wait().expect("reaped");
+        assert!(!process_alive(pid));
+    }
+
+    #[test]
+    fn the_hub_is_found_by_its_node_name() {
+        let session = unique_session("hub-pid");
+        let _release = ReleaseOnDrop(session.clone());
+        assert_eq!(session.hub_pid(), None);
+        let other = session.node("viewer").expect("a node");
+        assert_eq!(session.hub_pid(), None, "only the hub's node counts");
+        let hub = session.node(HUB_NODE_NAME).expect("the hub's node");
+        assert_eq!(session.hub_pid(), Some(std::process::id()));
+        drop((hub, other));
+        assert_eq!(session.hub_pid(), None);
+    }
+
+    #[test]
+    fn a_release_guard_removes_the_session_file_of_a_failed_client() {
+        let session = unique_session("guard");
+        {
+            let _release = session.release_on_drop();
+            let node = session.node("client").expect("a node");
+            assert!(matches!(session.world(&node, Role::Client), Err(ServicesError::NotRunning { .. })));
+            assert!(!shm_files_of(&session).is_empty(), "the node made the session's counter");
+        }
+        assert_eq!(shm_files_of(&session), Vec::<String>::new());
+    }
+
+    #[test]
+    fn report_survives_any_arguments() {
+        report!("{} {:?}", 1, "two");
     }
 
     #[test]

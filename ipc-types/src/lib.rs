@@ -98,6 +98,17 @@ impl FixedName {
         Some(Self { bytes })
     }
 
+    /// The name cut to fit: at its first zero byte, then to at most `NAME_BYTES − 1` bytes at
+    /// a character boundary, so a long name arrives shortened rather than empty.
+    pub fn truncated(name: &str) -> Self {
+        let name = name.split('\0').next().unwrap_or_default();
+        let mut end = name.len().min(NAME_BYTES - 1);
+        while !name.is_char_boundary(end) {
+            end -= 1;
+        }
+        Self::new(name.get(..end).unwrap_or_default()).unwrap_or(Self::EMPTY)
+    }
+
     /// The name, or `None` when the buffer does not hold UTF-8 (it came from outside).
     pub fn as_str(&self) -> Option<&str> {
         let len = self.bytes.iter().position(|&b| b == 0).unwrap_or(NAME_BYTES);
@@ -506,10 +517,6 @@ impl RobotRegistration {
     /// A simulated robot with the thesis defaults (1 m × 1 m, COM 0.5, 0.5 m/s, curve 0.5),
     /// starting at the first free grid slot. Names longer than 31 bytes are cut short.
     pub fn new(name: &str) -> Self {
-        let mut end = name.len().min(NAME_BYTES - 1);
-        while !name.is_char_boundary(end) {
-            end -= 1;
-        }
         Self {
             kind: RobotKind::Simulated as u32,
             width_m: 1.0,
@@ -517,7 +524,7 @@ impl RobotRegistration {
             com: 0.5,
             max_speed_mps: 0.5,
             accel_curve: 0.5,
-            name: FixedName::new(&name[..end]).unwrap_or(FixedName::EMPTY),
+            name: FixedName::truncated(name),
             ..Zeroable::zeroed()
         }
     }

@@ -135,3 +135,48 @@ pub fn assert_no_shared_memory_left(s: &str) {
         .collect();
     assert!(left.is_empty(), "left in /dev/shm: {left:?}");
 }
+
+impl Proc {
+    /// Takes the process's stderr: its lines, as they come, on a channel (drained on a thread
+    /// until the process exits).
+    pub fn stderr_lines(&mut self) -> std::sync::mpsc::Receiver<String> {
+        use std::io::BufRead;
+        let stderr = self.0.as_mut().and_then(|c| c.stderr.take()).expect("piped stderr");
+        let (tx, rx) = std::sync::mpsc::channel();
+        std::thread::spawn(move || {
+            for line in std::io::BufReader::new(stderr).lines().map_while(Result::ok) {
+                let _ = tx.send(line);
+            }
+        });
+        rx
+    }
+}
+
+/// Every process (other than this one) with an argument that starts with `prefix`, as
+/// "pid: command line", from /proc.
+pub fn processes_with_argument(prefix: &str) -> Vec<String> {
+    let me = std::process::id().to_string();
+    std::fs::read_dir("/proc")
+        .expect("/proc")
+        .filter_map(|e| e.ok())
+        .filter(|e| e.file_name().to_string_lossy().bytes().all(|b| b.is_ascii_digit()))
+        .filter(|e| e.file_name().to_string_lossy() != me)
+        .filter_map(|e| {
+            let cmdline = std::fs::read(e.path().join("cmdline")).ok()?;
+            let args: Vec<String> =
+                cmdline.split(|&b| b == 0).map(|a| String::from_utf8_lossy(a).into_owned()).collect();
+            args.iter()
+                .any(|a| a.starts_with(prefix))
+                .then(|| format!("{}: {}", e.file_name().to_string_lossy(), args.join(" ")))
+        })
+        .collect()
+}
+
+/// The files in /dev/shm whose names start with `prefix`.
+pub fn shared_memory_files(prefix: &str) -> Vec<String> {
+    std::fs::read_dir("/dev/shm")
+        .expect("/dev/shm")
+        .filter_map(|e| e.ok().map(|e| e.file_name().to_string_lossy().into_owned()))
+        .filter(|n| n.starts_with(prefix))
+        .collect()
+}

@@ -31,7 +31,7 @@ pub fn run(args: &ViewArgs) -> anyhow::Result<ExitCode> {
         connect_timeout: args.hub.timeout(),
     })?;
     let addr = v.local_addr().unwrap_or(args.http);
-    eprintln!("iwsim view: session {:?}, open http://{addr}/", args.hub.session);
+    agent_sdk::report!("iwsim view: session {:?}, open http://{addr}/", args.hub.session);
     v.run()?;
     Ok(ExitCode::SUCCESS)
 }

@@ -94,7 +94,10 @@ impl Viewer {
         self.listener.local_addr().ok()
     }
 
-    /// Serves until the hub ends the run or goes away.
+    /// Serves until the hub ends the run, or SIGINT/SIGTERM arrives (both `Ok`), or the hub's
+    /// process goes away without ending it (`ViewerError::Hub` with `AgentError::HubGone`):
+    /// then the viewer leaves at once, so its ports do not keep a restarted hub of the same
+    /// session from creating its services.
     pub fn run(self) -> Result<(), ViewerError> {
         let shared: Shared = Arc::new((Mutex::new(Latest::default()), Condvar::new()));
         {
@@ -151,8 +154,13 @@ impl Viewer {
                     }
                 }
                 // The world arrives once per tick; checking 100 times a second is plenty
-                // for a display that shows at most 30.
-                None => std::thread::sleep(Duration::from_millis(10)),
+                // for a display that shows at most 30. A silent hub may be a paused one or a
+                // dead one: only its process can tell.
+                None => match self.observer.check_alive() {
+                    Ok(()) => std::thread::sleep(Duration::from_millis(10)),
+                    Err(AgentError::Interrupted) => return Ok(()),
+                    Err(e) => return Err(e.into()),
+                },
             }
         }
     }

@@ -22,8 +22,24 @@ pub struct UdpArgs {
     #[arg(long, default_value_t = 6000)]
     pub port: u16,
     /// Seconds a robot client may stay silent before its robot is removed.
-    #[arg(long, default_value_t = 10.0)]
+    #[arg(long, default_value_t = 10.0, value_parser = client_timeout_s)]
     pub client_timeout: f64,
+}
+
+/// The shortest `--client-timeout`, seconds: the bridge looks at its clients every 20 ms, and a
+/// client needs a few cycles to answer.
+pub const MIN_CLIENT_TIMEOUT_S: f64 = 0.1;
+/// The longest `--client-timeout`, seconds (a day): a silent robot is removed some time.
+pub const MAX_CLIENT_TIMEOUT_S: f64 = 86_400.0;
+
+/// Parses `--client-timeout`: seconds in [`MIN_CLIENT_TIMEOUT_S`, `MAX_CLIENT_TIMEOUT_S`].
+fn client_timeout_s(text: &str) -> Result<f64, String> {
+    let s: f64 = text.trim().parse().map_err(|_| format!("{text:?} is not a number of seconds"))?;
+    if (MIN_CLIENT_TIMEOUT_S..=MAX_CLIENT_TIMEOUT_S).contains(&s) {
+        Ok(s)
+    } else {
+        Err(format!("{text} is not in {MIN_CLIENT_TIMEOUT_S}..={MAX_CLIENT_TIMEOUT_S} seconds"))
+    }
 }
 
 /// Serves UDP until the hub ends the run or goes away.
@@ -32,19 +48,49 @@ pub fn run(args: &UdpArgs) -> anyhow::Result<ExitCode> {
         session: args.hub.session.clone(),
         bind: args.bind,
         port: args.port,
-        client_timeout: Duration::try_from_secs_f64(args.client_timeout.max(0.1)).unwrap_or(Duration::MAX),
+        // In range by its parser; the clamp keeps a hand-built UdpArgs from panicking.
+        client_timeout: Duration::from_secs_f64(args.client_timeout.clamp(MIN_CLIENT_TIMEOUT_S, MAX_CLIENT_TIMEOUT_S)),
         connect_timeout: args.hub.timeout(),
     };
     let bridge = Bridge::start(cfg)?;
-    eprintln!(
+    agent_sdk::report!(
         "iwsim udp: session {:?}, registrations on {}",
         args.hub.session,
         bridge.local_addr().map_or_else(|| format!("{}:{}", args.bind, args.port), |a| a.to_string())
     );
     let counters = bridge.run()?;
-    eprintln!(
+    agent_sdk::report!(
         "iwsim udp: run over ({} malformed, {} foreign, {} refused, {} timed out)",
-        counters.malformed, counters.foreign, counters.refused, counters.timed_out
+        counters.malformed,
+        counters.foreign,
+        counters.refused,
+        counters.timed_out
     );
     Ok(ExitCode::SUCCESS)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clap::Parser as _;
+
+    #[derive(Debug, clap::Parser)]
+    struct Cli {
+        #[command(flatten)]
+        udp: UdpArgs,
+    }
+
+    #[test]
+    fn a_client_timeout_out_of_range_is_a_one_line_error_naming_the_option_and_range() {
+        for bad in ["1e30", "inf", "NaN", "0", "-1", "0.05", "86401"] {
+            let arg = format!("--client-timeout={bad}");
+            let err = Cli::try_parse_from(["udp", arg.as_str()]).expect_err(bad).to_string();
+            let line = err.lines().next().unwrap_or_default();
+            assert!(line.contains("--client-timeout") && line.contains("0.1..=86400"), "{bad}: {line}");
+        }
+        for good in ["0.1", "10", "86400"] {
+            let args = Cli::try_parse_from(["udp", "--client-timeout", good]).expect(good);
+            assert_eq!(args.udp.client_timeout, good.parse::<f64>().expect("a number"));
+        }
+    }
 }

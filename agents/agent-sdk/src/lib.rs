@@ -18,7 +18,8 @@
 //! Agents depend on `ipc-types` and `ipc-services` only, never on the hub.
 #![warn(missing_docs)]
 
-pub use records::{args, log};
+pub use ipc_services::report;
+pub use records::{args, files, log};
 
 pub mod cli;
 pub mod logs;
@@ -116,6 +117,8 @@ pub fn control(
     robot_id: u32,
 ) -> Result<ipc_types::ControlResponse, AgentError> {
     let session = Session::new(session)?;
+    // Declared first, dropped last: whatever happens below, the node is gone before it runs.
+    let _release = session.release_on_drop();
     let node = session.node(&format!("iwsim-control-{}", std::process::id()))?;
     let svc = session.control(&node, Role::Client)?;
     let start = Instant::now();
@@ -148,10 +151,13 @@ pub fn control(
 /// so the hub does not count it as an agent (viewers, loggers).
 pub struct Observer {
     session: Session,
+    hub_pid: Option<u32>,
     _node: Node<Svc>,
     world: Subscriber<Svc, [RobotState], WorldHeader>,
     sensors: Subscriber<Svc, [RobotSensors], ()>,
     map_svc: ipc_services::MapService,
+    /// Last, so it runs after every port and the node are gone.
+    _release: ipc_services::SessionRelease,
 }
 
 impl std::fmt::Debug for Observer {
@@ -164,6 +170,8 @@ impl Observer {
     /// Attaches to the hub serving `session`, waiting up to `timeout` for it to come up.
     pub fn connect_within(session: &str, name: &str, timeout: Duration) -> Result<Self, AgentError> {
         let session = Session::new(session)?;
+        // Declared before the node, so a failed attach (no hub) releases the session too.
+        let release = session.release_on_drop();
         let node = session.node(name)?;
         let start = Instant::now();
         let (world_svc, map_svc, sensors_svc) = loop {
@@ -184,7 +192,27 @@ impl Observer {
         };
         let world = world_svc.subscriber_builder().create().map_err(ipc("create a world subscriber"))?;
         let sensors = sensors_svc.subscriber_builder().create().map_err(ipc("create a robot-sensors subscriber"))?;
-        Ok(Self { session, _node: node, world, sensors, map_svc })
+        // The hub creates its node before its services, so a hub whose services opened is
+        // listed; one that died in between is found dead at the first check.
+        let hub_pid = session.hub_pid();
+        Ok(Self { session, hub_pid, _node: node, world, sensors, map_svc, _release: release })
+    }
+
+    /// Fails with [`AgentError::HubGone`] once the hub's process has exited (however it ended:
+    /// a SIGKILLed hub publishes no last tick), and with [`AgentError::Interrupted`] on SIGINT
+    /// or SIGTERM.
+    pub fn check_alive(&self) -> Result<(), AgentError> {
+        if self._node.wait(Duration::ZERO).is_err() {
+            return Err(AgentError::Interrupted);
+        }
+        match self.hub_pid {
+            Some(pid) if !ipc_services::process_alive(pid) => {
+                Err(AgentError::HubGone { pid, session: self.session.name().to_owned() })
+            }
+            // No hub node was listed at attach: the hub died before the observer looked.
+            None => Err(AgentError::HubGone { pid: 0, session: self.session.name().to_owned() }),
+            Some(_) => Ok(()),
+        }
     }
 
     /// The newest world snapshot if one arrived since the last call.
@@ -216,11 +244,10 @@ impl Observer {
         self.session.name()
     }
 
-    /// Detaches, and removes the session's last file if this was the last process in it.
+    /// Detaches, and removes the session's last file if this was the last process in it
+    /// (dropping the observer does the same).
     pub fn close(self) {
-        let session = self.session.clone();
         drop(self);
-        session.release_if_unused();
     }
 }
 
@@ -239,6 +266,8 @@ pub struct ControlClient {
             (),
         >,
     >,
+    /// Last, so it runs after every port and the node are gone.
+    _release: ipc_services::SessionRelease,
 }
 
 impl std::fmt::Debug for ControlClient {
@@ -251,6 +280,7 @@ impl ControlClient {
     /// Opens the control service of the hub serving `session`.
     pub fn connect(session: &str) -> Result<Self, AgentError> {
         let session = Session::new(session)?;
+        let release = session.release_on_drop();
         let node = session.node(&format!("iwsim-control-{}", std::process::id()))?;
         let svc = session.control(&node, Role::Client)?;
         let doorbell = session
@@ -259,7 +289,7 @@ impl ControlClient {
             .create()
             .map_err(ipc("create the hub doorbell"))?;
         let client = svc.client_builder().create().map_err(ipc("create a control client"))?;
-        Ok(Self { client, doorbell, _node: node, pending: Vec::new() })
+        Ok(Self { client, doorbell, _node: node, pending: Vec::new(), _release: release })
     }
 
     /// Sends a command and returns at once; answers are collected and dropped later.
@@ -320,6 +350,10 @@ pub struct Agent {
     last_world: Option<(WorldHeader, Vec<RobotState>)>,
     blocks: Vec<SensorBlock>,
     finished: bool,
+    /// Last, so it runs after every port and the node are gone: an agent that ends any way
+    /// (an error, a signal, the end of the run) leaves nothing in /dev/shm if it was the
+    /// session's last process.
+    _release: ipc_services::SessionRelease,
 }
 
 impl Drop for Agent {
@@ -342,6 +376,8 @@ impl Agent {
     /// Connects to the hub serving `session` and says hello.
     pub fn connect(session: &str, name: &str) -> Result<Self, AgentError> {
         let session = Session::new(session)?;
+        // Declared before the node, so a failed connect (no hub yet) releases the session too.
+        let release = session.release_on_drop();
         let node = session.node(name)?;
         let register_svc = session.register(&node, Role::Client)?;
         let actions_svc = session.actions(&node, Role::Client)?;
@@ -386,6 +422,7 @@ impl Agent {
             last_world: None,
             blocks: Vec::new(),
             finished: false,
+            _release: release,
         };
         let resp = agent.request(RegisterKind::Hello, None)?;
         agent.agent_id = resp.agent_id;
@@ -426,7 +463,7 @@ impl Agent {
     }
 
     fn hub_alive(&self) -> bool {
-        self.hub_pid == 0 || std::path::Path::new(&format!("/proc/{}", self.hub_pid)).exists()
+        self.hub_pid == 0 || ipc_services::process_alive(self.hub_pid)
     }
 
     fn check(&self) -> Result<(), AgentError> {
@@ -657,9 +694,7 @@ impl Agent {
     /// last process in it.
     pub fn close(mut self) {
         self.goodbye();
-        let session = self.session.clone();
         drop(self);
-        session.release_if_unused();
     }
 
     fn goodbye(&mut self) {

@@ -414,7 +414,7 @@ struct ConfigFile {
 
 fn doors_from(args: &DoorArgs) -> anyhow::Result<Vec<DoorConfig>> {
     if let Some(path) = &args.config {
-        let text = std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+        let text = agent_sdk::files::read_text(path).with_context(|| format!("reading {}", path.display()))?;
         let cfg: ConfigFile = toml::from_str(&text).map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
         anyhow::ensure!(!cfg.doors.is_empty(), "{}: no [[doors]]", path.display());
         return Ok(cfg.doors);
@@ -461,7 +461,7 @@ fn serve(agent: &mut Agent, mut doors: Vec<Door>, log: Option<&Path>) -> anyhow:
             let asked = b.messages().any(|(_, m)| asks_to_open(m, &door.cfg.name));
             let (powers, changed) = door.step(b, tick.sim_time_s, asked);
             if let Some(s) = changed {
-                eprintln!("door {}: {} at t {:.1} s", door.cfg.name, s.label(), tick.sim_time_s);
+                agent_sdk::report!("door {}: {} at t {:.1} s", door.cfg.name, s.label(), tick.sim_time_s);
             }
             logs.row(b, tick.sim_time_s, powers)?;
             actions.push(ActionBlock::motors(id, powers[0], powers[1]));

@@ -100,7 +100,7 @@ fn drive(
     agent.ready()?;
     let checkpoints = cfg.checkpoints.clone();
     let cycle_s = cfg.cycle_s;
-    eprintln!(
+    agent_sdk::report!(
         "navigator {name}: robot {id} in session {:?} on {:?}, from ({:.2}, {:.2}, {:.0}°) through {} checkpoint(s)",
         args.common.hub.session,
         map.name,
@@ -128,7 +128,7 @@ fn drive(
             report(name, &checkpoints, e);
         }
         for note in &out.notes {
-            eprintln!("navigator {name}: {note}");
+            agent_sdk::report!("navigator {name}: {note}");
         }
         let mut action = ActionBlock::motors(id, out.powers[0], out.powers[1]);
         if let Some(say) = &out.say
@@ -136,7 +136,7 @@ fn drive(
         {
             // Cannot happen for names the hub accepts (31 bytes) and places on a map; say so
             // if it does, since the other chairs would not hear this one.
-            eprintln!("navigator {name}: message of {} bytes too long to say: {say}", say.len());
+            agent_sdk::report!("navigator {name}: message of {} bytes too long to say: {say}", say.len());
         }
         agent.send(tick.tick, &[action])?;
         logs.row(&block, time_s, out.powers)?;
@@ -149,10 +149,12 @@ fn drive(
     let nav = pilot.navigator();
     let reached = nav.next_checkpoint().min(checkpoints.len());
     if nav.finished() {
-        eprintln!("navigator {name}: the run ended; all {reached} checkpoint(s) reached, {contacts} contact(s)");
+        agent_sdk::report!(
+            "navigator {name}: the run ended; all {reached} checkpoint(s) reached, {contacts} contact(s)"
+        );
         Ok(ExitCode::SUCCESS)
     } else {
-        eprintln!(
+        agent_sdk::report!(
             "navigator {name}: the run ended at t {last_time:.1} s with {reached} of {} checkpoint(s) reached, {contacts} contact(s)",
             checkpoints.len()
         );
@@ -167,9 +169,14 @@ fn report(name: &str, checkpoints: &[Checkpoint], e: &NavEvent) {
             let p = at(*index);
             match route_m {
                 Some(m) => {
-                    eprintln!("navigator {name}: to checkpoint {} ({:.2}, {:.2}): route {m:.1} m", index + 1, p.x, p.y)
+                    agent_sdk::report!(
+                        "navigator {name}: to checkpoint {} ({:.2}, {:.2}): route {m:.1} m",
+                        index + 1,
+                        p.x,
+                        p.y
+                    )
                 }
-                None => eprintln!(
+                None => agent_sdk::report!(
                     "navigator {name}: to checkpoint {} ({:.2}, {:.2}): no route on the map as known; trying anyway",
                     index + 1,
                     p.x,
@@ -178,16 +185,16 @@ fn report(name: &str, checkpoints: &[Checkpoint], e: &NavEvent) {
             }
         }
         NavEvent::Reached { index, checkpoint, time_s, .. } => {
-            eprintln!(
+            agent_sdk::report!(
                 "navigator {name}: reached checkpoint {} ({:.2}, {:.2}) at t {time_s:.1} s",
                 index + 1,
                 checkpoint.x,
                 checkpoint.y
             );
         }
-        NavEvent::Finished { time_s } => eprintln!("navigator {name}: done at t {time_s:.1} s; holding still"),
+        NavEvent::Finished { time_s } => agent_sdk::report!("navigator {name}: done at t {time_s:.1} s; holding still"),
         NavEvent::Blocked { index, reason } => {
-            eprintln!("navigator {name}: no way to checkpoint {} just now ({reason}); waiting", index + 1)
+            agent_sdk::report!("navigator {name}: no way to checkpoint {} just now ({reason}); waiting", index + 1)
         }
     }
 }

@@ -48,7 +48,7 @@ pub struct WheelchairArgs {
     #[arg(long)]
     pub config: Option<PathBuf>,
     /// Robots to register.
-    #[arg(long, default_value_t = 1)]
+    #[arg(long, default_value_t = 1, value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..=ipc_types::MAX_ROBOTS as u64))]
     pub robots: usize,
     /// Name prefix of the robots.
     #[arg(long, default_value = "chair")]
@@ -165,7 +165,7 @@ struct ConfigFile {
 
 /// Reads a `--config` file.
 pub fn read_config(path: &Path) -> anyhow::Result<Vec<ChairConfig>> {
-    let text = std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+    let text = records::files::read_text(path).with_context(|| format!("reading {}", path.display()))?;
     let cfg: ConfigFile = toml::from_str(&text).map_err(|e| anyhow::anyhow!("{}: {}", path.display(), e))?;
     anyhow::ensure!(!cfg.chairs.is_empty(), "{}: no [[chairs]]", path.display());
     for c in &cfg.chairs {
@@ -284,7 +284,12 @@ fn drive(agent: &mut Agent, args: &WheelchairArgs, chairs: &[ChairConfig]) -> an
         ids.push(agent.register(&registration(c)).with_context(|| format!("registering {}", c.name))?);
     }
     agent.ready()?;
-    eprintln!("wheelchair: agent {} drives robots {:?} in session {:?}", agent.id(), ids, args.common.hub.session);
+    agent_sdk::report!(
+        "wheelchair: agent {} drives robots {:?} in session {:?}",
+        agent.id(),
+        ids,
+        args.common.hub.session
+    );
     let mut logs = RobotLogs::new(args.common.log.as_deref());
     for (c, &id) in chairs.iter().zip(&ids) {
         logs.add(id, &c.name);
@@ -320,9 +325,11 @@ fn drive(agent: &mut Agent, args: &WheelchairArgs, chairs: &[ChairConfig]) -> an
                     match toward(b.pose, goal, c.speed) {
                         Some(p) => break p,
                         None => {
-                            eprintln!(
+                            agent_sdk::report!(
                                 "wheelchair {}: reached waypoint {:?} at t {:.1} s",
-                                c.name, goal, tick.sim_time_s
+                                c.name,
+                                goal,
+                                tick.sim_time_s
                             );
                             next_waypoint[k] += 1;
                         }
@@ -355,7 +362,7 @@ fn drive(agent: &mut Agent, args: &WheelchairArgs, chairs: &[ChairConfig]) -> an
     }
     // The run's final tick too, when the hub ended the run (not after `--ticks`).
     logs.finish(agent)?;
-    eprintln!("wheelchair: answered {answered} ticks");
+    agent_sdk::report!("wheelchair: answered {answered} ticks");
     if args.report_latency {
         // The first ticks include connection set-up; they are not the steady state.
         let steady = latencies_ns.get(latencies_ns.len().min(100)..).unwrap_or(&[]);
@@ -367,6 +374,12 @@ fn drive(agent: &mut Agent, args: &WheelchairArgs, chairs: &[ChairConfig]) -> an
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_config_file_larger_than_the_cap_is_refused() {
+        let err = read_config(Path::new("/dev/zero")).expect_err("endless");
+        assert!(format!("{err:#}").contains("reading /dev/zero: the file is larger than"), "{err:#}");
+    }
 
     #[test]
     fn waypoint_steering_turns_first_then_drives() {

@@ -1,7 +1,8 @@
 //! The formats iwsim writes and reads as text, each defined once for its writer and every
 //! reader: per-robot CSV logs ([`log`]), comma-separated option values ([`args`]), a scenario's
 //! obstacles and checkpoints ([`places`]), the hub's outcome line ([`outcome`]), a run's
-//! `summary.json` ([`summary`]) and latency percentiles ([`latency`]).
+//! `summary.json` ([`summary`]) and latency percentiles ([`latency`]), plus the one capped
+//! reader of the text files users write ([`files`]).
 //!
 //! ```
 //! let pose = records::args::pose("10,6.1,-90").expect("a pose");
@@ -10,6 +11,7 @@
 #![warn(missing_docs)]
 
 pub mod args;
+pub mod files;
 pub mod latency;
 pub mod log;
 pub mod outcome;

@@ -34,6 +34,10 @@ pub struct RunArgs {
     /// Print only the summary.
     #[arg(long)]
     pub quiet: bool,
+    /// Session name, so `iwsim view --session NAME` or `iwsim udp --session NAME` can attach
+    /// to the run (default: a unique name, run-<pid>-<seed>-<n>).
+    #[arg(long)]
+    pub session: Option<String>,
 }
 
 /// Options of `iwsim demo`.
@@ -60,4 +64,8 @@ pub struct DemoArgs {
     /// Let the viewer's page start, pause, step and stop the run.
     #[arg(long)]
     pub allow_control: bool,
+    /// Session name, so `iwsim view --session NAME` or `iwsim udp --session NAME` can attach
+    /// to the demo (default: a unique name, run-<pid>-<seed>-<n>).
+    #[arg(long)]
+    pub session: Option<String>,
 }

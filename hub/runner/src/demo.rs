@@ -10,6 +10,7 @@ use world::{Action, RobotSpec, World};
 use crate::args::DemoArgs;
 use crate::run::RunOptions;
 use crate::scenario::Scenario;
+use crate::signals::Signals;
 
 /// Full power from rest: top speed (m/s) and 10–90 % rise time (s) of a chair, measured from
 /// its positions tick by tick (thesis §7.2).
@@ -35,6 +36,11 @@ pub fn dynamic_characteristic(max_speed: f64, curve: f64, dt: f64) -> anyhow::Re
 /// Runs the demo: `builtin:demo` as real processes (hub, navigator, door, wheelchair and the
 /// viewer), then its summary and the thesis's dynamic characteristic.
 pub fn run(args: &DemoArgs) -> anyhow::Result<ExitCode> {
+    // First, before any thread starts (see `signals`).
+    let signals = Signals::install()?;
+    if let Some(session) = &args.session {
+        ipc_services::Session::new(session)?;
+    }
     let mut scenario = Scenario::load("builtin:demo")?;
     if let Some(s) = args.seconds {
         anyhow::ensure!(s.is_finite() && s > 0.0, "--seconds {s}: must be positive");
@@ -53,12 +59,16 @@ pub fn run(args: &DemoArgs) -> anyhow::Result<ExitCode> {
         http: args.http,
         allow_control: args.allow_control,
         verbose: true,
+        session: args.session.clone(),
     };
-    let summary = crate::run::run_once(&scenario, args.seed, &args.out, &opts)?;
-    crate::run::print_summary(&summary, &args.out);
+    let end = crate::run::run_once(&scenario, args.seed, &args.out, &opts, &signals)?;
+    crate::run::print_summary(&end.summary, &args.out);
+    if end.interrupted.is_some() {
+        return Ok(crate::run::exit_code(&end));
+    }
     let (top, rise) = dynamic_characteristic(0.49, 0.83, 0.1)?;
     println!(
         "  dynamic characteristic (thesis 7.2: MaxSpeed 0.49, AccelerationCurve 0.83, 100 ms): top speed {top:.3} m/s, 10-90% rise time {rise:.1} s"
     );
-    Ok(if summary.passed { ExitCode::SUCCESS } else { ExitCode::FAILURE })
+    Ok(crate::run::exit_code(&end))
 }

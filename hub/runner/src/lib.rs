@@ -1,7 +1,8 @@
 //! The scenario runner behind `iwsim run` and `iwsim demo`: a scenario file ([`scenario`])
 //! becomes a run of real processes — the hub, every agent and (unless headless) the viewer —
 //! whose outcome is a summary ([`run`]) written as `summary.json` and judged against the
-//! scenario's expectations.
+//! scenario's expectations. A signal to the runner ([`signals`]) stops every process of the
+//! run, and a process that fails before the run's end stops the rest.
 //!
 //! ```
 //! let slalom = runner::scenario::Scenario::load("builtin:slalom").expect("built in");
@@ -13,5 +14,6 @@ pub mod args;
 pub mod demo;
 pub mod run;
 pub mod scenario;
+pub mod signals;
 
 pub use args::{DemoArgs, RunArgs};

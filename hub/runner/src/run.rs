@@ -8,7 +8,10 @@
 use std::fmt::Write as _;
 use std::io::{BufRead, IsTerminal, Write as _};
 use std::path::{Path, PathBuf};
-use std::process::{Child, Command, ExitCode, Stdio};
+use std::process::{Child, Command, ExitCode, ExitStatus, Stdio};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::mpsc::{Receiver, RecvTimeoutError, Sender, TryRecvError};
+use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
 use agent_sdk::log::LogTable;
@@ -18,6 +21,7 @@ pub use records::summary::{RobotSummary, RunSummary};
 
 use crate::args::RunArgs;
 use crate::scenario::{Scenario, option_flags};
+use crate::signals::{Signal, Signals};
 
 /// Reads a robot's log and measures what the summary reports.
 pub fn summarise_log(path: &Path, route: &[usize], scenario: &Scenario) -> anyhow::Result<RobotSummary> {
@@ -106,10 +110,33 @@ fn iwsim() -> anyhow::Result<PathBuf> {
     std::env::current_exe().context("finding the iwsim executable")
 }
 
-/// A child that is killed if the run is abandoned.
+/// How long the run's processes get to stop before they are killed: the hub gives its agents
+/// 2 s to read the final tick and leave, then exits.
+const STOP_BOUND: Duration = Duration::from_secs(5);
+/// How long an agent's failure waits for a look at the hub's world that tells whether the run
+/// had ended (when the hub is not serving yet, no look comes); after that the failure stands.
+const LOOK_BOUND: Duration = Duration::from_secs(3);
+/// How long the agents get to leave once the hub has ended the run.
+const AGENTS_LEAVE_BOUND: Duration = Duration::from_secs(20);
+/// How long the viewer gets to leave once the hub has ended the run.
+const VIEWER_LEAVE_BOUND: Duration = Duration::from_secs(10);
+/// How long the runner waits for the viewer's address before going on without it.
+const VIEWER_START_BOUND: Duration = Duration::from_secs(20);
+/// How long the runner waits for the hub to accept its lab and options before starting the
+/// agents anyway.
+const HUB_START_BOUND: Duration = Duration::from_secs(30);
+/// The hub's first line on stderr, printed once its lab and options are accepted: the agents
+/// start after it, so a faulty lab is reported at once with no agent to stop.
+const HUB_BANNER: &str = "iwsim hub: session";
+/// How often the runner looks at its children and its signals.
+const POLL: Duration = Duration::from_millis(5);
+
+/// A child process of the run, killed if the run is abandoned.
 struct Kid {
-    child: Option<Child>,
+    child: Child,
     what: String,
+    status: Option<ExitStatus>,
+    stderr: Option<JoinHandle<()>>,
 }
 
 impl Kid {
@@ -122,56 +149,248 @@ impl Kid {
             .stdout(if keep_stdout { Stdio::piped() } else { Stdio::null() })
             .spawn()
             .with_context(|| format!("starting the {what}"))?;
-        Ok(Self { child: Some(child), what: what.to_owned() })
+        Ok(Self { child, what: what.to_owned(), status: None, stderr: None })
     }
 
     /// Copies the child's stderr, line by line, to `sink` (prefixed, unless the line already
     /// starts with the prefix's word, as agents' lines do: `navigator chair1: …`), on a thread.
-    fn forward_stderr(&mut self, prefix: String, echo: bool, sink: std::sync::mpsc::Sender<String>) {
-        let Some(err) = self.child.as_mut().and_then(|c| c.stderr.take()) else { return };
-        std::thread::spawn(move || {
+    /// The first line containing `marker`'s text is also sent to `marker`'s channel.
+    fn forward_stderr(
+        &mut self,
+        prefix: String,
+        echo: bool,
+        sink: Sender<String>,
+        mut marker: Option<(&'static str, Sender<String>)>,
+    ) {
+        let Some(err) = self.child.stderr.take() else { return };
+        self.stderr = Some(std::thread::spawn(move || {
             let word = prefix.trim_end_matches(": ").to_owned();
             for line in std::io::BufReader::new(err).lines().map_while(Result::ok) {
+                if let Some((text, tx)) = &marker
+                    && line.contains(text)
+                {
+                    let _ = tx.send(line.clone());
+                    marker = None;
+                }
                 let line = if !word.is_empty() && line.starts_with(&word) { line } else { format!("{prefix}{line}") };
                 if echo {
                     eprintln!("{line}");
                 }
                 let _ = sink.send(line);
             }
-        });
+        }));
     }
 
-    /// Waits up to `timeout` for the child to exit; returns its stdout (if piped).
-    fn wait(mut self, timeout: Duration) -> anyhow::Result<String> {
-        let mut child = self.child.take().context("already waited")?;
-        let start = Instant::now();
-        loop {
-            if let Some(status) = child.try_wait()? {
-                let mut out = String::new();
-                if let Some(mut so) = child.stdout.take() {
-                    use std::io::Read as _;
-                    let _ = so.read_to_string(&mut out);
-                }
-                anyhow::ensure!(status.success(), "the {} exited with {status}", self.what);
-                return Ok(out);
+    /// How the child exited, if it has.
+    fn exited(&mut self) -> Option<ExitStatus> {
+        if self.status.is_none()
+            && let Ok(Some(status)) = self.child.try_wait()
+        {
+            self.status = Some(status);
+        }
+        self.status
+    }
+
+    /// Sends `signal` to the child if it still runs.
+    #[allow(unsafe_code)] // kill(2): std sends only SIGKILL
+    fn signal(&mut self, signal: i32) {
+        if self.exited().is_none() {
+            let pid = self.child.id() as libc::pid_t;
+            // SAFETY: kill touches no memory of ours; the child is not reaped yet, so its pid
+            // cannot have been given to another process.
+            unsafe {
+                libc::kill(pid, signal);
             }
-            if start.elapsed() > timeout {
-                let _ = child.kill();
-                let _ = child.wait();
-                anyhow::bail!("the {} did not exit within {timeout:?} after the run ended; killed it", self.what);
+        }
+    }
+
+    /// Kills the child if it still runs, and reaps it.
+    fn kill(&mut self) {
+        if self.exited().is_none() {
+            let _ = self.child.kill();
+            if let Ok(status) = self.child.wait() {
+                self.status = Some(status);
             }
-            std::thread::sleep(Duration::from_millis(5));
+        }
+    }
+
+    /// What the child printed on stdout (read once it has exited).
+    fn stdout(&mut self) -> String {
+        let mut out = String::new();
+        if let Some(mut so) = self.child.stdout.take() {
+            use std::io::Read as _;
+            let _ = so.read_to_string(&mut out);
+        }
+        out
+    }
+
+    /// The child's failure, if it exited unsuccessfully.
+    fn failure(&self) -> Option<String> {
+        self.status.filter(|s| !s.success()).map(|s| format!("the {} exited with {s}", self.what))
+    }
+
+    /// Waits for the stderr thread, which ends once the child has exited and its pipe closed.
+    fn join_stderr(&mut self) {
+        if let Some(t) = self.stderr.take() {
+            let _ = t.join();
         }
     }
 }
 
 impl Drop for Kid {
     fn drop(&mut self) {
-        if let Some(mut c) = self.child.take() {
-            let _ = c.kill();
-            let _ = c.wait();
+        self.kill();
+    }
+}
+
+/// Every process of a run.
+struct Procs {
+    hub: Kid,
+    agents: Vec<Kid>,
+    viewer: Option<Kid>,
+}
+
+impl Procs {
+    fn all(&mut self) -> impl Iterator<Item = &mut Kid> {
+        std::iter::once(&mut self.hub).chain(self.agents.iter_mut()).chain(self.viewer.iter_mut())
+    }
+
+    /// Sends `signal` to every process still running, waits up to [`STOP_BOUND`] for them to
+    /// exit, then kills the rest; returns what had to be killed.
+    fn stop(&mut self, signal: i32) -> Vec<String> {
+        self.all().for_each(|k| k.signal(signal));
+        let until = Instant::now() + STOP_BOUND;
+        while self.all().any(|k| k.exited().is_none()) && Instant::now() < until {
+            std::thread::sleep(POLL);
+        }
+        let mut killed = Vec::new();
+        for k in self.all().filter(|k| k.status.is_none()) {
+            k.kill();
+            killed.push(k.what.clone());
+        }
+        killed
+    }
+}
+
+/// What the runner's observer learnt of the hub's world, for the supervising loop.
+#[derive(Debug, Default)]
+struct Watch {
+    /// The hub published its run's last tick.
+    finished: AtomicBool,
+    /// Looks at the world begun, and the last one completed (looks are numbered from 1).
+    begun: AtomicU64,
+    completed: AtomicU64,
+}
+
+impl Watch {
+    /// Whether the run had ended, from a look begun after look number `after`: `None` until
+    /// such a look has completed.
+    fn run_ended(&self, after: u64) -> Option<bool> {
+        let completed = self.completed.load(Ordering::SeqCst);
+        if self.finished.load(Ordering::SeqCst) {
+            Some(true)
+        } else if completed > after {
+            Some(false)
+        } else {
+            None
         }
     }
+}
+
+/// Why the supervising loop stopped.
+enum Stop {
+    /// The hub exited (the run's end, or its failure).
+    HubExited,
+    /// The runner was told to stop.
+    Signal(Signal),
+    /// An agent failed before the run ended (its index).
+    AgentFailed(usize),
+}
+
+/// The viewer, from its start until it has printed its address.
+struct ViewerStart {
+    lines: Receiver<String>,
+    since: Instant,
+}
+
+/// Waits until the hub has accepted its lab and options, exited, or the runner is told to stop.
+fn hub_started(procs: &mut Procs, banner: &Receiver<String>, signals: &Signals) -> Option<Stop> {
+    let since = Instant::now();
+    loop {
+        if let Some(signal) = signals.wait(POLL) {
+            return Some(Stop::Signal(signal));
+        }
+        if procs.hub.exited().is_some() {
+            return Some(Stop::HubExited);
+        }
+        match banner.try_recv() {
+            Ok(_) | Err(TryRecvError::Disconnected) => return None,
+            Err(TryRecvError::Empty) if since.elapsed() > HUB_START_BOUND => return None,
+            Err(TryRecvError::Empty) => {}
+        }
+    }
+}
+
+/// Watches the run until the hub exits, an agent fails before the run's end, or a signal
+/// comes. Starts the viewer's page on the way (or drops the viewer if it does not start).
+fn supervise(procs: &mut Procs, viewer: &mut Option<ViewerStart>, watch: &Watch, signals: &Signals) -> Stop {
+    // The first failed agent, the looks begun when it was seen, and when.
+    let mut failed: Option<(usize, u64, Instant)> = None;
+    loop {
+        if let Some(signal) = signals.wait(POLL) {
+            return Stop::Signal(signal);
+        }
+        if procs.hub.exited().is_some() {
+            return Stop::HubExited;
+        }
+        if let Some(start) = viewer {
+            let said = match start.lines.try_recv() {
+                Ok(line) => Some(Some(line)),
+                Err(TryRecvError::Disconnected) => Some(None),
+                Err(TryRecvError::Empty) => (start.since.elapsed() > VIEWER_START_BOUND).then_some(None),
+            };
+            match said {
+                Some(Some(line)) if line.contains("open http") => {
+                    eprintln!("{line}");
+                    *viewer = None;
+                }
+                Some(line) => {
+                    match line {
+                        Some(line) => eprintln!("iwsim run: the viewer did not start ({line}); going on headless"),
+                        None => eprintln!("iwsim run: the viewer did not start; going on headless"),
+                    }
+                    procs.viewer = None;
+                    *viewer = None;
+                }
+                None => {}
+            }
+        }
+        if failed.is_none()
+            && let Some(k) = procs.agents.iter_mut().position(|a| a.exited().is_some_and(|s| !s.success()))
+        {
+            failed = Some((k, watch.begun.load(Ordering::SeqCst), Instant::now()));
+        }
+        // An agent that fails after the run's last tick (a navigator that did not arrive)
+        // fails the run's outcome, and the hub ends on its own; one that fails before it
+        // (a bad option, a start pose off the map) would leave the hub waiting for it.
+        if let Some((k, after, at)) = failed {
+            match watch.run_ended(after) {
+                Some(true) => {}
+                Some(false) => return Stop::AgentFailed(k),
+                None if at.elapsed() > LOOK_BOUND => return Stop::AgentFailed(k),
+                None => {}
+            }
+        }
+    }
+}
+
+/// The end of one run.
+#[derive(Debug)]
+pub struct RunEnd {
+    /// What happened (partial if interrupted), as written to `summary.json`.
+    pub summary: RunSummary,
+    /// The signal that stopped the run before its end.
+    pub interrupted: Option<Signal>,
 }
 
 /// How to run a scenario once.
@@ -187,17 +406,28 @@ pub struct RunOptions {
     pub allow_control: bool,
     /// Print progress and the agents' messages.
     pub verbose: bool,
+    /// The session (default: a unique `run-<pid>-<seed>-<n>`).
+    pub session: Option<String>,
 }
 
-/// Runs `scenario` once with `seed`, writing logs and `summary.json` into `out`.
-pub fn run_once(scenario: &Scenario, seed: u64, out: &Path, opts: &RunOptions) -> anyhow::Result<RunSummary> {
+/// Runs `scenario` once with `seed`, writing logs and `summary.json` into `out`. A signal
+/// stops every process of the run and gives a partial summary; a process that fails before
+/// the run's end stops the rest and gives an error.
+pub fn run_once(
+    scenario: &Scenario,
+    seed: u64,
+    out: &Path,
+    opts: &RunOptions,
+    signals: &Signals,
+) -> anyhow::Result<RunEnd> {
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
     for e in std::fs::read_dir(out)?.flatten() {
         if e.path().extension().is_some_and(|x| x == "csv") {
             std::fs::remove_file(e.path())?;
         }
     }
-    let session = format!("run-{}-{seed}-{}", std::process::id(), crate::run::unique());
+    let session =
+        opts.session.clone().unwrap_or_else(|| format!("run-{}-{seed}-{}", std::process::id(), crate::run::unique()));
     let ticks = scenario.ticks();
     let s = |x: &str| x.to_owned();
     let mut hub_args = vec![
@@ -233,74 +463,148 @@ pub fn run_once(scenario: &Scenario, seed: u64, out: &Path, opts: &RunOptions) -
     }
     let started = Instant::now();
     let (tx, rx) = std::sync::mpsc::channel::<String>();
-    let mut hub = Kid::spawn(&hub_args, "hub", true)?;
-    hub.forward_stderr(s("hub: "), false, tx.clone());
-    let mut agents = Vec::new();
-    for (k, a) in scenario.agents.iter().enumerate() {
-        let mut args = vec![
-            s("agent"),
-            a.kind.clone(),
-            s("--session"),
-            session.clone(),
-            s("--connect-timeout"),
-            s("30"),
-            s("--log"),
-            out.display().to_string(),
-        ];
-        if let Some(cfg) = &a.config {
-            let path = out.join(format!("agent{}-{}.toml", k + 1, a.kind));
-            std::fs::write(&path, toml::to_string(cfg).context("writing an agent's config")?)?;
-            args.extend([s("--config"), path.display().to_string()]);
-        }
-        args.extend(option_flags(&a.options).map_err(|e| anyhow::anyhow!("agent {} ({}): {e}", k + 1, a.kind))?);
-        let mut kid = Kid::spawn(&args, &format!("agent {} ({})", k + 1, a.kind), false)?;
-        kid.forward_stderr(format!("{}: ", a.kind), opts.verbose, tx.clone());
-        agents.push(kid);
-    }
-    let mut viewer = None;
-    if !opts.headless {
-        let mut args = vec![s("view"), s("--session"), session.clone(), s("--http"), opts.http.to_string()];
-        if opts.allow_control {
-            args.push(s("--allow-control"));
-        }
-        let mut v = Kid::spawn(&args, "viewer", false)?;
-        let (vtx, vrx) = std::sync::mpsc::channel();
-        v.forward_stderr(String::new(), false, vtx);
-        match vrx.recv_timeout(Duration::from_secs(20)) {
-            Ok(line) if line.contains("open http") => {
-                eprintln!("{line}");
-                viewer = Some(v);
+    let (banner_tx, banner) = std::sync::mpsc::channel();
+    let mut procs = Procs { hub: Kid::spawn(&hub_args, "hub", true)?, agents: Vec::new(), viewer: None };
+    procs.hub.forward_stderr(s("hub: "), false, tx.clone(), Some((HUB_BANNER, banner_tx)));
+    let watch = std::sync::Arc::new(Watch::default());
+    let (stop_watch, stopped) = std::sync::mpsc::channel::<()>();
+    let mut watcher = None;
+    let stop = match hub_started(&mut procs, &banner, signals) {
+        Some(stop) => stop,
+        None => {
+            for (k, a) in scenario.agents.iter().enumerate() {
+                let mut args = vec![
+                    s("agent"),
+                    a.kind.clone(),
+                    s("--session"),
+                    session.clone(),
+                    s("--connect-timeout"),
+                    s("30"),
+                    s("--log"),
+                    out.display().to_string(),
+                ];
+                if let Some(cfg) = &a.config {
+                    let path = out.join(format!("agent{}-{}.toml", k + 1, a.kind));
+                    std::fs::write(&path, toml::to_string(cfg).context("writing an agent's config")?)?;
+                    args.extend([s("--config"), path.display().to_string()]);
+                }
+                args.extend(
+                    option_flags(&a.options).map_err(|e| anyhow::anyhow!("agent {} ({}): {e}", k + 1, a.kind))?,
+                );
+                let mut kid = Kid::spawn(&args, &format!("agent {} ({})", k + 1, a.kind), false)?;
+                kid.forward_stderr(format!("{}: ", a.kind), opts.verbose, tx.clone(), None);
+                procs.agents.push(kid);
             }
-            Ok(line) => eprintln!("iwsim run: the viewer did not start ({line}); going on headless"),
-            Err(_) => eprintln!("iwsim run: the viewer did not start; going on headless"),
+            let mut viewer_start = None;
+            if !opts.headless {
+                let mut args = vec![s("view"), s("--session"), session.clone(), s("--http"), opts.http.to_string()];
+                if opts.allow_control {
+                    args.push(s("--allow-control"));
+                }
+                let mut v = Kid::spawn(&args, "viewer", false)?;
+                let (vtx, lines) = std::sync::mpsc::channel();
+                v.forward_stderr(String::new(), false, vtx, None);
+                procs.viewer = Some(v);
+                viewer_start = Some(ViewerStart { lines, since: Instant::now() });
+            }
+            // The observer: progress every few seconds on long runs, and whether the run had
+            // ended when an agent fails.
+            watcher = Some({
+                let (session, watch, verbose) = (session.clone(), watch.clone(), opts.verbose);
+                std::thread::spawn(move || watch_loop(&session, ticks, verbose, &watch, &stopped))
+            });
+            supervise(&mut procs, &mut viewer_start, &watch, signals)
         }
-    }
+    };
     drop(tx);
-    // Progress: every few seconds on long runs, from the world the hub publishes.
-    let (stop_progress, stopped) = std::sync::mpsc::channel::<()>();
-    let progress = opts.verbose.then(|| {
-        let session = session.clone();
-        std::thread::spawn(move || progress_loop(&session, ticks, &stopped))
-    });
-    let hub_out = hub.wait(Duration::from_secs(24 * 3600));
-    drop(stop_progress);
-    let agent_results: Vec<anyhow::Result<String>> =
-        agents.into_iter().map(|a| a.wait(Duration::from_secs(20))).collect();
-    if let Some(v) = viewer {
-        let _ = v.wait(Duration::from_secs(10));
+    let mut interrupted = None;
+    let mut agent_failures = Vec::new();
+    let failure = match stop {
+        Stop::Signal(signal) => {
+            eprintln!(
+                "iwsim run: {} received; stopping the hub, {} agent(s){}",
+                signal.name(),
+                procs.agents.len(),
+                if procs.viewer.is_some() { " and the viewer" } else { "" }
+            );
+            interrupted = Some(signal);
+            for what in procs.stop(signal.forwarded()) {
+                eprintln!("iwsim run: the {what} did not stop within {STOP_BOUND:?}; killed it");
+            }
+            None
+        }
+        Stop::AgentFailed(k) => {
+            let failure = procs.agents[k].failure().unwrap_or_default();
+            procs.stop(libc::SIGTERM);
+            Some(format!("{failure} before the run ended; stopped the hub and the other processes"))
+        }
+        Stop::HubExited => match procs.hub.failure() {
+            Some(failure) => {
+                procs.stop(libc::SIGTERM);
+                Some(failure)
+            }
+            None => {
+                // The run's end: the agents write their last rows and leave, then the viewer.
+                let until = Instant::now() + AGENTS_LEAVE_BOUND;
+                let mut signal = None;
+                while signal.is_none() && procs.agents.iter_mut().any(|a| a.exited().is_none()) {
+                    if Instant::now() > until {
+                        break;
+                    }
+                    signal = signals.wait(POLL);
+                }
+                for a in &mut procs.agents {
+                    if a.exited().is_none() && signal.is_none() {
+                        a.kill();
+                        agent_failures.push(format!(
+                            "the {} did not exit within {AGENTS_LEAVE_BOUND:?} after the run ended; killed it",
+                            a.what
+                        ));
+                    } else if let Some(f) = a.failure() {
+                        agent_failures.push(f);
+                    }
+                }
+                let until = Instant::now() + VIEWER_LEAVE_BOUND;
+                while signal.is_none()
+                    && procs.viewer.as_mut().is_some_and(|v| v.exited().is_none())
+                    && Instant::now() < until
+                {
+                    signal = signals.wait(POLL);
+                }
+                if let Some(signal) = signal {
+                    eprintln!("iwsim run: {} received; stopping what is left of the run", signal.name());
+                    interrupted = Some(signal);
+                    procs.stop(signal.forwarded());
+                }
+                procs.viewer.take();
+                None
+            }
+        },
+    };
+    // Every process is gone: collect what they said, and leave nothing of the session behind
+    // (a process killed above could not remove its files itself).
+    drop(stop_watch);
+    if let Some(w) = watcher {
+        let _ = w.join();
     }
-    if let Some(p) = progress {
-        let _ = p.join();
+    procs.all().for_each(Kid::join_stderr);
+    if let Ok(s) = ipc_services::Session::new(&session) {
+        s.release_if_unused();
     }
     let messages: Vec<String> = rx.try_iter().collect();
-    let hub_out =
-        hub_out.with_context(|| format!("the run failed; what the processes said:\n{}", messages.join("\n")))?;
-    // An agent that fails (a navigator that did not arrive exits 1) fails the run's outcome,
-    // not the runner: the summary still says what happened.
-    let agent_failures: Vec<String> =
-        agent_results.into_iter().filter_map(|r| r.err().map(|e| e.to_string())).collect();
-    let hub_outcome = HubOutcome::from_stdout(&hub_out).context("reading how the hub's run ended")?;
+    if let Some(failure) = failure {
+        return Err(anyhow::Error::msg(failure))
+            .with_context(|| format!("the run failed; what the processes said:\n{}", messages.join("\n")));
+    }
+    let hub_out = procs.hub.stdout();
+    let hub_outcome = match HubOutcome::from_stdout(&hub_out) {
+        Ok(o) => o,
+        // An interrupted hub may have had no time to say how far it got.
+        Err(_) if interrupted.is_some() => HubOutcome::default(),
+        Err(e) => return Err(e).context("reading how the hub's run ended"),
+    };
     let mut robots = Vec::new();
+    let mut failures = Vec::new();
     let mut logs: Vec<PathBuf> = std::fs::read_dir(out)?
         .flatten()
         .map(|e| e.path())
@@ -310,9 +614,20 @@ pub fn run_once(scenario: &Scenario, seed: u64, out: &Path, opts: &RunOptions) -
     for log in logs {
         let name = records::log::robot_name_of(&log);
         let route = scenario.routes.get(&name).cloned().unwrap_or_default();
-        robots.push(summarise_log(&log, &route, scenario)?);
+        match summarise_log(&log, &route, scenario) {
+            Ok(r) => robots.push(r),
+            // A log cut short by the interruption still leaves the others to summarise.
+            Err(e) if interrupted.is_some() => failures.push(format!("{}: {e}", log.display())),
+            Err(e) => return Err(e),
+        }
     }
-    let mut failures = check(scenario, &robots);
+    if let Some(signal) = interrupted {
+        failures.push(format!("interrupted by {} at tick {}", signal.name(), hub_outcome.ticks));
+    } else {
+        failures.extend(check(scenario, &robots));
+    }
+    // An agent that fails (a navigator that did not arrive exits 1) fails the run's outcome,
+    // not the runner: the summary still says what happened.
     failures.extend(agent_failures);
     let summary = RunSummary {
         scenario: scenario.name.clone(),
@@ -328,7 +643,7 @@ pub fn run_once(scenario: &Scenario, seed: u64, out: &Path, opts: &RunOptions) -
         robots,
     };
     std::fs::write(out.join("summary.json"), summary.to_json())?;
-    Ok(summary)
+    Ok(RunEnd { summary, interrupted })
 }
 
 /// A number unique within this process, for session names.
@@ -338,27 +653,36 @@ pub fn unique() -> u32 {
     N.fetch_add(1, Ordering::Relaxed)
 }
 
-/// Prints how far the run is every two seconds until the hub ends it or `stop` is dropped
-/// (a fast lock-step run may end before the observer sees its last snapshot).
-fn progress_loop(session: &str, ticks: u64, stop: &std::sync::mpsc::Receiver<()>) {
-    let Ok(obs) = agent_sdk::Observer::connect_within(session, "iwsim-run-progress", Duration::from_secs(30)) else {
-        return;
+/// Observes the session until the hub ends the run or `stop` is dropped: records in `watch`
+/// what it sees, and (if `verbose`) prints how far the run is every two seconds.
+fn watch_loop(session: &str, ticks: u64, verbose: bool, watch: &Watch, stop: &Receiver<()>) {
+    let stopped = || matches!(stop.recv_timeout(Duration::from_millis(20)), Err(RecvTimeoutError::Disconnected));
+    // Short attempts, so that a run that ends before its hub serves does not wait for this.
+    let obs = loop {
+        match agent_sdk::Observer::connect_within(session, "iwsim-run-progress", Duration::from_millis(100)) {
+            Ok(obs) => break obs,
+            Err(_) if stopped() => return,
+            Err(_) => {}
+        }
     };
     let tty = std::io::stderr().is_terminal();
     let mut last_print = Instant::now();
     let mut last_tick = 0;
     loop {
-        match obs.try_world() {
-            Ok(Some((h, _))) => {
-                last_tick = h.tick;
-                if h.run_state == ipc_types::RunState::Finished as u32 {
-                    break;
-                }
+        let look = watch.begun.fetch_add(1, Ordering::SeqCst) + 1;
+        let seen = obs.try_world();
+        if let Ok(Some((h, _))) = &seen {
+            last_tick = h.tick;
+            if h.run_state == ipc_types::RunState::Finished as u32 {
+                watch.finished.store(true, Ordering::SeqCst);
             }
-            Ok(None) => {}
-            Err(_) => break,
         }
-        if last_print.elapsed() >= Duration::from_secs(2) {
+        watch.completed.store(look, Ordering::SeqCst);
+        // A fast lock-step run may end before the observer sees its last snapshot.
+        if seen.is_err() || watch.finished.load(Ordering::SeqCst) {
+            break;
+        }
+        if verbose && last_print.elapsed() >= Duration::from_secs(2) {
             let pct = 100.0 * last_tick as f64 / ticks.max(1) as f64;
             if tty {
                 eprint!("\r  tick {last_tick} / {ticks} ({pct:.0} %)   ");
@@ -367,11 +691,11 @@ fn progress_loop(session: &str, ticks: u64, stop: &std::sync::mpsc::Receiver<()>
             }
             last_print = Instant::now();
         }
-        if let Err(std::sync::mpsc::RecvTimeoutError::Disconnected) = stop.recv_timeout(Duration::from_millis(50)) {
+        if stopped() {
             break;
         }
     }
-    if tty {
+    if verbose && tty {
         eprint!("\r{:40}\r", "");
     }
     obs.close();
@@ -409,6 +733,16 @@ pub fn print_summary(s: &RunSummary, out: &Path) {
     println!("  logs and summary.json in {}", out.display());
 }
 
+/// A run's exit code: 0 when the expected outcome holds, 1 when not, and 128 + the signal's
+/// number when a signal stopped it (as a shell reports a process the signal killed).
+pub fn exit_code(end: &RunEnd) -> ExitCode {
+    match end.interrupted {
+        Some(signal) => ExitCode::from(signal.exit_code()),
+        None if end.summary.passed => ExitCode::SUCCESS,
+        None => ExitCode::FAILURE,
+    }
+}
+
 /// Parses `A..B` (inclusive).
 pub fn parse_seeds(text: &str) -> Result<std::ops::RangeInclusive<u64>, String> {
     let (a, b) = text.split_once("..").ok_or_else(|| format!("--seeds {text}: expected A..B, e.g. 1..20"))?;
@@ -423,7 +757,12 @@ pub fn parse_seeds(text: &str) -> Result<std::ops::RangeInclusive<u64>, String> 
 
 /// `iwsim run`.
 pub fn run(args: &RunArgs) -> anyhow::Result<ExitCode> {
+    // First, before any thread starts (see `signals`).
+    let signals = Signals::install()?;
     let scenario = Scenario::load(&args.scenario)?;
+    if let Some(session) = &args.session {
+        ipc_services::Session::new(session)?;
+    }
     let out = args.out.clone().unwrap_or_else(|| PathBuf::from(format!("runs/{}", scenario.name)));
     let opts = RunOptions {
         lockstep: args.lockstep,
@@ -431,6 +770,7 @@ pub fn run(args: &RunArgs) -> anyhow::Result<ExitCode> {
         http: args.http,
         allow_control: args.allow_control,
         verbose: !args.quiet,
+        session: args.session.clone(),
     };
     let Some(seeds) = &args.seeds else {
         let seed = args.seed.unwrap_or(scenario.seed);
@@ -441,9 +781,9 @@ pub fn run(args: &RunArgs) -> anyhow::Result<ExitCode> {
             scenario.seconds,
             if opts.lockstep { "lock-step" } else { "real time" }
         );
-        let s = run_once(&scenario, seed, &out, &opts)?;
-        print_summary(&s, &out);
-        return Ok(if s.passed { ExitCode::SUCCESS } else { ExitCode::FAILURE });
+        let end = run_once(&scenario, seed, &out, &opts, &signals)?;
+        print_summary(&end.summary, &out);
+        return Ok(exit_code(&end));
     };
     let seeds = parse_seeds(seeds).map_err(anyhow::Error::msg)?;
     let mut table = String::new();
@@ -455,7 +795,15 @@ pub fn run(args: &RunArgs) -> anyhow::Result<ExitCode> {
     );
     for seed in seeds {
         let dir = out.join(format!("seed-{seed}"));
-        let s = run_once(&scenario, seed, &dir, &RunOptions { verbose: false, ..opts.clone() })?;
+        let end = run_once(&scenario, seed, &dir, &RunOptions { verbose: false, ..opts.clone() }, &signals)?;
+        if end.interrupted.is_some() {
+            // The batch stops with the run it was in: that run's partial summary, and where
+            // the finished ones are.
+            print_summary(&end.summary, &dir);
+            println!("  {} earlier run(s) in {}/seed-*/", all.len(), out.display());
+            return Ok(exit_code(&end));
+        }
+        let s = end.summary;
         let reached: usize = s.robots.iter().map(|r| r.checkpoints_reached).sum();
         let total: usize = s.robots.iter().map(|r| r.checkpoints_total).sum();
         let contacts: u64 = s.robots.iter().map(|r| r.collisions).sum();

@@ -178,6 +178,14 @@ pub enum ScenarioError {
         /// Why.
         source: std::io::Error,
     },
+    /// The file is too large or not UTF-8 text.
+    #[error("{path}: {source}")]
+    NotText {
+        /// File.
+        path: String,
+        /// Why.
+        source: records::files::TextReadError,
+    },
     /// Bad TOML, or a field of the wrong type (the message carries line and column).
     #[error("{path}: {message}")]
     Toml {
@@ -210,8 +218,10 @@ impl Scenario {
                 Self::parse(text, spec, Path::new("."))
             }
             None => {
-                let text =
-                    std::fs::read_to_string(spec).map_err(|source| ScenarioError::Io { path: spec.into(), source })?;
+                let text = records::files::read_text(Path::new(spec)).map_err(|err| match err {
+                    records::files::TextReadError::Io(source) => ScenarioError::Io { path: spec.into(), source },
+                    source => ScenarioError::NotText { path: spec.into(), source },
+                })?;
                 let base = Path::new(spec).parent().map(Path::to_path_buf).unwrap_or_else(|| PathBuf::from("."));
                 Self::parse(&text, spec, &base)
             }
@@ -321,6 +331,18 @@ pub fn option_flags(options: &toml::Table) -> Result<Vec<String>, String> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_scenario_file_larger_than_the_cap_is_refused() {
+        // /dev/zero once read until memory ran out.
+        let err = Scenario::load("/dev/zero").expect_err("endless");
+        assert!(
+            matches!(&err, ScenarioError::NotText { path, source: records::files::TextReadError::TooLarge { .. } }
+                if path == "/dev/zero"),
+            "{err:?}"
+        );
+        assert!(err.to_string().starts_with("/dev/zero: the file is larger than 16777216 bytes"), "{err}");
+    }
 
     #[test]
     fn every_builtin_scenario_loads() {

@@ -263,6 +263,18 @@ pub enum AddRobotError {
         /// The capacity.
         max: usize,
     },
+    /// The start pose's centre of movement lies outside the lab's rectangle.
+    #[error("start position ({x}, {y}) lies outside the lab: expected 0 <= x <= {width} and 0 <= y <= {height}")]
+    OutsideLab {
+        /// Start x, metres.
+        x: Real,
+        /// Start y, metres.
+        y: Real,
+        /// Lab width, metres.
+        width: Real,
+        /// Lab height, metres.
+        height: Real,
+    },
 }
 
 /// A proximity sensor prepared for fast evaluation: its origin and the unit vectors of its cone

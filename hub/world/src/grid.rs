@@ -23,7 +23,34 @@ pub(crate) struct GridSpec {
     pub ny: usize,
 }
 
+/// Most cells the wall index may have (its two start arrays take 4 bytes a cell each).
+pub(crate) const MAX_WALL_CELLS: u64 = 1 << 20;
+/// Most (cell, item) entries the wall index may hold: cells plus every edge and triangle
+/// counted once per cell of its bounding box (8 bytes each while building).
+pub(crate) const MAX_WALL_ENTRIES: u64 = 1 << 22;
+
 impl GridSpec {
+    /// How many entries an index over this grid would hold for these items, counting the cells
+    /// themselves; `None` when the cells alone exceed [`MAX_WALL_CELLS`] or the count overflows.
+    fn entries(&self, edges: &[Edge], triangles: &[WallTriangle]) -> Option<u64> {
+        let cells = u64::try_from(self.nx).ok()?.checked_mul(u64::try_from(self.ny).ok()?)?;
+        if cells > MAX_WALL_CELLS {
+            return None;
+        }
+        let mut boxes = edges
+            .iter()
+            .map(|e| {
+                let (a, b) = (e.seg.a, e.seg.b());
+                (Point2::new(a.x.min(b.x), a.y.min(b.y)), Point2::new(a.x.max(b.x), a.y.max(b.y)))
+            })
+            .chain(triangles.iter().map(|t| (t.min, t.max)));
+        boxes.try_fold(cells, |total, (lo, hi)| {
+            let (x0, y0, x1, y1) = self.cell_range(lo, hi);
+            let n = u64::try_from((x1 - x0 + 1).checked_mul(y1 - y0 + 1)?).ok()?;
+            total.checked_add(n)
+        })
+    }
+
     pub(crate) fn covering(min: Point2<Real>, max: Point2<Real>, cell: Real) -> Self {
         let nx = (((max.x - min.x) / cell).ceil() as usize).max(1);
         let ny = (((max.y - min.y) / cell).ceil() as usize).max(1);
@@ -146,8 +173,8 @@ pub enum StaticBuildError {
         /// Index of the wall in the lab.
         wall: usize,
     },
-    /// The lab's size is not a positive finite number.
-    #[error("lab size {width} × {height} is not positive and finite")]
+    /// The lab's size is not a positive finite number of at most [`crate::MAX_LAB_SIZE_M`].
+    #[error("lab size {width} × {height} is out of range: expected sides greater than 0 and at most 10000 m")]
     BadLabSize {
         /// Width given.
         width: Real,
@@ -169,7 +196,8 @@ pub(crate) struct StaticIndex {
 impl StaticIndex {
     pub(crate) fn build(lab: &Lab, cell: Real) -> Result<Self, StaticBuildError> {
         let (w, h) = (lab.width_m, lab.height_m);
-        if !(w.is_finite() && h.is_finite() && w > 0.0 && h > 0.0) {
+        let side_ok = |v: Real| v.is_finite() && v > 0.0 && v <= crate::MAX_LAB_SIZE_M;
+        if !(side_ok(w) && side_ok(h)) {
             return Err(StaticBuildError::BadLabSize { width: w, height: h });
         }
         let t = BORDER_THICKNESS_M;
@@ -208,7 +236,7 @@ impl StaticIndex {
             }
         }
 
-        let spec = GridSpec::covering(Point2::new(-t, -t), Point2::new(w + t, h + t), cell);
+        let spec = Self::spec_within_budget(Point2::new(-t, -t), Point2::new(w + t, h + t), cell, &edges, &triangles);
         let n_cells = spec.nx * spec.ny;
         let mut pairs = Vec::new();
         // Edges are listed in every cell of their bounding box (not only the cells they cross),
@@ -236,6 +264,44 @@ impl StaticIndex {
         }
         let tri_cells = CellLists::build(n_cells, &mut pairs);
         Ok(Self { spec, edges, triangles, edge_cells, tri_cells })
+    }
+
+    /// The grid over [min, max] with the smallest cell, from `cell` doubling, whose cell count
+    /// and (cell, item) entries stay within [`MAX_WALL_CELLS`] and [`MAX_WALL_ENTRIES`].
+    ///
+    /// The index is sized by what the walls need rather than by the lab's area alone: a huge
+    /// lab, or walls whose bounding boxes span many cells, get coarser cells instead of an
+    /// allocation the machine cannot make. Once a cell covers the whole lab every item sits in
+    /// at most 4 cells, so the loop always ends within budget for any lab a file can hold.
+    fn spec_within_budget(
+        min: Point2<Real>,
+        max: Point2<Real>,
+        cell: Real,
+        edges: &[Edge],
+        triangles: &[WallTriangle],
+    ) -> GridSpec {
+        let extent = (max.x - min.x).max(max.y - min.y);
+        let mut spec = GridSpec::covering(min, max, cell);
+        // 64 doublings take any cell past any finite extent.
+        for _ in 0..64 {
+            if spec.cell >= extent || spec.entries(edges, triangles).is_some_and(|n| n <= MAX_WALL_ENTRIES) {
+                break;
+            }
+            spec = GridSpec::covering(min, max, spec.cell * 2.0);
+        }
+        spec
+    }
+
+    /// How many (cell, edge) entries the index holds.
+    #[cfg(test)]
+    pub(crate) fn edges_in_all(&self) -> usize {
+        self.edge_cells.items.len()
+    }
+
+    /// How many (cell, triangle) entries the index holds.
+    #[cfg(test)]
+    pub(crate) fn triangles_in_all(&self) -> usize {
+        self.tri_cells.items.len()
     }
 
     /// Edge indices listed in one cell.

@@ -63,7 +63,16 @@ use grid::{DynGrid, GridSpec, StaticIndex};
 /// How many robots a world holds unless told otherwise (the hub's capacity).
 pub const DEFAULT_CAPACITY: usize = 10_000;
 
-/// Cell size of the wall index, metres.
+/// The largest lab side, metres (10 km).
+///
+/// Far beyond any building (the largest benchmark world, 10,000 chairs on tiled LIACC floors,
+/// is about 650 m a side), and small enough that f64 positions keep a resolution near 2 pm,
+/// well inside the 1 nm tolerances the geometry uses; the robot index stays below 2^32 cells.
+/// A lab file asking for more is refused with its line and column.
+pub const MAX_LAB_SIZE_M: Real = 10_000.0;
+
+/// Cell size of the wall index, metres (the smallest; large labs get larger cells so that the
+/// index stays within its entry budget, see `grid::StaticIndex::build`).
 const STATIC_CELL_M: Real = 4.0;
 /// Cell size of the robot index, metres (about one chair).
 const DYN_CELL_M: Real = 2.0;
@@ -446,6 +455,11 @@ impl World {
     /// [`World::is_free`].
     pub fn add_robot(&mut self, spec: RobotSpec) -> Result<RobotHandle, AddRobotError> {
         spec.validate()?;
+        // A robot placed off the lab would drive outside its border wall for good.
+        let (x, y, width, height) = (spec.pose.x, spec.pose.y, self.lab.width_m, self.lab.height_m);
+        if !((0.0..=width).contains(&x) && (0.0..=height).contains(&y)) {
+            return Err(AddRobotError::OutsideLab { x, y, width, height });
+        }
         if self.live >= self.capacity {
             return Err(AddRobotError::Full { max: self.capacity });
         }

@@ -549,3 +549,58 @@ fn readings_exist_before_the_first_step_and_priming_draws_nothing() {
     assert_eq!(w.state_hash(), other.state_hash());
     assert_ne!(before, w.state_hash());
 }
+
+#[test]
+fn a_lab_beyond_the_size_limit_is_refused_with_an_error_not_an_abort() {
+    // The 10,000,000 m lab once asked for a 25 TB wall index.
+    let mut lab = empty_lab(10_000_000.0, 10_000_000.0);
+    lab.walls.push(rect_wall(1.0, 1.0, 2.0, 2.0, 1.0));
+    let err = World::new(&lab, quiet(), 1).expect_err("too large");
+    assert!(matches!(err, WorldBuildError::Static(StaticBuildError::BadLabSize { .. })), "{err:?}");
+    assert!(err.to_string().contains("at most 10000 m"), "{err}");
+}
+
+#[test]
+fn the_largest_lab_builds_a_wall_index_within_its_budget() {
+    // A 10 km lab with walls whose bounding boxes span it all: the index coarsens its cells
+    // instead of listing every edge in millions of cells.
+    let mut lab = empty_lab(MAX_LAB_SIZE_M, MAX_LAB_SIZE_M);
+    for k in 0..50 {
+        let o = k as Real;
+        lab.walls.push(Wall {
+            height_m: 1.0,
+            corners: vec![
+                Point2::new(o, 0.0),
+                Point2::new(o + 1.0, 0.0),
+                Point2::new(MAX_LAB_SIZE_M, MAX_LAB_SIZE_M - o),
+            ],
+        });
+    }
+    let mut w = world(lab, quiet());
+    let spec = w.statics.spec;
+    let cells = (spec.nx * spec.ny) as u64;
+    assert!(cells <= grid::MAX_WALL_CELLS, "{cells} cells");
+    let entries = cells + (w.statics.edges_in_all() + w.statics.triangles_in_all()) as u64;
+    assert!(entries <= grid::MAX_WALL_ENTRIES, "{entries} entries");
+    // The coarse index still serves the world: a robot starts beside the walls.
+    let r = w.add_robot(RobotSpec::at(5000.0, 2.0, 0.0)).expect("free start");
+    assert!(w.robot(r).is_some());
+}
+
+#[test]
+fn a_usual_lab_keeps_its_four_metre_wall_cells() {
+    let w = world(empty_lab(44.0, 17.75), quiet());
+    assert_eq!(w.statics.spec.cell, STATIC_CELL_M);
+}
+
+#[test]
+fn a_robot_cannot_start_outside_the_lab() {
+    let mut w = world(empty_lab(40.0, 14.0), quiet());
+    let err = w.add_robot(RobotSpec::at(200.0, 3.0, 0.0)).expect_err("x = 200 on a 40 m lab");
+    assert!(
+        matches!(err, AddRobotError::OutsideLab { x, y, width, height } if x == 200.0 && y == 3.0 && width == 40.0 && height == 14.0),
+        "{err:?}"
+    );
+    assert!(w.add_robot(RobotSpec::at(5.0, -0.5, 0.0)).is_err(), "below the lab");
+    assert!(w.add_robot(RobotSpec::at(5.0, 7.0, 0.0)).is_ok(), "inside");
+}

@@ -11,7 +11,7 @@
 
 use std::path::Path;
 
-use super::xml::{parse_grid, parse_lab, read_text};
+use super::xml::{parse_grid, parse_grid_for, parse_lab, read_text};
 use super::{Grid, Lab, Map, MapLoadError};
 
 /// Names of the built-in maps; the first is the default world.
@@ -73,11 +73,12 @@ pub fn load_lab_spec(spec: &str) -> Result<Lab, MapLoadError> {
     }
 }
 
-/// Loads a start grid from `builtin:NAME` or from a file path.
-pub fn load_grid_spec(spec: &str) -> Result<Grid, MapLoadError> {
+/// Loads a start grid for `lab` from `builtin:NAME` or from a file path; every position must
+/// lie inside the lab.
+pub fn load_grid_spec(spec: &str, lab: &Lab) -> Result<Grid, MapLoadError> {
     match spec.strip_prefix(PREFIX) {
-        Some(name) => parse_grid(grid_xml(name).ok_or_else(|| unknown(name))?),
-        None => parse_grid(&read_text(Path::new(spec))?),
+        Some(name) => parse_grid_for(grid_xml(name).ok_or_else(|| unknown(name))?, lab),
+        None => parse_grid_for(&read_text(Path::new(spec))?, lab),
     }
 }
 
@@ -324,7 +325,7 @@ mod tests {
     fn specs_name_a_builtin_or_a_file() {
         let lab = load_lab_spec("builtin:thesis").expect("built in");
         assert_eq!(lab.name, "ThesisExampleMap");
-        let grid = load_grid_spec("builtin:maze").expect("built in");
+        let grid = load_grid_spec("builtin:maze", &lab).expect("built in");
         assert_eq!(grid.poses.len(), 4);
 
         let dir = std::env::temp_dir().join(format!("iwsim-map-spec-{}", std::process::id()));
@@ -341,12 +342,12 @@ mod tests {
         let err = load_lab_spec("builtin:atlantis").expect_err("no such map");
         assert!(matches!(&err, MapLoadError::UnknownBuiltin { name, .. } if name == "atlantis"));
         assert!(err.to_string().contains("liacc, thesis, maze"), "{err}");
-        assert!(matches!(load_grid_spec("builtin:"), Err(MapLoadError::UnknownBuiltin { .. })));
+        assert!(matches!(load_grid_spec("builtin:", &load("liacc").lab), Err(MapLoadError::UnknownBuiltin { .. })));
     }
 
     #[test]
     fn a_missing_file_spec_is_an_io_error_naming_the_file() {
-        let err = load_grid_spec("/nonexistent/iwsim/grid.xml").expect_err("no such file");
+        let err = load_grid_spec("/nonexistent/iwsim/grid.xml", &load("liacc").lab).expect_err("no such file");
         assert!(matches!(&err, MapLoadError::Io { path, .. } if path.ends_with("grid.xml")));
         assert!(err.to_string().contains("/nonexistent/iwsim/grid.xml"), "{err}");
     }

@@ -6,8 +6,10 @@
 //! a [`Lab`], a [`Grid`] or [`Params`], checking the values. Every problem becomes a
 //! [`MapLoadError`] that says where it is and what was expected; no input makes it panic.
 //!
-//! Like Ciber-Rato, the reader ignores elements it does not know and stray text, so every
-//! Ciber-Rato lab, grid and parameters file loads.
+//! Like Ciber-Rato, the reader ignores elements it does not know and stray text around the
+//! elements, so every Ciber-Rato lab, grid and parameters file loads. Unlike Ciber-Rato, it
+//! refuses what would silently lose part of a map: a lab without its size, a `<Row>` pattern
+//! character that means nothing, text with no element at all, a DTD.
 //!
 //! ```
 //! use world::map::xml::parse_lab;
@@ -17,10 +19,10 @@
 //! </Lab>"#).expect("valid lab");
 //! assert_eq!(lab.walls.len(), 1);
 //!
-//! let err = parse_lab(r#"<Lab><Beacon X="1" Y="NaN"/></Lab>"#).unwrap_err();
+//! let err = parse_lab(r#"<Lab Width="4" Height="3"><Beacon X="1" Y="NaN"/></Lab>"#).unwrap_err();
 //! assert_eq!(
 //!     err.to_string(),
-//!     "1:6: <Beacon> attribute Y=\"NaN\" is not a number: expected a finite decimal number such as 2.5"
+//!     "1:27: <Beacon> attribute Y=\"NaN\" is not a number: expected a finite decimal number such as 2.5"
 //! );
 //! ```
 
@@ -29,6 +31,7 @@ use std::path::{Path, PathBuf};
 
 use nalgebra::Point2;
 use quick_xml::XmlVersion;
+use quick_xml::escape::EscapeError;
 use quick_xml::events::attributes::AttrError;
 use quick_xml::events::{BytesStart, Event};
 use quick_xml::reader::Reader;
@@ -111,9 +114,64 @@ pub enum MapLoadError {
         /// What would have been accepted, e.g. "Lab" or "Lab, Grid or Parameters".
         expected: &'static str,
     },
-    /// The file holds no element at all.
+    /// The file holds no element at all (it is empty, or only whitespace and comments).
     #[error("the file holds no root element: expected <Lab>, <Grid> or <Parameters>")]
     Empty,
+    /// The file holds text but no element: it is not XML at all.
+    #[error("{pos}: text where the root element belongs: expected <Lab>, <Grid> or <Parameters>")]
+    NoRootElement {
+        /// Where the text starts (its first character that is not whitespace).
+        pos: TextPos,
+    },
+    /// The file is not UTF-8 text.
+    #[error("{pos}: the file is not UTF-8 text: expected UTF-8 (or plain ASCII) from this byte on")]
+    NotUtf8 {
+        /// Where the first byte that is not UTF-8 is (its column counts the characters before it).
+        pos: TextPos,
+    },
+    /// The file is larger than [`MAX_FILE_BYTES`].
+    #[error("{} is larger than {max} bytes: expected a lab, grid or parameters file of at most {max} bytes", path.display())]
+    TooLarge {
+        /// The file.
+        path: PathBuf,
+        /// The limit, [`MAX_FILE_BYTES`].
+        max: u64,
+    },
+    /// A `<!DOCTYPE>` declares a DTD (its internal subset, in `[...]`): iwsim does not read
+    /// DTDs, so the entities it declares would be unknown.
+    #[error(
+        "{pos}: DTDs and entity declarations are not supported: expected no <!DOCTYPE [...]> \
+         (write the characters themselves, UTF-8 encoded)"
+    )]
+    DtdNotSupported {
+        /// Where the `<!DOCTYPE` starts.
+        pos: TextPos,
+    },
+    /// An `&name;` reference that is not one of XML's five predefined entities.
+    #[error(
+        "{pos}: &{name}; is not an entity iwsim knows (DTDs and entity declarations are not \
+         supported): expected &amp; &lt; &gt; &quot; &apos;, a character reference such as \
+         &#233;, or the character itself"
+    )]
+    UnknownEntity {
+        /// Where the `&` is.
+        pos: TextPos,
+        /// The entity's name.
+        name: String,
+    },
+    /// A `<Row Pattern>` holds a character that draws nothing in Ciber-Rato and is not one of
+    /// the characters its labs use, most likely a typo that would silently lose a wall.
+    #[error(
+        "{pos}: <Row> Pattern holds {found:?}, which means nothing in a pattern: expected only \
+         space | - + / \\ . · T H X"
+    )]
+    BadPatternCharacter {
+        /// Where the character is (the attribute value's start when it was written with
+        /// entities, so that its column cannot be told).
+        pos: TextPos,
+        /// The character.
+        found: char,
+    },
     /// A required attribute is absent.
     #[error("{pos}: <{element}> has no {attr} attribute: expected {attr}=\"...\"")]
     MissingAttribute {
@@ -125,10 +183,7 @@ pub enum MapLoadError {
         attr: String,
     },
     /// A numeric attribute is not a finite number (this includes `NaN` and `inf`).
-    #[error(
-        "{pos}: <{element}> attribute {attr}=\"{value}\" is not a number: \
-         expected a finite decimal number such as 2.5"
-    )]
+    #[error("{pos}: <{element}> attribute {attr}=\"{value}\" is not a number: expected {expected}")]
     NotANumber {
         /// Where the element starts.
         pos: TextPos,
@@ -138,6 +193,8 @@ pub enum MapLoadError {
         attr: String,
         /// The attribute's text.
         value: String,
+        /// What kind of number belongs there, with an example that would be accepted.
+        expected: &'static str,
     },
     /// An attribute is readable but its value is not allowed (a zero width, a negative height
     /// or noise, a beacon outside the lab, a switch that is neither On nor Off…).
@@ -219,9 +276,103 @@ pub enum MapFile {
     Params(Params),
 }
 
-/// Reads a whole file as text.
+/// The largest lab, grid or parameters file read, in bytes (16 MiB).
+///
+/// Ciber-Rato's largest shipped lab is a few kilobytes and iwsim's largest benchmark lab well
+/// under a megabyte; the cap only stops a wrong path (`/dev/zero`, a disk image) from being read
+/// until memory runs out.
+pub const MAX_FILE_BYTES: u64 = 16 * 1024 * 1024;
+
+/// Reads a whole file as text: at most [`MAX_FILE_BYTES`], and UTF-8 (a byte-order mark is
+/// kept; the parsers skip it).
+///
+/// This is the world crate's one file-reading function. It cannot share
+/// `records::files::read_text` (the scenario and agent configs' reader) because `records`
+/// links `ipc-types`, which the world model must not.
 pub fn read_text(path: &Path) -> Result<String, MapLoadError> {
-    std::fs::read_to_string(path).map_err(|source| MapLoadError::Io { path: path.to_owned(), source })
+    use std::io::Read;
+
+    let io = |source| MapLoadError::Io { path: path.to_owned(), source };
+    let file = std::fs::File::open(path).map_err(io)?;
+    let mut bytes = Vec::new();
+    // One byte past the cap tells "exactly the cap" from "larger".
+    file.take(MAX_FILE_BYTES + 1).read_to_end(&mut bytes).map_err(io)?;
+    if u64::try_from(bytes.len()).unwrap_or(u64::MAX) > MAX_FILE_BYTES {
+        return Err(MapLoadError::TooLarge { path: path.to_owned(), max: MAX_FILE_BYTES });
+    }
+    text_from_bytes(bytes)
+}
+
+/// The bytes as text, or where the first byte that is not UTF-8 is.
+pub fn text_from_bytes(bytes: Vec<u8>) -> Result<String, MapLoadError> {
+    String::from_utf8(bytes).map_err(|err| {
+        let good = err.utf8_error().valid_up_to();
+        let bytes = err.as_bytes();
+        // Everything before `good` is valid UTF-8, so this never fails.
+        let before = std::str::from_utf8(bytes.get(..good).unwrap_or_default()).unwrap_or_default();
+        let line = before.matches('\n').count() + 1;
+        let column = before.rsplit('\n').next().unwrap_or_default().chars().count() + 1;
+        MapLoadError::NotUtf8 { pos: TextPos { line: saturate(line), column: saturate(column) } }
+    })
+}
+
+impl MapLoadError {
+    /// Where in the file the problem is, for errors that know.
+    pub fn pos(&self) -> Option<TextPos> {
+        match self {
+            Self::UnclosedTag { pos, .. }
+            | Self::MismatchedEndTag { pos, .. }
+            | Self::Syntax { pos, .. }
+            | Self::DuplicateAttribute { pos, .. }
+            | Self::UnknownRoot { pos, .. }
+            | Self::NoRootElement { pos }
+            | Self::NotUtf8 { pos }
+            | Self::DtdNotSupported { pos }
+            | Self::UnknownEntity { pos, .. }
+            | Self::BadPatternCharacter { pos, .. }
+            | Self::MissingAttribute { pos, .. }
+            | Self::NotANumber { pos, .. }
+            | Self::OutOfRange { pos, .. }
+            | Self::TooFewCorners { pos, .. }
+            | Self::CornerOutsideLab { pos, .. }
+            | Self::DegenerateWall { pos } => Some(*pos),
+            Self::Empty | Self::UnknownBuiltin { .. } | Self::Io { .. } | Self::TooLarge { .. } => None,
+        }
+    }
+
+    /// The error as a user reads it about the file `file`: `file:line:column: what` when it
+    /// has a place, `file: what` when not, and just `what` when it names the file itself
+    /// (cannot read it, too large).
+    ///
+    /// ```
+    /// use world::map::xml::parse_lab;
+    ///
+    /// let err = parse_lab("<Lab Width=\"x\"/>").unwrap_err();
+    /// assert!(err.in_file("lab.xml").to_string().starts_with("lab.xml:1:1: <Lab> attribute Width"));
+    /// let err = parse_lab("").unwrap_err();
+    /// assert!(err.in_file("lab.xml").to_string().starts_with("lab.xml: the file holds no root element"));
+    /// ```
+    pub fn in_file<'a>(&'a self, file: &'a str) -> InFile<'a> {
+        InFile { err: self, file }
+    }
+}
+
+/// A [`MapLoadError`] shown with its file's name; see [`MapLoadError::in_file`].
+#[derive(Debug, Clone, Copy)]
+pub struct InFile<'a> {
+    err: &'a MapLoadError,
+    file: &'a str,
+}
+
+impl fmt::Display for InFile<'_> {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self.err {
+            MapLoadError::Io { .. } | MapLoadError::TooLarge { .. } => write!(f, "{}", self.err),
+            // A positioned error prints `line:column: ` first, so the name joins it with `:`.
+            err if err.pos().is_some() => write!(f, "{}:{err}", self.file),
+            err => write!(f, "{}: {err}", self.file),
+        }
+    }
 }
 
 /// Parses a Ciber-Rato lab: `<Lab Name Width Height>` with `<Beacon>`, `<Target>`, `<Wall>`
@@ -231,10 +382,18 @@ pub fn parse_lab(text: &str) -> Result<Lab, MapLoadError> {
     lab_from(doc.root()?, &doc, "Lab")
 }
 
-/// Parses a Ciber-Rato start grid: `<Grid>` with `<Position X Y Dir/>` children.
+/// Parses a Ciber-Rato start grid: `<Grid>` with `<Position X Y Dir/>` children. Without its
+/// lab a position can be anywhere; [`parse_grid_for`] checks them against the lab.
 pub fn parse_grid(text: &str) -> Result<Grid, MapLoadError> {
     let doc = Document::parse(text)?;
-    grid_from(doc.root()?, &doc, "Grid")
+    grid_from(doc.root()?, &doc, "Grid", None)
+}
+
+/// [`parse_grid`] for `lab`: a position outside the lab's rectangle is an error at its line
+/// and column (a robot started there would drive outside the border wall for good).
+pub fn parse_grid_for(text: &str, lab: &Lab) -> Result<Grid, MapLoadError> {
+    let doc = Document::parse(text)?;
+    grid_from(doc.root()?, &doc, "Grid", Some(lab))
 }
 
 /// Parses a Ciber-Rato parameters file (root `<Parameters .../>`), starting from
@@ -251,7 +410,7 @@ pub fn parse_any(text: &str) -> Result<MapFile, MapLoadError> {
     let root = doc.root()?;
     match root.name.as_str() {
         "Lab" => lab_from(root, &doc, EXPECTED).map(MapFile::Lab),
-        "Grid" => grid_from(root, &doc, EXPECTED).map(MapFile::Grid),
+        "Grid" => grid_from(root, &doc, EXPECTED, None).map(MapFile::Grid),
         "Parameters" => params_from(root, EXPECTED).map(MapFile::Params),
         _ => Err(unknown_root(root, EXPECTED)),
     }
@@ -267,14 +426,39 @@ struct Element {
     name: String,
     pos: TextPos,
     /// Attributes in file order, values unescaped; names are unique.
-    attrs: Vec<(String, String)>,
+    attrs: Vec<Attr>,
     /// Indices into [`Document::elements`], in file order.
     children: Vec<usize>,
 }
 
+/// One attribute of an element.
+#[derive(Debug)]
+struct Attr {
+    name: String,
+    /// The value, entities and whitespace normalised.
+    value: String,
+    /// Where the value's first character is (just after the opening quote).
+    value_pos: TextPos,
+    /// Whether the value is character for character as written on one line (no entity, no
+    /// line break), so that its n-th character sits n columns after `value_pos`.
+    verbatim: bool,
+}
+
 impl Element {
     fn attr(&self, name: &str) -> Option<&str> {
-        self.attrs.iter().find(|(key, _)| key == name).map(|(_, value)| value.as_str())
+        self.attrs.iter().find(|a| a.name == name).map(|a| a.value.as_str())
+    }
+
+    /// Where the `index`-th character (0-based) of the attribute's value is written: exact
+    /// when the value was written verbatim, else the value's start.
+    fn char_pos(&self, name: &str, index: usize) -> TextPos {
+        match self.attrs.iter().find(|a| a.name == name) {
+            Some(a) if a.verbatim => {
+                TextPos { line: a.value_pos.line, column: a.value_pos.column.saturating_add(saturate(index)) }
+            }
+            Some(a) => a.value_pos,
+            None => self.pos,
+        }
     }
 }
 
@@ -332,6 +516,8 @@ impl Document {
         }
         let mut elements: Vec<Element> = Vec::new();
         let mut open: Vec<usize> = Vec::new();
+        // Where the first stray text is, to report a file of text without any element.
+        let mut first_text: Option<TextPos> = None;
         loop {
             let before = usize::try_from(reader.buffer_position()).unwrap_or(usize::MAX);
             let event = match reader.read_event() {
@@ -372,6 +558,8 @@ impl Document {
                 Event::Text(content) => {
                     let content: &str = &content;
                     if !content.trim().is_empty() {
+                        let lead = content.len() - content.trim_start().len();
+                        first_text.get_or_insert_with(|| index.pos(before.saturating_add(lead)));
                         tracing::debug!(
                             at = %index.pos(before),
                             "ignoring stray text {:?}",
@@ -382,6 +570,11 @@ impl Document {
                 Event::CData(_) | Event::GeneralRef(_) => {
                     tracing::debug!(at = %index.pos(before), "ignoring stray character data");
                 }
+                // An internal subset can declare entities, which this reader never expands:
+                // refuse it here, where it is written, rather than at the first use.
+                Event::DocType(doctype) if doctype.contains('[') => {
+                    return Err(MapLoadError::DtdNotSupported { pos: index.pos(tag_start) });
+                }
                 Event::Comment(_) | Event::Decl(_) | Event::PI(_) | Event::DocType(_) => {}
                 Event::Eof => break,
             }
@@ -390,7 +583,10 @@ impl Document {
             return Err(MapLoadError::UnclosedTag { pos: element.pos, tag: element.name.clone() });
         }
         if elements.is_empty() {
-            return Err(MapLoadError::Empty);
+            return Err(match first_text {
+                Some(pos) => MapLoadError::NoRootElement { pos },
+                None => MapLoadError::Empty,
+            });
         }
         Ok(Document { elements })
     }
@@ -430,10 +626,19 @@ fn add_element(
         match attr {
             Ok(attr) => {
                 let key = attr.key.as_ref().to_owned();
-                let value = attr
-                    .normalized_value(XmlVersion::Implicit1_0)
-                    .map_err(|err| MapLoadError::Syntax { pos, message: format!("<{name}> attribute {key}: {err}") })?;
-                attrs.push((key, value.into_owned()));
+                // The reader borrows from the text, so the value's address gives its offset.
+                let value_at = (attr.value.as_ptr() as usize).checked_sub(index.text.as_ptr() as usize);
+                let value_at = value_at.filter(|&at| at <= index.text.len()).unwrap_or(start);
+                let value = attr.normalized_value(XmlVersion::Implicit1_0).map_err(|err| match err {
+                    quick_xml::Error::Escape(EscapeError::UnrecognizedEntity(range, entity)) => {
+                        // The range covers the name; the `&` is just before it.
+                        let amp = value_at.saturating_add(range.start).saturating_sub(1);
+                        MapLoadError::UnknownEntity { pos: index.pos(amp), name: entity }
+                    }
+                    err => MapLoadError::Syntax { pos, message: format!("<{name}> attribute {key}: {err}") },
+                })?;
+                let verbatim = *value == *attr.value;
+                attrs.push(Attr { name: key, value: value.into_owned(), value_pos: index.pos(value_at), verbatim });
             }
             Err(AttrError::Duplicated(offset, _)) => {
                 let attr = raw
@@ -494,8 +699,12 @@ fn describe_xml_error(err: &quick_xml::Error) -> String {
 const BORDER_TOLERANCE_M: f64 = 1e-9;
 
 const DEFAULT_LAB_NAME: &str = "NO NAMED LAB";
-const DEFAULT_LAB_SIZE_M: f64 = 16.0;
 const DEFAULT_TARGET_RADIUS_M: f64 = 2.0;
+
+/// The characters a `<Row Pattern>` may hold: those Ciber-Rato's shipped labs use. Only `|` and
+/// `-` draw walls (see [`pattern`]); the others are drawn by hand as junctions, diagonals or
+/// marks, and carry no wall in Ciber-Rato either.
+pub const PATTERN_CHARACTERS: &str = " |-+/\\.·THX";
 
 fn unknown_root(root: &Element, expected: &'static str) -> MapLoadError {
     MapLoadError::UnknownRoot { pos: root.pos, found: root.name.clone(), expected }
@@ -505,8 +714,19 @@ fn ignore(child: &Element, parent: &str) {
     tracing::debug!(at = %child.pos, "ignoring unknown element <{}> in <{}>", child.name, parent);
 }
 
+/// The hint a [`MapLoadError::NotANumber`] gives for a decimal attribute.
+const DECIMAL: &str = "a finite decimal number such as 2.5";
+/// The hint a [`MapLoadError::NotANumber`] gives for a whole-number attribute (a `<Row Pos>`,
+/// a count, a latency), which refuses "2.5".
+const WHOLE_EXAMPLE: &str = "a whole number of 0 or more, such as 12";
+
 /// The attribute as a finite number, or `None` when absent.
 fn number(element: &Element, attr: &str) -> Result<Option<f64>, MapLoadError> {
+    number_as(element, attr, DECIMAL)
+}
+
+/// [`number`], with `expected` as the hint when the text is not a number.
+fn number_as(element: &Element, attr: &str, expected: &'static str) -> Result<Option<f64>, MapLoadError> {
     let Some(raw) = element.attr(attr) else {
         return Ok(None);
     };
@@ -517,12 +737,17 @@ fn number(element: &Element, attr: &str) -> Result<Option<f64>, MapLoadError> {
             element: element.name.clone(),
             attr: attr.to_owned(),
             value: raw.to_owned(),
+            expected,
         }),
     }
 }
 
 fn required(element: &Element, attr: &str) -> Result<f64, MapLoadError> {
-    number(element, attr)?.ok_or_else(|| MapLoadError::MissingAttribute {
+    required_as(element, attr, DECIMAL)
+}
+
+fn required_as(element: &Element, attr: &str, expected: &'static str) -> Result<f64, MapLoadError> {
+    number_as(element, attr, expected)?.ok_or_else(|| MapLoadError::MissingAttribute {
         pos: element.pos,
         element: element.name.clone(),
         attr: attr.to_owned(),
@@ -559,10 +784,12 @@ fn lab_from(root: &Element, doc: &Document, expected: &'static str) -> Result<La
         return Err(unknown_root(root, expected));
     }
     let name = root.attr("Name").unwrap_or(DEFAULT_LAB_NAME).to_owned();
-    let width = number(root, "Width")?.unwrap_or(DEFAULT_LAB_SIZE_M);
-    let width = check(root, "Width", width, |v| v > 0.0, POSITIVE)?;
-    let height = number(root, "Height")?.unwrap_or(DEFAULT_LAB_SIZE_M);
-    let height = check(root, "Height", height, |v| v > 0.0, POSITIVE)?;
+    // Ciber-Rato falls back to 16 m when a size is missing; a lab that forgot its size is more
+    // likely a mistake than a 16 m lab, so the size is required.
+    const SIZE: &str = "a number of metres greater than 0 and at most 10000";
+    let in_size = |v: f64| v > 0.0 && v <= crate::MAX_LAB_SIZE_M;
+    let width = check(root, "Width", required(root, "Width")?, in_size, SIZE)?;
+    let height = check(root, "Height", required(root, "Height")?, in_size, SIZE)?;
     let mut lab =
         Lab { name, width_m: width, height_m: height, walls: Vec::new(), beacons: Vec::new(), targets: Vec::new() };
     let inside_x = |v: f64| (-BORDER_TOLERANCE_M..=width + BORDER_TOLERANCE_M).contains(&v);
@@ -588,7 +815,7 @@ fn lab_from(root: &Element, doc: &Document, expected: &'static str) -> Result<La
             }
             "Wall" => lab.walls.push(wall_from(child, doc, width, height)?),
             "Row" => {
-                let pos = required(child, "Pos")?;
+                let pos = required_as(child, "Pos", WHOLE_EXAMPLE)?;
                 let pos = check(child, "Pos", pos, |v| v >= 0.0 && v.fract() == 0.0 && v <= 1e9, WHOLE)?;
                 let Some(pattern) = child.attr("Pattern") else {
                     return Err(MapLoadError::MissingAttribute {
@@ -597,6 +824,9 @@ fn lab_from(root: &Element, doc: &Document, expected: &'static str) -> Result<La
                         attr: "Pattern".to_owned(),
                     });
                 };
+                if let Some((i, found)) = pattern.chars().enumerate().find(|(_, c)| !PATTERN_CHARACTERS.contains(*c)) {
+                    return Err(MapLoadError::BadPatternCharacter { pos: child.char_pos("Pattern", i), found });
+                }
                 let h = number(child, "Height")?.unwrap_or(DEFAULT_WALL_HEIGHT_M);
                 let h = check(child, "Height", h, |v| v >= 0.0, NOT_NEGATIVE)?;
                 // `pos` is a whole number below 1e9, so the cast is exact.
@@ -729,7 +959,7 @@ fn is_simple(corners: &[Point2<f64>]) -> bool {
     true
 }
 
-fn grid_from(root: &Element, doc: &Document, expected: &'static str) -> Result<Grid, MapLoadError> {
+fn grid_from(root: &Element, doc: &Document, expected: &'static str, lab: Option<&Lab>) -> Result<Grid, MapLoadError> {
     if root.name != "Grid" {
         return Err(unknown_root(root, expected));
     }
@@ -739,8 +969,14 @@ fn grid_from(root: &Element, doc: &Document, expected: &'static str) -> Result<G
             ignore(child, "Grid");
             continue;
         }
-        let x = required(child, "X")?;
-        let y = required(child, "Y")?;
+        let mut x = required(child, "X")?;
+        let mut y = required(child, "Y")?;
+        if let Some(lab) = lab {
+            const INSIDE_X: &str = "an x inside the lab, from 0 to its Width";
+            const INSIDE_Y: &str = "a y inside the lab, from 0 to its Height";
+            x = check(child, "X", x, |v| (0.0..=lab.width_m).contains(&v), INSIDE_X)?;
+            y = check(child, "Y", y, |v| (0.0..=lab.height_m).contains(&v), INSIDE_Y)?;
+        }
         let dir = number(child, "Dir")?.unwrap_or(0.0);
         grid.poses.push(StartPose { pos: Point2::new(x, y), heading_deg: dir });
     }
@@ -752,13 +988,14 @@ fn params_from(root: &Element, expected: &'static str) -> Result<Params, MapLoad
         return Err(unknown_root(root, expected));
     }
     let mut p = Params::default();
-    for (name, raw) in &root.attrs {
+    for Attr { name, value: raw, .. } in &root.attrs {
         let attr = name.as_str();
         let value = || -> Result<f64, MapLoadError> { required(root, attr) };
         let not_negative = || -> Result<f64, MapLoadError> { check(root, attr, value()?, |v| v >= 0.0, NOT_NEGATIVE) };
         let positive = || -> Result<f64, MapLoadError> { check(root, attr, value()?, |v| v > 0.0, POSITIVE) };
         let whole = |max: f64| -> Result<f64, MapLoadError> {
-            check(root, attr, value()?, |v| v >= 0.0 && v.fract() == 0.0 && v <= max, WHOLE)
+            let v = required_as(root, attr, WHOLE_EXAMPLE)?;
+            check(root, attr, v, |v| v >= 0.0 && v.fract() == 0.0 && v <= max, WHOLE)
         };
         let count = || -> Result<u32, MapLoadError> { Ok(whole(f64::from(u32::MAX))? as u32) };
         let switch = || -> Result<bool, MapLoadError> {
@@ -858,18 +1095,17 @@ mod tests {
 
     #[test]
     fn a_wall_with_two_corners_is_too_few() {
-        let text =
-            "<Lab>\n<Wall Height=\"1\">\n  <Corner X=\"1\" Y=\"1\"/>\n  <Corner X=\"2\" Y=\"1\"/>\n</Wall>\n</Lab>";
+        let text = "<Lab Width=\"16\" Height=\"16\">\n<Wall Height=\"1\">\n  <Corner X=\"1\" Y=\"1\"/>\n  <Corner X=\"2\" Y=\"1\"/>\n</Wall>\n</Lab>";
         let err = lab_err(text);
         assert!(matches!(err, MapLoadError::TooFewCorners { pos, count: 2 } if pos == at(2, 1)), "{err:?}");
     }
 
     #[test]
     fn nan_is_not_a_number() {
-        let text = "<Lab>\n  <Wall>\n    <Corner X=\"1\" Y=\"NaN\"/>\n    <Corner X=\"2\" Y=\"1\"/>\n    <Corner X=\"2\" Y=\"2\"/>\n  </Wall>\n</Lab>";
+        let text = "<Lab Width=\"16\" Height=\"16\">\n  <Wall>\n    <Corner X=\"1\" Y=\"NaN\"/>\n    <Corner X=\"2\" Y=\"1\"/>\n    <Corner X=\"2\" Y=\"2\"/>\n  </Wall>\n</Lab>";
         let err = lab_err(text);
         assert!(
-            matches!(&err, MapLoadError::NotANumber { pos, element, attr, value }
+            matches!(&err, MapLoadError::NotANumber { pos, element, attr, value, .. }
                 if *pos == at(3, 5) && element == "Corner" && attr == "Y" && value == "NaN"),
             "{err:?}"
         );
@@ -887,9 +1123,9 @@ mod tests {
 
     #[test]
     fn text_where_a_number_belongs_is_not_a_number() {
-        let err = lab_err("<Lab>\r\n\t<Beacon X=\"1,5\" Y=\"2\"/>\r\n</Lab>");
+        let err = lab_err("<Lab Width=\"16\" Height=\"16\">\r\n\t<Beacon X=\"1,5\" Y=\"2\"/>\r\n</Lab>");
         assert!(
-            matches!(&err, MapLoadError::NotANumber { pos, element, attr, value }
+            matches!(&err, MapLoadError::NotANumber { pos, element, attr, value, .. }
                 if *pos == at(2, 2) && element == "Beacon" && attr == "X" && value == "1,5"),
             "{err:?}"
         );
@@ -897,8 +1133,8 @@ mod tests {
 
     #[test]
     fn columns_count_characters_not_bytes() {
-        let err = lab_err("<Lab Name=\"Ção\"><Beacon X=\"1\" Y=\"é\"/></Lab>");
-        assert!(matches!(err, MapLoadError::NotANumber { pos, .. } if pos == at(1, 17)), "{err:?}");
+        let err = lab_err("<Lab Name=\"Ção\" Width=\"16\" Height=\"16\"><Beacon X=\"1\" Y=\"é\"/></Lab>");
+        assert!(matches!(err, MapLoadError::NotANumber { pos, .. } if pos == at(1, 40)), "{err:?}");
     }
 
     #[test]
@@ -930,7 +1166,7 @@ mod tests {
 
     #[test]
     fn a_repeated_attribute_is_reported_at_its_second_occurrence() {
-        let err = lab_err("<Lab>\n  <Beacon X=\"1\" Y=\"2\" X=\"3\"/>\n</Lab>");
+        let err = lab_err("<Lab Width=\"16\" Height=\"16\">\n  <Beacon X=\"1\" Y=\"2\" X=\"3\"/>\n</Lab>");
         assert!(
             matches!(&err, MapLoadError::DuplicateAttribute { pos, element, attr }
                 if *pos == at(2, 23) && element == "Beacon" && attr == "X"),
@@ -950,7 +1186,7 @@ mod tests {
 
     #[test]
     fn a_closing_tag_for_the_wrong_element_is_mismatched() {
-        let err = lab_err("<Lab>\n  <Wall>\n  </Lab>\n");
+        let err = lab_err("<Lab Width=\"16\" Height=\"16\">\n  <Wall>\n  </Lab>\n");
         assert!(
             matches!(&err, MapLoadError::MismatchedEndTag { pos, expected, found }
                 if *pos == at(3, 3) && expected == "Wall" && found == "Lab"),
@@ -960,7 +1196,7 @@ mod tests {
 
     #[test]
     fn a_corner_without_y_is_missing_an_attribute() {
-        let text = "<Lab>\n <Wall>\n  <Corner X=\"1\" Y=\"1\"/>\n  <Corner X=\"2\"/>\n  <Corner X=\"2\" Y=\"2\"/>\n </Wall>\n</Lab>";
+        let text = "<Lab Width=\"16\" Height=\"16\">\n <Wall>\n  <Corner X=\"1\" Y=\"1\"/>\n  <Corner X=\"2\"/>\n  <Corner X=\"2\" Y=\"2\"/>\n </Wall>\n</Lab>";
         let err = lab_err(text);
         assert!(
             matches!(&err, MapLoadError::MissingAttribute { pos, element, attr }
@@ -971,7 +1207,7 @@ mod tests {
 
     #[test]
     fn a_bow_tie_wall_is_degenerate() {
-        let text = "<Lab>\n<Wall>\n<Corner X=\"0\" Y=\"0\"/><Corner X=\"2\" Y=\"2\"/>\
+        let text = "<Lab Width=\"16\" Height=\"16\">\n<Wall>\n<Corner X=\"0\" Y=\"0\"/><Corner X=\"2\" Y=\"2\"/>\
                     <Corner X=\"2\" Y=\"0\"/><Corner X=\"0\" Y=\"2\"/>\n</Wall>\n</Lab>";
         let err = lab_err(text);
         assert!(matches!(err, MapLoadError::DegenerateWall { pos } if pos == at(2, 1)), "{err:?}");
@@ -979,7 +1215,7 @@ mod tests {
 
     #[test]
     fn a_wall_whose_edges_cross_is_degenerate_even_with_area() {
-        let text = "<Lab>\n  <Wall><Corner X=\"1\" Y=\"1\"/><Corner X=\"6\" Y=\"1\"/><Corner X=\"6\" Y=\"4\"/>\
+        let text = "<Lab Width=\"16\" Height=\"16\">\n  <Wall><Corner X=\"1\" Y=\"1\"/><Corner X=\"6\" Y=\"1\"/><Corner X=\"6\" Y=\"4\"/>\
                     <Corner X=\"2\" Y=\"4\"/><Corner X=\"4\" Y=\"0.5\"/></Wall>\n</Lab>";
         let err = lab_err(text);
         assert!(matches!(err, MapLoadError::DegenerateWall { pos } if pos == at(2, 3)), "{err:?}");
@@ -987,16 +1223,15 @@ mod tests {
 
     #[test]
     fn a_wall_with_collinear_corners_is_degenerate() {
-        let text =
-            "<Lab><Wall><Corner X=\"1\" Y=\"1\"/><Corner X=\"2\" Y=\"2\"/><Corner X=\"3\" Y=\"3\"/></Wall></Lab>";
+        let text = "<Lab Width=\"16\" Height=\"16\"><Wall><Corner X=\"1\" Y=\"1\"/><Corner X=\"2\" Y=\"2\"/><Corner X=\"3\" Y=\"3\"/></Wall></Lab>";
         let err = lab_err(text);
-        assert!(matches!(err, MapLoadError::DegenerateWall { pos } if pos == at(1, 6)), "{err:?}");
+        assert!(matches!(err, MapLoadError::DegenerateWall { pos } if pos == at(1, 29)), "{err:?}");
     }
 
     #[test]
     fn a_wall_that_doubles_back_on_itself_is_degenerate() {
         // A square with a spike: (3,1) -> (4,1) -> (3,1) folds the edge back.
-        let text = "<Lab><Wall><Corner X=\"1\" Y=\"1\"/><Corner X=\"3\" Y=\"1\"/><Corner X=\"4\" Y=\"1\"/>\
+        let text = "<Lab Width=\"16\" Height=\"16\"><Wall><Corner X=\"1\" Y=\"1\"/><Corner X=\"3\" Y=\"1\"/><Corner X=\"4\" Y=\"1\"/>\
                     <Corner X=\"3\" Y=\"1.0\"/><Corner X=\"3\" Y=\"3\"/><Corner X=\"1\" Y=\"3\"/></Wall></Lab>";
         let err = lab_err(text);
         assert!(matches!(err, MapLoadError::DegenerateWall { .. }), "{err:?}");
@@ -1005,7 +1240,7 @@ mod tests {
     #[test]
     fn clockwise_walls_come_back_counter_clockwise_from_the_same_first_corner() {
         let lab = lab_ok(
-            "<Lab><Wall><Corner X=\"1\" Y=\"1\"/><Corner X=\"1\" Y=\"2\"/>\
+            "<Lab Width=\"16\" Height=\"16\"><Wall><Corner X=\"1\" Y=\"1\"/><Corner X=\"1\" Y=\"2\"/>\
              <Corner X=\"2\" Y=\"2\"/><Corner X=\"2\" Y=\"1\"/></Wall></Lab>",
         );
         assert_eq!(corners(&lab.walls[0]), [(1.0, 1.0), (2.0, 1.0), (2.0, 2.0), (1.0, 2.0)]);
@@ -1015,7 +1250,7 @@ mod tests {
     #[test]
     fn counter_clockwise_walls_keep_their_order() {
         let lab = lab_ok(
-            "<Lab><Wall><Corner X=\"1\" Y=\"1\"/><Corner X=\"2\" Y=\"1\"/>\
+            "<Lab Width=\"16\" Height=\"16\"><Wall><Corner X=\"1\" Y=\"1\"/><Corner X=\"2\" Y=\"1\"/>\
              <Corner X=\"2\" Y=\"2\"/><Corner X=\"1\" Y=\"2\"/></Wall></Lab>",
         );
         assert_eq!(corners(&lab.walls[0]), [(1.0, 1.0), (2.0, 1.0), (2.0, 2.0), (1.0, 2.0)]);
@@ -1024,18 +1259,48 @@ mod tests {
     #[test]
     fn a_closing_corner_that_repeats_the_first_is_dropped() {
         let lab = lab_ok(
-            "<Lab><Wall><Corner X=\"1\" Y=\"1\"/><Corner X=\"2\" Y=\"1\"/><Corner X=\"2\" Y=\"2\"/>\
+            "<Lab Width=\"16\" Height=\"16\"><Wall><Corner X=\"1\" Y=\"1\"/><Corner X=\"2\" Y=\"1\"/><Corner X=\"2\" Y=\"2\"/>\
              <Corner X=\"1\" Y=\"1\"/></Wall></Lab>",
         );
         assert_eq!(corners(&lab.walls[0]), [(1.0, 1.0), (2.0, 1.0), (2.0, 2.0)]);
     }
 
     #[test]
-    fn an_empty_lab_gets_ciber_rato_defaults() {
-        let lab = lab_ok("<Lab/>");
+    fn an_empty_lab_gets_ciber_rato_default_name() {
+        let lab = lab_ok("<Lab Width=\"16\" Height=\"16\"/>");
         assert_eq!(lab.name, "NO NAMED LAB");
         assert_eq!((lab.width_m, lab.height_m), (16.0, 16.0));
         assert!(lab.walls.is_empty() && lab.beacons.is_empty() && lab.targets.is_empty());
+    }
+
+    #[test]
+    fn a_lab_without_width_or_height_is_refused_rather_than_given_16_m() {
+        for (text, want) in
+            [("<Lab Height=\"14\"/>", "Width"), ("\n <Lab Width=\"28\"/>", "Height"), ("<Lab/>", "Width")]
+        {
+            let err = lab_err(text);
+            assert!(
+                matches!(&err, MapLoadError::MissingAttribute { element, attr, .. } if element == "Lab" && attr == want),
+                "{text}: {err:?}"
+            );
+        }
+        let err = lab_err("\n <Lab Width=\"28\"/>");
+        assert_eq!(err.to_string(), "2:2: <Lab> has no Height attribute: expected Height=\"...\"");
+    }
+
+    #[test]
+    fn a_lab_larger_than_the_limit_is_out_of_range() {
+        let err = lab_err("<Lab Width=\"10000000\" Height=\"10000000\"/>");
+        assert!(
+            matches!(&err, MapLoadError::OutOfRange { attr, pos, .. } if attr == "Width" && *pos == at(1, 1)),
+            "{err:?}"
+        );
+        assert!(err.to_string().contains("at most 10000"), "{err}");
+        assert_eq!(crate::MAX_LAB_SIZE_M, 10_000.0, "the message above quotes the limit");
+        let lab = lab_ok("<Lab Width=\"10000\" Height=\"0.5\"/>");
+        assert_eq!((lab.width_m, lab.height_m), (10_000.0, 0.5));
+        let err = lab_err("<Lab Width=\"5\" Height=\"10000.001\"/>");
+        assert!(matches!(&err, MapLoadError::OutOfRange { attr, .. } if attr == "Height"), "{err:?}");
     }
 
     #[test]
@@ -1086,13 +1351,13 @@ mod tests {
 
     #[test]
     fn a_row_needs_a_whole_non_negative_pos_and_a_pattern() {
-        let err = lab_err("<Lab><Row Pos=\"1.5\" Pattern=\"--\"/></Lab>");
+        let err = lab_err("<Lab Width=\"16\" Height=\"16\"><Row Pos=\"1.5\" Pattern=\"--\"/></Lab>");
         assert!(matches!(&err, MapLoadError::OutOfRange { attr, .. } if attr == "Pos"), "{err:?}");
-        let err = lab_err("<Lab><Row Pos=\"-2\" Pattern=\"--\"/></Lab>");
+        let err = lab_err("<Lab Width=\"16\" Height=\"16\"><Row Pos=\"-2\" Pattern=\"--\"/></Lab>");
         assert!(matches!(&err, MapLoadError::OutOfRange { attr, .. } if attr == "Pos"), "{err:?}");
-        let err = lab_err("<Lab><Row Pos=\"2\"/></Lab>");
+        let err = lab_err("<Lab Width=\"16\" Height=\"16\"><Row Pos=\"2\"/></Lab>");
         assert!(
-            matches!(&err, MapLoadError::MissingAttribute { attr, pos, .. } if attr == "Pattern" && *pos == at(1, 6)),
+            matches!(&err, MapLoadError::MissingAttribute { attr, pos, .. } if attr == "Pattern" && *pos == at(1, 29)),
             "{err:?}"
         );
     }
@@ -1100,14 +1365,14 @@ mod tests {
     #[test]
     fn impossible_sizes_and_heights_are_out_of_range() {
         let cases = [
-            ("<Lab Width=\"0\"/>", "Lab", "Width"),
-            ("<Lab Height=\"-3\"/>", "Lab", "Height"),
-            ("<Lab><Target X=\"1\" Y=\"1\" Radius=\"0\"/></Lab>", "Target", "Radius"),
-            ("<Lab><Beacon X=\"1\" Y=\"1\" Height=\"-1\"/></Lab>", "Beacon", "Height"),
-            ("<Lab Width=\"5\"><Beacon X=\"6\" Y=\"1\"/></Lab>", "Beacon", "X"),
-            ("<Lab Height=\"5\"><Target X=\"1\" Y=\"-1\"/></Lab>", "Target", "Y"),
+            ("<Lab Width=\"0\" Height=\"5\"/>", "Lab", "Width"),
+            ("<Lab Width=\"5\" Height=\"-3\"/>", "Lab", "Height"),
+            ("<Lab Width=\"16\" Height=\"16\"><Target X=\"1\" Y=\"1\" Radius=\"0\"/></Lab>", "Target", "Radius"),
+            ("<Lab Width=\"16\" Height=\"16\"><Beacon X=\"1\" Y=\"1\" Height=\"-1\"/></Lab>", "Beacon", "Height"),
+            ("<Lab Width=\"5\" Height=\"5\"><Beacon X=\"6\" Y=\"1\"/></Lab>", "Beacon", "X"),
+            ("<Lab Width=\"5\" Height=\"5\"><Target X=\"1\" Y=\"-1\"/></Lab>", "Target", "Y"),
             (
-                "<Lab><Wall Height=\"-1\"><Corner X=\"1\" Y=\"1\"/><Corner X=\"2\" Y=\"1\"/>\
+                "<Lab Width=\"16\" Height=\"16\"><Wall Height=\"-1\"><Corner X=\"1\" Y=\"1\"/><Corner X=\"2\" Y=\"1\"/>\
                  <Corner X=\"2\" Y=\"2\"/></Wall></Lab>",
                 "Wall",
                 "Height",
@@ -1126,11 +1391,10 @@ mod tests {
     #[test]
     fn malformed_xml_is_a_syntax_error_with_its_position() {
         let cases = [
-            ("<Lab>\n  <Wall Height=\"1\"", at(2, 3)),
+            ("<Lab Width=\"16\" Height=\"16\">\n  <Wall Height=\"1\"", at(2, 3)),
             ("<Lab Width=10/>", at(1, 12)),
             ("<Lab/>\n<Lab/>", at(2, 1)),
-            ("<Lab>\n</Lab>\n</Lab>", at(3, 1)),
-            ("<Lab Name=\"&nope;\"/>", at(1, 1)),
+            ("<Lab Width=\"16\" Height=\"16\">\n</Lab>\n</Lab>", at(3, 1)),
         ];
         for (text, want) in cases {
             let err = lab_err(text);
@@ -1141,14 +1405,22 @@ mod tests {
 
     #[test]
     fn a_file_without_elements_is_empty() {
-        for text in ["", "   \n", "<?xml version=\"1.0\"?><!-- nothing -->", "just text"] {
+        for text in ["", "   \n", "<?xml version=\"1.0\"?><!-- nothing -->"] {
             assert!(matches!(parse_lab(text), Err(MapLoadError::Empty)), "{text:?}");
         }
     }
 
     #[test]
+    fn plain_text_without_an_element_is_refused_at_its_first_character() {
+        let err = lab_err("\n  just some text\nand more\n");
+        assert!(matches!(err, MapLoadError::NoRootElement { pos } if pos == at(2, 3)), "{err:?}");
+        assert!(err.to_string().starts_with("2:3: text where the root element belongs"), "{err}");
+        assert!(matches!(parse_any("garbage"), Err(MapLoadError::NoRootElement { pos }) if pos == at(1, 1)));
+    }
+
+    #[test]
     fn a_byte_order_mark_is_skipped() {
-        assert_eq!(lab_ok("\u{feff}<Lab Name=\"bom\"/>").name, "bom");
+        assert_eq!(lab_ok("\u{feff}<Lab Name=\"bom\" Width=\"1\" Height=\"1\"/>").name, "bom");
         let err = lab_err("\u{feff}<Lab Width=\"x\"/>");
         assert!(matches!(err, MapLoadError::NotANumber { pos, .. } if pos == at(1, 1)), "{err:?}");
     }
@@ -1270,7 +1542,7 @@ mod tests {
 
     #[test]
     fn parse_any_dispatches_on_the_root_element() {
-        assert!(matches!(parse_any("<Lab/>"), Ok(MapFile::Lab(_))));
+        assert!(matches!(parse_any("<Lab Width=\"1\" Height=\"1\"/>"), Ok(MapFile::Lab(_))));
         assert!(matches!(parse_any("<Grid/>"), Ok(MapFile::Grid(_))));
         assert!(matches!(parse_any("<Parameters GPS=\"On\"/>"), Ok(MapFile::Params(p)) if p.sensors.gps));
         let err = parse_any("\n <Robot Name=\"r\"/>").expect_err("not a map file");
@@ -1288,6 +1560,114 @@ mod tests {
         let err = read_text(Path::new("/nonexistent/iwsim/lab.xml")).expect_err("missing");
         assert!(matches!(&err, MapLoadError::Io { path, .. } if path == Path::new("/nonexistent/iwsim/lab.xml")));
         assert!(std::error::Error::source(&err).is_some());
+    }
+
+    #[test]
+    fn every_pattern_character_of_ciber_ratos_labs_loads() {
+        // One row per character Ciber-Rato's 89 shipped labs use.
+        let lab = lab_ok("<Lab Width=\"28\" Height=\"14\">\n<Row Pos=\"1\" Pattern=\"--+--| /\\ . · T H X\"/>\n</Lab>");
+        assert_eq!(lab.walls.len(), 2, "the bar and the run of dashes");
+    }
+
+    #[test]
+    fn a_pattern_character_that_means_nothing_is_refused_at_its_column() {
+        for bad in ['#', '=', '*', '@', '{', '}', 'x'] {
+            let text = format!("<Lab Width=\"28\" Height=\"14\">\n  <Row Pos=\"3\" Pattern=\"--+-{bad}+\"/>\n</Lab>");
+            let err = lab_err(&text);
+            // `  <Row Pos="3" Pattern="` is 24 characters; the bad one is the 5th of the value.
+            assert!(
+                matches!(err, MapLoadError::BadPatternCharacter { pos, found } if pos == at(2, 29) && found == bad),
+                "{bad}: {err:?}"
+            );
+        }
+        let err = lab_err("<Lab Width=\"28\" Height=\"14\"><Row Pos=\"3\" Pattern=\"·#\"/></Lab>");
+        assert!(err.to_string().contains("'#'") && err.to_string().contains("expected only space"), "{err}");
+    }
+
+    #[test]
+    fn a_pattern_written_with_entities_is_refused_at_the_value() {
+        let err = lab_err("<Lab Width=\"28\" Height=\"14\">\n<Row Pos=\"3\" Pattern=\"&amp;-#\"/></Lab>");
+        assert!(matches!(err, MapLoadError::BadPatternCharacter { pos, found: '&' } if pos == at(2, 23)), "{err:?}");
+    }
+
+    #[test]
+    fn a_row_pos_that_is_not_a_number_hints_at_a_whole_number() {
+        let err = lab_err("<Lab Width=\"28\" Height=\"14\"><Row Pos=\"two\" Pattern=\"--\"/></Lab>");
+        assert!(matches!(&err, MapLoadError::NotANumber { attr, .. } if attr == "Pos"), "{err:?}");
+        let message = err.to_string();
+        assert!(message.contains("expected a whole number") && !message.contains("2.5"), "{message}");
+        let err = parse_params("<Parameters CycleTime=\"fast\"/>").expect_err("not a number");
+        assert!(!err.to_string().contains("2.5"), "{err}");
+    }
+
+    #[test]
+    fn a_dtd_is_refused_as_unsupported_where_it_is_declared() {
+        let text = "<?xml version=\"1.0\"?>\n<!DOCTYPE Lab [ <!ENTITY e9 \"é\"> ]>\n<Lab Name=\"&e9;\" Width=\"1\" Height=\"1\"/>";
+        let err = lab_err(text);
+        assert!(matches!(err, MapLoadError::DtdNotSupported { pos } if pos == at(2, 1)), "{err:?}");
+        assert!(err.to_string().contains("DTDs and entity declarations are not supported"), "{err}");
+        // A DOCTYPE that declares nothing is harmless.
+        assert_eq!(lab_ok("<!DOCTYPE Lab>\n<Lab Name=\"x\" Width=\"1\" Height=\"1\"/>").name, "x");
+    }
+
+    #[test]
+    fn an_unknown_entity_says_entities_are_not_supported_and_where() {
+        let err = lab_err("<Lab Width=\"1\" Height=\"1\"\n  Name=\"caf&e9;\"/>");
+        assert!(
+            matches!(&err, MapLoadError::UnknownEntity { pos, name } if *pos == at(2, 12) && name == "e9"),
+            "{err:?}"
+        );
+        assert!(err.to_string().contains("not supported"), "{err}");
+        assert_eq!(lab_ok("<Lab Name=\"caf&#233; &amp; co\" Width=\"1\" Height=\"1\"/>").name, "café & co");
+    }
+
+    #[test]
+    fn invalid_utf8_is_refused_at_its_first_bad_byte() {
+        let bytes = b"<Lab Width=\"1\" Height=\"1\">\n  <!-- caf\xe9 -->\n</Lab>".to_vec();
+        let err = text_from_bytes(bytes).expect_err("latin-1 is not UTF-8");
+        assert!(matches!(err, MapLoadError::NotUtf8 { pos } if pos == at(2, 11)), "{err:?}");
+        assert!(err.to_string().starts_with("2:11: the file is not UTF-8 text"), "{err}");
+        assert_eq!(text_from_bytes("é\nok".as_bytes().to_vec()).expect("UTF-8"), "é\nok");
+    }
+
+    #[test]
+    fn a_file_larger_than_the_cap_is_refused_without_reading_it_all() {
+        // /dev/zero never ends: only the cap stops the read.
+        let err = read_text(Path::new("/dev/zero")).expect_err("endless");
+        assert!(matches!(err, MapLoadError::TooLarge { max: MAX_FILE_BYTES, .. }), "{err:?}");
+        assert!(err.to_string().contains("/dev/zero is larger than 16777216 bytes"), "{err}");
+    }
+
+    #[test]
+    fn errors_name_their_file_once_with_a_colon_or_a_space() {
+        let err = lab_err("<Lab Width=\"1\" Height=\"1\"><Beacon X=\"9\" Y=\"0\"/></Lab>");
+        assert!(err.in_file("lab.xml").to_string().starts_with("lab.xml:1:27: <Beacon>"), "{err}");
+        assert_eq!(
+            MapLoadError::Empty.in_file("lab.xml").to_string(),
+            "lab.xml: the file holds no root element: expected <Lab>, <Grid> or <Parameters>"
+        );
+        let err = read_text(Path::new("/nonexistent/iwsim/lab.xml")).expect_err("missing");
+        let shown = err.in_file("/nonexistent/iwsim/lab.xml").to_string();
+        assert_eq!(shown.matches("/nonexistent/iwsim/lab.xml").count(), 1, "{shown}");
+    }
+
+    #[test]
+    fn grid_positions_outside_their_lab_are_refused_at_the_position() {
+        let lab = lab_ok("<Lab Width=\"40\" Height=\"14\"/>");
+        let text = "<Grid>\n  <Position X=\"3\" Y=\"3\"/>\n  <Position X=\"200\" Y=\"3\"/>\n</Grid>";
+        let err = parse_grid_for(text, &lab).expect_err("x = 200 on a 40 m lab");
+        assert!(
+            matches!(&err, MapLoadError::OutOfRange { attr, pos, .. } if attr == "X" && *pos == at(3, 3)),
+            "{err:?}"
+        );
+        let err = parse_grid_for("<Grid><Position X=\"3\" Y=\"-1\"/></Grid>", &lab).expect_err("y < 0");
+        assert!(matches!(&err, MapLoadError::OutOfRange { attr, .. } if attr == "Y"), "{err:?}");
+        assert_eq!(
+            parse_grid_for("<Grid><Position X=\"40\" Y=\"0\"/></Grid>", &lab).expect("on the border").poses.len(),
+            1
+        );
+        // Without a lab there is nothing to check against.
+        assert_eq!(parse_grid(text).expect("no lab").poses.len(), 2);
     }
 
     #[test]

@@ -1,0 +1,157 @@
+//! Hardening (issue 16): values a process cannot honour are refused up front, a closed stderr
+//! is not an error, an idle lock-step hub sleeps, a viewer leaves with its hub, and no way out
+//! of a process leaves files of its session in /dev/shm.
+
+use std::process::{Command, Stdio};
+use std::time::Duration;
+
+use super::common::{Proc, assert_no_shared_memory_left, session, text, wait_for_tick};
+
+/// Runs `iwsim ARGS` to its end and returns its exit code and stderr.
+fn iwsim(args: &[&str]) -> (Option<i32>, String) {
+    let out = Command::new(env!("CARGO_BIN_EXE_iwsim"))
+        .args(args)
+        .env("RUST_LOG", "warn")
+        .stdin(Stdio::null())
+        .output()
+        .expect("iwsim runs");
+    (out.status.code(), text(&out.stderr))
+}
+
+#[test]
+fn values_that_cannot_be_honoured_are_refused_with_the_option_and_its_range() {
+    for (args, option, range) in [
+        (&["hub", "--deadline-ms", "0"][..], "--deadline-ms", "1..=86400000"),
+        (&["hub", "--wait-agents", "1000"][..], "--wait-agents", "0..=128"),
+        (&["hub", "--max-robots", "0"][..], "--max-robots", "1..=10000"),
+        (&["hub", "--max-robots", "20000"][..], "--max-robots", "1..=10000"),
+        (&["hub", "--cycle-ms", "0"][..], "--cycle-ms", "1..="),
+        (&["agent", "wheelchair", "--robots", "0"][..], "--robots", "1..=10000"),
+        (&["udp", "--client-timeout", "1e30"][..], "--client-timeout", "0.1..=86400"),
+    ] {
+        let (code, stderr) = iwsim(args);
+        assert_eq!(code, Some(2), "{args:?} must be refused before anything starts: {stderr}");
+        let first = stderr.lines().next().unwrap_or_default();
+        assert!(first.contains(option) && first.contains(range), "{args:?}: {stderr}");
+        assert!(!stderr.contains("panicked"), "{args:?}: {stderr}");
+    }
+}
+
+#[test]
+fn an_agent_whose_stderr_is_closed_finishes_its_run() {
+    let s = session("closed-stderr");
+    let hub = Proc::spawn(&["hub", "--session", &s, "--lockstep", "--ticks", "30", "--wait-agents", "1", "--json"]);
+    let mut agent = Command::new(env!("CARGO_BIN_EXE_iwsim"))
+        .args(["agent", "wheelchair", "--session", &s, "--connect-timeout", "20"])
+        .env("RUST_LOG", "info")
+        .stdin(Stdio::null())
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("the agent starts");
+    // The reader goes away before the agent has written anything: every line it reports
+    // meets a broken pipe.
+    drop(agent.stderr.take());
+    let status = Proc(Some(agent)).wait(Duration::from_secs(30)).status;
+    assert_eq!(status.code(), Some(0), "the agent must finish its run as if its stderr were there");
+    let h = hub.wait(Duration::from_secs(10));
+    assert!(h.status.success(), "{}", text(&h.stderr));
+    assert!(text(&h.stdout).contains("\"ticks\":30"), "the hub ran all its ticks: {}", text(&h.stdout));
+    assert_no_shared_memory_left(&s);
+}
+
+/// User plus system CPU time of process `pid` so far, in clock ticks.
+fn cpu_ticks(pid: u32) -> u64 {
+    let stat = std::fs::read_to_string(format!("/proc/{pid}/stat")).expect("the hub runs");
+    // Fields after the command name (which is in parentheses): state is the 1st, utime the
+    // 12th, stime the 13th.
+    let rest = stat.rsplit_once(')').expect("a stat line").1;
+    let fields: Vec<&str> = rest.split_whitespace().collect();
+    fields[11].parse::<u64>().expect("utime") + fields[12].parse::<u64>().expect("stime")
+}
+
+/// The unit of /proc's CPU times (`getconf CLK_TCK`; 100 on every Linux we know).
+fn clock_ticks_per_second() -> u64 {
+    let out = Command::new("getconf").arg("CLK_TCK").output().ok();
+    out.and_then(|o| text(&o.stdout).trim().parse().ok()).unwrap_or(100)
+}
+
+/// CPU time (clock ticks) process `pid` uses over one second of wall time.
+fn cpu_over_a_second(pid: u32) -> u64 {
+    let before = cpu_ticks(pid);
+    // A measuring interval, not a synchronisation: nothing is waited for.
+    std::thread::sleep(Duration::from_secs(1));
+    cpu_ticks(pid) - before
+}
+
+#[test]
+fn a_lock_step_hub_with_no_ready_agent_sleeps() {
+    let hz = clock_ticks_per_second();
+    let s = session("idle-lockstep");
+    let hub = Proc::spawn(&["hub", "--session", &s, "--lockstep", "--deadline-ms", "20"]);
+    // Serving: an observer saw tick 0 and left again; the 20 ms deadline is long past below.
+    wait_for_tick(&s, 0, Duration::from_secs(20)).close();
+    let idle = cpu_over_a_second(hub.pid());
+    assert!(idle < hz / 5, "a lock-step hub with no agent used {idle} of {hz} clock ticks in a second");
+
+    // Its last ready agent leaves: the hub is back to no ready agent.
+    let agent = Proc::spawn(&["agent", "wheelchair", "--session", &s, "--ticks", "5"]);
+    let a = agent.wait(Duration::from_secs(20));
+    assert!(a.status.success(), "{}", text(&a.stderr));
+    let idle = cpu_over_a_second(hub.pid());
+    assert!(idle < hz / 5, "a lock-step hub whose agent left used {idle} of {hz} clock ticks in a second");
+
+    // SIGTERM to a lock-step hub alone leaves nothing behind.
+    hub.signal("TERM");
+    let h = hub.wait(Duration::from_secs(10));
+    assert!(h.status.success(), "{}", text(&h.stderr));
+    assert_no_shared_memory_left(&s);
+}
+
+#[test]
+fn a_viewer_leaves_when_its_hub_is_killed_and_a_restarted_hub_serves_the_session() {
+    let s = session("view-hub-killed");
+    let mut hub = Proc::spawn(&["hub", "--session", &s, "--cycle-ms", "20"]);
+    let mut viewer = Proc::spawn(&["view", "--session", &s, "--http", "127.0.0.1:0", "--connect-timeout", "20"]);
+    viewer.announced("open http://", Duration::from_secs(20));
+    hub.kill9();
+    let v = viewer.wait(Duration::from_secs(5));
+    assert!(!v.status.success(), "a viewer whose hub died must say so in its exit status");
+    // The viewer, last of the session, cleaned up after the dead hub too.
+    assert_no_shared_memory_left(&s);
+
+    let hub = Proc::spawn(&["hub", "--session", &s, "--cycle-ms", "20"]);
+    wait_for_tick(&s, 2, Duration::from_secs(20)).close();
+    assert_eq!(agent_sdk::control(&s, ipc_types::Command::Stop, 0).expect("the new hub answers").status, 0);
+    let h = hub.wait(Duration::from_secs(10));
+    assert!(h.status.success(), "the restarted hub: {}", text(&h.stderr));
+    assert_no_shared_memory_left(&s);
+}
+
+#[test]
+fn clients_that_find_no_hub_leave_nothing_behind() {
+    let s = session("no-hub");
+    for args in [
+        &["agent", "wheelchair", "--session", &s, "--connect-timeout", "0.2"][..],
+        &["view", "--session", &s, "--http", "127.0.0.1:0", "--connect-timeout", "0.2"][..],
+        &["udp", "--session", &s, "--port", "0", "--connect-timeout", "0.2"][..],
+    ] {
+        let (code, stderr) = iwsim(args);
+        assert_eq!(code, Some(1), "{args:?}: {stderr}");
+        assert!(stderr.contains("no hub is serving session"), "{args:?}: {stderr}");
+        assert_no_shared_memory_left(&s);
+    }
+}
+
+#[test]
+fn sigterm_to_a_lock_step_hub_and_its_bridge_leaves_nothing_behind() {
+    let s = session("term-hub-bridge");
+    let hub = Proc::spawn(&["hub", "--session", &s, "--lockstep"]);
+    let mut bridge = Proc::spawn(&["udp", "--session", &s, "--port", "0", "--connect-timeout", "20"]);
+    bridge.announced("registrations on ", Duration::from_secs(20));
+    hub.signal("TERM");
+    bridge.signal("TERM");
+    hub.wait(Duration::from_secs(10));
+    bridge.wait(Duration::from_secs(10));
+    assert_no_shared_memory_left(&s);
+}

@@ -1,0 +1,234 @@
+//! `iwsim run` as a process that owns others: a signal to it alone stops its hub, agents and
+//! viewer and leaves nothing behind; a child that fails before the run's end stops the run at
+//! once; `--session` lets another process attach; and every command README shows exists.
+
+use std::path::{Path, PathBuf};
+use std::sync::mpsc::Receiver;
+use std::time::{Duration, Instant};
+
+use records::summary::RunSummary;
+
+use super::common::{Proc, assert_no_shared_memory_left, processes_with_argument, session, shared_memory_files, text};
+
+/// A fresh directory for one test.
+fn work_dir(tag: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("iwsim-e2e-runner-{tag}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).expect("work dir");
+    dir
+}
+
+/// A scenario file in `dir`: the agents given as TOML, for a run far longer than any test.
+fn scenario(dir: &Path, lab: &str, agents: &str) -> String {
+    let path = dir.join("long.toml");
+    std::fs::write(
+        &path,
+        format!(
+            "name = \"long\"\ndescription = \"chairs standing still for a long time\"\nlab = \"{lab}\"\nseconds = 100000\n{agents}"
+        ),
+    )
+    .expect("scenario written");
+    path.display().to_string()
+}
+
+/// A wheelchair agent that stands still at `x`.
+fn still_chair(x: f64) -> String {
+    format!("[[agents]]\nkind = \"wheelchair\"\noptions = {{ pose = [{x}, 6.1, 0.0], powers = [0.0, 0.0] }}\n")
+}
+
+/// Reads `lines` until every marker has been seen (in any order); returns what was read.
+fn wait_for_lines(lines: &Receiver<String>, markers: &[&str], timeout: Duration) -> Vec<String> {
+    let deadline = Instant::now() + timeout;
+    let mut seen = Vec::new();
+    while !markers.iter().all(|m| seen.iter().any(|l: &String| l.contains(m))) {
+        match lines.recv_timeout(deadline.saturating_duration_since(Instant::now())) {
+            Ok(line) => seen.push(line),
+            Err(_) => panic!("no lines with all of {markers:?} within {timeout:?}; read:\n{}", seen.join("\n")),
+        }
+    }
+    seen
+}
+
+/// Asserts that nothing of the runner `pid`'s sessions is left: no process and no file.
+fn assert_nothing_of_run_left(pid: u32) {
+    let prefix = format!("run-{pid}-");
+    let procs = processes_with_argument(&prefix);
+    assert!(procs.is_empty(), "processes of the run left: {procs:?}");
+    let files = shared_memory_files(&format!("iwsim_{prefix}"));
+    assert!(files.is_empty(), "left in /dev/shm: {files:?}");
+}
+
+/// Starts a long run, waits until its agent drives (and its viewer serves, unless headless),
+/// sends `signal` to the runner alone, and checks what it leaves.
+fn interrupt_a_run(tag: &str, extra: &[&str], viewer: bool, signal: &str, name: &str, code: i32) {
+    let dir = work_dir(tag);
+    let scenario = scenario(&dir, "builtin:liacc", &still_chair(10.0));
+    let out = dir.join("out");
+    let mut args = vec!["run", &scenario, "--out", out.to_str().expect("utf-8")];
+    args.extend(extra);
+    if viewer {
+        args.extend(["--http", "127.0.0.1:0"]);
+    } else {
+        args.push("--headless");
+    }
+    let mut run = Proc::spawn(&args);
+    let pid = run.pid();
+    let lines = run.stderr_lines();
+    let mut markers = vec!["wheelchair: agent"];
+    if viewer {
+        markers.push("open http://");
+    }
+    wait_for_lines(&lines, &markers, Duration::from_secs(60));
+    assert!(!processes_with_argument(&format!("run-{pid}-")).is_empty(), "the run's processes are found");
+    run.signal(signal);
+    let output = run.wait(Duration::from_secs(30));
+    let stdout = text(&output.stdout);
+    let stderr: Vec<String> = lines.try_iter().collect();
+    assert_eq!(output.status.code(), Some(code), "{stdout}\n{}", stderr.join("\n"));
+    assert!(stderr.iter().any(|l| l.contains(&format!("iwsim run: {name} received"))), "{stderr:?}");
+    assert!(stdout.contains(&format!("FAIL: interrupted by {name}")), "{stdout}");
+    assert!(stdout.contains(&format!("logs and summary.json in {}", out.display())), "{stdout}");
+    let summary = RunSummary::read(&out.join("summary.json")).unwrap_or_else(|e| panic!("{e}"));
+    assert!(!summary.passed, "{summary:?}");
+    assert!(summary.failures.iter().any(|f| f.starts_with(&format!("interrupted by {name}"))), "{summary:?}");
+    assert_nothing_of_run_left(pid);
+    let _ = std::fs::remove_dir_all(dir);
+}
+
+#[test]
+fn sigint_to_a_lock_step_run_stops_its_hub_and_agents_and_leaves_nothing() {
+    interrupt_a_run("sigint-lockstep", &["--lockstep"], false, "INT", "SIGINT", 130);
+}
+
+#[test]
+fn sigterm_to_a_real_time_run_stops_its_hub_agents_and_viewer_and_leaves_nothing() {
+    interrupt_a_run("sigterm-realtime", &[], true, "TERM", "SIGTERM", 143);
+}
+
+#[test]
+fn sigterm_to_a_lock_step_run_stops_its_hub_and_agents_and_leaves_nothing() {
+    interrupt_a_run("sigterm-lockstep", &["--lockstep"], false, "TERM", "SIGTERM", 143);
+}
+
+#[test]
+fn sighup_to_a_real_time_run_stops_its_hub_and_agents_and_leaves_nothing() {
+    interrupt_a_run("sighup-realtime", &[], false, "HUP", "SIGHUP", 129);
+}
+
+#[test]
+fn an_agent_that_fails_at_start_up_stops_the_run_at_once() {
+    let dir = work_dir("agent-fails");
+    let bad = "[[agents]]\nkind = \"wheelchair\"\noptions = { pose = [12.0, 6.1, 0.0], powerz = [0.5, 0.5] }\n";
+    let scenario = scenario(&dir, "builtin:liacc", &format!("{}{bad}", still_chair(10.0)));
+    let out = dir.join("out");
+    let run = Proc::spawn(&["run", &scenario, "--headless", "--out", out.to_str().expect("utf-8")]);
+    let pid = run.pid();
+    // Without the fix the hub waits for its second agent for ever.
+    let output = run.wait(Duration::from_secs(60));
+    let stderr = text(&output.stderr);
+    assert_eq!(output.status.code(), Some(1), "{stderr}");
+    assert!(stderr.contains("the agent 2 (wheelchair) exited with exit status: 2 before the run ended"), "{stderr}");
+    assert!(stderr.contains("--powerz"), "the agent's own message is shown: {stderr}");
+    assert_nothing_of_run_left(pid);
+    let _ = std::fs::remove_dir_all(dir);
+}
+
+#[test]
+fn a_faulty_lab_is_reported_before_any_agent_starts() {
+    let dir = work_dir("faulty-lab");
+    std::fs::write(dir.join("bad.xml"), "<Lab Name=\"bad\" Width=\"10\" Height=\"10\"><Wall").expect("lab");
+    let scenario = scenario(&dir, "bad.xml", &still_chair(1.0));
+    let out = dir.join("out");
+    let run = Proc::spawn(&["run", &scenario, "--headless", "--out", out.to_str().expect("utf-8")]);
+    let pid = run.pid();
+    // Without the fix the runner waited 20 s for each agent (which waits 30 s for a hub) before
+    // saying anything; with it the hub's failure ends the run as it happens.
+    let output = run.wait(Duration::from_secs(15));
+    let stderr = text(&output.stderr);
+    assert_eq!(output.status.code(), Some(1), "{stderr}");
+    assert!(stderr.contains("the hub exited with exit status: 1"), "{stderr}");
+    assert!(stderr.contains("bad.xml"), "the hub's message names the lab: {stderr}");
+    // No agent was started, so none was waited for (it would wait 30 s for the hub) or
+    // killed: no agent said anything and no log was written.
+    assert!(!stderr.contains("wheelchair"), "{stderr}");
+    assert!(!out.join("chair1.csv").exists());
+    assert_nothing_of_run_left(pid);
+    let _ = std::fs::remove_dir_all(dir);
+}
+
+#[test]
+fn a_run_with_a_session_name_can_be_watched_from_another_process() {
+    let dir = work_dir("session");
+    let scenario = scenario(&dir, "builtin:liacc", &still_chair(10.0));
+    let out = dir.join("out");
+    let name = session("runner-session");
+    let mut run =
+        Proc::spawn(&["run", &scenario, "--headless", "--session", &name, "--out", out.to_str().expect("utf-8")]);
+    let lines = run.stderr_lines();
+    wait_for_lines(&lines, &["wheelchair: agent"], Duration::from_secs(60));
+    let observer = agent_sdk::Observer::connect_within(&name, "e2e-runner-watch", Duration::from_secs(10))
+        .expect("an observer joins the run's session");
+    let start = Instant::now();
+    let robots = loop {
+        if let Some((_, robots)) = observer.try_world().expect("world") {
+            break robots;
+        }
+        assert!(start.elapsed() < Duration::from_secs(10), "no world snapshot");
+        std::thread::sleep(Duration::from_millis(5));
+    };
+    assert_eq!(robots.len(), 1, "the run's chair is in the session's world");
+    observer.close();
+    run.signal("INT");
+    let output = run.wait(Duration::from_secs(30));
+    assert_eq!(output.status.code(), Some(130), "{}", text(&output.stdout));
+    assert_no_shared_memory_left(&name);
+    let _ = std::fs::remove_dir_all(dir);
+}
+
+/// The command lines README's code blocks show, as `iwsim` arguments: lines that start with
+/// `iwsim ` or `cargo run --release -- `, without their shell comments.
+fn readme_commands(readme: &str) -> Vec<(usize, Vec<String>)> {
+    let mut commands = Vec::new();
+    let mut in_block = false;
+    for (n, line) in readme.lines().enumerate() {
+        if line.trim_start().starts_with("```") {
+            in_block = !in_block;
+            continue;
+        }
+        if !in_block {
+            continue;
+        }
+        let line = line.trim().trim_start_matches("$ ");
+        let line = line.split(" #").next().unwrap_or_default();
+        let Some(rest) = line.strip_prefix("iwsim ").or_else(|| line.strip_prefix("cargo run --release -- ")) else {
+            continue;
+        };
+        commands.push((n + 1, rest.split_whitespace().map(str::to_owned).collect()));
+    }
+    commands
+}
+
+#[test]
+fn readme_commands_are_split_from_their_comments() {
+    let readme = "text iwsim no\n```\niwsim run builtin:door --session d1   # then: iwsim view --session d1\n# a comment\ncargo run --release -- hub --session lab1\n```\niwsim outside\n";
+    let got = readme_commands(readme);
+    let want = [(3, vec!["run", "builtin:door", "--session", "d1"]), (5, vec!["hub", "--session", "lab1"])];
+    assert_eq!(got, want.map(|(n, a)| (n, a.into_iter().map(String::from).collect::<Vec<_>>())));
+}
+
+#[test]
+fn every_iwsim_command_in_the_readme_takes_the_options_it_shows() {
+    let readme = std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("README.md")).expect("README");
+    let commands = readme_commands(&readme);
+    assert!(commands.len() >= 20, "README shows {} commands: {commands:?}", commands.len());
+    let mut refused = Vec::new();
+    for (line, args) in &commands {
+        let mut args: Vec<&str> = args.iter().map(String::as_str).collect();
+        args.push("--help");
+        let output = Proc::spawn(&args).wait(Duration::from_secs(30));
+        if !output.status.success() {
+            refused.push(format!("README.md:{line}: iwsim {}\n{}", args.join(" "), text(&output.stderr)));
+        }
+    }
+    assert!(refused.is_empty(), "{}", refused.join("\n"));
+}
