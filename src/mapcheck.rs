@@ -13,14 +13,14 @@ pub fn check(spec: &str) -> anyhow::Result<ExitCode> {
         Some(name) => match builtin::lab_xml(name) {
             Some(xml) => xml.to_owned(),
             None => {
-                eprintln!("{spec}: unknown built-in map; known: {}", builtin::NAMES.join(", "));
+                agent_sdk::report!("{spec}: unknown built-in map; known: {}", builtin::NAMES.join(", "));
                 return Ok(ExitCode::FAILURE);
             }
         },
         None => match read_text(std::path::Path::new(spec)) {
             Ok(t) => t,
             Err(err) => {
-                eprintln!("{}", err.in_file(spec));
+                agent_sdk::report!("{}", err.in_file(spec));
                 return Ok(ExitCode::FAILURE);
             }
         },
@@ -32,14 +32,14 @@ pub fn check(spec: &str) -> anyhow::Result<ExitCode> {
                 // The world model has its own checks (beacon count, triangulation): run them
                 // too, so a lab that passes here loads in the hub.
                 if let Err(err) = World::new(lab, world::map::Params::default(), 0) {
-                    eprintln!("{spec}: the lab parses but the world refuses it: {err}");
+                    agent_sdk::report!("{spec}: the lab parses but the world refuses it: {err}");
                     return Ok(ExitCode::FAILURE);
                 }
             }
             Ok(ExitCode::SUCCESS)
         }
         Err(err) => {
-            eprintln!("{}", err.in_file(spec));
+            agent_sdk::report!("{}", err.in_file(spec));
             Ok(ExitCode::FAILURE)
         }
     }

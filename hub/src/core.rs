@@ -43,17 +43,21 @@ impl Refused {
     }
 }
 
+/// A live agent. An agent that says goodbye or dies leaves the table at once, so the table
+/// holds at most `MAX_AGENTS` entries and the per-tick scans stay as short as the live set.
 #[derive(Debug, Clone)]
 struct AgentEntry {
     pid: u32,
     ready: bool,
-    alive: bool,
     robots: Vec<u32>,
     /// The last tick this agent answered.
     answered: Option<u64>,
     lagging: bool,
 }
 
+/// A robot and the agent that drives it. When that agent dies the robot stays, frozen, with
+/// the dead agent's id (which is never given out again): an orphan, until an agent registers
+/// a robot of the same name (and id, when it asks for one) and so takes it back.
 #[derive(Debug, Clone)]
 struct RobotEntry {
     handle: RobotHandle,
@@ -155,37 +159,42 @@ impl HubCore {
 
     /// A new agent process; its id, or a refusal when the hub is full.
     pub fn hello(&mut self, pid: u32) -> Result<u32, Refused> {
-        if self.agents.values().filter(|a| a.alive).count() >= MAX_AGENTS {
+        if self.agents.len() >= MAX_AGENTS {
             return Err(Refused::new(Refusal::Capacity, format!("the hub serves at most {MAX_AGENTS} agents")));
         }
         let id = self.next_agent_id;
         self.next_agent_id += 1;
-        self.agents.insert(
-            id,
-            AgentEntry { pid, ready: false, alive: true, robots: Vec::new(), answered: None, lagging: false },
-        );
+        self.agents.insert(id, AgentEntry { pid, ready: false, robots: Vec::new(), answered: None, lagging: false });
         Ok(id)
     }
 
-    /// The process id an agent said hello with.
+    /// The process id a live agent said hello with.
     pub fn agent_pid(&self, agent_id: u32) -> Option<u32> {
         self.agents.get(&agent_id).map(|a| a.pid)
     }
 
-    /// Live agents.
+    /// Live agents: the size of the agent table.
     pub fn live_agents(&self) -> usize {
-        self.agents.values().filter(|a| a.alive).count()
+        self.agents.len()
     }
 
     /// Live agents that said they are ready.
     pub fn ready_agents(&self) -> usize {
-        self.agents.values().filter(|a| a.alive && a.ready).count()
+        self.agents.values().filter(|a| a.ready).count()
     }
 
     /// Registers a robot for an agent: its id and sensor count, or why not.
+    ///
+    /// A robot left behind by a dead agent is taken back instead of a new one being added
+    /// when the registration names it: the same name, and either the same id or id 0. The
+    /// restarted agent gets it where it stands, with the body and sensors it was registered
+    /// with, thawed and with its motors at rest.
     pub fn register(&mut self, agent_id: u32, reg: &RobotRegistration) -> Result<(u32, u32), Refused> {
-        if !self.agents.get(&agent_id).is_some_and(|a| a.alive) {
+        if !self.agents.contains_key(&agent_id) {
             return Err(Refused::new(Refusal::UnknownAgent, format!("agent {agent_id} has not said hello")));
+        }
+        if let Some(taken_back) = self.take_back(agent_id, reg)? {
+            return Ok(taken_back);
         }
         if self.robots.len() >= self.max_robots {
             return Err(Refused::new(Refusal::Capacity, format!("the hub serves at most {} robots", self.max_robots)));
@@ -228,6 +237,37 @@ impl HubCore {
             a.robots.push(id);
         }
         Ok((id, sensors))
+    }
+
+    /// Hands an orphan robot that `reg` names to `agent_id`; its id and sensor count, or
+    /// `None` when `reg` names no orphan.
+    fn take_back(&mut self, agent_id: u32, reg: &RobotRegistration) -> Result<Option<(u32, u32)>, Refused> {
+        let name = reg.name.as_str().ok_or_else(|| Refused::new(Refusal::Malformed, "the name is not UTF-8"))?;
+        let orphan = |(&id, e): (&u32, &RobotEntry)| {
+            let named = |want: &str| self.world.robot(e.handle).is_some_and(|r| r.spec.name == want);
+            let matches = match reg.requested_id {
+                0 => !name.is_empty() && named(name),
+                wanted => id == wanted && (if name.is_empty() { named(&format!("robot{id}")) } else { named(name) }),
+            };
+            (matches && !self.agents.contains_key(&e.agent_id)).then_some(id)
+        };
+        let found = match reg.requested_id {
+            0 => self.robots.iter().find_map(orphan),
+            wanted => self.robots.get_key_value(&wanted).and_then(orphan),
+        };
+        let Some(id) = found else { return Ok(None) };
+        let Some(entry) = self.robots.get_mut(&id) else { return Ok(None) };
+        entry.agent_id = agent_id;
+        entry.leds = 0;
+        let handle = entry.handle;
+        self.world.set_frozen(handle, false);
+        // The dead agent's last powers would drive it until the new agent's first action.
+        self.pending.push(Action::motors(handle, 0.0, 0.0));
+        let sensors = self.world.robot(handle).map_or(0, |r| r.readings.proximity_count as u32);
+        if let Some(a) = self.agents.get_mut(&agent_id) {
+            a.robots.push(id);
+        }
+        Ok(Some((id, sensors)))
     }
 
     fn spec_of(&self, id: u32, reg: &RobotRegistration) -> Result<RobotSpec, Refused> {
@@ -276,19 +316,18 @@ impl HubCore {
     /// An agent has registered all its robots.
     pub fn ready(&mut self, agent_id: u32) -> Result<(), Refused> {
         match self.agents.get_mut(&agent_id) {
-            Some(a) if a.alive => {
+            Some(a) => {
                 a.ready = true;
                 Ok(())
             }
-            _ => Err(Refused::new(Refusal::UnknownAgent, format!("agent {agent_id} is unknown"))),
+            None => Err(Refused::new(Refusal::UnknownAgent, format!("agent {agent_id} is unknown"))),
         }
     }
 
-    /// An agent leaves: its robots are removed from the world.
+    /// An agent leaves: its robots are removed from the world and it from the table.
     pub fn bye(&mut self, agent_id: u32) {
-        if let Some(a) = self.agents.get_mut(&agent_id) {
-            a.alive = false;
-            for id in std::mem::take(&mut a.robots) {
+        if let Some(a) = self.agents.remove(&agent_id) {
+            for id in a.robots {
                 if let Some(r) = self.robots.remove(&id) {
                     self.world.remove_robot(r.handle);
                 }
@@ -296,30 +335,35 @@ impl HubCore {
         }
     }
 
-    /// An agent's process died: its robots are frozen and flagged, the run goes on without
-    /// waiting for it. Returns whether the agent was alive.
+    /// An agent's process died: it leaves the table, its robots stay frozen and flagged (until
+    /// a restarted agent takes them back, see [`HubCore::register`], or a `RemoveRobot`
+    /// command removes them), and the run goes on without waiting for it. Returns whether the
+    /// agent was alive.
     pub fn agent_died(&mut self, agent_id: u32) -> bool {
-        let Some(a) = self.agents.get_mut(&agent_id) else { return false };
-        let was_alive = a.alive;
-        a.alive = false;
+        let Some(a) = self.agents.remove(&agent_id) else { return false };
         for id in &a.robots {
             if let Some(r) = self.robots.get(id) {
                 self.world.set_frozen(r.handle, true);
             }
         }
-        was_alive
+        true
+    }
+
+    /// Robots whose agent died and that no agent has taken back, in id order.
+    pub fn orphan_robots(&self) -> impl Iterator<Item = u32> + '_ {
+        self.robots.iter().filter(|(_, e)| !self.agents.contains_key(&e.agent_id)).map(|(&id, _)| id)
     }
 
     /// Agents whose process id is `pid` (normally one).
     pub fn agents_with_pid(&self, pid: u32) -> Vec<u32> {
-        self.agents.iter().filter(|(_, a)| a.alive && a.pid == pid).map(|(&id, _)| id).collect()
+        self.agents.iter().filter(|(_, a)| a.pid == pid).map(|(&id, _)| id).collect()
     }
 
     /// Takes an agent's actions for `tick`. Actions for robots it does not own are ignored;
     /// returns how many were.
     pub fn actions(&mut self, agent_id: u32, tick: u64, blocks: &[ActionBlock]) -> usize {
         let now = self.world.tick();
-        let Some(agent) = self.agents.get_mut(&agent_id).filter(|a| a.alive) else { return blocks.len() };
+        let Some(agent) = self.agents.get_mut(&agent_id) else { return blocks.len() };
         // Only an answer to the tick in hand counts for the barrier: a tick from the future
         // (a buggy or hostile agent) must not excuse it from later ticks. Late answers still
         // set the robots' inputs for the next step.
@@ -355,7 +399,7 @@ impl HubCore {
     /// racing ahead on its own.
     pub fn all_answered(&self) -> bool {
         let t = self.world.tick();
-        let mut waiting_on = self.agents.values().filter(|a| a.alive && a.ready && !a.robots.is_empty()).peekable();
+        let mut waiting_on = self.agents.values().filter(|a| a.ready && !a.robots.is_empty()).peekable();
         waiting_on.peek().is_some() && waiting_on.all(|a| a.answered.is_some_and(|x| x >= t))
     }
 
@@ -366,7 +410,7 @@ impl HubCore {
 
     /// Agents the lock-step barrier waits for: live, ready, with robots.
     pub fn barrier_size(&self) -> usize {
-        self.agents.values().filter(|a| a.alive && a.ready && !a.robots.is_empty()).count()
+        self.agents.values().filter(|a| a.ready && !a.robots.is_empty()).count()
     }
 
     /// Marks the agents that have not answered the current tick as lagging (called when the
@@ -374,7 +418,7 @@ impl HubCore {
     pub fn mark_laggards(&mut self) -> usize {
         let t = self.world.tick();
         let mut n = 0;
-        for a in self.agents.values_mut().filter(|a| a.alive && a.ready && !a.robots.is_empty()) {
+        for a in self.agents.values_mut().filter(|a| a.ready && !a.robots.is_empty()) {
             a.lagging = a.answered.is_none_or(|x| x < t);
             n += a.lagging as usize;
         }
@@ -799,6 +843,88 @@ mod tests {
         assert_eq!(frozen, vec![rb]);
         assert!(c.agent_died(a));
         assert!(!c.all_answered(), "with no live agent lock-step waits instead of racing");
+    }
+
+    #[test]
+    fn agents_that_leave_or_die_leave_the_table_and_free_their_place() {
+        let mut c = core(Mode::LockStep);
+        for round in 0..3 * MAX_AGENTS {
+            let a = c.hello(round as u32).expect("a place is free again");
+            if round % 2 == 0 {
+                c.bye(a);
+            } else {
+                assert!(c.agent_died(a));
+                assert!(!c.agent_died(a), "dies once");
+            }
+        }
+        assert_eq!((c.agents.len(), c.live_agents()), (0, 0));
+        let a = c.hello(1).expect("room");
+        c.register(a, &RobotRegistration::new("a")).expect("ok");
+        c.bye(a);
+        assert_eq!((c.agents.len(), c.robot_count()), (0, 0), "goodbye takes the robots too");
+        assert_eq!(c.register(a, &RobotRegistration::new("a")).map_err(|e| e.reason), Err(Refusal::UnknownAgent));
+    }
+
+    #[test]
+    fn a_restarted_agent_takes_its_robot_back_where_it_stands() {
+        let mut c = core(Mode::LockStep);
+        let a = c.hello(1).expect("room");
+        let reg = RobotRegistration::new("chair1").id(1);
+        assert_eq!(c.register(a, &reg), Ok((1, 4)));
+        c.ready(a).expect("known");
+        c.command(Command::Start, 0);
+        for t in 0..10 {
+            c.actions(a, t, &[ActionBlock::motors(1, 1.0, 1.0)]);
+            c.step();
+        }
+        assert!(c.agent_died(a));
+        let before = c.robot_states().next().expect("robot stays");
+        assert_ne!(before.flags & ROBOT_FROZEN, 0);
+        assert_eq!(c.orphan_robots().collect::<Vec<_>>(), vec![1]);
+        c.step();
+
+        // Another name, or another id, does not take it.
+        let b = c.hello(2).expect("room");
+        assert_eq!(
+            c.register(b, &RobotRegistration::new("chair2").id(1)).map_err(|e| e.reason),
+            Err(Refusal::DuplicateId)
+        );
+        assert_eq!(c.register(b, &RobotRegistration::new("chair1").id(2)).map(|r| r.0), Ok(2));
+        c.bye(b);
+
+        let restarted = c.hello(1).expect("room");
+        assert_eq!(c.register(restarted, &reg), Ok((1, 4)), "same name and id: the robot comes back");
+        assert_eq!(c.orphan_robots().count(), 0);
+        assert_eq!(c.robot_count(), 1);
+        let after = c.robot_states().next().expect("robot");
+        assert_eq!((after.id, after.agent_id, after.flags & ROBOT_FROZEN), (1, restarted, 0));
+        assert_eq!((after.x_m, after.y_m, after.heading_deg), (before.x_m, before.y_m, before.heading_deg));
+        c.ready(restarted).expect("known");
+        let t = c.world().tick();
+        c.actions(restarted, t, &[ActionBlock::motors(1, 1.0, 1.0)]);
+        assert!(c.all_answered(), "the barrier waits for the new owner");
+        c.step();
+        assert!(c.robot_states().next().expect("robot").x_m > before.x_m, "it drives again");
+
+        // A live agent's robot is never taken: the same name with id 0 gets a new robot.
+        let other = c.hello(3).expect("room");
+        assert_eq!(c.register(other, &RobotRegistration::new("chair1")).map(|r| r.0), Ok(2));
+    }
+
+    #[test]
+    fn a_restarted_agent_asking_for_any_id_takes_back_the_robot_of_its_name() {
+        let mut c = core(Mode::RealTime);
+        let a = c.hello(1).expect("room");
+        assert_eq!(c.register(a, &RobotRegistration::new("left")).map(|r| r.0), Ok(1));
+        assert_eq!(c.register(a, &RobotRegistration::new("right")).map(|r| r.0), Ok(2));
+        assert!(c.agent_died(a));
+        let b = c.hello(1).expect("room");
+        assert_eq!(c.register(b, &RobotRegistration::new("right")).map(|r| r.0), Ok(2));
+        assert_eq!(c.agent_robots(b), &[2]);
+        assert_eq!(c.orphan_robots().collect::<Vec<_>>(), vec![1]);
+        // The orphan left can still be removed by command.
+        assert_eq!(c.command(Command::RemoveRobot, 1), 0);
+        assert_eq!(c.orphan_robots().count(), 0);
     }
 
     #[test]

@@ -276,9 +276,13 @@ pub fn run(cfg: HubConfig) -> Result<HubOutcome, HubError> {
         dead_agents.extend(ready.iter().filter(|&&i| i > 0).map(|&i| fd_agents[i - 1]));
 
         for id in dead_agents.drain(..) {
+            let pid = core.agent_pid(id);
             if core.agent_died(id) {
                 outcome.agents_died += 1;
-                tracing::warn!("agent {id} (pid {:?}) died; its robots are frozen", core.agent_pid(id));
+                tracing::warn!("agent {id} (pid {pid:?}) died; its robots are frozen");
+                // Observers see the frozen flag even when no tick follows (a lock-step run
+                // whose only agent died waits for the next one).
+                publish = true;
             }
             agents.remove(&id);
             let _ = node.try_cleanup_dead_nodes();

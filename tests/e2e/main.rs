@@ -7,6 +7,7 @@ mod common;
 mod hardening;
 mod hub;
 mod maps;
+mod robots;
 mod runner;
 mod scenarios;
 mod teleop;

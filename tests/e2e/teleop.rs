@@ -179,7 +179,15 @@ fn teleop_exits_with_a_message_and_a_restored_terminal_when_its_hub_is_killed() 
     hub.kill9();
     let out = teleop.wait(Duration::from_secs(10));
     assert!(!out.status.success(), "a lost hub is an error");
-    let all = screen.text();
+    // The process has exited, but the reader thread may still be draining the pty.
+    let deadline = Instant::now() + Duration::from_secs(10);
+    let all = loop {
+        let all = screen.text();
+        if (all.contains("lost its hub") && all.contains("has exited")) || Instant::now() > deadline {
+            break all;
+        }
+        std::thread::sleep(Duration::from_millis(5));
+    };
     assert!(all.contains("lost its hub") && all.contains("has exited"), "{all}");
     let restored = local_modes(pty.slave()).expect("termios");
     assert!(restored.canonical && restored.echo, "terminal left in raw mode: {restored:?}");

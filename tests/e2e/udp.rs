@@ -358,3 +358,103 @@ fn a_viewer_sees_robots_driven_over_shared_memory() {
     stop(&s, hub, bridge);
     assert!(agent.wait(Duration::from_secs(10)).status.success());
 }
+
+/// Like [`hub_and_bridge`], but keeps every line the bridge prints on stderr.
+fn hub_and_logged_bridge(s: &str, hub_args: &[&str]) -> (Proc, Proc, SocketAddr, std::sync::mpsc::Receiver<String>) {
+    let mut args = vec!["hub", "--session", s];
+    args.extend_from_slice(hub_args);
+    let hub = Proc::spawn(&args);
+    let mut bridge = Proc::spawn(&["udp", "--session", s, "--port", "0"]);
+    let lines = bridge.stderr_lines();
+    let deadline = Instant::now() + Duration::from_secs(20);
+    let addr = loop {
+        let line = lines
+            .recv_timeout(deadline.saturating_duration_since(Instant::now()))
+            .expect("the bridge announces its port within 20 s");
+        if let Some(rest) = line.split("registrations on ").nth(1) {
+            break rest.trim().parse().expect("address");
+        }
+    };
+    (hub, bridge, addr, lines)
+}
+
+/// Every line still to come from a process's stderr, until it closes.
+fn rest_of(lines: &std::sync::mpsc::Receiver<String>) -> Vec<String> {
+    let mut rest = Vec::new();
+    while let Ok(line) = lines.recv_timeout(Duration::from_secs(10)) {
+        rest.push(line);
+    }
+    rest
+}
+
+#[test]
+fn a_flood_of_junk_is_counted_in_full_but_logged_in_a_few_lines() {
+    let s = session("udp-flood");
+    let (hub, bridge, reg, lines) = hub_and_logged_bridge(&s, &["--cycle-ms", "20", "--no-noise"]);
+    // A panel paces the flood: the bridge reads each socket in order, so once the panel's
+    // own datagram is answered, every junk datagram sent before it to that socket was read
+    // (and none was lost to a full receive buffer).
+    let mut panel = Client::new();
+    assert!(panel.register(reg, "<Panel/>").contains("Status=\"Ok\""));
+    let panel_port = panel.server.expect("reply port");
+    let junk = UdpSocket::bind("127.0.0.1:0").expect("bind");
+    const BATCHES: usize = 400;
+    const AT_REGISTRATION: usize = 50;
+    const AT_PANEL: usize = 10;
+    for b in 0..BATCHES {
+        for k in 0..AT_REGISTRATION {
+            junk.send_to(format!("<Robot Id=\"junk-{b}-{k}\"").as_bytes(), reg).expect("send");
+        }
+        for k in 0..AT_PANEL {
+            junk.send_to(format!("<Start {b} {k}").as_bytes(), panel_port).expect("send");
+        }
+        panel.sock.send_to(b"<Panel/>", reg).expect("send");
+        panel.next("Reply");
+        panel.send("<LabReq/>");
+        panel.next("Lab");
+    }
+    // The bridge still serves: a robot registers and gets its Measures.
+    let mut c = Client::new();
+    assert!(c.register(reg, r#"<Robot Name="after" Id="1"/>"#).contains("Status=\"Ok\""));
+    assert!(c.next("Measures").contains("<Measures Time="));
+    stop(&s, hub, bridge);
+    let logged = rest_of(&lines);
+    let bytes: usize = logged.iter().map(|l| l.len() + 1).sum();
+    assert!(bytes < 64 * 1024, "{bytes} bytes of stderr for a flood, e.g. {:?}", &logged[..logged.len().min(5)]);
+    let last = logged.iter().find(|l| l.contains("run over")).expect("the counters are printed");
+    let total_junk = BATCHES * AT_REGISTRATION;
+    let total_foreign = BATCHES * AT_PANEL;
+    assert!(last.contains(&format!("({total_junk} malformed, {total_foreign} foreign, 0 refused")), "{last}");
+}
+
+#[test]
+fn a_registration_the_hub_has_not_answered_yet_stalls_no_other_client() {
+    let s = session("udp-pending");
+    // Waiting for a Start, the bridge re-sends each robot's Measures every 20 ms cycle.
+    let (hub, bridge, reg) = hub_and_bridge(&s, &["--cycle-ms", "20", "--start-on-command"], &[]);
+    let mut a = Client::new();
+    assert!(a.register(reg, r#"<Robot Name="first" Id="1"/>"#).contains("Status=\"Ok\""));
+    a.next("Measures");
+    // A stopped hub answers no registration (a busy one answers late): the second client's
+    // registration stays pending while the first client's Measures keep coming.
+    hub.signal("STOP");
+    let mut b = Client::new();
+    b.sock.send_to(br#"<Robot Name="second" Id="2"/>"#, reg).expect("send");
+    for k in 0..10 {
+        if a.try_next("Measures", Duration::from_secs(1)).is_none() {
+            hub.signal("CONT");
+            panic!("no Measures for 1 s while a registration was pending (after {k})");
+        }
+    }
+    b.sock.set_nonblocking(true).expect("non-blocking");
+    let early = b.sock.recv_from(&mut [0u8; 256]).is_ok();
+    b.sock.set_nonblocking(false).expect("blocking");
+    hub.signal("CONT");
+    assert!(!early, "the stopped hub cannot have answered");
+    assert!(b.recv().starts_with("<Reply Status=\"Ok\">"), "answered once the hub goes on");
+    // Both drive once the run starts.
+    assert_eq!(agent_sdk::control(&s, ipc_types::Command::Start, 0).expect("hub answers").status, 0);
+    assert!(b.next("Measures").contains("<Measures Time="));
+    assert!(a.next("Measures").contains("<Measures Time="));
+    stop(&s, hub, bridge);
+}

@@ -3,6 +3,7 @@
 
 use std::io::{Read, Write};
 use std::net::{SocketAddr, TcpStream};
+use std::sync::mpsc::Receiver;
 use std::time::{Duration, Instant};
 
 use tungstenite::Message;
@@ -11,6 +12,12 @@ use viewer::frame;
 use super::common::{Proc, session, text};
 
 fn start(s: &str, view_args: &[&str]) -> (Proc, Proc, Proc, SocketAddr) {
+    let (hub, agent, view, addr, _) = start_lines(s, view_args);
+    (hub, agent, view, addr)
+}
+
+/// As [`start`], with the viewer's stderr lines after its first.
+fn start_lines(s: &str, view_args: &[&str]) -> (Proc, Proc, Proc, SocketAddr, Receiver<String>) {
     let hub = Proc::spawn(&["hub", "--session", s, "--cycle-ms", "10", "--no-noise"]);
     let agent = Proc::spawn(&[
         "agent",
@@ -27,8 +34,22 @@ fn start(s: &str, view_args: &[&str]) -> (Proc, Proc, Proc, SocketAddr) {
     let mut args = vec!["view", "--session", s, "--http", "127.0.0.1:0"];
     args.extend_from_slice(view_args);
     let mut view = Proc::spawn(&args);
-    let url = view.announced("open http://", Duration::from_secs(20));
-    (hub, agent, view, url.trim_end_matches('/').parse().expect("address"))
+    let lines = view.stderr_lines();
+    let url = said(&lines, "open http://");
+    (hub, agent, view, url.trim_end_matches('/').parse().expect("address"), lines)
+}
+
+/// What follows `marker` on the next line of `lines` that has it (within 20 s).
+fn said(lines: &Receiver<String>, marker: &str) -> String {
+    let deadline = Instant::now() + Duration::from_secs(20);
+    loop {
+        let line = lines
+            .recv_timeout(deadline.saturating_duration_since(Instant::now()))
+            .unwrap_or_else(|_| panic!("no line with {marker:?} within 20 s"));
+        if let Some(rest) = line.split(marker).nth(1) {
+            return rest.trim().to_owned();
+        }
+    }
 }
 
 fn get(addr: SocketAddr, path: &str) -> String {
@@ -51,6 +72,19 @@ fn next_frame(ws: &mut Ws) -> frame::Frame {
         if let Message::Binary(b) = ws.read().expect("message") {
             return frame::decode(&b).expect("a valid frame");
         }
+    }
+}
+
+/// The first frame that shows `n` robots (within 20 s): the agent has registered them all, so
+/// stopping the run now cannot catch it half-way through its registrations.
+fn frame_with_robots(ws: &mut Ws, n: usize) -> frame::Frame {
+    let deadline = Instant::now() + Duration::from_secs(20);
+    loop {
+        let f = next_frame(ws);
+        if f.robots.len() == n {
+            return f;
+        }
+        assert!(Instant::now() < deadline, "no frame with {n} robots within 20 s");
     }
 }
 
@@ -213,4 +247,211 @@ fn the_pages_decoder_reads_what_the_viewer_encodes() {
     }
     assert!((nums[15] - fr.0).abs() < 1e-4 && (nums[16] - fr.1).abs() < 1e-4, "corner {got} vs {fr:?}");
     let _ = std::fs::remove_dir_all(dir);
+}
+
+/// A WebSocket handshake to the viewer carrying `origin`; `Err` holds the HTTP status.
+fn ws_from(addr: SocketAddr, origin: &str) -> Result<Ws, u16> {
+    use tungstenite::client::IntoClientRequest;
+    let mut req = format!("ws://{addr}/ws").into_client_request().expect("request");
+    req.headers_mut().insert("Origin", origin.parse().expect("header value"));
+    match tungstenite::connect(req) {
+        Ok((ws, _)) => Ok(ws),
+        Err(tungstenite::Error::Http(resp)) => Err(resp.status().as_u16()),
+        Err(e) => panic!("handshake failed without an HTTP answer: {e}"),
+    }
+}
+
+#[test]
+fn a_websocket_from_another_origin_is_refused_unless_allowed() {
+    let s = session("view-origin");
+    let (hub, agent, view, addr, lines) =
+        start_lines(&s, &["--allow-control", "--allow-origin", "http://lab.example:8080"]);
+    // A page from elsewhere (what a browser sends when evil.example's script opens the socket).
+    assert_eq!(ws_from(addr, "http://evil.example").err(), Some(403));
+    assert_eq!(ws_from(addr, "http://127.0.0.1:1").err(), Some(403), "another port is another origin");
+    // The viewer's own pages, and the origin named with --allow-origin, get the stream.
+    for ok in [format!("http://{addr}"), "http://lab.example:8080".to_owned()] {
+        let mut w = ws_from(addr, &ok).unwrap_or_else(|status| panic!("{ok} refused with {status}"));
+        let Message::Text(map) = w.read().expect("map") else { panic!("the map comes first") };
+        assert!(map.contains("\"type\":\"map\""), "{map}");
+    }
+    // The refusal is reported, naming the origin and the option.
+    let line = said(&lines, "refused a WebSocket from origin");
+    assert!(line.contains("evil.example") && line.contains("--allow-origin"), "{line}");
+    frame_with_robots(&mut ws(addr), 2);
+    assert_eq!(agent_sdk::control(&s, ipc_types::Command::Stop, 0).expect("hub answers").status, 0);
+    for p in [hub, agent, view] {
+        let out = p.wait(Duration::from_secs(10));
+        assert!(out.status.success(), "{}", text(&out.stderr));
+    }
+}
+
+#[test]
+fn connections_beyond_the_cap_are_refused_and_a_freed_slot_serves_again() {
+    let s = session("view-cap");
+    let (hub, agent, view, addr) = start(&s, &[]);
+    let mut held: Vec<Ws> = (0..viewer::server::MAX_CONNECTIONS).map(|_| ws(addr)).collect();
+    for w in &mut held {
+        let Message::Text(_) = w.read().expect("map") else { panic!("the map comes first") };
+    }
+    // One more is answered at once and closed, whatever it asks.
+    let mut extra = TcpStream::connect(addr).expect("connect");
+    extra.set_read_timeout(Some(Duration::from_secs(10))).expect("timeout");
+    let mut answer = String::new();
+    extra.read_to_string(&mut answer).expect("an answer, then end of stream");
+    assert!(answer.starts_with("HTTP/1.1 503"), "{answer}");
+    assert!(answer.contains(&format!("at most {} connections", viewer::server::MAX_CONNECTIONS)), "{answer}");
+    // A page that leaves frees its slot (once its thread notices, so poll with a bound).
+    drop(held.pop());
+    let deadline = Instant::now() + Duration::from_secs(15);
+    loop {
+        // Until the slot is free the viewer answers 503 and may close before the request is
+        // even written: a failed write or read is "not yet", like the 503.
+        let page = TcpStream::connect(addr).and_then(|mut c| {
+            write!(c, "GET / HTTP/1.1\r\nHost: x\r\nConnection: close\r\n\r\n")?;
+            let mut out = String::new();
+            c.read_to_string(&mut out).map(|_| out)
+        });
+        if page.as_deref().is_ok_and(|p| p.starts_with("HTTP/1.1 200 OK")) {
+            break;
+        }
+        assert!(Instant::now() < deadline, "no slot freed: {page:?}");
+    }
+    drop(held);
+    frame_with_robots(&mut ws(addr), 2);
+    assert_eq!(agent_sdk::control(&s, ipc_types::Command::Stop, 0).expect("hub answers").status, 0);
+    for p in [hub, agent, view] {
+        let out = p.wait(Duration::from_secs(10));
+        assert!(out.status.success(), "{}", text(&out.stderr));
+    }
+}
+
+#[test]
+fn a_websocket_message_over_the_size_bound_closes_its_connection_only() {
+    let s = session("view-size");
+    let (hub, agent, view, addr) = start(&s, &["--allow-control"]);
+    let mut w = ws(addr);
+    let bound = viewer::server::MAX_MESSAGE_BYTES;
+    // At the bound a message is read (and is no command).
+    w.send(Message::text("x".repeat(bound))).expect("send");
+    let reply = loop {
+        if let Message::Text(t) = w.read().expect("reply")
+            && t.contains("\"error\"")
+        {
+            break t;
+        }
+    };
+    assert!(reply.contains("unknown command"), "{reply}");
+    // One byte over, the connection ends; reading it drains frames until it does.
+    w.send(Message::text("x".repeat(bound + 1))).expect("send");
+    let deadline = Instant::now() + Duration::from_secs(10);
+    loop {
+        match w.read() {
+            Ok(Message::Close(_)) | Err(_) => break,
+            Ok(_) => assert!(Instant::now() < deadline, "the connection stayed open"),
+        }
+    }
+    // Everyone else is served as before.
+    let mut other = ws(addr);
+    frame_with_robots(&mut other, 2);
+    assert_eq!(agent_sdk::control(&s, ipc_types::Command::Stop, 0).expect("hub answers").status, 0);
+    for p in [hub, agent, view] {
+        let out = p.wait(Duration::from_secs(10));
+        assert!(out.status.success(), "{}", text(&out.stderr));
+    }
+}
+
+/// Waits for a world snapshot that satisfies `done`; returns it, or the last one seen.
+fn watch(
+    obs: &agent_sdk::Observer,
+    timeout: Duration,
+    done: impl Fn(&ipc_types::WorldHeader, &[ipc_types::RobotState]) -> bool,
+) -> (ipc_types::WorldHeader, Vec<ipc_types::RobotState>) {
+    let deadline = Instant::now() + timeout;
+    let mut last = None;
+    loop {
+        if let Some((h, robots)) = obs.try_world().expect("world") {
+            if done(&h, &robots) {
+                return (h, robots);
+            }
+            last = Some((h, robots));
+        }
+        if Instant::now() > deadline {
+            return last.expect("some snapshot");
+        }
+        std::thread::sleep(Duration::from_millis(2));
+    }
+}
+
+#[test]
+fn udp_viewers_control_the_run_only_with_allow_control() {
+    for allow in [false, true] {
+        let s = session("udp-ctl");
+        let hub = Proc::spawn(&["hub", "--session", &s, "--cycle-ms", "10", "--no-noise"]);
+        let agent = Proc::spawn(&["agent", "wheelchair", "--session", &s, "--robots", "2", "--pose", "10,6.1,0"]);
+        let mut bargs = vec!["udp", "--session", &s, "--port", "0"];
+        if allow {
+            bargs.push("--allow-control");
+        }
+        let mut bridge = Proc::spawn(&bargs);
+        let lines = bridge.stderr_lines();
+        let reg: SocketAddr = said(&lines, "registrations on ").parse().expect("address");
+        let obs = agent_sdk::Observer::connect_within(&s, "udp-ctl-test", Duration::from_secs(20)).expect("observer");
+        let (_, robots) = watch(&obs, Duration::from_secs(20), |h, r| h.run_state == 1 && r.len() == 2);
+        assert_eq!(robots.len(), 2, "both chairs registered");
+        let victim = robots[0].id;
+
+        // A stock Ciber-Rato Viewer: <View/> on the registration port, later traffic to the
+        // port that answered.
+        let sock = std::net::UdpSocket::bind("127.0.0.1:0").expect("bind");
+        sock.set_read_timeout(Some(Duration::from_secs(5))).expect("timeout");
+        sock.send_to(b"<View/>\n\0", reg).expect("send");
+        let mut buf = [0u8; 65536];
+        let (_, port) = sock.recv_from(&mut buf).expect("a reply");
+        let send = |xml: &str| {
+            sock.send_to(xml.as_bytes(), port).expect("send");
+        };
+        // The bridge reads a client's datagrams in order: once the lab comes back, the
+        // commands before it were handled.
+        let handled = || {
+            send("<LabReq/>\n\0");
+            let end = Instant::now() + Duration::from_secs(20);
+            let mut buf = [0u8; 65536];
+            loop {
+                let (n, _) = sock.recv_from(&mut buf).expect("the lab within 20 s");
+                if buf[..n].starts_with(b"<Lab") {
+                    break;
+                }
+                assert!(Instant::now() < end, "no lab");
+            }
+        };
+        send(&format!("<Robot Id=\"{victim}\" Removed=\"Yes\"/>\n\0"));
+        handled();
+        let (h, robots) = watch(&obs, Duration::from_secs(5), |_, r| r.len() == 1);
+        assert_eq!(robots.len(), if allow { 1 } else { 2 }, "allow={allow}: robots at tick {}", h.tick);
+        send("<Stop/>\n\0");
+        handled();
+        let (h, _) = watch(&obs, Duration::from_secs(5), |h, _| h.run_state == 2);
+        assert_eq!(h.run_state == 2, allow, "allow={allow}: paused?");
+        send("<Start/>\n\0");
+        handled();
+        if allow {
+            let (h, _) = watch(&obs, Duration::from_secs(5), |h, _| h.run_state == 1);
+            assert_eq!(h.run_state, 1, "started again");
+        }
+        obs.close();
+        assert_eq!(agent_sdk::control(&s, ipc_types::Command::Stop, 0).expect("hub answers").status, 0);
+        let b = bridge.wait(Duration::from_secs(10));
+        // The process is gone: its stderr's lines are all on the channel or about to be.
+        let err: Vec<String> = lines.iter().collect();
+        let err = err.join("\n");
+        assert!(b.status.success(), "bridge: {err}");
+        let ignored = if allow { 0 } else { 3 };
+        assert!(err.contains(&format!("{ignored} viewer commands ignored")), "{err}");
+        assert_eq!(err.contains("--allow-control"), !allow, "the hint is given when a command is ignored: {err}");
+        for p in [hub, agent] {
+            let _ = p.wait(Duration::from_secs(10));
+        }
+        super::common::assert_no_shared_memory_left(&s);
+    }
 }

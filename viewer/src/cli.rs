@@ -20,6 +20,10 @@ pub struct ViewArgs {
     /// Let pages start, pause, step and stop the run.
     #[arg(long)]
     pub allow_control: bool,
+    /// Accept WebSockets from pages of this origin too (repeatable), e.g. http://lab-pc:8080;
+    /// by default only pages this viewer served may connect.
+    #[arg(long = "allow-origin", value_name = "ORIGIN")]
+    pub allow_origin: Vec<String>,
 }
 
 /// Serves the viewer until the hub ends the run.
@@ -28,6 +32,7 @@ pub fn run(args: &ViewArgs) -> anyhow::Result<ExitCode> {
         session: args.hub.session.clone(),
         http: args.http,
         allow_control: args.allow_control,
+        allowed_origins: args.allow_origin.clone(),
         connect_timeout: args.hub.timeout(),
     })?;
     let addr = v.local_addr().unwrap_or(args.http);

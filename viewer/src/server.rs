@@ -4,20 +4,46 @@
 //! The iceoryx2 ports are not `Send`, so the main thread reads the hub and publishes the newest
 //! frame in a shared slot; each browser connection runs on a thread of its own and sends the
 //! newest frame at most ~30 times a second, whatever the tick rate.
+//!
+//! What one browser (or a hostile page) can cost everyone is bounded: at most
+//! [`MAX_CONNECTIONS`] connections at once, [`IO_TIMEOUT`] on every read and write (a client
+//! that never reads is dropped), [`MAX_MESSAGE_BYTES`] per incoming WebSocket message, a
+//! WebSocket only from the viewer's own origin (or one named with `--allow-origin`), and one
+//! control client for every page's commands.
 
 use std::io::{Read, Write};
 use std::net::{SocketAddr, TcpListener, TcpStream};
+use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
+use std::sync::mpsc::{self, Receiver, RecvTimeoutError, SyncSender, TrySendError};
 use std::sync::{Arc, Condvar, Mutex};
+use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
-use agent_sdk::{AgentError, Observer};
-use ipc_types::{Command, RunState};
+use agent_sdk::{AgentError, ControlClient, Observer};
+use ipc_types::{Command, ControlResponse, RunState};
 use tungstenite::Message;
+use tungstenite::handshake::server::{ErrorResponse, Request, Response};
+use tungstenite::protocol::WebSocketConfig;
 
 use crate::frame;
 
 /// At most this many frames per second go to a page.
 pub const MAX_FPS: u32 = 60;
+
+/// Connections served at once (pages, WebSockets and file requests together); one more is
+/// answered `503 Service Unavailable` and closed. Each costs a thread and its buffers.
+pub const MAX_CONNECTIONS: usize = 64;
+
+/// The largest WebSocket message (and frame) a page may send; a page's commands are a few
+/// bytes, and a larger message closes its connection.
+pub const MAX_MESSAGE_BYTES: usize = 4096;
+
+/// How long one read or write on a connection may block: a client that stops reading is
+/// dropped after this, so it cannot pin a thread and kernel buffers for good.
+pub const IO_TIMEOUT: Duration = Duration::from_secs(5);
+
+/// Page commands waiting for the control client; more are answered "busy".
+const CONTROL_QUEUE: usize = 16;
 
 /// The page's files, built into the binary so `iwsim view` needs nothing beside it.
 const STATIC_FILES: &[(&str, &str, &str)] = &[
@@ -39,6 +65,9 @@ pub struct ViewerConfig {
     pub http: SocketAddr,
     /// Whether pages may send run-control commands.
     pub allow_control: bool,
+    /// WebSocket origins accepted besides the viewer's own (`http://` + the `Host` it is
+    /// served as), e.g. `http://lab-pc:8080`.
+    pub allowed_origins: Vec<String>,
     /// How long to wait for the hub.
     pub connect_timeout: Duration,
 }
@@ -57,6 +86,9 @@ pub enum ViewerError {
         /// Why.
         source: std::io::Error,
     },
+    /// The thread that sends the pages' commands could not start.
+    #[error("cannot start the control thread: {0}")]
+    Thread(std::io::Error),
 }
 
 #[derive(Debug, Default)]
@@ -69,6 +101,121 @@ struct Latest {
 }
 
 type Shared = Arc<(Mutex<Latest>, Condvar)>;
+
+/// What every connection's thread shares.
+#[derive(Debug)]
+struct Context {
+    shared: Shared,
+    map_json: Arc<String>,
+    allowed_origins: Vec<String>,
+    /// The control thread's queue, when pages may control the run.
+    control: Option<SyncSender<ControlJob>>,
+    /// Refused origins, reported at a bounded rate.
+    refused_origins: Mutex<Throttle>,
+}
+
+/// Counts events and says when one may be reported: at most once a second, so a flood of
+/// refused clients cannot flood stderr.
+#[derive(Debug, Default)]
+struct Throttle {
+    last: Option<Instant>,
+    count: u64,
+}
+
+impl Throttle {
+    /// Counts one event; returns the count so far when it may be reported now.
+    fn note(&mut self, now: Instant) -> Option<u64> {
+        self.count += 1;
+        let due = self.last.is_none_or(|t| now.duration_since(t) >= Duration::from_secs(1));
+        due.then(|| {
+            self.last = Some(now);
+            self.count
+        })
+    }
+}
+
+/// Frees a connection's slot when its thread ends, however it ends.
+#[derive(Debug)]
+struct Slot(Arc<AtomicUsize>);
+
+impl Drop for Slot {
+    fn drop(&mut self) {
+        self.0.fetch_sub(1, Ordering::SeqCst);
+    }
+}
+
+/// One page command for the control thread, and where its answer goes.
+#[derive(Debug)]
+struct ControlJob {
+    command: Command,
+    robot_id: u32,
+    reply: mpsc::Sender<Result<ControlResponse, String>>,
+}
+
+/// The one control client of the viewer, on a thread of its own (iceoryx2 ports are not
+/// `Send`): pages queue commands and it sends them one at a time. Dropping it ends the
+/// thread and closes the client's node, before the viewer's own node is closed.
+#[derive(Debug)]
+struct ControlThread {
+    jobs: SyncSender<ControlJob>,
+    stop: Arc<AtomicBool>,
+    handle: Option<JoinHandle<()>>,
+}
+
+impl ControlThread {
+    fn spawn(session: String) -> std::io::Result<Self> {
+        let (jobs, rx) = mpsc::sync_channel(CONTROL_QUEUE);
+        let stop = Arc::new(AtomicBool::new(false));
+        let flag = stop.clone();
+        let handle = std::thread::Builder::new()
+            .name("viewer-control".into())
+            .spawn(move || serve_control(&session, &rx, &flag))?;
+        Ok(Self { jobs, stop, handle: Some(handle) })
+    }
+}
+
+impl Drop for ControlThread {
+    fn drop(&mut self) {
+        self.stop.store(true, Ordering::SeqCst);
+        if let Some(h) = self.handle.take() {
+            let _ = h.join();
+        }
+    }
+}
+
+/// The control thread: connects on the first command (and again after a failure, so a
+/// hiccup is not for good), then answers each job with the hub's answer.
+fn serve_control(session: &str, jobs: &Receiver<ControlJob>, stop: &AtomicBool) {
+    let mut client: Option<ControlClient> = None;
+    while !stop.load(Ordering::SeqCst) {
+        let job = match jobs.recv_timeout(Duration::from_millis(100)) {
+            Ok(job) => job,
+            Err(RecvTimeoutError::Timeout) => continue,
+            Err(RecvTimeoutError::Disconnected) => break,
+        };
+        let answer = match client.as_mut() {
+            Some(c) => c.ask(job.command, job.robot_id),
+            None => ControlClient::connect(session).and_then(|c| client.insert(c).ask(job.command, job.robot_id)),
+        };
+        if answer.is_err() {
+            client = None;
+        }
+        let _ = job.reply.send(answer.map_err(|e| e.to_string()));
+    }
+}
+
+/// Whether a WebSocket handshake may proceed: browsers always send `Origin` on one, so a
+/// request without it is no page's (a script on this machine, which could send anything);
+/// with it, it must be the viewer's own origin (`http://` + the `Host` asked for) or one of
+/// `allowed`. Hosts compare without case, as DNS does.
+fn origin_allowed(origin: Option<&str>, host: Option<&str>, allowed: &[String]) -> bool {
+    let Some(origin) = origin else { return true };
+    let origin = origin.trim().trim_end_matches('/');
+    if allowed.iter().any(|a| a.trim().trim_end_matches('/').eq_ignore_ascii_case(origin)) {
+        return true;
+    }
+    host.and_then(|h| Some(origin.strip_prefix("http://")?.eq_ignore_ascii_case(h.trim()))).unwrap_or(false)
+}
 
 /// A bound viewer, before it serves.
 #[derive(Debug)]
@@ -100,23 +247,22 @@ impl Viewer {
     /// session from creating its services.
     pub fn run(self) -> Result<(), ViewerError> {
         let shared: Shared = Arc::new((Mutex::new(Latest::default()), Condvar::new()));
-        {
-            let shared = shared.clone();
-            let map_json = self.map_json.clone();
-            let session = self.cfg.session.clone();
-            let allow = self.cfg.allow_control;
-            let listener = self.listener;
-            std::thread::spawn(move || {
-                for stream in listener.incoming().flatten() {
-                    let (shared, map_json, session) = (shared.clone(), map_json.clone(), session.clone());
-                    std::thread::spawn(move || {
-                        if let Err(e) = serve_connection(stream, &shared, &map_json, &session, allow) {
-                            tracing::debug!("viewer connection: {e}");
-                        }
-                    });
-                }
-            });
-        }
+        // Declared before anything that can fail: dropped first on every way out, so its
+        // node is gone before the observer's.
+        let control = if self.cfg.allow_control {
+            Some(ControlThread::spawn(self.cfg.session.clone()).map_err(ViewerError::Thread)?)
+        } else {
+            None
+        };
+        let ctx = Arc::new(Context {
+            shared: shared.clone(),
+            map_json: self.map_json.clone(),
+            allowed_origins: self.cfg.allowed_origins.clone(),
+            control: control.as_ref().map(|c| c.jobs.clone()),
+            refused_origins: Mutex::new(Throttle::default()),
+        });
+        let listener = self.listener;
+        std::thread::spawn(move || accept_connections(&listener, &ctx));
         let mut ids: Vec<u32> = Vec::new();
         let mut sensors: Vec<ipc_types::RobotSensors> = Vec::new();
         let mut roster_dirty = false;
@@ -149,6 +295,7 @@ impl Viewer {
                     if finished {
                         // Let the pages draw the last frame, then leave no file behind.
                         std::thread::sleep(Duration::from_millis(200));
+                        drop(control);
                         self.observer.close();
                         return Ok(());
                     }
@@ -166,14 +313,58 @@ impl Viewer {
     }
 }
 
-fn serve_connection(
-    mut stream: TcpStream,
-    shared: &Shared,
-    map_json: &str,
-    session: &str,
-    allow_control: bool,
-) -> std::io::Result<()> {
-    stream.set_read_timeout(Some(Duration::from_secs(5)))?;
+/// Accepts connections for good, each on a thread of its own, at most [`MAX_CONNECTIONS`] at
+/// once; beyond that a connection is answered 503 and closed at once.
+fn accept_connections(listener: &TcpListener, ctx: &Arc<Context>) {
+    let live = Arc::new(AtomicUsize::new(0));
+    let mut refused = Throttle::default();
+    for stream in listener.incoming().flatten() {
+        if live.fetch_add(1, Ordering::SeqCst) >= MAX_CONNECTIONS {
+            live.fetch_sub(1, Ordering::SeqCst);
+            if let Some(n) = refused.note(Instant::now()) {
+                agent_sdk::report!(
+                    "iwsim view: refused a connection: at most {MAX_CONNECTIONS} at once ({n} refused so far)"
+                );
+            }
+            refuse_busy(stream);
+            continue;
+        }
+        let slot = Slot(live.clone());
+        let ctx = ctx.clone();
+        let spawned = std::thread::Builder::new().name("viewer-connection".into()).spawn(move || {
+            let _slot = slot;
+            if let Err(e) = serve_connection(stream, &ctx) {
+                tracing::debug!("viewer connection: {e}");
+            }
+        });
+        // Out of threads: the stream and its slot went with the closure.
+        if let Err(e) = spawned {
+            tracing::debug!("viewer connection: no thread: {e}");
+        }
+    }
+}
+
+/// Answers a connection over the cap without serving it. The accept loop must not wait on
+/// it: whatever request already arrived is read without blocking (closing a socket with
+/// unread data would reset it and lose the answer), and the write is short and bounded.
+fn refuse_busy(mut stream: TcpStream) {
+    let body = format!("the viewer serves at most {MAX_CONNECTIONS} connections at once; try again later\n");
+    let _ = stream.set_nonblocking(true);
+    let mut sink = [0u8; 4096];
+    let _ = stream.read(&mut sink);
+    let _ = stream.set_nonblocking(false);
+    let _ = stream.set_write_timeout(Some(Duration::from_millis(200)));
+    let _ = write!(
+        stream,
+        "HTTP/1.1 503 Service Unavailable\r\nContent-Type: text/plain\r\nContent-Length: {}\r\nConnection: close\r\n\r\n{body}",
+        body.len()
+    );
+    let _ = stream.shutdown(std::net::Shutdown::Write);
+}
+
+fn serve_connection(mut stream: TcpStream, ctx: &Context) -> std::io::Result<()> {
+    stream.set_read_timeout(Some(IO_TIMEOUT))?;
+    stream.set_write_timeout(Some(IO_TIMEOUT))?;
     // Route on the request line without consuming it (a WebSocket handshake must reach
     // tungstenite whole); it may arrive in pieces, so peek until the head is complete.
     let mut peek = [0u8; 2048];
@@ -186,7 +377,7 @@ fn serve_connection(
     let head = String::from_utf8_lossy(&peek[..n]);
     let path = head.split_whitespace().nth(1).unwrap_or("/").to_owned();
     if path == "/ws" {
-        return serve_websocket(stream, shared, map_json, session, allow_control);
+        return serve_websocket(stream, ctx);
     }
     // Consume the request (up to the blank line) before answering.
     let mut req = Vec::new();
@@ -223,15 +414,42 @@ fn parse_command(text: &str) -> Option<(Command, u32)> {
     }
 }
 
-fn serve_websocket(
-    stream: TcpStream,
-    shared: &Shared,
-    map_json: &str,
-    session: &str,
-    allow_control: bool,
-) -> std::io::Result<()> {
-    let mut ws = tungstenite::accept(stream).map_err(|e| std::io::Error::other(e.to_string()))?;
+/// The answer to a handshake from an origin that is not allowed.
+fn forbidden(origin: &str) -> ErrorResponse {
+    let mut r = ErrorResponse::new(Some(format!(
+        "origin {origin} may not connect: open the page from this viewer, or start iwsim view with --allow-origin {origin}\n"
+    )));
+    *r.status_mut() = tungstenite::http::StatusCode::FORBIDDEN;
+    r
+}
+
+fn serve_websocket(stream: TcpStream, ctx: &Context) -> std::io::Result<()> {
+    let config = WebSocketConfig::default()
+        .read_buffer_size(MAX_MESSAGE_BYTES * 2)
+        .max_message_size(Some(MAX_MESSAGE_BYTES))
+        .max_frame_size(Some(MAX_MESSAGE_BYTES));
+    // The error type is tungstenite's handshake callback's, not ours to shrink.
+    #[allow(clippy::result_large_err)]
+    let check = |req: &Request, resp: Response| -> Result<Response, ErrorResponse> {
+        let header = |name: &str| req.headers().get(name).map(|v| v.to_str().unwrap_or("\u{fffd}"));
+        let origin = header("origin");
+        if origin_allowed(origin, header("host"), &ctx.allowed_origins) {
+            return Ok(resp);
+        }
+        let origin = origin.unwrap_or_default();
+        let mut refused = ctx.refused_origins.lock().unwrap_or_else(|p| p.into_inner());
+        if let Some(n) = refused.note(Instant::now()) {
+            agent_sdk::report!(
+                "iwsim view: refused a WebSocket from origin {origin:?} ({n} so far); allow it with --allow-origin"
+            );
+        }
+        Err(forbidden(origin))
+    };
+    let mut ws = tungstenite::accept_hdr_with_config(stream, check, Some(config))
+        .map_err(|e| std::io::Error::other(e.to_string()))?;
     let io = |e: tungstenite::Error| std::io::Error::other(e.to_string());
+    let map_json = ctx.map_json.as_str();
+    let shared = &ctx.shared;
     ws.send(Message::text(map_json.to_owned())).map_err(io)?;
     // Reads must not block the frame stream: poll them with a short timeout.
     ws.get_mut().set_read_timeout(Some(Duration::from_millis(5)))?;
@@ -262,20 +480,9 @@ fn serve_websocket(
         }
         match ws.read() {
             Ok(Message::Text(cmd)) => {
-                let reply = match (parse_command(cmd.as_str()), allow_control) {
-                    (Some((c, robot)), true) => {
-                        let refused =
-                            |why: &str| format!("{{\"type\":\"error\",\"message\":{}}}", frame::json_str(why));
-                        match agent_sdk::control(session, c, robot) {
-                            Ok(r) if r.status == 0 => {
-                                format!("{{\"type\":\"ack\",\"command\":{}}}", frame::json_str(cmd.as_str()))
-                            }
-                            Ok(r) if r.status == 2 => refused(&format!("{cmd}: no robot {robot}")),
-                            Ok(_) => refused(&format!("{cmd}: not possible now")),
-                            Err(e) => refused(&e.to_string()),
-                        }
-                    }
-                    (Some(_), false) => {
+                let reply = match (parse_command(cmd.as_str()), &ctx.control) {
+                    (Some((c, robot)), Some(control)) => command_reply(control, cmd.as_str(), c, robot),
+                    (Some(_), None) => {
                         "{\"type\":\"error\",\"message\":\"control is off: start iwsim view with --allow-control\"}"
                             .to_owned()
                     }
@@ -293,5 +500,69 @@ fn serve_websocket(
             let _ = ws.close(None);
             return Ok(());
         }
+    }
+}
+
+/// Has the control thread send a page's command and turns the hub's answer into the page's
+/// reply. Waits for the answer (this page's stream pauses meanwhile, as a click expects), but
+/// never queues behind a full queue.
+fn command_reply(control: &SyncSender<ControlJob>, text: &str, command: Command, robot_id: u32) -> String {
+    let refused = |why: &str| format!("{{\"type\":\"error\",\"message\":{}}}", frame::json_str(why));
+    let (reply, answer) = mpsc::channel();
+    match control.try_send(ControlJob { command, robot_id, reply }) {
+        Ok(()) => {}
+        Err(TrySendError::Full(_)) => return refused(&format!("{text}: busy, try again")),
+        Err(TrySendError::Disconnected(_)) => return refused(&format!("{text}: the viewer is closing")),
+    }
+    // The control client gives up after 5 s itself; the extra second covers the queue.
+    match answer.recv_timeout(Duration::from_secs(6)) {
+        Ok(Ok(r)) if r.status == 0 => format!("{{\"type\":\"ack\",\"command\":{}}}", frame::json_str(text)),
+        Ok(Ok(r)) if r.status == 2 => refused(&format!("{text}: no robot {robot_id}")),
+        Ok(Ok(_)) => refused(&format!("{text}: not possible now")),
+        Ok(Err(e)) => refused(&e),
+        Err(_) => refused(&format!("{text}: the hub did not answer")),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_websocket_is_accepted_only_from_the_viewers_own_origin_or_an_allowed_one() {
+        let none: &[String] = &[];
+        let host = Some("127.0.0.1:8080");
+        assert!(origin_allowed(Some("http://127.0.0.1:8080"), host, none));
+        assert!(origin_allowed(Some("http://LAB-PC:8080/"), Some("lab-pc:8080"), none));
+        assert!(!origin_allowed(Some("http://evil.example"), host, none));
+        assert!(!origin_allowed(Some("http://127.0.0.1:9090"), host, none), "another port is another origin");
+        assert!(!origin_allowed(Some("https://127.0.0.1:8080"), host, none), "the viewer serves http only");
+        assert!(!origin_allowed(Some("null"), host, none), "a file:// page");
+        assert!(!origin_allowed(Some("http://127.0.0.1:8080"), None, none), "no Host, no own origin");
+        let allowed = vec!["http://evil.example/".to_owned()];
+        assert!(origin_allowed(Some("http://evil.example"), host, &allowed));
+        assert!(!origin_allowed(Some("http://evil.example.net"), host, &allowed));
+        // Browsers always send Origin on a WebSocket handshake; a request without one is a
+        // program's, which could send any Origin it liked.
+        assert!(origin_allowed(None, host, none));
+    }
+
+    #[test]
+    fn a_throttle_reports_the_first_event_then_at_most_once_a_second_with_the_count() {
+        let mut t = Throttle::default();
+        let t0 = Instant::now();
+        assert_eq!(t.note(t0), Some(1));
+        assert_eq!(t.note(t0 + Duration::from_millis(500)), None);
+        assert_eq!(t.note(t0 + Duration::from_millis(999)), None);
+        assert_eq!(t.note(t0 + Duration::from_millis(1000)), Some(4));
+        assert_eq!(t.note(t0 + Duration::from_millis(1001)), None);
+    }
+
+    #[test]
+    fn page_commands_parse_and_anything_else_is_unknown() {
+        assert_eq!(parse_command("pause"), Some((Command::Pause, 0)));
+        assert_eq!(parse_command("remove:7"), Some((Command::RemoveRobot, 7)));
+        assert_eq!(parse_command("remove:x"), None);
+        assert_eq!(parse_command("PAUSE"), None);
     }
 }

@@ -24,6 +24,10 @@ pub struct UdpArgs {
     /// Seconds a robot client may stay silent before its robot is removed.
     #[arg(long, default_value_t = 10.0, value_parser = client_timeout_s)]
     pub client_timeout: f64,
+    /// Let registered viewers and panels start, pause and stop the run and remove robots
+    /// (Ciber-Rato's Viewer sends Start); without it their commands are ignored and counted.
+    #[arg(long)]
+    pub allow_control: bool,
 }
 
 /// The shortest `--client-timeout`, seconds: the bridge looks at its clients every 20 ms, and a
@@ -51,6 +55,7 @@ pub fn run(args: &UdpArgs) -> anyhow::Result<ExitCode> {
         // In range by its parser; the clamp keeps a hand-built UdpArgs from panicking.
         client_timeout: Duration::from_secs_f64(args.client_timeout.clamp(MIN_CLIENT_TIMEOUT_S, MAX_CLIENT_TIMEOUT_S)),
         connect_timeout: args.hub.timeout(),
+        allow_control: args.allow_control,
     };
     let bridge = Bridge::start(cfg)?;
     agent_sdk::report!(
@@ -60,11 +65,12 @@ pub fn run(args: &UdpArgs) -> anyhow::Result<ExitCode> {
     );
     let counters = bridge.run()?;
     agent_sdk::report!(
-        "iwsim udp: run over ({} malformed, {} foreign, {} refused, {} timed out)",
+        "iwsim udp: run over ({} malformed, {} foreign, {} refused, {} timed out, {} viewer commands ignored)",
         counters.malformed,
         counters.foreign,
         counters.refused,
-        counters.timed_out
+        counters.timed_out,
+        counters.ignored_commands
     );
     Ok(ExitCode::SUCCESS)
 }

@@ -4,6 +4,7 @@
 
 pub mod cli;
 pub mod codec;
+pub mod noise;
 pub mod server;
 
 pub use server::{Bridge, BridgeConfig, BridgeError, Counters};

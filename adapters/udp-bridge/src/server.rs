@@ -14,6 +14,7 @@ use std::os::fd::AsRawFd;
 use std::time::{Duration, Instant};
 
 use agent_sdk::map::Map;
+use agent_sdk::pending::PendingRequest;
 use agent_sdk::{Agent, AgentError};
 use ipc_types::{
     ACT_MOTORS, ACT_POSE, ActionBlock, COLLISION, Command, HAS_COMPASS, HAS_GPS, HAS_GROUND, LED_END, LED_RETURNING,
@@ -22,6 +23,7 @@ use ipc_types::{
 };
 
 use crate::codec::{self, Actions, MeasuresData, Registration, ReplyParams, RobotType, ViewerCommand, ViewerRobot};
+use crate::noise::NoiseLog;
 
 /// Ciber-Rato's motor power limit: powers are clamped to ±0.15 and 0.15 means full power.
 pub const MAX_POWER: f64 = 0.15;
@@ -39,6 +41,9 @@ pub struct BridgeConfig {
     pub client_timeout: Duration,
     /// How long to wait for the hub to come up.
     pub connect_timeout: Duration,
+    /// Whether registered viewers and panels may start, pause and stop the run and remove
+    /// robots; without it their `<Start/>`, `<Stop/>` and `<Robot Removed>` are ignored.
+    pub allow_control: bool,
 }
 
 /// Why the bridge stopped.
@@ -68,6 +73,8 @@ pub struct Counters {
     pub refused: u64,
     /// Clients dropped for silence.
     pub timed_out: u64,
+    /// Run commands from viewers and panels ignored for want of `--allow-control`.
+    pub ignored_commands: u64,
 }
 
 #[derive(Debug)]
@@ -96,6 +103,22 @@ enum Kind {
     Robot(Box<RobotClient>),
     Viewer,
     Panel,
+}
+
+/// A robot client whose registration the hub has not answered yet (or, accepted, waits for
+/// the bridge's ready): it is answered on a later loop turn, so a slow hub never stalls the
+/// clients already served.
+#[derive(Debug)]
+struct Joining {
+    socket: UdpSocket,
+    peer: SocketAddr,
+    robot: codec::RobotRegistration,
+    hub_reg: ipc_types::RobotRegistration,
+    ir_ids: Vec<u32>,
+    /// The request in flight; `None` while queued or once answered.
+    request: Option<PendingRequest>,
+    /// The robot's id once the hub accepted it.
+    robot_id: Option<u32>,
 }
 
 #[derive(Debug)]
@@ -294,6 +317,12 @@ pub struct Bridge {
     run_state: RunState,
     answered: bool,
     is_ready: bool,
+    /// The ready request in flight.
+    ready: Option<PendingRequest>,
+    /// Robot registrations not yet answered, in arrival order.
+    joining: Vec<Joining>,
+    /// Bad datagrams, logged at a bounded rate.
+    noise: NoiseLog,
     /// The latest sensor block of each robot.
     blocks: BTreeMap<u32, SensorBlock>,
     control: Option<agent_sdk::ControlClient>,
@@ -302,6 +331,8 @@ pub struct Bridge {
     last_sent: Instant,
     /// Counters of refused input.
     pub counters: Counters,
+    /// When an ignored run command was last reported (at most once a second).
+    ignored_reported: Option<Instant>,
 }
 
 impl Bridge {
@@ -324,10 +355,14 @@ impl Bridge {
             run_state: RunState::Waiting,
             answered: true,
             is_ready: false,
+            ready: None,
+            joining: Vec::new(),
+            noise: NoiseLog::new(),
             blocks: BTreeMap::new(),
             control: None,
             last_sent: Instant::now(),
             counters: Counters::default(),
+            ignored_reported: None,
         })
     }
 
@@ -352,8 +387,12 @@ impl Bridge {
             unsafe {
                 libc::poll(fds.as_mut_ptr(), fds.len() as libc::nfds_t, timeout_ms);
             }
-            self.serve_registrations()?;
+            self.serve_registrations();
+            self.serve_joining()?;
             let changed = self.serve_clients();
+            for line in self.noise.due(Instant::now()) {
+                tracing::warn!("{line}");
+            }
             // Read the hub before judging its liveness: its last tick may be waiting.
             if let Some(tick) = self.agent.try_tick()? {
                 self.on_tick(tick.tick, tick.run_state);
@@ -374,16 +413,16 @@ impl Bridge {
         }
     }
 
-    fn serve_registrations(&mut self) -> Result<(), BridgeError> {
+    fn serve_registrations(&mut self) {
         let mut buf = [0u8; 65536];
         // Bounded, so a flood on the port cannot keep the loop from serving everyone else.
         for _ in 0..MAX_READS_PER_SOCKET {
             let (n, peer) = match self.reg.recv_from(&mut buf) {
                 Ok(x) => x,
-                Err(e) if e.kind() == ErrorKind::WouldBlock => return Ok(()),
+                Err(e) if e.kind() == ErrorKind::WouldBlock => return,
                 Err(e) => {
                     tracing::debug!("registration socket: {e}");
-                    return Ok(());
+                    return;
                 }
             };
             let registration = match codec::decode_registration(&buf[..n]) {
@@ -391,7 +430,7 @@ impl Bridge {
                 Err(e) => {
                     // Ciber-Rato sends no reply to what it cannot parse.
                     self.counters.malformed += 1;
-                    tracing::warn!("registration from {peer} dropped: {e}");
+                    noisy(&mut self.noise, peer, || format!("registration from {peer} dropped: {e}"));
                     continue;
                 }
             };
@@ -403,16 +442,20 @@ impl Bridge {
                 send(&c.socket, peer, &codec::encode_reply_ok(&reply_params(&self.map)));
                 continue;
             }
-            if self.clients.len() >= MAX_CLIENTS {
+            if self.clients.len() + self.joining.len() >= MAX_CLIENTS {
                 self.counters.refused += 1;
-                tracing::warn!("registration from {peer} refused: the bridge serves at most {MAX_CLIENTS} clients");
+                noisy(&mut self.noise, peer, || {
+                    format!("registration from {peer} refused: the bridge serves at most {MAX_CLIENTS} clients")
+                });
                 send(&self.reg, peer, &codec::encode_refused());
                 continue;
             }
             let socket = match UdpSocket::bind((self.cfg.bind, 0)).and_then(|s| s.set_nonblocking(true).map(|_| s)) {
                 Ok(s) => s,
                 Err(e) => {
-                    tracing::warn!("registration from {peer} dropped: cannot open its socket: {e}");
+                    noisy(&mut self.noise, peer, || {
+                        format!("registration from {peer} dropped: cannot open its socket: {e}")
+                    });
                     continue;
                 }
             };
@@ -420,50 +463,118 @@ impl Bridge {
                 Registration::View => Kind::Viewer,
                 Registration::Panel => Kind::Panel,
                 Registration::Robot(r) | Registration::RobotBeacon(r) => {
-                    let hub_reg = hub_registration(&r);
-                    let result = match &hub_reg {
-                        Ok((reg, _)) => self.agent.register(reg).and_then(|id| {
-                            if !self.is_ready {
-                                self.agent.ready()?;
-                                self.is_ready = true;
-                            }
-                            Ok(id)
-                        }),
-                        Err(detail) => Err(AgentError::Refused {
-                            reason: ipc_types::Refusal::BadParameters,
-                            detail: detail.clone(),
-                        }),
-                    };
-                    match (result, hub_reg) {
-                        (Ok(robot_id), Ok((_, ir_ids))) => Kind::Robot(Box::new(RobotClient {
-                            robot_id,
+                    match hub_registration(&r) {
+                        Ok((hub_reg, ir_ids)) => self.joining.push(Joining {
+                            socket,
+                            peer,
+                            robot: r,
+                            hub_reg,
                             ir_ids,
-                            real: r.kind == Some(RobotType::Real),
-                            name: r.name.clone(),
-                            leds: [false; 3],
-                            motors: [0.0; 2],
-                            pose: None,
-                            say: None,
-                            requests: Vec::new(),
-                            measures_sent: 0,
-                            actions_received: 0,
-                            last_measures: None,
-                        })),
-                        (Err(AgentError::Refused { reason, detail }), _) => {
+                            request: None,
+                            robot_id: None,
+                        }),
+                        Err(detail) => {
                             self.counters.refused += 1;
-                            tracing::warn!("robot {:?} from {peer} refused: {reason:?}: {detail}", r.name);
+                            noisy(&mut self.noise, peer, || {
+                                format!(
+                                    "robot {:?} from {peer} refused: {:?}: {detail}",
+                                    r.name,
+                                    ipc_types::Refusal::BadParameters
+                                )
+                            });
                             // The refusal comes from a fresh port, as the simulator's does.
                             send(&socket, peer, &codec::encode_refused());
-                            continue;
                         }
-                        (Err(e), _) => return Err(e.into()),
-                        (Ok(_), Err(_)) => continue,
                     }
+                    continue;
                 }
             };
             send(&socket, peer, &codec::encode_reply_ok(&reply_params(&self.map)));
             tracing::info!("{peer} registered as {kind:?}");
             self.clients.push(Client { socket, peer, kind, last_heard: Instant::now() });
+        }
+    }
+
+    /// Moves robot registrations along without waiting for the hub: sends queued ones (a few
+    /// in flight at a time), reads the answers that came, and admits accepted robots once the
+    /// bridge is ready (so the hub counts the bridge before its first robot drives).
+    fn serve_joining(&mut self) -> Result<(), BridgeError> {
+        if self.joining.is_empty() && self.ready.is_none() {
+            return Ok(());
+        }
+        let in_flight = self.joining.iter().filter(|j| j.request.is_some()).count() + self.ready.is_some() as usize;
+        let room = MAX_REQUESTS_IN_FLIGHT.saturating_sub(in_flight);
+        for j in self.joining.iter_mut().filter(|j| j.request.is_none() && j.robot_id.is_none()).take(room) {
+            j.request = Some(self.agent.start_register(&j.hub_reg)?);
+        }
+        let mut k = 0;
+        while k < self.joining.len() {
+            let j = &mut self.joining[k];
+            let Some(request) = &j.request else {
+                k += 1;
+                continue;
+            };
+            match self.agent.poll_pending(request) {
+                Ok(None) => k += 1,
+                Ok(Some(accepted)) => {
+                    j.request = None;
+                    j.robot_id = Some(accepted.robot_id);
+                    if !self.is_ready && self.ready.is_none() {
+                        self.ready = Some(self.agent.start_ready()?);
+                    }
+                    k += 1;
+                }
+                Err(AgentError::Refused { reason, detail }) => {
+                    let j = self.joining.remove(k);
+                    self.counters.refused += 1;
+                    let peer = j.peer;
+                    noisy(&mut self.noise, peer, || {
+                        format!("robot {:?} from {peer} refused: {reason:?}: {detail}", j.robot.name)
+                    });
+                    // The refusal comes from a fresh port, as the simulator's does.
+                    send(&j.socket, peer, &codec::encode_refused());
+                }
+                Err(e) => return Err(e.into()),
+            }
+        }
+        if let Some(ready) = &self.ready
+            && self.agent.poll_pending(ready)?.is_some()
+        {
+            self.ready = None;
+            self.is_ready = true;
+        }
+        if !self.is_ready {
+            return Ok(());
+        }
+        let (admitted, waiting): (Vec<Joining>, Vec<Joining>) =
+            std::mem::take(&mut self.joining).into_iter().partition(|j| j.robot_id.is_some());
+        self.joining = waiting;
+        for j in admitted {
+            let Joining { socket, peer, robot: r, ir_ids, robot_id, .. } = j;
+            let kind = Kind::Robot(Box::new(RobotClient {
+                robot_id: robot_id.unwrap_or_default(),
+                ir_ids,
+                real: r.kind == Some(RobotType::Real),
+                name: r.name,
+                leds: [false; 3],
+                motors: [0.0; 2],
+                pose: None,
+                say: None,
+                requests: Vec::new(),
+                measures_sent: 0,
+                actions_received: 0,
+                last_measures: None,
+            }));
+            send(&socket, peer, &codec::encode_reply_ok(&reply_params(&self.map)));
+            tracing::info!("{peer} registered as {kind:?}");
+            let mut client = Client { socket, peer, kind, last_heard: Instant::now() };
+            // The hub's sample of the tick in hand may have come while this robot waited for
+            // the bridge's ready: its Measures are due now (a run that waits for a Start
+            // brings no other tick to send them with).
+            if let Some((tick, _)) = self.tick {
+                send_measures(&mut client, &self.blocks, tick, self.run_state, &self.map);
+            }
+            self.clients.push(client);
         }
         Ok(())
     }
@@ -478,7 +589,8 @@ impl Bridge {
                 let Ok((n, from)) = c.socket.recv_from(&mut buf) else { break };
                 if from != c.peer {
                     self.counters.foreign += 1;
-                    tracing::warn!("datagram to {}'s port from {from} dropped", c.peer);
+                    let to = c.peer;
+                    noisy(&mut self.noise, from, || format!("datagram to {to}'s port from {from} dropped"));
                     continue;
                 }
                 c.last_heard = Instant::now();
@@ -490,14 +602,14 @@ impl Bridge {
                         }
                         Err(e) => {
                             self.counters.malformed += 1;
-                            tracing::warn!("actions from {from} dropped: {e}");
+                            noisy(&mut self.noise, from, || format!("actions from {from} dropped: {e}"));
                         }
                     },
                     Kind::Viewer | Kind::Panel => match codec::decode_viewer(&buf[..n]) {
                         Ok(cmd) => commands.push((c.socket.try_clone(), c.peer, cmd)),
                         Err(e) => {
                             self.counters.malformed += 1;
-                            tracing::warn!("viewer command from {from} dropped: {e}");
+                            noisy(&mut self.noise, from, || format!("viewer command from {from} dropped: {e}"));
                         }
                     },
                 }
@@ -532,6 +644,19 @@ impl Bridge {
         match cmd {
             ViewerCommand::LabReq => send(socket, peer, &codec::encode_lab(&self.map)),
             ViewerCommand::GridReq => send(socket, peer, &codec::encode_grid(&self.map)),
+            // Any registered viewer or panel (with --bind 0.0.0.0, any machine on the LAN)
+            // would otherwise control every robot, shared-memory ones included.
+            ViewerCommand::Start | ViewerCommand::Stop | ViewerCommand::RemoveRobot(_) if !self.cfg.allow_control => {
+                self.counters.ignored_commands += 1;
+                let now = Instant::now();
+                if self.ignored_reported.is_none_or(|t| now.duration_since(t) >= Duration::from_secs(1)) {
+                    self.ignored_reported = Some(now);
+                    agent_sdk::report!(
+                        "iwsim udp: {cmd:?} from {peer} ignored ({} so far): start iwsim udp with --allow-control to let viewers control the run",
+                        self.counters.ignored_commands
+                    );
+                }
+            }
             ViewerCommand::Start => self.command(Command::Start, 0),
             ViewerCommand::Stop => self.command(Command::Pause, 0),
             ViewerCommand::RemoveRobot(id) => {
@@ -555,18 +680,7 @@ impl Bridge {
             self.blocks.insert(b.robot_id, *b);
         }
         for c in &mut self.clients {
-            if let Kind::Robot(r) = &mut c.kind
-                && let Some(b) = self.blocks.get(&r.robot_id)
-            {
-                let m = measures(b, tick, state, &r.ir_ids, r.leds, &self.map, &r.requests);
-                r.requests.clear();
-                let datagram = codec::encode_measures(&m);
-                send(&c.socket, c.peer, &datagram);
-                r.last_measures = Some(datagram);
-                r.measures_sent += 1;
-                // A client that is behind never owes more than the tick in hand.
-                r.actions_received = r.actions_received.max(r.measures_sent.saturating_sub(1));
-            }
+            send_measures(c, &self.blocks, tick, state, &self.map);
         }
         self.last_sent = Instant::now();
     }
@@ -641,7 +755,11 @@ impl Bridge {
         let p = &self.map.header.params;
         let robots = || self.clients.iter().filter_map(|c| if let Kind::Robot(r) = &c.kind { Some(r) } else { None });
         let due = if p.lockstep != 0 {
-            let all = robots().all(|r| r.actions_received >= r.measures_sent);
+            // A robot the hub may have taken but the bridge has not admitted yet is owed this
+            // tick's Measures on admission: wait for its answer too (the deadline still holds).
+            let all = self.joining.is_empty()
+                && self.ready.is_none()
+                && robots().all(|r| r.actions_received >= r.measures_sent);
             // Answer a little before the hub's deadline, so the robots that did act still count.
             let near_deadline = since.elapsed() >= Duration::from_millis(p.deadline_ms as u64 * 9 / 10);
             !self.answered && (all || near_deadline)
@@ -712,8 +830,34 @@ impl Bridge {
 const MAX_READS_PER_SOCKET: usize = 64;
 /// Clients one bridge serves (each has a socket).
 const MAX_CLIENTS: usize = 512;
+/// Robot registrations sent to the hub and not yet answered, counting the ready request: the
+/// hub holds 4 requests per agent, and one slot stays free for the bridge's goodbye.
+const MAX_REQUESTS_IN_FLIGHT: usize = 2;
 /// Sensor requests kept per robot between ticks.
 const MAX_REQUESTS: usize = 64;
+
+/// Sends a robot client its Measures for `tick`, if the hub's sample has its robot's block.
+fn send_measures(c: &mut Client, blocks: &BTreeMap<u32, SensorBlock>, tick: u64, state: RunState, map: &Map) {
+    if let Kind::Robot(r) = &mut c.kind
+        && let Some(b) = blocks.get(&r.robot_id)
+    {
+        let m = measures(b, tick, state, &r.ir_ids, r.leds, map, &r.requests);
+        r.requests.clear();
+        let datagram = codec::encode_measures(&m);
+        send(&c.socket, c.peer, &datagram);
+        r.last_measures = Some(datagram);
+        r.measures_sent += 1;
+        // A client that is behind never owes more than the tick in hand.
+        r.actions_received = r.actions_received.max(r.measures_sent.saturating_sub(1));
+    }
+}
+
+/// Logs a bad datagram from `peer` if the rate limit allows; the caller counts it either way.
+fn noisy(log: &mut NoiseLog, peer: SocketAddr, what: impl FnOnce() -> String) {
+    if let Some(line) = log.note(peer, Instant::now(), what) {
+        tracing::warn!("{line}");
+    }
+}
 
 fn apply_actions(r: &mut RobotClient, a: &Actions) {
     let power = |p: f64| p.clamp(-MAX_POWER, MAX_POWER) / MAX_POWER;

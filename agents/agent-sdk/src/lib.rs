@@ -24,6 +24,7 @@ pub use records::{args, files, log};
 pub mod cli;
 pub mod logs;
 pub mod map;
+pub mod pending;
 
 use std::time::{Duration, Instant};
 
@@ -257,6 +258,8 @@ pub struct ControlClient {
     client: Client<Svc, ipc_types::ControlRequest, (), ipc_types::ControlResponse, ()>,
     doorbell: Notifier<Svc>,
     _node: Node<Svc>,
+    /// The session's name, for errors.
+    session: String,
     pending: Vec<
         ipc_services::iceoryx2::pending_response::PendingResponse<
             Svc,
@@ -289,7 +292,8 @@ impl ControlClient {
             .create()
             .map_err(ipc("create the hub doorbell"))?;
         let client = svc.client_builder().create().map_err(ipc("create a control client"))?;
-        Ok(Self { client, doorbell, _node: node, pending: Vec::new(), _release: release })
+        let session = session.name().to_owned();
+        Ok(Self { client, doorbell, _node: node, session, pending: Vec::new(), _release: release })
     }
 
     /// Sends a command and returns at once; answers are collected and dropped later.
@@ -306,6 +310,31 @@ impl ControlClient {
         self.pending.push(p);
         let _ = self.doorbell.notify();
         Ok(())
+    }
+
+    /// Sends a command and waits up to 5 s for the hub's answer, on this one client: a
+    /// process that sends many commands (the web viewer) keeps one node instead of one per
+    /// command.
+    pub fn ask(
+        &mut self,
+        command: ipc_types::Command,
+        robot_id: u32,
+    ) -> Result<ipc_types::ControlResponse, AgentError> {
+        let p = self
+            .client
+            .send_copy(ipc_types::ControlRequest { command: command as u32, robot_id })
+            .map_err(ipc("send a command"))?;
+        let _ = self.doorbell.notify();
+        let start = Instant::now();
+        loop {
+            if let Some(r) = p.receive().map_err(ipc("receive an answer"))? {
+                return Ok(*r.payload());
+            }
+            if start.elapsed() > ANSWER_TIMEOUT {
+                return Err(AgentError::NoAnswer(self.session.clone()));
+            }
+            std::thread::sleep(Duration::from_micros(200));
+        }
     }
 }
 

@@ -9,7 +9,7 @@ use agent_sdk::cli::{BodyArgs, CommonArgs};
 use agent_sdk::logs::RobotLogs;
 use agent_sdk::{Agent, Wait};
 use anyhow::Context as _;
-use ipc_types::{ActionBlock, COLLISION, MAX_PROXIMITY, RobotKind, RobotRegistration, SensorSpec};
+use ipc_types::{ActionBlock, COLLISION, MAX_PROXIMITY, RobotKind, RobotRegistration, SensorBlock, SensorSpec};
 use serde::Deserialize;
 
 use clap::Args;
@@ -264,6 +264,17 @@ pub fn toward(pose: [f64; 3], goal: [f64; 2], speed: f64) -> Option<[f64; 2]> {
     Some([(speed - turn).clamp(-1.0, 1.0), (speed + turn).clamp(-1.0, 1.0)])
 }
 
+/// The sensor block of robot `id`, the agent's `k`-th robot. The hub sends an agent's blocks in
+/// registration order, so the `k`-th block is normally the one; once one of its robots is
+/// removed the rest move up, and the block is found by its robot id instead. `None` when the
+/// robot is gone.
+pub fn sensor_block_of(blocks: &[SensorBlock], k: usize, id: u32) -> Option<&SensorBlock> {
+    match blocks.get(k) {
+        Some(b) if b.robot_id == id => Some(b),
+        _ => blocks.iter().find(|b| b.robot_id == id),
+    }
+}
+
 /// `iwsim agent wheelchair`.
 pub fn run(args: &WheelchairArgs) -> anyhow::Result<ExitCode> {
     let chairs = match &args.config {
@@ -314,7 +325,7 @@ fn drive(agent: &mut Agent, args: &WheelchairArgs, chairs: &[ChairConfig]) -> an
         let dt = last_time.map_or(cycle_s, |t| (tick.sim_time_s - t).max(0.0));
         last_time = Some(tick.sim_time_s);
         for (k, (c, &id)) in chairs.iter().zip(&ids).enumerate() {
-            let Some(b) = agent.sensors().get(k) else { continue };
+            let Some(b) = sensor_block_of(agent.sensors(), k, id) else { continue };
             let powers = if tick.sim_time_s < c.start_s {
                 [0.0, 0.0]
             } else if let Some(p) = c.powers {
@@ -374,11 +385,27 @@ fn drive(agent: &mut Agent, args: &WheelchairArgs, chairs: &[ChairConfig]) -> an
 #[cfg(test)]
 mod tests {
     use super::*;
+    use bytemuck::Zeroable as _;
 
     #[test]
     fn a_config_file_larger_than_the_cap_is_refused() {
         let err = read_config(Path::new("/dev/zero")).expect_err("endless");
         assert!(format!("{err:#}").contains("reading /dev/zero: the file is larger than"), "{err:#}");
+    }
+
+    #[test]
+    fn chairs_are_paired_with_their_own_sensor_blocks_after_a_removal() {
+        let block = |robot_id: u32, x: f64| SensorBlock { robot_id, pose: [x, 0.0, 0.0], ..SensorBlock::zeroed() };
+        let ids = [1, 2, 3];
+        let all = [block(1, 10.0), block(2, 20.0), block(3, 30.0)];
+        let paired: Vec<_> =
+            ids.iter().enumerate().map(|(k, &id)| sensor_block_of(&all, k, id).map(|b| b.pose[0])).collect();
+        assert_eq!(paired, vec![Some(10.0), Some(20.0), Some(30.0)]);
+        // Robot 1 removed: its chair gets nothing, and chair 2 still gets robot 2's data.
+        let after = [block(2, 20.0), block(3, 30.0)];
+        let paired: Vec<_> =
+            ids.iter().enumerate().map(|(k, &id)| sensor_block_of(&after, k, id).map(|b| b.robot_id)).collect();
+        assert_eq!(paired, vec![None, Some(2), Some(3)]);
     }
 
     #[test]

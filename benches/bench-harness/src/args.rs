@@ -67,6 +67,11 @@ pub struct BenchLockstepArgs {
     /// one run with the ratio (both).
     #[arg(long, default_value = "shm")]
     pub transport: Transport,
+    /// Also run over UDP with this many junk datagrams sent at the bridge during the run (half
+    /// to its registration port, half to a client's port from a stranger), and report ticks/s
+    /// with and without the flood and the bridge's stderr bytes (0: no flood run).
+    #[arg(long, default_value_t = 0)]
+    pub flood: u64,
     /// Print one JSON object instead of text.
     #[arg(long)]
     pub json: bool,

@@ -299,6 +299,10 @@ pub struct LockstepBench {
     pub ticks: u64,
     /// Ticks per second, end to end.
     pub ticks_per_s: f64,
+    /// Junk datagrams sent at the bridge during the run (UDP only).
+    pub flood_sent: u64,
+    /// Bytes the bridge wrote to stderr (UDP only).
+    pub bridge_stderr_bytes: u64,
 }
 
 /// A hub in lock-step with `agents` agent processes of `robots_per_agent` robots each, physics
@@ -306,21 +310,24 @@ pub struct LockstepBench {
 /// Robots stand in lattices 5 m apart (one per 25 m², about three times the density of the
 /// LIACC floor in `bench world`), driving slow arcs. Over UDP, each agent is a Ciber-Rato-style
 /// client process (one socket per robot, one `<Actions>` per `<Measures>`) talking to
-/// `iwsim udp`.
+/// `iwsim udp`. With `flood` > 0 (UDP only), a thread sends that many junk datagrams at the
+/// bridge while the run goes on.
 pub fn measure_lockstep(
     agents: usize,
     robots_per_agent: usize,
     ticks: u64,
     udp: bool,
+    flood: u64,
 ) -> anyhow::Result<LockstepBench> {
-    let dir = std::env::temp_dir().join(format!("iwsim-bench-{}-{}", std::process::id(), udp as u8));
+    let tag = format!("{}-{}", udp as u8, (flood > 0) as u8);
+    let dir = std::env::temp_dir().join(format!("iwsim-bench-{}-{tag}", std::process::id()));
     std::fs::create_dir_all(&dir)?;
     let lab = dir.join("lab.xml");
     std::fs::write(
         &lab,
         "<Lab Name=\"bench\" Width=\"400\" Height=\"400\">\n  <Wall Height=\"2\"><Corner X=\"200\" Y=\"0\"/><Corner X=\"201\" Y=\"0\"/><Corner X=\"201\" Y=\"150\"/><Corner X=\"200\" Y=\"150\"/></Wall>\n</Lab>\n",
     )?;
-    let session = format!("bench-ls-{}-{}", std::process::id(), udp as u8);
+    let session = format!("bench-ls-{}-{tag}", std::process::id());
     // Over UDP the bridge is the hub's one agent, whatever the number of UDP clients.
     let hub_agents = if udp { 1 } else { agents };
     let hub = spawn_self(&[
@@ -341,6 +348,8 @@ pub fn measure_lockstep(
     let origin = |i: usize| (5.0 + (10.0 * SPACING + SPACING) * (i % 7) as f64, 5.0 + rows * (i / 7) as f64);
     let mut children = Vec::new();
     let mut bridge = None;
+    let mut flooder = None;
+    let mut stderr_bytes = None;
     if udp {
         let mut b = spawn_self(&[
             "udp".into(),
@@ -351,8 +360,12 @@ pub fn measure_lockstep(
             "--connect-timeout".into(),
             "30".into(),
         ])?;
-        let server = bridge_address(&mut b)?;
+        let (server, bytes) = bridge_address(&mut b)?;
+        stderr_bytes = Some(bytes);
         bridge = Some(b);
+        if flood > 0 {
+            flooder = Some(start_flood(server, flood)?);
+        }
         // The hub starts when the bridge is ready, i.e. at its first robot: register every
         // client's robots before the first tick matters, which the clients do at once.
         for i in 0..agents {
@@ -396,23 +409,80 @@ pub fn measure_lockstep(
     if let Some(b) = bridge {
         finish(b, "bridge")?;
     }
+    let flood_sent = match flooder {
+        Some(f) => f.stop(),
+        None => 0,
+    };
+    // The bridge has exited: its stderr is closed and the counting thread ends.
+    let bridge_stderr_bytes = stderr_bytes.map_or(0, |h| h.join().unwrap_or(0));
     let _ = std::fs::remove_dir_all(&dir);
     let hub_out = HubOutcome::from_stdout(&out).context("reading how the hub's run ended")?;
     let ticks_per_s = hub_out.ticks as f64 / hub_out.run_s.max(1e-9);
-    Ok(LockstepBench { agents, robots_per_agent, ticks: hub_out.ticks, ticks_per_s })
+    Ok(LockstepBench { agents, robots_per_agent, ticks: hub_out.ticks, ticks_per_s, flood_sent, bridge_stderr_bytes })
 }
 
-/// Reads the bridge's "registrations on ADDR" line from its stderr.
-fn bridge_address(bridge: &mut std::process::Child) -> anyhow::Result<std::net::SocketAddr> {
+/// A thread sending junk datagrams at a bridge until it has sent its count or is stopped.
+struct Flood {
+    stop: std::sync::Arc<std::sync::atomic::AtomicBool>,
+    thread: std::thread::JoinHandle<u64>,
+}
+
+impl Flood {
+    /// Stops the flood; the datagrams it sent.
+    fn stop(self) -> u64 {
+        self.stop.store(true, std::sync::atomic::Ordering::Relaxed);
+        self.thread.join().unwrap_or(0)
+    }
+}
+
+/// Registers a panel at `server` (so the bridge opens a client port), then sends `count`
+/// junk datagrams as fast as the socket takes them: half malformed registrations to the
+/// registration port, half to the panel's port from another socket (foreign datagrams).
+fn start_flood(server: std::net::SocketAddr, count: u64) -> anyhow::Result<Flood> {
+    use std::net::UdpSocket;
+    let panel = UdpSocket::bind("127.0.0.1:0").context("bind the flood's panel socket")?;
+    panel.set_read_timeout(Some(Duration::from_secs(10)))?;
+    panel.send_to(b"<Panel/>", server)?;
+    let mut buf = [0u8; 4096];
+    let (_, client_port) = panel.recv_from(&mut buf).context("the bridge did not answer the flood's panel")?;
+    let junk = UdpSocket::bind("127.0.0.1:0").context("bind the flood socket")?;
+    let stop = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
+    let stopped = stop.clone();
+    let thread = std::thread::spawn(move || {
+        let _panel = panel;
+        let mut sent = 0u64;
+        while sent < count && !stopped.load(std::sync::atomic::Ordering::Relaxed) {
+            let to = if sent.is_multiple_of(2) { server } else { client_port };
+            let datagram = format!("<Robot Id=\"junk{sent}\"");
+            if junk.send_to(datagram.as_bytes(), to).is_ok() {
+                sent += 1;
+            }
+        }
+        sent
+    });
+    Ok(Flood { stop, thread })
+}
+
+/// Reads the bridge's "registrations on ADDR" line from its stderr; the thread that drains
+/// the rest of it returns how many bytes the bridge wrote in all.
+fn bridge_address(
+    bridge: &mut std::process::Child,
+) -> anyhow::Result<(std::net::SocketAddr, std::thread::JoinHandle<u64>)> {
     use std::io::BufRead;
     let stderr = bridge.stderr.take().context("bridge stderr")?;
-    let mut lines = std::io::BufReader::new(stderr).lines();
+    let mut reader = std::io::BufReader::new(stderr);
+    let mut bytes = 0u64;
     loop {
-        let line = lines.next().context("the bridge exited before announcing its port")??;
+        let mut line = String::new();
+        let n = reader.read_line(&mut line).context("reading the bridge's stderr")?;
+        anyhow::ensure!(n > 0, "the bridge exited before announcing its port");
+        bytes += n as u64;
         if let Some(addr) = line.split("registrations on ").nth(1) {
+            let addr = addr.trim().parse().context("the bridge's address")?;
             // Keep draining stderr so the bridge never blocks on a full pipe.
-            std::thread::spawn(move || for _ in lines.by_ref() {});
-            return addr.trim().parse().context("the bridge's address");
+            let drain =
+                std::thread::spawn(move || bytes + std::io::copy(&mut reader, &mut std::io::sink()).unwrap_or(0));
+            return Ok((addr, drain));
         }
     }
 }
@@ -460,43 +530,71 @@ pub fn udp_client(args: &UdpClientArgs) -> anyhow::Result<ExitCode> {
 
 /// `iwsim bench lockstep`.
 pub fn lockstep(args: &BenchLockstepArgs) -> anyhow::Result<ExitCode> {
-    let runs: Vec<(&str, LockstepBench)> = match args.transport {
-        Transport::Shm => vec![("shm", measure_lockstep(args.agents, args.robots_per_agent, args.ticks, false)?)],
-        Transport::Udp => vec![("udp", measure_lockstep(args.agents, args.robots_per_agent, args.ticks, true)?)],
-        Transport::Both => vec![
-            ("shm", measure_lockstep(args.agents, args.robots_per_agent, args.ticks, false)?),
-            ("udp", measure_lockstep(args.agents, args.robots_per_agent, args.ticks, true)?),
-        ],
+    let m = |udp: bool, flood: u64| measure_lockstep(args.agents, args.robots_per_agent, args.ticks, udp, flood);
+    let mut runs: Vec<(&str, LockstepBench)> = match args.transport {
+        Transport::Shm if args.flood == 0 => vec![("shm", m(false, 0)?)],
+        Transport::Shm => vec![],
+        Transport::Udp => vec![("udp", m(true, 0)?)],
+        Transport::Both => vec![("shm", m(false, 0)?), ("udp", m(true, 0)?)],
     };
-    let ratio = (runs.len() == 2).then(|| runs[0].1.ticks_per_s / runs[1].1.ticks_per_s.max(1e-9));
+    if args.flood > 0 {
+        // The flood is at the bridge: compare UDP runs with and without it, in one invocation.
+        if !runs.iter().any(|(name, _)| *name == "udp") {
+            runs.push(("udp", m(true, 0)?));
+        }
+        runs.push(("udp+flood", m(true, args.flood)?));
+    }
+    let shm_udp = match (runs.first(), runs.get(1)) {
+        (Some(("shm", a)), Some(("udp", b))) => Some(a.ticks_per_s / b.ticks_per_s.max(1e-9)),
+        _ => None,
+    };
+    let flood = runs.iter().find(|(name, _)| *name == "udp+flood").map(|(_, f)| f);
+    let quiet = runs.iter().find(|(name, _)| *name == "udp").map(|(_, q)| q);
+    let flood_ratio = match (flood, quiet) {
+        (Some(f), Some(q)) => Some(f.ticks_per_s / q.ticks_per_s.max(1e-9)),
+        _ => None,
+    };
     if args.json {
         let mut s = format!(
             "{{\"agents\":{},\"robots_per_agent\":{},\"ticks\":{}",
             args.agents, args.robots_per_agent, runs[0].1.ticks
         );
-        for (name, b) in &runs {
-            let key = if runs.len() == 1 { "ticks_per_s".to_owned() } else { format!("{name}_ticks_per_s") };
-            s += &format!(",\"transport\":\"{name}\",\"{key}\":{:.1}", b.ticks_per_s);
-            if runs.len() == 1 {
-                break;
+        if runs.len() == 1 {
+            s += &format!(",\"transport\":\"{}\",\"ticks_per_s\":{:.1}", runs[0].0, runs[0].1.ticks_per_s);
+        } else {
+            for (name, b) in &runs {
+                s += &format!(",\"{}_ticks_per_s\":{:.1}", name.replace('+', "_"), b.ticks_per_s);
             }
         }
-        if let Some(r) = ratio {
-            s = format!(
-                "{{\"agents\":{},\"robots_per_agent\":{},\"ticks\":{},\"shm_ticks_per_s\":{:.1},\"udp_ticks_per_s\":{:.1},\"ratio_shm_over_udp\":{:.2}",
-                args.agents, args.robots_per_agent, runs[0].1.ticks, runs[0].1.ticks_per_s, runs[1].1.ticks_per_s, r
+        if let Some(r) = shm_udp {
+            s += &format!(",\"ratio_shm_over_udp\":{r:.2}");
+        }
+        if let (Some(f), Some(r), Some(q)) = (flood, flood_ratio, quiet) {
+            s += &format!(
+                ",\"flood_sent\":{},\"ratio_flood_over_udp\":{r:.2},\"udp_stderr_bytes\":{},\"flood_stderr_bytes\":{}",
+                f.flood_sent, q.bridge_stderr_bytes, f.bridge_stderr_bytes
             );
         }
         println!("{s}}}");
     } else {
         for (name, b) in &runs {
+            let flooded =
+                if b.flood_sent > 0 { format!(", {} junk datagrams sent", b.flood_sent) } else { String::new() };
+            let stderr = if args.flood > 0 && name.starts_with("udp") {
+                format!("; bridge stderr {} bytes", b.bridge_stderr_bytes)
+            } else {
+                String::new()
+            };
             println!(
-                "lockstep over {name}: {} agents x {} robots, physics and sensors on: {:.1} ticks/s over {} ticks",
+                "lockstep over {name}: {} agents x {} robots, physics and sensors on: {:.1} ticks/s over {} ticks{flooded}{stderr}",
                 b.agents, b.robots_per_agent, b.ticks_per_s, b.ticks
             );
         }
-        if let Some(r) = ratio {
+        if let Some(r) = shm_udp {
             println!("  shared memory / UDP: {r:.2}x");
+        }
+        if let Some(r) = flood_ratio {
+            println!("  UDP with the flood / without: {r:.2}x");
         }
     }
     Ok(ExitCode::SUCCESS)

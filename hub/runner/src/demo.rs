@@ -46,7 +46,7 @@ pub fn run(args: &DemoArgs) -> anyhow::Result<ExitCode> {
         anyhow::ensure!(s.is_finite() && s > 0.0, "--seconds {s}: must be positive");
         scenario.seconds = s;
     }
-    eprintln!(
+    ipc_services::report!(
         "iwsim demo: {} — {} s simulated on the LIACC floor (thesis Annex D), {}, seed {}",
         scenario.description,
         scenario.seconds,

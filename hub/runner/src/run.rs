@@ -174,7 +174,7 @@ impl Kid {
                 }
                 let line = if !word.is_empty() && line.starts_with(&word) { line } else { format!("{prefix}{line}") };
                 if echo {
-                    eprintln!("{line}");
+                    ipc_services::report!("{line}");
                 }
                 let _ = sink.send(line);
             }
@@ -351,13 +351,15 @@ fn supervise(procs: &mut Procs, viewer: &mut Option<ViewerStart>, watch: &Watch,
             };
             match said {
                 Some(Some(line)) if line.contains("open http") => {
-                    eprintln!("{line}");
+                    ipc_services::report!("{line}");
                     *viewer = None;
                 }
                 Some(line) => {
                     match line {
-                        Some(line) => eprintln!("iwsim run: the viewer did not start ({line}); going on headless"),
-                        None => eprintln!("iwsim run: the viewer did not start; going on headless"),
+                        Some(line) => {
+                            ipc_services::report!("iwsim run: the viewer did not start ({line}); going on headless")
+                        }
+                        None => ipc_services::report!("iwsim run: the viewer did not start; going on headless"),
                     }
                     procs.viewer = None;
                     *viewer = None;
@@ -521,7 +523,7 @@ pub fn run_once(
     let mut agent_failures = Vec::new();
     let failure = match stop {
         Stop::Signal(signal) => {
-            eprintln!(
+            ipc_services::report!(
                 "iwsim run: {} received; stopping the hub, {} agent(s){}",
                 signal.name(),
                 procs.agents.len(),
@@ -529,7 +531,7 @@ pub fn run_once(
             );
             interrupted = Some(signal);
             for what in procs.stop(signal.forwarded()) {
-                eprintln!("iwsim run: the {what} did not stop within {STOP_BOUND:?}; killed it");
+                ipc_services::report!("iwsim run: the {what} did not stop within {STOP_BOUND:?}; killed it");
             }
             None
         }
@@ -572,7 +574,7 @@ pub fn run_once(
                     signal = signals.wait(POLL);
                 }
                 if let Some(signal) = signal {
-                    eprintln!("iwsim run: {} received; stopping what is left of the run", signal.name());
+                    ipc_services::report!("iwsim run: {} received; stopping what is left of the run", signal.name());
                     interrupted = Some(signal);
                     procs.stop(signal.forwarded());
                 }
@@ -687,7 +689,7 @@ fn watch_loop(session: &str, ticks: u64, verbose: bool, watch: &Watch, stop: &Re
             if tty {
                 eprint!("\r  tick {last_tick} / {ticks} ({pct:.0} %)   ");
             } else {
-                eprintln!("  tick {last_tick} / {ticks} ({pct:.0} %)");
+                ipc_services::report!("  tick {last_tick} / {ticks} ({pct:.0} %)");
             }
             last_print = Instant::now();
         }
@@ -774,7 +776,7 @@ pub fn run(args: &RunArgs) -> anyhow::Result<ExitCode> {
     };
     let Some(seeds) = &args.seeds else {
         let seed = args.seed.unwrap_or(scenario.seed);
-        eprintln!(
+        ipc_services::report!(
             "iwsim run: {} ({}), seed {seed}, {} s simulated in {}",
             scenario.name,
             scenario.description,
@@ -818,7 +820,7 @@ pub fn run(args: &RunArgs) -> anyhow::Result<ExitCode> {
             s.state_hash
         );
         if !args.quiet {
-            eprintln!("{line}");
+            ipc_services::report!("{line}");
         }
         table += &line;
         table.push('\n');

@@ -11,6 +11,31 @@ pub const MAX_PROXIMITY: usize = 8;
 /// Longest robot name, in bytes.
 pub const MAX_NAME_LEN: usize = 31;
 
+/// The longest side of a robot's body, metres (`Width` and `Height` alike).
+///
+/// The largest things that move on their own in a building are a hospital bed (about 2.2 m)
+/// and a wide sliding door (a door is a robot here); 5 m holds both with room to spare. The
+/// bound matters because every robot's body sizes the broad-phase queries of its neighbours:
+/// one 10 km "robot" would touch every cell of the robot index and make each tick quadratic.
+/// A proximity sensor's mount point must also lie within this distance of the centre of
+/// movement on each axis.
+pub const MAX_BODY_M: Real = 5.0;
+
+/// The highest top speed, m/s (18 km/h).
+///
+/// Powered wheelchairs are limited to about 3.3–3.6 m/s (12 km/h in most of Europe, 8 mph in
+/// the UK); 5 m/s leaves room for a fast test robot while keeping a robot's travel in one
+/// 100 ms tick (0.5 m) well under one cell of the robot index (2 m), which is what the
+/// collision phase assumes when it looks only at neighbouring cells.
+pub const MAX_SPEED_MPS: Real = 5.0;
+
+/// The longest proximity-sensor range, metres.
+///
+/// Infrared sensors read up to about 1.5 m and ultrasonic ones up to about 10 m; 20 m covers
+/// both. A sensor's range sizes the region of walls and robots its cone is tested against
+/// every tick, so it is bounded for the same reason as the body.
+pub const MAX_SENSOR_RANGE_M: Real = 20.0;
+
 /// How a robot moves.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub enum RobotKind {
@@ -158,20 +183,22 @@ impl RobotSpec {
         if self.name.len() > MAX_NAME_LEN {
             return Err(AddRobotError::NameTooLong { len: self.name.len(), max: MAX_NAME_LEN });
         }
-        if self.width_m <= 0.0 {
-            return Err(AddRobotError::OutOfRange { field: "width", value: self.width_m, expected: "> 0 m" });
+        // The `expected` texts spell out MAX_BODY_M, MAX_SPEED_MPS and MAX_SENSOR_RANGE_M; a test
+        // keeps them in step.
+        if !(self.width_m > 0.0 && self.width_m <= MAX_BODY_M) {
+            return Err(AddRobotError::OutOfRange { field: "width", value: self.width_m, expected: "in (0, 5] m" });
         }
-        if self.height_m <= 0.0 {
-            return Err(AddRobotError::OutOfRange { field: "height", value: self.height_m, expected: "> 0 m" });
+        if !(self.height_m > 0.0 && self.height_m <= MAX_BODY_M) {
+            return Err(AddRobotError::OutOfRange { field: "height", value: self.height_m, expected: "in (0, 5] m" });
         }
         if !(self.com > 0.0 && self.com < 1.0) {
             return Err(AddRobotError::OutOfRange { field: "com", value: self.com, expected: "in (0, 1)" });
         }
-        if self.max_speed_mps <= 0.0 {
+        if !(self.max_speed_mps > 0.0 && self.max_speed_mps <= MAX_SPEED_MPS) {
             return Err(AddRobotError::OutOfRange {
                 field: "max_speed",
                 value: self.max_speed_mps,
-                expected: "> 0 m/s",
+                expected: "in (0, 5] m/s",
             });
         }
         if !(0.0..1.0).contains(&self.accel_curve) {
@@ -192,6 +219,11 @@ impl RobotSpec {
                     return Err(AddRobotError::BadSensor { index, field, value: v, expected: "a finite number" });
                 }
             }
+            for (field, v) in [("sensor x", s.x_m), ("sensor y", s.y_m)] {
+                if v.abs() > MAX_BODY_M {
+                    return Err(AddRobotError::BadSensor { index, field, value: v, expected: "in [-5, 5] m" });
+                }
+            }
             if !(s.cone_rad > 0.0 && s.cone_rad <= std::f64::consts::TAU + 1e-12) {
                 return Err(AddRobotError::BadSensor {
                     index,
@@ -201,9 +233,14 @@ impl RobotSpec {
                 });
             }
             if let Some(r) = s.range_m
-                && !(r.is_finite() && r > 0.0)
+                && !(r.is_finite() && r > 0.0 && r <= MAX_SENSOR_RANGE_M)
             {
-                return Err(AddRobotError::BadSensor { index, field: "sensor range", value: r, expected: "> 0 m" });
+                return Err(AddRobotError::BadSensor {
+                    index,
+                    field: "sensor range",
+                    value: r,
+                    expected: "in (0, 20] m",
+                });
             }
         }
         Ok(())
@@ -238,7 +275,7 @@ pub enum AddRobotError {
         max: usize,
     },
     /// A proximity sensor's parameter was invalid.
-    #[error("proximity sensor {index}: {field} = {value} is invalid: expected {expected}")]
+    #[error("{field} = {value} on sensor {index}: expected {expected}")]
     BadSensor {
         /// The sensor's index in the spec.
         index: usize,
@@ -424,5 +461,60 @@ mod tests {
         assert!(matches!(ok.clone().sensors(bad_cone).validate(), Err(AddRobotError::BadSensor { index: 0, .. })));
         let long = "x".repeat(40);
         assert!(matches!(ok.named(&long).validate(), Err(AddRobotError::NameTooLong { len: 40, .. })));
+    }
+
+    #[test]
+    fn bodies_speeds_and_sensor_ranges_past_their_limits_are_refused() {
+        let ok = RobotSpec::at(1.0, 1.0, 0.0);
+        // The limits themselves are accepted.
+        let edge =
+            ok.clone().body(MAX_BODY_M, MAX_BODY_M, 0.5).motors(MAX_SPEED_MPS, 0.5).sensors(vec![ProximitySpec {
+                range_m: Some(MAX_SENSOR_RANGE_M),
+                ..ProximitySpec::deg(MAX_BODY_M, -MAX_BODY_M, 0.0, 60.0)
+            }]);
+        assert_eq!(edge.validate(), Ok(()));
+        let refused = ok.clone().body(10_000.0, 1.0, 0.5).validate();
+        assert_eq!(
+            refused,
+            Err(AddRobotError::OutOfRange { field: "width", value: 10_000.0, expected: "in (0, 5] m" })
+        );
+        assert_eq!(
+            refused.map_err(|e| e.to_string()),
+            Err("width = 10000 is out of range: expected in (0, 5] m".to_owned())
+        );
+        assert!(matches!(
+            ok.clone().body(1.0, 5.01, 0.5).validate(),
+            Err(AddRobotError::OutOfRange { field: "height", .. })
+        ));
+        assert_eq!(
+            ok.clone().motors(5.5, 0.5).validate(),
+            Err(AddRobotError::OutOfRange { field: "max_speed", value: 5.5, expected: "in (0, 5] m/s" })
+        );
+        let far = vec![ProximitySpec { range_m: Some(20.5), ..ProximitySpec::deg(0.0, 0.0, 0.0, 60.0) }];
+        assert_eq!(
+            ok.clone().sensors(far).validate(),
+            Err(AddRobotError::BadSensor { index: 0, field: "sensor range", value: 20.5, expected: "in (0, 20] m" })
+        );
+        let off_body = vec![ProximitySpec::deg(0.0, 0.0, 0.0, 60.0), ProximitySpec::deg(0.0, 9.0, 90.0, 60.0)];
+        assert_eq!(
+            ok.sensors(off_body).validate(),
+            Err(AddRobotError::BadSensor { index: 1, field: "sensor y", value: 9.0, expected: "in [-5, 5] m" })
+        );
+        // The refusals' texts name the constants' values.
+        assert_eq!((MAX_BODY_M, MAX_SPEED_MPS, MAX_SENSOR_RANGE_M), (5.0, 5.0, 20.0));
+    }
+
+    #[test]
+    fn a_world_refuses_an_oversized_robot_and_an_oversized_default_sensor_range() {
+        let map = crate::map::builtin::map("liacc").expect("built in");
+        let mut world = crate::World::new(&map.lab, crate::map::Params::default(), 1).expect("valid");
+        let huge = RobotSpec::at(10.0, 6.1, 0.0).body(10_000.0, 1.0, 0.5);
+        assert!(matches!(world.add_robot(huge), Err(AddRobotError::OutOfRange { field: "width", .. })));
+        assert!(world.is_empty());
+        let params = crate::map::Params { proximity_range_m: 25.0, ..crate::map::Params::default() };
+        assert!(matches!(
+            crate::World::new(&map.lab, params, 1),
+            Err(crate::WorldBuildError::BadParam { name: "proximity_range_m", .. })
+        ));
     }
 }

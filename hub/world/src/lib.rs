@@ -47,7 +47,10 @@ use std::collections::VecDeque;
 use nalgebra::{Point2, Vector2};
 use thiserror::Error;
 
-pub use body::{AddRobotError, MAX_NAME_LEN, MAX_PROXIMITY, ProximitySpec, RobotKind, RobotSpec};
+pub use body::{
+    AddRobotError, MAX_BODY_M, MAX_NAME_LEN, MAX_PROXIMITY, MAX_SENSOR_RANGE_M, MAX_SPEED_MPS, ProximitySpec,
+    RobotKind, RobotSpec,
+};
 pub use grid::StaticBuildError;
 pub use readings::{
     GpsReading, Heard, MAX_BEACONS, MAX_INBOX_BYTES, MAX_MESSAGE_BYTES, Message, MessageTooLong, SensorReadings,
@@ -370,6 +373,14 @@ impl World {
             }
         };
         positive("proximity_range_m", params.proximity_range_m)?;
+        // The default range is every default sensor's range: bounded like a registered one.
+        if params.proximity_range_m > MAX_SENSOR_RANGE_M {
+            return Err(WorldBuildError::BadParam {
+                name: "proximity_range_m",
+                value: params.proximity_range_m,
+                expected: "in (0, 20] m",
+            });
+        }
         positive("message_range_m", params.message_range_m)?;
         positive("wheel_radius_m", params.wheel_radius_m)?;
         positive("encoder_ticks_per_rev", params.encoder_ticks_per_rev as Real)?;

@@ -246,9 +246,9 @@ fn a_move_that_would_end_fully_inside_a_wall_or_a_body_is_refused() {
     let mut lab = empty_lab(20.0, 8.0);
     lab.walls.push(rect_wall(5.0, 2.0, 9.0, 6.0, 2.0));
     let mut w = world(lab, quiet());
-    let small = RobotSpec::at(4.0, 4.0, 0.0).body(0.2, 0.2, 0.5).motors(30.0, 0.0);
+    let small = RobotSpec::at(4.0, 4.0, 0.0).body(0.2, 0.2, 0.5).motors(5.0, 0.0);
     let r = w.add_robot(small.clone()).expect("valid");
-    w.step(&[Action::motors(r, 1.0, 1.0)], 0.1); // would move 3 m to x = 7
+    w.step(&[Action::motors(r, 1.0, 1.0)], 0.6); // would move 3 m to x = 7
     assert_eq!(w.robot(r).expect("alive").pose.x, 4.0);
     assert!(w.robot(r).expect("alive").collision);
 
@@ -256,7 +256,7 @@ fn a_move_that_would_end_fully_inside_a_wall_or_a_body_is_refused() {
     let mut w = world(empty_lab(20.0, 8.0), quiet());
     w.add_robot(RobotSpec::at(7.0, 4.0, 0.0).body(4.0, 4.0, 0.5)).expect("valid");
     let r = w.add_robot(small).expect("valid");
-    w.step(&[Action::motors(r, 1.0, 1.0)], 0.1);
+    w.step(&[Action::motors(r, 1.0, 1.0)], 0.6);
     assert_eq!(w.robot(r).expect("alive").pose.x, 4.0);
     assert!(w.robot(r).expect("alive").collision);
 }

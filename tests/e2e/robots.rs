@@ -1,0 +1,140 @@
+//! Robots across processes: the bounds on a robot's body, speed and sensors hold on every way
+//! in (the SDK, an agent's options, the UDP bridge), and a killed agent's robot goes back to
+//! the agent restarted in its place.
+
+use std::net::{SocketAddr, UdpSocket};
+use std::time::{Duration, Instant};
+
+use agent_sdk::{Agent, AgentError, control};
+use ipc_types::{Command as Cmd, ROBOT_FROZEN, Refusal, RobotRegistration, RobotState, SensorSpec};
+use records::outcome::HubOutcome;
+
+use super::common::{Proc, assert_no_shared_memory_left, session, text, wait_for_tick};
+
+/// Sends one datagram to `to` and returns the first reply, without its trailing NUL.
+fn udp_exchange(sock: &UdpSocket, to: SocketAddr, datagram: &str) -> String {
+    sock.send_to(datagram.as_bytes(), to).expect("send");
+    let mut buf = [0u8; 65536];
+    let (n, _) = sock.recv_from(&mut buf).expect("a reply within 5 s");
+    String::from_utf8_lossy(&buf[..n.saturating_sub(1)]).into_owned()
+}
+
+#[test]
+fn robots_past_the_size_speed_and_range_limits_are_refused_on_every_way_in() {
+    let s = session("limits");
+    let hub = Proc::spawn(&["hub", "--session", &s]);
+    let mut probe = Agent::connect_within(&s, "probe", Duration::from_secs(20)).expect("hub comes up");
+
+    // Through the SDK: a typed refusal naming the field and its range.
+    let mut far_sensor = RobotRegistration::new("far-sighted");
+    far_sensor.sensors[0] = SensorSpec { x_m: 0.5, y_m: 0.0, angle_deg: 0.0, cone_deg: 60.0, range_m: 25.0 };
+    far_sensor.sensor_count = 1;
+    for (reg, says) in [
+        (
+            RobotRegistration::new("huge").body(10_000.0, 1.0, 0.5),
+            "width = 10000 is out of range: expected in (0, 5] m",
+        ),
+        (RobotRegistration::new("wide").body(1.0, 5.5, 0.5), "height = 5.5 is out of range: expected in (0, 5] m"),
+        (RobotRegistration::new("fast").motors(6.0, 0.5), "max_speed = 6 is out of range: expected in (0, 5] m/s"),
+        (far_sensor, "sensor range = 25 on sensor 0: expected in (0, 20] m"),
+    ] {
+        match probe.register(&reg) {
+            Err(AgentError::Refused { reason: Refusal::BadParameters, detail }) => {
+                assert!(detail.contains(says), "{detail:?} should say {says:?}")
+            }
+            other => panic!("{:?} registered: {other:?}", reg.name.as_str()),
+        }
+    }
+    // At the limits a robot is welcome.
+    let largest =
+        RobotRegistration::new("largest").id(5).body(5.0, 5.0, 0.5).motors(5.0, 0.5).at(Some([20.0, 6.1, 0.0]));
+    assert!(probe.register(&largest).is_ok());
+
+    // Through an agent's options: it exits with the hub's reason.
+    let agent = Proc::spawn(&["agent", "wheelchair", "--session", &s, "--width", "6", "--powers", "0,0"]);
+    let out = agent.wait(Duration::from_secs(20));
+    assert!(!out.status.success());
+    assert!(text(&out.stderr).contains("width = 6 is out of range"), "{}", text(&out.stderr));
+
+    // Through the UDP bridge, the `<Robot Width="10000">` of issue 16: refused like any bad robot.
+    let mut bridge = Proc::spawn(&["udp", "--session", &s, "--port", "0"]);
+    let addr: SocketAddr = bridge.announced("registrations on ", Duration::from_secs(20)).parse().expect("address");
+    let client = UdpSocket::bind("127.0.0.1:0").expect("bind");
+    client.set_read_timeout(Some(Duration::from_secs(5))).expect("timeout");
+    for robot in [r#"<Robot Name="huge" Id="1" Width="10000"/>"#, r#"<Robot Name="fast" Id="1" MaxSpeed="50"/>"#] {
+        assert_eq!(udp_exchange(&client, addr, robot), "<Reply Status=\"Refused\"></Reply>\n", "{robot}");
+    }
+    let ok = udp_exchange(&client, addr, r#"<Robot Name="fits" Id="1" Width="1.2" Height="0.7"/>"#);
+    assert!(ok.starts_with("<Reply Status=\"Ok\">"), "{ok}");
+
+    // Only the robots within the limits are in the world (in id order).
+    let mut observer = Agent::connect_within(&s, "observer", Duration::from_secs(5)).expect("hub answers");
+    let start = Instant::now();
+    loop {
+        let (_, robots) = observer.world().expect("snapshot");
+        let names: Vec<_> = robots.iter().filter_map(|r| r.name.as_str()).collect();
+        if names == ["fits", "largest"] {
+            break;
+        }
+        assert!(start.elapsed() < Duration::from_secs(10), "robots in the world: {names:?}");
+        std::thread::sleep(Duration::from_millis(5));
+    }
+    observer.close();
+    probe.close();
+
+    assert_eq!(control(&s, Cmd::Stop, 0).expect("hub answers").status, 0);
+    let h = hub.wait(Duration::from_secs(10));
+    assert!(h.status.success(), "{}", text(&h.stderr));
+    let b = bridge.wait(Duration::from_secs(10));
+    assert!(b.status.success(), "bridge: {}", text(&b.stderr));
+    assert_no_shared_memory_left(&s);
+}
+
+/// Robot 1 in the latest snapshot once `done` holds for it, polling for up to 20 s.
+fn robot_one_when(observer: &mut Agent, what: &str, done: impl Fn(&RobotState, usize) -> bool) -> RobotState {
+    let start = Instant::now();
+    loop {
+        let (h, robots) = observer.world().expect("snapshot");
+        if let Some(r) = robots.iter().find(|r| r.id == 1)
+            && done(r, robots.len())
+        {
+            return *r;
+        }
+        assert!(start.elapsed() < Duration::from_secs(20), "at tick {}, robot 1 never {what}: {robots:?}", h.tick);
+        std::thread::sleep(Duration::from_millis(5));
+    }
+}
+
+#[test]
+fn a_restarted_agent_takes_back_the_robot_its_killed_predecessor_left_frozen() {
+    let s = session("restart");
+    let hub =
+        Proc::spawn(&["hub", "--session", &s, "--lockstep", "--wait-agents", "1", "--deadline-ms", "20000", "--json"]);
+    let chair = |powers: &str| {
+        ["agent", "wheelchair", "--session", &s, "--id", "1", "--name", "chair", powers].map(String::from)
+    };
+    let first_args = chair("--powers=0.5,0.5");
+    let mut first = Proc::spawn(&first_args.each_ref().map(String::as_str));
+    let mut observer = wait_for_tick(&s, 20, Duration::from_secs(20));
+    first.kill9();
+    let frozen = robot_one_when(&mut observer, "froze", |r, _| r.flags & ROBOT_FROZEN != 0);
+
+    // Its successor backs the chair up: the hub's motor outputs follow the new agent's powers
+    // (whether or not a wall stops the chair), and the lock-step run steps for it.
+    let second_args = chair("--powers=-0.5,-0.5");
+    let second = Proc::spawn(&second_args.each_ref().map(String::as_str));
+    let back = robot_one_when(&mut observer, "obeyed its new agent", |r, n| {
+        r.flags & ROBOT_FROZEN == 0 && r.agent_id != frozen.agent_id && r.motor_out.iter().all(|&p| p < -0.25) && n == 1
+    });
+    assert_eq!(back.name.as_str(), Some("chair1"), "the same robot, not a fresh one beside it");
+    observer.close();
+
+    assert_eq!(control(&s, Cmd::Stop, 0).expect("hub answers").status, 0);
+    let out = hub.wait(Duration::from_secs(10));
+    let json = text(&out.stdout);
+    assert!(out.status.success(), "{json}{}", text(&out.stderr));
+    let outcome = HubOutcome::from_stdout(&json).expect("the hub's JSON line");
+    assert_eq!((outcome.agents_died, outcome.robots.len()), (1, 1), "{json}");
+    assert!(second.wait(Duration::from_secs(10)).status.success());
+    assert_no_shared_memory_left(&s);
+}
