@@ -403,8 +403,9 @@ fn serve_connection(mut stream: TcpStream, ctx: &Context) -> std::io::Result<()>
     stream.write_all(body.as_bytes())
 }
 
-/// A page's command: `start`, `pause`, `step`, `stop` or `remove:<robot id>`.
-fn parse_command(text: &str) -> Option<(Command, u32)> {
+/// A page's command: `start`, `pause`, `step`, `stop` or `remove:<robot id>` (public for the
+/// fuzz target, which feeds it whatever a WebSocket can carry).
+pub fn parse_command(text: &str) -> Option<(Command, u32)> {
     match text {
         "start" => Some((Command::Start, 0)),
         "pause" => Some((Command::Pause, 0)),
@@ -412,6 +413,15 @@ fn parse_command(text: &str) -> Option<(Command, u32)> {
         "stop" => Some((Command::Stop, 0)),
         _ => Some((Command::RemoveRobot, text.strip_prefix("remove:")?.parse().ok()?)),
     }
+}
+
+/// The WebSocket limits every page connection is read with: messages and frames of at most
+/// [`MAX_MESSAGE_BYTES`] (public for the fuzz target, which reads junk streams with them).
+pub fn websocket_config() -> WebSocketConfig {
+    WebSocketConfig::default()
+        .read_buffer_size(MAX_MESSAGE_BYTES * 2)
+        .max_message_size(Some(MAX_MESSAGE_BYTES))
+        .max_frame_size(Some(MAX_MESSAGE_BYTES))
 }
 
 /// The answer to a handshake from an origin that is not allowed.
@@ -424,10 +434,7 @@ fn forbidden(origin: &str) -> ErrorResponse {
 }
 
 fn serve_websocket(stream: TcpStream, ctx: &Context) -> std::io::Result<()> {
-    let config = WebSocketConfig::default()
-        .read_buffer_size(MAX_MESSAGE_BYTES * 2)
-        .max_message_size(Some(MAX_MESSAGE_BYTES))
-        .max_frame_size(Some(MAX_MESSAGE_BYTES));
+    let config = websocket_config();
     // The error type is tungstenite's handshake callback's, not ours to shrink.
     #[allow(clippy::result_large_err)]
     let check = |req: &Request, resp: Response| -> Result<Response, ErrorResponse> {
