@@ -43,7 +43,8 @@ pub fn run(args: &DemoArgs) -> anyhow::Result<ExitCode> {
     }
     let mut scenario = Scenario::load("builtin:demo")?;
     if let Some(s) = args.seconds {
-        anyhow::ensure!(s.is_finite() && s > 0.0, "--seconds {s}: must be positive");
+        let max = crate::scenario::MAX_SECONDS;
+        anyhow::ensure!(s > 0.0 && s <= max, "--seconds {s}: must be more than 0 and at most {max} (a week)");
         scenario.seconds = s;
     }
     ipc_services::report!(

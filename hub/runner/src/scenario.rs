@@ -159,6 +159,10 @@ pub struct RobotExpect {
     pub final_x_m: Option<[f64; 2]>,
 }
 
+/// The longest simulated run a scenario may ask for, seconds (a week): long enough for any
+/// experiment, short enough that the tick count is exact and the run ends.
+pub const MAX_SECONDS: f64 = 7.0 * 24.0 * 3600.0;
+
 /// Why a scenario could not be loaded.
 #[derive(Debug, thiserror::Error)]
 pub enum ScenarioError {
@@ -234,8 +238,11 @@ impl Scenario {
             .map_err(|e| ScenarioError::Toml { path: path.into(), message: e.to_string().trim_end().to_owned() })?;
         s.base = base.to_path_buf();
         let bad = |message: String| ScenarioError::Invalid { path: path.into(), message };
-        if !(s.seconds.is_finite() && s.seconds > 0.0) {
-            return Err(bad(format!("seconds = {} must be a positive number", s.seconds)));
+        if !(s.seconds > 0.0 && s.seconds <= MAX_SECONDS) {
+            return Err(bad(format!(
+                "seconds = {}: must be more than 0 and at most {MAX_SECONDS} (a week)",
+                s.seconds
+            )));
         }
         if s.cycle_ms == 0 {
             return Err(bad("cycle_ms must be at least 1".into()));
@@ -379,6 +386,11 @@ mod tests {
 
     #[test]
     fn mistakes_are_named_with_their_place() {
+        for forever in ["1e300", "inf", "nan", "0", "604801"] {
+            let text = format!("name = \"x\"\nseconds = {forever}\n[[agents]]\nkind = \"navigator\"\n");
+            let err = Scenario::parse(&text, "x.toml", Path::new(".")).expect_err(forever).to_string();
+            assert!(err.contains("seconds") && err.contains("at most 604800"), "{forever}: {err}");
+        }
         let err = Scenario::parse("name = \"x\"\nseconds = \"ten\"\n", "x.toml", Path::new(".")).expect_err("type");
         let msg = err.to_string();
         assert!(msg.starts_with("x.toml: ") && msg.contains("line 2"), "{msg}");
