@@ -505,35 +505,16 @@ impl Agent {
         Ok(())
     }
 
+    /// Sends a request and waits for the hub's answer (at most 5 s).
     fn request(
         &mut self,
         kind: RegisterKind,
         robot: Option<&RobotRegistration>,
     ) -> Result<RegisterResponse, AgentError> {
-        let req = RegisterRequest {
-            kind: kind as u32,
-            pid: std::process::id(),
-            agent_id: self.agent_id,
-            _reserved: 0,
-            robot: robot.copied().unwrap_or_else(bytemuck::Zeroable::zeroed),
-        };
-        let pending = self.register.send_copy(req).map_err(ipc("send a registration"))?;
-        let _ = self.doorbell.notify();
-        let start = Instant::now();
+        let pending = self.start_request(kind, robot)?;
         loop {
-            if let Some(resp) = pending.receive().map_err(ipc("receive an answer"))? {
-                let r = *resp.payload();
-                return match Refusal::from_u32(r.status) {
-                    Some(Refusal::Accepted) => Ok(r),
-                    reason => Err(AgentError::Refused {
-                        reason: reason.unwrap_or(Refusal::Malformed),
-                        detail: r.detail().to_owned(),
-                    }),
-                };
-            }
-            self.check()?;
-            if start.elapsed() > ANSWER_TIMEOUT {
-                return Err(AgentError::NoAnswer(self.session.name().to_owned()));
+            if let Some(r) = self.poll_response(&pending)? {
+                return Ok(r);
             }
             // The hub answers within its loop; a short nap keeps the wait cheap.
             std::thread::sleep(Duration::from_micros(200));

@@ -59,7 +59,7 @@ impl Agent {
         self.start_request(RegisterKind::Ready, None)
     }
 
-    fn start_request(
+    pub(crate) fn start_request(
         &mut self,
         kind: RegisterKind,
         robot: Option<&RobotRegistration>,
@@ -81,17 +81,22 @@ impl Agent {
     /// refusal. Fails with [`AgentError::NoAnswer`] once the request is 5 s old, and like
     /// [`Agent::check_alive`] when the hub is gone or a termination signal arrived.
     pub fn poll_pending(&mut self, request: &PendingRequest) -> Result<Option<Accepted>, AgentError> {
+        let Some(r) = self.poll_response(request)? else { return Ok(None) };
+        if request.kind == RegisterKind::Robot {
+            self.robots.push(r.robot_id);
+            Ok(Some(Accepted { robot_id: r.robot_id }))
+        } else {
+            Ok(Some(Accepted { robot_id: 0 }))
+        }
+    }
+
+    /// The hub's accepted answer to `request` as it came, if it has come: what the blocking
+    /// requests (hello, register, ready) and [`Agent::poll_pending`] are built on.
+    pub(crate) fn poll_response(&mut self, request: &PendingRequest) -> Result<Option<RegisterResponse>, AgentError> {
         if let Some(resp) = request.pending.receive().map_err(ipc("receive an answer"))? {
             let r = *resp.payload();
             return match Refusal::from_u32(r.status) {
-                Some(Refusal::Accepted) => {
-                    if request.kind == RegisterKind::Robot {
-                        self.robots.push(r.robot_id);
-                        Ok(Some(Accepted { robot_id: r.robot_id }))
-                    } else {
-                        Ok(Some(Accepted { robot_id: 0 }))
-                    }
-                }
+                Some(Refusal::Accepted) => Ok(Some(r)),
                 reason => Err(AgentError::Refused {
                     reason: reason.unwrap_or(Refusal::Malformed),
                     detail: r.detail().to_owned(),
