@@ -88,6 +88,22 @@ fn frame_with_robots(ws: &mut Ws, n: usize) -> frame::Frame {
     }
 }
 
+/// Stops the run and checks that the hub, the agent and the viewer all end cleanly.
+fn stop_and_expect_clean_exits(s: &str, procs: [Proc; 3]) {
+    assert_eq!(agent_sdk::control(s, ipc_types::Command::Stop, 0).expect("hub answers").status, 0);
+    for p in procs {
+        let out = p.wait(Duration::from_secs(10));
+        assert!(out.status.success(), "{}", text(&out.stderr));
+    }
+}
+
+/// Waits until the stream shows both chairs (the agent has finished registering, so a stop
+/// cannot catch it half-way), then stops as [`stop_and_expect_clean_exits`] does.
+fn stop_once_both_chairs_run(s: &str, addr: SocketAddr, procs: [Proc; 3]) {
+    frame_with_robots(&mut ws(addr), 2);
+    stop_and_expect_clean_exits(s, procs);
+}
+
 #[test]
 fn the_page_and_the_stream_show_the_map_and_every_robot() {
     let s = session("view");
@@ -138,11 +154,7 @@ fn the_page_and_the_stream_show_the_map_and_every_robot() {
     assert!(n >= 10, "only {n} frames in 1 s");
     assert!(last.tick > first.tick + 30);
     assert!(last.robots[0].pose[0] > first.robots[0].pose[0], "chair1 moves");
-    assert_eq!(agent_sdk::control(&s, ipc_types::Command::Stop, 0).expect("hub answers").status, 0);
-    for p in [hub, agent, view] {
-        let out = p.wait(Duration::from_secs(10));
-        assert!(out.status.success(), "{}", text(&out.stderr));
-    }
+    stop_and_expect_clean_exits(&s, [hub, agent, view]);
 }
 
 #[test]
@@ -278,12 +290,7 @@ fn a_websocket_from_another_origin_is_refused_unless_allowed() {
     // The refusal is reported, naming the origin and the option.
     let line = said(&lines, "refused a WebSocket from origin");
     assert!(line.contains("evil.example") && line.contains("--allow-origin"), "{line}");
-    frame_with_robots(&mut ws(addr), 2);
-    assert_eq!(agent_sdk::control(&s, ipc_types::Command::Stop, 0).expect("hub answers").status, 0);
-    for p in [hub, agent, view] {
-        let out = p.wait(Duration::from_secs(10));
-        assert!(out.status.success(), "{}", text(&out.stderr));
-    }
+    stop_once_both_chairs_run(&s, addr, [hub, agent, view]);
 }
 
 #[test]
@@ -318,12 +325,7 @@ fn connections_beyond_the_cap_are_refused_and_a_freed_slot_serves_again() {
         assert!(Instant::now() < deadline, "no slot freed: {page:?}");
     }
     drop(held);
-    frame_with_robots(&mut ws(addr), 2);
-    assert_eq!(agent_sdk::control(&s, ipc_types::Command::Stop, 0).expect("hub answers").status, 0);
-    for p in [hub, agent, view] {
-        let out = p.wait(Duration::from_secs(10));
-        assert!(out.status.success(), "{}", text(&out.stderr));
-    }
+    stop_once_both_chairs_run(&s, addr, [hub, agent, view]);
 }
 
 #[test]
@@ -352,13 +354,7 @@ fn a_websocket_message_over_the_size_bound_closes_its_connection_only() {
         }
     }
     // Everyone else is served as before.
-    let mut other = ws(addr);
-    frame_with_robots(&mut other, 2);
-    assert_eq!(agent_sdk::control(&s, ipc_types::Command::Stop, 0).expect("hub answers").status, 0);
-    for p in [hub, agent, view] {
-        let out = p.wait(Duration::from_secs(10));
-        assert!(out.status.success(), "{}", text(&out.stderr));
-    }
+    stop_once_both_chairs_run(&s, addr, [hub, agent, view]);
 }
 
 /// Waits for a world snapshot that satisfies `done`; returns it, or the last one seen.
