@@ -20,8 +20,8 @@ use ipc_services::iceoryx2::port::update_connections::UpdateConnections as _;
 use ipc_services::iceoryx2::prelude::FileDescriptorBased;
 use ipc_services::{HUB_NODE_NAME, Role, SLICE_ALLOCATION, ServicesError, Session, Svc, clean_dead_nodes};
 use ipc_types::{
-    Command, ControlResponse, Refusal, RegisterKind, RegisterResponse, RobotSensors, RobotState, RunState, SensorBlock,
-    TickHeader,
+    Command, ControlResponse, Refusal, RegisterKind, RegisterRequest, RegisterResponse, RobotSensors, RobotState,
+    RunState, SensorBlock, TickHeader,
 };
 
 use self::core::{HubCore, Mode};
@@ -134,6 +134,15 @@ struct AgentPorts {
     publisher: Publisher<Svc, [SensorBlock], TickHeader>,
     _service: ipc_services::SensorService,
     pidfd: Option<PidFd>,
+    /// The register client that said hello: only its requests speak for this agent.
+    client: u128,
+    /// The publisher the hello named: only its actions drive this agent's robots.
+    actions: u128,
+}
+
+/// The iceoryx2 publisher id a register request names (see `RegisterRequest::actions_publisher`).
+fn named_publisher(r: &RegisterRequest) -> u128 {
+    r.actions_publisher[0] as u128 | (r.actions_publisher[1] as u128) << 64
 }
 
 /// Runs a hub until its tick limit, a Stop command, or SIGINT/SIGTERM.
@@ -291,10 +300,28 @@ pub fn run(cfg: HubConfig) -> Result<HubOutcome, HubError> {
         // Registrations.
         while let Some(req) = register_server.receive().map_err(ipc("receive a registration"))? {
             let r = *req.payload();
+            let origin = req.origin().value();
             tracing::debug!("registration request kind {} from pid {} agent {}", r.kind, r.pid, r.agent_id);
             let mut resp =
                 RegisterResponse { hub_pid, tick: core.world().tick() as u32, ..bytemuck::Zeroable::zeroed() };
-            match RegisterKind::from_u32(r.kind) {
+            let kind = RegisterKind::from_u32(r.kind);
+            // A request in an agent's name from a port other than the one that said hello for
+            // it (another process, or a stale client) is refused and changes nothing.
+            let foreign = kind.is_some_and(|k| k != RegisterKind::Hello)
+                && agents.get(&r.agent_id).is_some_and(|a| a.client != origin);
+            if foreign {
+                outcome.foreign_dropped += 1;
+                tracing::warn!("a {kind:?} request in agent {}'s name came from another port; refused", r.agent_id);
+                resp.status = Refusal::NotYours as u32;
+                resp.set_detail("this agent id belongs to another process's port");
+                req.send_copy(resp).map_err(ipc("answer a registration"))?;
+                continue;
+            }
+            match kind {
+                Some(RegisterKind::Hello) if named_publisher(&r) == 0 => {
+                    resp.status = Refusal::Malformed as u32;
+                    resp.set_detail("a hello must name its actions publisher");
+                }
                 Some(RegisterKind::Hello) => match core.hello(r.pid) {
                     Ok(id) => {
                         let ports = session.agent_sensors(&node, id, Role::Hub).map_err(|e| e.to_string()).and_then(
@@ -317,7 +344,16 @@ pub fn run(cfg: HubConfig) -> Result<HubOutcome, HubError> {
                                         r.pid
                                     );
                                 }
-                                agents.insert(id, AgentPorts { publisher, _service: service, pidfd });
+                                agents.insert(
+                                    id,
+                                    AgentPorts {
+                                        publisher,
+                                        _service: service,
+                                        pidfd,
+                                        client: origin,
+                                        actions: named_publisher(&r),
+                                    },
+                                );
                                 outcome.agents_seen += 1;
                                 resp.agent_id = id;
                             }
@@ -404,6 +440,19 @@ pub fn run(cfg: HubConfig) -> Result<HubOutcome, HubError> {
         // Actions.
         while let Some(sample) = actions_sub.receive().map_err(ipc("receive actions"))? {
             let h = *sample.user_header();
+            if agents.get(&h.agent_id).is_none_or(|a| a.actions != sample.origin().value()) {
+                // Not from the publisher this agent's hello named: another process acting in
+                // its name, or a port of an agent that has left. Its robots keep their inputs.
+                outcome.foreign_dropped += 1;
+                if outcome.foreign_dropped.is_power_of_two() {
+                    tracing::warn!(
+                        "actions in agent {}'s name from a port that is not its own dropped ({} so far)",
+                        h.agent_id,
+                        outcome.foreign_dropped
+                    );
+                }
+                continue;
+            }
             let ignored = core.actions(h.agent_id, h.tick, sample.payload());
             if ignored > 0 {
                 tracing::debug!("agent {}: {ignored} actions for robots it does not own were ignored", h.agent_id);

@@ -561,7 +561,7 @@ impl RobotRegistration {
 /// What an agent sends on the register service.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable, ZeroCopySend)]
-#[type_name("iwsim::RegisterRequest.v1")]
+#[type_name("iwsim::RegisterRequest.v2")]
 pub struct RegisterRequest {
     /// [`RegisterKind`] as u32.
     pub kind: u32,
@@ -571,10 +571,15 @@ pub struct RegisterRequest {
     pub agent_id: u32,
     /// Padding.
     pub _reserved: u32,
+    /// In a hello: the iceoryx2 id of the publisher the agent will send its actions from
+    /// (`UniquePublisherId::value()`, low 64 bits first). The hub ties the agent id to it and
+    /// to the client that said hello, and drops actions and requests in that agent's name
+    /// from any other port.
+    pub actions_publisher: [u64; 2],
     /// The robot (with `RegisterKind::Robot`).
     pub robot: RobotRegistration,
 }
-const _: () = assert!(core::mem::size_of::<RegisterRequest>() == 448);
+const _: () = assert!(core::mem::size_of::<RegisterRequest>() == 464);
 const _: () = assert!(core::mem::align_of::<RegisterRequest>() == 8);
 
 /// What a register request asks for.
@@ -626,6 +631,8 @@ pub enum Refusal {
     RunStarted = 7,
     /// The request was malformed (unknown kind, bad name).
     Malformed = 8,
+    /// The request names an agent id that another process's port said hello for.
+    NotYours = 9,
 }
 
 impl Refusal {
@@ -641,6 +648,7 @@ impl Refusal {
             6 => Some(Self::UnknownAgent),
             7 => Some(Self::RunStarted),
             8 => Some(Self::Malformed),
+            9 => Some(Self::NotYours),
             _ => None,
         }
     }
@@ -908,7 +916,7 @@ mod tests {
         assert_eq!(type_name_of::<RobotSensors>(), "iwsim::RobotSensors.v1");
         assert_eq!(type_name_of::<SensorBlock>(), "iwsim::SensorBlock.v1");
         assert_eq!(type_name_of::<ActionBlock>(), "iwsim::ActionBlock.v1");
-        assert_eq!(type_name_of::<RegisterRequest>(), "iwsim::RegisterRequest.v1");
+        assert_eq!(type_name_of::<RegisterRequest>(), "iwsim::RegisterRequest.v2");
         assert_eq!(type_name_of::<MapItem>(), "iwsim::MapItem.v1");
         assert_eq!(type_name_of::<Ping>(), "iwsim::bench::Ping.v1");
     }

@@ -5,7 +5,7 @@
 use std::net::{SocketAddr, UdpSocket};
 use std::time::{Duration, Instant};
 
-use agent_sdk::{Agent, AgentError, control};
+use agent_sdk::{Agent, AgentError, Observer, control};
 use ipc_types::{Command as Cmd, ROBOT_FROZEN, Refusal, RobotRegistration, RobotState, SensorSpec};
 use records::outcome::HubOutcome;
 
@@ -136,5 +136,99 @@ fn a_restarted_agent_takes_back_the_robot_its_killed_predecessor_left_frozen() {
     let outcome = HubOutcome::from_stdout(&json).expect("the hub's JSON line");
     assert_eq!((outcome.agents_died, outcome.robots.len()), (1, 1), "{json}");
     assert!(second.wait(Duration::from_secs(10)).status.success());
+    assert_no_shared_memory_left(&s);
+}
+
+/// The newest world snapshot, waiting for one past `after`.
+fn world_after(observer: &Observer, after: u64) -> (u64, Vec<RobotState>) {
+    let start = Instant::now();
+    loop {
+        if let Some((h, robots)) = observer.try_world().expect("world")
+            && h.tick > after
+        {
+            return (h.tick, robots);
+        }
+        assert!(start.elapsed() < Duration::from_secs(20), "the hub stayed at tick {after}");
+        std::thread::sleep(Duration::from_millis(2));
+    }
+}
+
+#[test]
+fn a_process_acting_in_another_agents_name_changes_nothing() {
+    use ipc_services::{Role, SLICE_ALLOCATION, Session};
+    use ipc_types::{ActionBlock, ActionHeader, RegisterKind, RegisterRequest};
+
+    let s = session("spoof");
+    let hub =
+        Proc::spawn(&["hub", "--session", &s, "--lockstep", "--wait-agents", "1", "--deadline-ms", "20000", "--json"]);
+    // The victim: a real agent process holding its chair still.
+    let victim = Proc::spawn(&["agent", "wheelchair", "--session", &s, "--id", "1", "--name", "chair", "--powers=0,0"]);
+    let observer = Observer::connect_within(&s, "spoof-observer", Duration::from_secs(20)).expect("hub comes up");
+    let (mut tick, robots) = world_after(&observer, 5);
+    let before = robots.iter().find(|r| r.id == 1).copied().expect("the victim's chair");
+    let victim_agent = before.agent_id;
+
+    // The spoofer (this test's process): its own ports, the victim's agent id.
+    let session = Session::new(&s).expect("session");
+    let node = session.node("spoofer").expect("node");
+    let actions = session.actions(&node, Role::Client).expect("actions service");
+    let publisher = actions
+        .publisher_builder()
+        .initial_max_slice_len(4)
+        .allocation_strategy(SLICE_ALLOCATION)
+        .create()
+        .expect("a publisher");
+    let doorbell =
+        session.hub_event(&node, Role::Client).expect("doorbell").notifier_builder().create().expect("notifier");
+    let register = session.register(&node, Role::Client).expect("register").client_builder().create().expect("client");
+    let ask = |kind: RegisterKind| {
+        let req = RegisterRequest {
+            kind: kind as u32,
+            pid: victim.pid(),
+            agent_id: victim_agent,
+            _reserved: 0,
+            actions_publisher: [0, 0],
+            robot: RobotRegistration::new("intruder"),
+        };
+        let pending = register.send_copy(req).expect("sent");
+        doorbell.notify().expect("rang");
+        let start = Instant::now();
+        loop {
+            if let Some(r) = pending.receive().expect("receive") {
+                return *r.payload();
+            }
+            assert!(start.elapsed() < Duration::from_secs(10), "the hub did not answer a {kind:?}");
+            std::thread::sleep(Duration::from_millis(1));
+        }
+    };
+    // A robot registered and a goodbye said in the victim's name are refused.
+    assert_eq!(Refusal::from_u32(ask(RegisterKind::Robot).status), Some(Refusal::NotYours));
+    assert_eq!(Refusal::from_u32(ask(RegisterKind::Bye).status), Some(Refusal::NotYours));
+
+    // Full power in the victim's name, 50 times, each for the tick in hand as the victim does.
+    for _ in 0..50 {
+        let mut sample = publisher.loan_slice_uninit(1).expect("loan");
+        *sample.user_header_mut() = ActionHeader { tick, agent_id: victim_agent, count: 1 };
+        sample.write_from_slice(&[ActionBlock::motors(1, 1.0, 1.0)]).send().expect("sent");
+        doorbell.notify().expect("rang");
+        let (now, robots) = world_after(&observer, tick);
+        let chair = robots.iter().find(|r| r.id == 1).expect("the chair is still there");
+        assert_eq!(chair.motor_out, [0.0, 0.0], "tick {now}: the spoofed powers reached the motors");
+        assert_eq!((chair.x_m, chair.y_m, chair.heading_deg), (before.x_m, before.y_m, before.heading_deg));
+        assert_eq!(chair.agent_id, victim_agent);
+        tick = now;
+    }
+    drop((publisher, doorbell, register, actions, node));
+
+    observer.close();
+    assert_eq!(control(&s, Cmd::Stop, 0).expect("hub answers").status, 0);
+    let out = hub.wait(Duration::from_secs(10));
+    let json = text(&out.stdout);
+    assert!(out.status.success(), "{json}{}", text(&out.stderr));
+    let outcome = HubOutcome::from_stdout(&json).expect("the hub's JSON line");
+    assert!(outcome.foreign_dropped >= 52, "every spoofed request and action counted: {json}");
+    assert_eq!(outcome.robots.len(), 1, "{json}");
+    assert!(victim.wait(Duration::from_secs(10)).status.success(), "the victim ran to the end");
+    drop(session);
     assert_no_shared_memory_left(&s);
 }

@@ -707,15 +707,24 @@ impl Agent {
         drop(self);
     }
 
+    /// A register request of this agent. Every one names the publisher its actions come
+    /// from: the hub ties this agent's id to it (and to the client the hello came from), so
+    /// no other process's port can act in its name.
+    pub(crate) fn request_of(&self, kind: RegisterKind, robot: Option<&RobotRegistration>) -> RegisterRequest {
+        let publisher = self.actions.id().value();
+        RegisterRequest {
+            kind: kind as u32,
+            pid: std::process::id(),
+            agent_id: self.agent_id,
+            _reserved: 0,
+            actions_publisher: [publisher as u64, (publisher >> 64) as u64],
+            robot: robot.copied().unwrap_or_else(bytemuck::Zeroable::zeroed),
+        }
+    }
+
     fn goodbye(&mut self) {
         if !self.finished && self.agent_id != 0 && self.hub_alive() {
-            let req = RegisterRequest {
-                kind: RegisterKind::Bye as u32,
-                pid: std::process::id(),
-                agent_id: self.agent_id,
-                _reserved: 0,
-                robot: bytemuck::Zeroable::zeroed(),
-            };
+            let req = self.request_of(RegisterKind::Bye, None);
             if self.register.send_copy(req).is_ok() {
                 let _ = self.doorbell.notify();
             }

@@ -64,13 +64,7 @@ impl Agent {
         kind: RegisterKind,
         robot: Option<&RobotRegistration>,
     ) -> Result<PendingRequest, AgentError> {
-        let req = RegisterRequest {
-            kind: kind as u32,
-            pid: std::process::id(),
-            agent_id: self.agent_id,
-            _reserved: 0,
-            robot: robot.copied().unwrap_or_else(bytemuck::Zeroable::zeroed),
-        };
+        let req = self.request_of(kind, robot);
         let pending = self.register.send_copy(req).map_err(ipc("send a registration"))?;
         let _ = self.doorbell.notify();
         Ok(PendingRequest { pending, kind, sent: Instant::now() })

@@ -71,6 +71,10 @@ pub struct HubOutcome {
     pub agents_seen: usize,
     /// Agents noticed dead (their robots were frozen).
     pub agents_died: usize,
+    /// Actions and requests in an agent's name that came from another process's port (not
+    /// the client that said hello, not the publisher it named), dropped unread.
+    #[serde(default)]
+    pub foreign_dropped: u64,
     /// Stopped by SIGINT/SIGTERM.
     pub interrupted: bool,
     /// Robots at the end.
@@ -114,12 +118,13 @@ mod tests {
             state_hash: StateHash(0x0123_4567_89ab_cdef),
             agents_seen: 2,
             agents_died: 1,
+            foreign_dropped: 4,
             interrupted: false,
             robots: vec![RobotAtEnd { id: 3, x_m: 10.5, y_m: 6.1, heading_deg: -90.0, flags: 4 }],
         };
         assert_eq!(
             out.json_line(),
-            r#"{"ticks":60,"run_s":0.123457,"state_hash":"0123456789abcdef","agents_seen":2,"agents_died":1,"interrupted":false,"robots":[{"id":3,"x_m":10.5,"y_m":6.1,"heading_deg":-90.0,"flags":4}]}"#
+            r#"{"ticks":60,"run_s":0.123457,"state_hash":"0123456789abcdef","agents_seen":2,"agents_died":1,"foreign_dropped":4,"interrupted":false,"robots":[{"id":3,"x_m":10.5,"y_m":6.1,"heading_deg":-90.0,"flags":4}]}"#
         );
     }
 
