@@ -25,11 +25,15 @@ pub enum Command {
     },
     /// Runs a hub: loads a map and serves its world over shared memory to agents.
     Hub(hub::cli::HubArgs),
+    /// Replays a recorded run (an MCAP file) from its replay journal; --check compares every
+    /// tick's state hash with the recording's.
+    Replay(hub::replay::ReplayArgs),
     /// Serves the Ciber-Rato / Intellwheels UDP/XML protocol to remote agents and viewers.
     Udp(udp_bridge::cli::UdpArgs),
     /// Serves a live view of a session to browsers (2D top view and 3D).
     View(viewer::cli::ViewArgs),
-    /// Draws a run log's trajectory over the map and its speed over time as SVG.
+    /// Draws a run's trajectories over the map and speeds over time as SVG, from its recording
+    /// (run.mcap) or from its robots' CSV logs.
     Plot(plot::PlotArgs),
     /// Runs a scenario (a TOML file or builtin:NAME): the hub, its agents and the viewer as
     /// processes, then a summary from the robots' logs. Exit code 0 when the expected outcome

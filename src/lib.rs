@@ -37,6 +37,7 @@ pub fn run(cli: Cli) -> anyhow::Result<ExitCode> {
         Command::Bench { command } => bench_harness::run(&command),
         Command::Demo(args) => runner::demo::run(&args),
         Command::Hub(args) => hub::cli::run(&args),
+        Command::Replay(args) => hub::replay::run(&args),
         Command::Udp(args) => udp_bridge::cli::run(&args),
         Command::View(args) => viewer::cli::run(&args),
         Command::Agent { agent: AgentCommand::Wheelchair(args) } => wheelchair::run(&args),

@@ -69,6 +69,10 @@ pub struct HubArgs {
     /// A scenario checkpoint X,Y with radius R (default 0.5 m), shown by viewers. Repeatable.
     #[arg(long, value_name = "X,Y[,R]", allow_hyphen_values = true)]
     pub checkpoint: Vec<String>,
+    /// Record the run to this MCAP file: an exact replay journal (`iwsim replay`) and the
+    /// world per tick in Foxglove's schemas.
+    #[arg(long, value_name = "FILE.mcap")]
+    pub record: Option<PathBuf>,
 }
 
 /// Builds the hub's configuration from the command line.
@@ -120,6 +124,7 @@ pub fn config(args: &HubArgs) -> anyhow::Result<HubConfig> {
         max_robots: args.max_robots,
         obstacle_from,
         checkpoints,
+        record: args.record.clone(),
     })
 }
 

@@ -14,10 +14,13 @@ use ipc_types::{
     SensorGeometry, WorldHeader,
 };
 
+use recorder::journal::{Event, RecordedAction, RunStart};
 use records::places::Checkpoint;
 use world::map::{Grid, Lab, Params};
 use world::math::Pose;
-use world::{Action, Message, ProximitySpec, RobotHandle, RobotKind, RobotSpec, World, WorldBuildError};
+use world::{Message, ProximitySpec, RobotKind, RobotSpec, World, WorldBuildError};
+
+use crate::stage::Stage;
 
 /// How the hub steps.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -60,7 +63,6 @@ struct AgentEntry {
 /// a robot of the same name (and id, when it asks for one) and so takes it back.
 #[derive(Debug, Clone)]
 struct RobotEntry {
-    handle: RobotHandle,
     agent_id: u32,
     leds: u32,
 }
@@ -68,21 +70,18 @@ struct RobotEntry {
 /// The hub's state apart from its ports.
 #[derive(Debug)]
 pub struct HubCore {
-    world: World,
+    /// The world and its robots by id; every change to the world goes through it.
+    stage: Stage,
     grid: Grid,
     mode: Mode,
-    dt_s: f64,
     state: RunState,
     agents: BTreeMap<u32, AgentEntry>,
     robots: BTreeMap<u32, RobotEntry>,
-    /// Robot id by world slot index, for message senders.
-    id_by_slot: Vec<u32>,
     next_agent_id: u32,
     tick_limit: u64,
-    seed: u64,
-    settled: bool,
     max_robots: usize,
-    pending: Vec<Action>,
+    /// The actions taken since the last step, as they will be applied (and recorded).
+    pending: Vec<RecordedAction>,
     /// Steps left to take while paused (from `Step` commands).
     single_steps: u32,
     /// Walls from this index on are a scenario's obstacles (the map's walls come first).
@@ -101,22 +100,15 @@ impl HubCore {
         mode: Mode,
         tick_limit: u64,
     ) -> Result<Self, WorldBuildError> {
-        let dt_s = params.cycle_ms.max(1) as f64 / 1000.0;
-        let mut world = World::new(lab, params, seed)?;
-        world.set_capacity(MAX_ROBOTS);
         Ok(Self {
-            world,
+            stage: Stage::new(lab, params, seed)?,
             grid,
             mode,
-            dt_s,
             state: RunState::Waiting,
             agents: BTreeMap::new(),
             robots: BTreeMap::new(),
-            id_by_slot: Vec::new(),
             next_agent_id: 1,
             tick_limit,
-            seed,
-            settled: false,
             max_robots: MAX_ROBOTS,
             pending: Vec::new(),
             single_steps: 0,
@@ -139,12 +131,12 @@ impl HubCore {
 
     /// The world.
     pub fn world(&self) -> &World {
-        &self.world
+        self.stage.world()
     }
 
     /// The simulated duration of one tick, seconds (the cycle time, also in lock-step).
     pub fn dt_s(&self) -> f64 {
-        self.dt_s
+        self.stage.dt_s()
     }
 
     /// The run state.
@@ -223,16 +215,11 @@ impl HubCore {
         };
         let spec = self.spec_of(id, reg)?;
         let sensors = if spec.sensors.is_empty() { 4 } else { spec.sensors.len() as u32 };
-        let handle = self.world.add_robot(spec).map_err(|e| match e {
+        self.stage.add(id, agent_id, spec).map_err(|e| match e {
             world::AddRobotError::Full { .. } => Refused::new(Refusal::Capacity, e.to_string()),
             _ => Refused::new(Refusal::BadParameters, e.to_string()),
         })?;
-        let slot = handle.index() as usize;
-        if self.id_by_slot.len() <= slot {
-            self.id_by_slot.resize(slot + 1, 0);
-        }
-        self.id_by_slot[slot] = id;
-        self.robots.insert(id, RobotEntry { handle, agent_id, leds: 0 });
+        self.robots.insert(id, RobotEntry { agent_id, leds: 0 });
         if let Some(a) = self.agents.get_mut(&agent_id) {
             a.robots.push(id);
         }
@@ -244,7 +231,7 @@ impl HubCore {
     fn take_back(&mut self, agent_id: u32, reg: &RobotRegistration) -> Result<Option<(u32, u32)>, Refused> {
         let name = reg.name.as_str().ok_or_else(|| Refused::new(Refusal::Malformed, "the name is not UTF-8"))?;
         let orphan = |(&id, e): (&u32, &RobotEntry)| {
-            let named = |want: &str| self.world.robot(e.handle).is_some_and(|r| r.spec.name == want);
+            let named = |want: &str| self.stage.robot(id).is_some_and(|r| r.spec.name == want);
             let matches = match reg.requested_id {
                 0 => !name.is_empty() && named(name),
                 wanted => id == wanted && (if name.is_empty() { named(&format!("robot{id}")) } else { named(name) }),
@@ -259,11 +246,10 @@ impl HubCore {
         let Some(entry) = self.robots.get_mut(&id) else { return Ok(None) };
         entry.agent_id = agent_id;
         entry.leds = 0;
-        let handle = entry.handle;
-        self.world.set_frozen(handle, false);
+        self.stage.set_frozen(id, false);
         // The dead agent's last powers would drive it until the new agent's first action.
-        self.pending.push(Action::motors(handle, 0.0, 0.0));
-        let sensors = self.world.robot(handle).map_or(0, |r| r.readings.proximity_count as u32);
+        self.pending.push(RecordedAction { id, motors: Some([0.0, 0.0]), pose: None, say: None, leds: 0 });
+        let sensors = self.stage.robot(id).map_or(0, |r| r.readings.proximity_count as u32);
         if let Some(a) = self.agents.get_mut(&agent_id) {
             a.robots.push(id);
         }
@@ -328,8 +314,8 @@ impl HubCore {
     pub fn bye(&mut self, agent_id: u32) {
         if let Some(a) = self.agents.remove(&agent_id) {
             for id in a.robots {
-                if let Some(r) = self.robots.remove(&id) {
-                    self.world.remove_robot(r.handle);
+                if self.robots.remove(&id).is_some() {
+                    self.stage.remove(id);
                 }
             }
         }
@@ -341,9 +327,9 @@ impl HubCore {
     /// agent was alive.
     pub fn agent_died(&mut self, agent_id: u32) -> bool {
         let Some(a) = self.agents.remove(&agent_id) else { return false };
-        for id in &a.robots {
-            if let Some(r) = self.robots.get(id) {
-                self.world.set_frozen(r.handle, true);
+        for &id in &a.robots {
+            if self.robots.contains_key(&id) {
+                self.stage.set_frozen(id, true);
             }
         }
         true
@@ -362,7 +348,7 @@ impl HubCore {
     /// Takes an agent's actions for `tick`. Actions for robots it does not own are ignored;
     /// returns how many were.
     pub fn actions(&mut self, agent_id: u32, tick: u64, blocks: &[ActionBlock]) -> usize {
-        let now = self.world.tick();
+        let now = self.stage.world().tick();
         let Some(agent) = self.agents.get_mut(&agent_id) else { return blocks.len() };
         // Only an answer to the tick in hand counts for the barrier: a tick from the future
         // (a buggy or hostile agent) must not excuse it from later ticks. Late answers still
@@ -377,19 +363,19 @@ impl HubCore {
                 ignored += 1;
                 continue;
             };
-            let mut a = Action { robot: r.handle, motors: None, pose: None, say: None };
-            if b.flags & ACT_MOTORS != 0 {
-                a.motors = Some(b.motors);
-            }
-            if b.flags & ACT_POSE != 0 {
-                a.pose = Some(Pose::from_deg(b.pose[0], b.pose[1], b.pose[2]));
-            }
-            if b.flags & ACT_SAY != 0 {
-                let len = (b.say_len as usize).min(b.say_bytes.len());
-                a.say = Message::new(&b.say_bytes[..len]).ok();
-            }
             r.leds = b.flags & 0xff00;
-            self.pending.push(a);
+            let say = (b.flags & ACT_SAY != 0).then(|| {
+                let len = (b.say_len as usize).min(b.say_bytes.len());
+                b.say_bytes[..len].to_vec()
+            });
+            self.pending.push(RecordedAction {
+                id: b.robot_id,
+                motors: (b.flags & ACT_MOTORS != 0).then_some(b.motors),
+                pose: (b.flags & ACT_POSE != 0).then(|| Pose::from_deg(b.pose[0], b.pose[1], b.pose[2])),
+                // A message too long for the world is not said (the world's rule).
+                say: say.filter(|m| Message::new(m).is_ok()),
+                leds: r.leds,
+            });
         }
         ignored
     }
@@ -398,14 +384,14 @@ impl HubCore {
     /// such agent there is nothing to step for: a lock-step hub waits for one instead of
     /// racing ahead on its own.
     pub fn all_answered(&self) -> bool {
-        let t = self.world.tick();
+        let t = self.stage.world().tick();
         let mut waiting_on = self.agents.values().filter(|a| a.ready && !a.robots.is_empty()).peekable();
         waiting_on.peek().is_some() && waiting_on.all(|a| a.answered.is_some_and(|x| x >= t))
     }
 
     /// Measures every robot where it stands (before the first step), without noise.
     pub fn prime_sensors(&mut self) {
-        self.world.refresh_sensors();
+        self.stage.refresh_sensors();
     }
 
     /// Agents the lock-step barrier waits for: live, ready, with robots.
@@ -416,7 +402,7 @@ impl HubCore {
     /// Marks the agents that have not answered the current tick as lagging (called when the
     /// lock-step deadline passes); returns how many.
     pub fn mark_laggards(&mut self) -> usize {
-        let t = self.world.tick();
+        let t = self.stage.world().tick();
         let mut n = 0;
         for a in self.agents.values_mut().filter(|a| a.ready && !a.robots.is_empty()) {
             a.lagging = a.answered.is_none_or(|x| x < t);
@@ -449,7 +435,7 @@ impl HubCore {
             Command::Stop => self.state = RunState::Finished,
             Command::RemoveRobot => match self.robots.remove(&robot_id) {
                 Some(r) => {
-                    self.world.remove_robot(r.handle);
+                    self.stage.remove(robot_id);
                     if let Some(a) = self.agents.get_mut(&r.agent_id) {
                         a.robots.retain(|&id| id != robot_id);
                     }
@@ -461,80 +447,56 @@ impl HubCore {
         0
     }
 
-    /// Rebuilds the world with its robots added in name order (id order among equal names):
-    /// registrations arrive in whatever order the agents' processes run, and the world's slot
-    /// order fixes the order of every random draw, so without this two runs with one seed
-    /// could differ. Names, not ids, because ids given out on request (id 0) also follow the
-    /// order in which agents happened to register.
-    fn settle_slots(&mut self) {
-        let mut world = match World::new(self.world.lab(), self.world.params().clone(), self.seed) {
-            Ok(w) => w,
-            Err(_) => return, // the same lab and parameters built once already
-        };
-        world.set_capacity(MAX_ROBOTS);
-        self.id_by_slot.clear();
-        let mut order: Vec<(String, u32)> = self
-            .robots
-            .iter()
-            .filter_map(|(&id, e)| Some((self.world.robot(e.handle)?.spec.name.clone(), id)))
-            .collect();
-        order.sort();
-        for (_, id) in order {
-            let Some(entry) = self.robots.get_mut(&id) else { continue };
-            let Some(r) = self.world.robot(entry.handle) else { continue };
-            let spec = RobotSpec { pose: r.pose, ..r.spec.clone() };
-            let frozen = r.frozen;
-            let Ok(handle) = world.add_robot(spec) else { continue };
-            world.set_frozen(handle, frozen);
-            entry.handle = handle;
-            let slot = handle.index() as usize;
-            if self.id_by_slot.len() <= slot {
-                self.id_by_slot.resize(slot + 1, 0);
-            }
-            self.id_by_slot[slot] = id;
-        }
-        self.world = world;
-    }
-
     /// Steps the world once with the actions taken since the last step.
     pub fn step(&mut self) {
-        if self.world.tick() == 0 && !self.settled {
-            self.settled = true;
-            let pending = std::mem::take(&mut self.pending);
-            // Pending actions name world handles: map them to ids and back across the rebuild.
-            let by_handle: BTreeMap<RobotHandle, u32> = self.robots.iter().map(|(&id, e)| (e.handle, id)).collect();
-            let ids: Vec<Option<u32>> = pending.iter().map(|a| by_handle.get(&a.robot).copied()).collect();
-            self.settle_slots();
-            self.pending = pending
-                .into_iter()
-                .zip(ids)
-                .filter_map(|(mut a, id)| {
-                    a.robot = self.robots.get(&id?)?.handle;
-                    Some(a)
-                })
-                .collect();
-        }
         if self.state != RunState::Running {
             self.single_steps = self.single_steps.saturating_sub(1);
         }
-        let actions = std::mem::take(&mut self.pending);
-        let stats = self.world.step(&actions, self.dt_s);
+        let stats = self.stage.step(&self.pending);
         if stats.unknown_robot_actions > 0 || stats.bad_values > 0 {
-            tracing::debug!(?stats, "tick {}", self.world.tick());
+            tracing::debug!(?stats, "tick {}", self.stage.world().tick());
         }
-        self.pending = actions;
         self.pending.clear();
-        if self.tick_limit > 0 && self.world.tick() >= self.tick_limit {
+        if self.tick_limit > 0 && self.stage.world().tick() >= self.tick_limit {
             self.state = RunState::Finished;
+        }
+    }
+
+    /// Starts journaling every change to the world, for a recording.
+    pub fn record(&mut self) {
+        self.stage.record();
+    }
+
+    /// The world's changes since the last call (none unless recording), oldest first.
+    pub fn take_journal(&mut self, into: &mut Vec<Event>) {
+        self.stage.take_journal(into);
+    }
+
+    /// What a recording of this run starts from.
+    pub fn run_start(&self, deadline_ms: u32) -> RunStart {
+        let w = self.stage.world();
+        RunStart {
+            iwsim_version: env!("CARGO_PKG_VERSION").to_owned(),
+            seed: self.stage.seed(),
+            dt_s: self.stage.dt_s(),
+            lockstep: self.mode == Mode::LockStep,
+            tick_limit: self.tick_limit,
+            cycle_ms: w.params().cycle_ms,
+            deadline_ms,
+            lab: w.lab().clone(),
+            params: w.params().clone(),
+            grid: self.grid.clone(),
+            obstacle_from: self.obstacle_from,
+            checkpoints: self.checkpoints.clone(),
         }
     }
 
     /// The world header for the current tick.
     pub fn world_header(&self) -> WorldHeader {
         WorldHeader {
-            tick: self.world.tick(),
-            sim_time_s: self.world.time_s(),
-            state_hash: self.world.state_hash(),
+            tick: self.stage.world().tick(),
+            sim_time_s: self.stage.world().time_s(),
+            state_hash: self.stage.world().state_hash(),
             run_state: self.state as u32,
             robot_count: self.robots.len() as u32,
             agent_count: self.live_agents() as u32,
@@ -550,58 +512,16 @@ impl HubCore {
     /// The robot state of every robot, in id order.
     pub fn robot_states(&self) -> impl Iterator<Item = RobotState> + '_ {
         self.robots.iter().filter_map(|(&id, e)| {
-            let r = self.world.robot(e.handle)?;
+            let r = self.stage.robot(id)?;
             let lagging = self.agents.get(&e.agent_id).is_some_and(|a| a.lagging);
-            Some(RobotState {
-                id,
-                kind: match r.spec.kind {
-                    RobotKind::Simulated => WireKind::Simulated,
-                    RobotKind::Real => WireKind::Real,
-                    RobotKind::Door => WireKind::Door,
-                } as u32,
-                flags: (r.collision as u32 * ROBOT_COLLISION)
-                    | (r.frozen as u32 * ROBOT_FROZEN)
-                    | (lagging as u32 * ROBOT_LAGGING),
-                collision_count: r.collision_count.min(u32::MAX as u64) as u32,
-                x_m: r.pose.x,
-                y_m: r.pose.y,
-                heading_deg: r.pose.heading_deg(),
-                width_m: r.spec.width_m as f32,
-                height_m: r.spec.height_m as f32,
-                com: r.spec.com as f32,
-                agent_id: e.agent_id,
-                motor_out: [r.motor_out[0] as f32, r.motor_out[1] as f32],
-                name: FixedName::new(&r.spec.name).unwrap_or(FixedName::EMPTY),
-                proximity_m: {
-                    let mut p = [f32::NAN; MAX_PROXIMITY];
-                    for (o, v) in p.iter_mut().zip(r.readings.proximity()) {
-                        *o = *v as f32;
-                    }
-                    p
-                },
-            })
+            Some(robot_state(r, id, e.agent_id, lagging))
         })
     }
 
     /// Every robot's proximity-sensor geometry, in id order.
     pub fn robot_sensors(&self) -> impl Iterator<Item = RobotSensors> + '_ {
-        let default_range = self.world.params().proximity_range_m;
-        self.robots.iter().filter_map(move |(&id, e)| {
-            let r = self.world.robot(e.handle)?;
-            let specs = if r.spec.sensors.is_empty() { r.spec.default_sensors() } else { r.spec.sensors.clone() };
-            let mut out = RobotSensors { robot_id: id, count: 0, sensors: [SensorGeometry::default(); MAX_PROXIMITY] };
-            for (o, s) in out.sensors.iter_mut().zip(&specs) {
-                *o = SensorGeometry {
-                    x_m: s.x_m as f32,
-                    y_m: s.y_m as f32,
-                    angle_deg: s.angle_rad.to_degrees() as f32,
-                    cone_deg: s.cone_rad.to_degrees() as f32,
-                    range_m: s.range_m.unwrap_or(default_range) as f32,
-                };
-                out.count += 1;
-            }
-            Some(out)
-        })
+        let default_range = self.stage.world().params().proximity_range_m;
+        self.robots.keys().filter_map(move |&id| Some(sensor_geometry(self.stage.robot(id)?, id, default_range)))
     }
 
     /// An agent's robot ids, in registration order.
@@ -611,21 +531,102 @@ impl HubCore {
 
     /// The sensor block of a robot for the current tick.
     pub fn sensor_block(&self, robot_id: u32) -> SensorBlock {
-        let tick = self.world.tick();
-        match self.robots.get(&robot_id).and_then(|e| self.world.robot(e.handle)) {
-            Some(r) => {
-                pack_sensor_block(r, robot_id, tick, |h| self.id_by_slot.get(h.index() as usize).copied().unwrap_or(0))
-            }
+        let tick = self.stage.world().tick();
+        match self.robots.get(&robot_id).and_then(|_| self.stage.robot(robot_id)) {
+            Some(r) => pack_sensor_block(r, robot_id, tick, |h| self.stage.id_of(h)),
             None => SensorBlock { robot_id, tick, ..SensorBlock::zeroed() },
         }
     }
 
     /// The map as a header and items, for agents and viewers; `deadline_ms` is the lock-step
     /// deadline the process uses.
-    pub fn map_items(&self, cycle_ms: u32, deadline_ms: u32) -> (MapHeader, Vec<MapItem>) {
-        let params = hub_params(self.world.params(), self.mode, self.tick_limit, deadline_ms);
-        pack_map(self.world.lab(), &self.grid, self.obstacle_from, &self.checkpoints, cycle_ms, params)
+    pub fn map_items(&self, cycle_ms: u32, deadline_ms: u32, audience: MapAudience) -> (MapHeader, Vec<MapItem>) {
+        let params = hub_params(self.stage.world().params(), self.mode, self.tick_limit, deadline_ms);
+        let lab = self.stage.world().lab();
+        pack_map_for(audience, lab, &self.grid, self.obstacle_from, &self.checkpoints, cycle_ms, params)
     }
+}
+
+/// The map packed for `audience`: [`pack_map`] of the whole lab for observers, of the lab
+/// without the scenario's obstacles (walls from `obstacle_from` on) for agents.
+pub fn pack_map_for(
+    audience: MapAudience,
+    lab: &Lab,
+    grid: &Grid,
+    obstacle_from: usize,
+    checkpoints: &[Checkpoint],
+    cycle_ms: u32,
+    params: HubParams,
+) -> (MapHeader, Vec<MapItem>) {
+    match audience {
+        MapAudience::Observers => pack_map(lab, grid, obstacle_from, checkpoints, cycle_ms, params),
+        MapAudience::Agents => {
+            // The scenario's obstacles are the world's truth: an agent's sensors find them.
+            let known = obstacle_from.min(lab.walls.len());
+            let walls = Lab { walls: lab.walls[..known].to_vec(), ..lab.clone() };
+            pack_map(&walls, grid, known, checkpoints, cycle_ms, params)
+        }
+    }
+}
+
+/// Robot `id` of agent `agent_id` as observers see it in a world snapshot: what
+/// [`HubCore::robot_states`] publishes, public so that a replay publishes the same.
+pub fn robot_state(r: &world::Robot, id: u32, agent_id: u32, lagging: bool) -> RobotState {
+    RobotState {
+        id,
+        kind: match r.spec.kind {
+            RobotKind::Simulated => WireKind::Simulated,
+            RobotKind::Real => WireKind::Real,
+            RobotKind::Door => WireKind::Door,
+        } as u32,
+        flags: (r.collision as u32 * ROBOT_COLLISION)
+            | (r.frozen as u32 * ROBOT_FROZEN)
+            | (lagging as u32 * ROBOT_LAGGING),
+        collision_count: r.collision_count.min(u32::MAX as u64) as u32,
+        x_m: r.pose.x,
+        y_m: r.pose.y,
+        heading_deg: r.pose.heading_deg(),
+        width_m: r.spec.width_m as f32,
+        height_m: r.spec.height_m as f32,
+        com: r.spec.com as f32,
+        agent_id,
+        motor_out: [r.motor_out[0] as f32, r.motor_out[1] as f32],
+        name: FixedName::new(&r.spec.name).unwrap_or(FixedName::EMPTY),
+        proximity_m: {
+            let mut p = [f32::NAN; MAX_PROXIMITY];
+            for (o, v) in p.iter_mut().zip(r.readings.proximity()) {
+                *o = *v as f32;
+            }
+            p
+        },
+    }
+}
+
+/// Robot `id`'s proximity-sensor geometry (`default_range_m` for sensors without a range of
+/// their own): what [`HubCore::robot_sensors`] publishes, public so that a replay does too.
+pub fn sensor_geometry(r: &world::Robot, id: u32, default_range_m: f64) -> RobotSensors {
+    let specs = if r.spec.sensors.is_empty() { r.spec.default_sensors() } else { r.spec.sensors.clone() };
+    let mut out = RobotSensors { robot_id: id, count: 0, sensors: [SensorGeometry::default(); MAX_PROXIMITY] };
+    for (o, s) in out.sensors.iter_mut().zip(&specs) {
+        *o = SensorGeometry {
+            x_m: s.x_m as f32,
+            y_m: s.y_m as f32,
+            angle_deg: s.angle_rad.to_degrees() as f32,
+            cone_deg: s.cone_rad.to_degrees() as f32,
+            range_m: s.range_m.unwrap_or(default_range_m) as f32,
+        };
+        out.count += 1;
+    }
+    out
+}
+
+/// Who a map is packed for.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum MapAudience {
+    /// Agents: the lab as their robots would know it, without the scenario's obstacles.
+    Agents,
+    /// Observers (viewer, recorder, runner): everything, obstacles flagged.
+    Observers,
 }
 
 /// A robot's readings packed into the block its agent reads: what [`HubCore::sensor_block`]
@@ -663,7 +664,6 @@ pub fn pack_sensor_block(
         b.beacons_deg[k] = v.unwrap_or(f64::NAN);
     }
     b.encoder_ticks = rd.encoder_ticks;
-    b.pose = [r.pose.x, r.pose.y, r.pose.heading_deg()];
     b.collision_count = r.collision_count.min(u32::MAX as u64) as u32;
     let mut offset = 0usize;
     for heard in &r.inbox {
@@ -784,7 +784,7 @@ mod tests {
         // 30 ASCII bytes, then "é" (2 bytes) straddles the 31-byte limit: the cut drops it whole.
         map.lab.name = format!("{}éé and more", "L".repeat(30));
         let c = HubCore::new(&map.lab, map.grid, Params::default(), 1, Mode::LockStep, 0).expect("valid");
-        let (header, _) = c.map_items(100, 0);
+        let (header, _) = c.map_items(100, 0, MapAudience::Observers);
         assert_eq!(header.name.as_str(), Some("L".repeat(30).as_str()));
         assert_eq!(FixedName::truncated("short lab").as_str(), Some("short lab"));
         assert_eq!(FixedName::truncated("nul\0after").as_str(), Some("nul"));
@@ -976,7 +976,8 @@ mod tests {
         assert!(b.present & HAS_COMPASS != 0);
         let heard: Vec<_> = b.messages().collect();
         assert_eq!(heard, vec![(r1, &b"go first"[..])]);
-        assert_eq!(b.pose[0], 14.0, "grid slot 2 of LIACC");
+        // Where robot 2 is, only observers learn: grid slot 2 of LIACC.
+        assert_eq!(c.robot_states().find(|s| s.id == r2).map(|s| s.x_m), Some(14.0));
     }
 
     #[test]
@@ -984,7 +985,7 @@ mod tests {
         let run = |first_b: bool| {
             let mut c = core(Mode::LockStep);
             let params = Params::default(); // noise on: slot order decides the draws
-            c = HubCore::new(c.world.lab(), c.grid.clone(), params, 5, Mode::LockStep, 0).expect("valid");
+            c = HubCore::new(c.world().lab(), c.grid.clone(), params, 5, Mode::LockStep, 0).expect("valid");
             let a = c.hello(1).expect("room");
             let b = c.hello(2).expect("room");
             let mut ra = RobotRegistration::new("a");
@@ -1030,10 +1031,23 @@ mod tests {
     #[test]
     fn the_map_lists_every_wall_corner_and_grid_slot() {
         let c = core(Mode::RealTime);
-        let (h, items) = c.map_items(100, 1000);
+        let (h, items) = c.map_items(100, 1000, MapAudience::Observers);
         assert_eq!((h.wall_count, h.grid_count), (23, 9));
         assert_eq!(items.iter().filter(|i| i.kind == MAP_CORNER).count(), 92);
         assert_eq!(h.item_count as usize, items.len());
         assert_eq!(h.name.as_str(), Some("IW_LIACC"));
+    }
+
+    #[test]
+    fn agents_get_the_map_without_the_scenarios_obstacles() {
+        let mut c = core(Mode::RealTime);
+        c.set_scenario(20, Vec::new());
+        let walls = |audience| {
+            let (h, items) = c.map_items(100, 1000, audience);
+            let flagged = items.iter().filter(|i| i.kind == MAP_WALL && i.c != 0.0).count();
+            (h.wall_count, flagged)
+        };
+        assert_eq!(walls(MapAudience::Observers), (23, 3));
+        assert_eq!(walls(MapAudience::Agents), (20, 0));
     }
 }

@@ -10,6 +10,9 @@
 
 pub mod cli;
 pub mod core;
+pub mod replay;
+pub mod serve;
+pub mod stage;
 
 use std::collections::BTreeMap;
 use std::os::fd::{AsRawFd, FromRawFd, OwnedFd};
@@ -24,7 +27,8 @@ use ipc_types::{
     RunState, SensorBlock, TickHeader,
 };
 
-use self::core::{HubCore, Mode};
+use self::core::{HubCore, MapAudience, Mode};
+use recorder::{Recorder, RecorderOptions};
 use world::WorldBuildError;
 use world::map::{Grid, Lab, Params};
 
@@ -57,6 +61,8 @@ pub struct HubConfig {
     pub obstacle_from: usize,
     /// A scenario's checkpoints, published in the map for viewers and agents.
     pub checkpoints: Vec<records::places::Checkpoint>,
+    /// Record the run to this MCAP file (see the `recorder` crate).
+    pub record: Option<std::path::PathBuf>,
 }
 
 /// Why the hub stopped with an error.
@@ -71,6 +77,12 @@ pub enum HubError {
     /// iceoryx2 failed while serving.
     #[error("iceoryx2 failed to {0}")]
     Ipc(String),
+    /// The recording could not be started.
+    #[error(transparent)]
+    RecordCreate(#[from] recorder::RecorderCreateError),
+    /// The recording could not be finished (what was written before is readable).
+    #[error(transparent)]
+    RecordFinish(#[from] recorder::RecorderFinishError),
 }
 
 /// How a hub run ended: the type `iwsim hub --json` prints, defined once with its JSON form.
@@ -160,9 +172,23 @@ pub fn run(cfg: HubConfig) -> Result<HubOutcome, HubError> {
     let mut core = HubCore::new(&cfg.lab, cfg.grid.clone(), cfg.params.clone(), cfg.seed, cfg.mode, cfg.tick_limit)?;
     core.set_max_robots(cfg.max_robots);
     core.set_scenario(cfg.obstacle_from, cfg.checkpoints.clone());
+    let deadline_ms = cfg.deadline.as_millis().min(u32::MAX as u128) as u32;
+    let mut recording = match &cfg.record {
+        Some(path) => {
+            core.record();
+            let options =
+                RecorderOptions { wall_clock_start: Some(std::time::SystemTime::now()), ..Default::default() };
+            let rec = Recorder::create(path, &core.run_start(deadline_ms), options)?;
+            tracing::info!("recording the run to {}", path.display());
+            Some(rec)
+        }
+        None => None,
+    };
+    let mut journal: Vec<recorder::journal::Event> = Vec::new();
 
     let world_svc = session.world(&node, Role::Hub)?;
     let map_svc = session.map(&node, Role::Hub)?;
+    let observer_map_svc = session.observer_map(&node, Role::Hub)?;
     let sensors_svc = session.robot_sensors(&node, Role::Hub)?;
     let actions_svc = session.actions(&node, Role::Hub)?;
     let register_svc = session.register(&node, Role::Hub)?;
@@ -183,17 +209,23 @@ pub fn run(cfg: HubConfig) -> Result<HubOutcome, HubError> {
         .create()
         .map_err(ipc("create the robot-sensors publisher"))?;
     let mut roster = Roster { publisher: sensors_pub, ids: None, scratch: Vec::new() };
-    let (map_header, items) =
-        core.map_items(cfg.params.cycle_ms, cfg.deadline.as_millis().min(u32::MAX as u128) as u32);
-    let map_pub = map_svc
-        .publisher_builder()
-        .initial_max_slice_len(items.len().max(1))
-        .allocation_strategy(SLICE_ALLOCATION)
-        .create()
-        .map_err(ipc("create the map publisher"))?;
-    let mut sample = map_pub.loan_slice_uninit(items.len()).map_err(ipc("loan the map"))?;
-    *sample.user_header_mut() = map_header;
-    sample.write_from_slice(&items).send().map_err(ipc("send the map"))?;
+    // Two maps, kept for late subscribers: the agents' (no scenario obstacles: their sensors
+    // must find those) and the observers' (the truth).
+    let publish_map = |svc: &ipc_services::MapService, audience| -> Result<_, HubError> {
+        let (header, items) = core.map_items(cfg.params.cycle_ms, deadline_ms, audience);
+        let publisher = svc
+            .publisher_builder()
+            .initial_max_slice_len(items.len().max(1))
+            .allocation_strategy(SLICE_ALLOCATION)
+            .create()
+            .map_err(ipc("create a map publisher"))?;
+        let mut sample = publisher.loan_slice_uninit(items.len()).map_err(ipc("loan the map"))?;
+        *sample.user_header_mut() = header;
+        sample.write_from_slice(&items).send().map_err(ipc("send the map"))?;
+        Ok(publisher)
+    };
+    let map_pub = publish_map(&map_svc, MapAudience::Agents)?;
+    let observer_map_pub = publish_map(&observer_map_svc, MapAudience::Observers)?;
 
     let actions_sub = actions_svc.subscriber_builder().create().map_err(ipc("create the actions subscriber"))?;
     let register_server = register_svc.server_builder().create().map_err(ipc("create the register server"))?;
@@ -240,11 +272,17 @@ pub fn run(cfg: HubConfig) -> Result<HubOutcome, HubError> {
             roster.publish_if_changed(&core, &states)?;
             tick_notifier.notify().map_err(ipc("ring the tick"))?;
             publish = false;
+            if let Some(rec) = &mut recording {
+                record_changes(&mut core, rec, &mut journal);
+            }
             // The deadline runs from the tick's first publication: re-publishing the same tick
             // (a command, an agent joining) must not push it back, or lock-step could hang.
             if last_published != Some(core.world().tick()) {
                 last_published = Some(core.world().tick());
                 deadline_at = Instant::now() + cfg.deadline;
+                if let Some(rec) = &mut recording {
+                    rec.world(core.world().tick(), &states, &roster.scratch);
+                }
             }
             if core.state() == RunState::Finished {
                 break;
@@ -279,6 +317,7 @@ pub fn run(cfg: HubConfig) -> Result<HubOutcome, HubError> {
         // A new subscriber gets the kept (history) sample only when the publisher next looks
         // at its connections: the map is sent once, and the world not while paused.
         let _ = map_pub.update_connections();
+        let _ = observer_map_pub.update_connections();
         let _ = world_pub.update_connections();
         let _ = roster.publisher.update_connections();
         dead_agents.clear();
@@ -515,6 +554,22 @@ pub fn run(cfg: HubConfig) -> Result<HubOutcome, HubError> {
         let done: Vec<i32> = ready.iter().map(|&i| waiting[i]).collect();
         waiting.retain(|fd| !done.contains(fd));
     }
+    if let Some(mut rec) = recording {
+        record_changes(&mut core, &mut rec, &mut journal);
+        let reason = if outcome.interrupted { "interrupted" } else { "finished" };
+        rec.event(&recorder::journal::Event::Finish { tick: core.world().tick(), reason: reason.to_owned() });
+        let stats = rec.finish()?;
+        if stats.dropped_world_frames > 0 || stats.replay_stalls > 0 {
+            tracing::warn!(
+                "recording: {} world frames dropped for people (the replay journal is whole), the tick waited \
+                 for the writer {} times",
+                stats.dropped_world_frames,
+                stats.replay_stalls
+            );
+        }
+        outcome.recorded_bytes = stats.bytes;
+        outcome.recording_dropped_frames = stats.dropped_world_frames;
+    }
     outcome.ticks = core.world().tick();
     outcome.run_s = first_step.map_or(0.0, |t| t.elapsed().as_secs_f64());
     outcome.state_hash = StateHash(core.world().state_hash());
@@ -522,9 +577,39 @@ pub fn run(cfg: HubConfig) -> Result<HubOutcome, HubError> {
         .robot_states()
         .map(|s| RobotAtEnd { id: s.id, x_m: s.x_m, y_m: s.y_m, heading_deg: s.heading_deg, flags: s.flags })
         .collect();
-    drop((agents, world_pub, map_pub, roster, actions_sub, register_server, control_server, tick_notifier, doorbell));
-    drop((world_svc, map_svc, sensors_svc, actions_svc, register_svc, control_svc, tick_svc, doorbell_svc, node));
+    drop((
+        agents,
+        world_pub,
+        map_pub,
+        observer_map_pub,
+        roster,
+        actions_sub,
+        register_server,
+        control_server,
+        tick_notifier,
+        doorbell,
+    ));
+    drop((
+        world_svc,
+        map_svc,
+        observer_map_svc,
+        sensors_svc,
+        actions_svc,
+        register_svc,
+        control_svc,
+        tick_svc,
+        doorbell_svc,
+        node,
+    ));
     Ok(outcome)
+}
+
+/// Writes the world's changes since the last call to the recording's replay journal.
+fn record_changes(core: &mut HubCore, rec: &mut Recorder, journal: &mut Vec<recorder::journal::Event>) {
+    core.take_journal(journal);
+    for e in journal.drain(..) {
+        rec.event(&e);
+    }
 }
 
 /// The robot-sensors publisher and the robot ids it last published for.

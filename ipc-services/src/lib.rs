@@ -258,10 +258,20 @@ impl Session {
         finish!(self, b, role, service::WORLD)
     }
 
-    /// The map: published once with history, so every later subscriber gets it.
+    /// The agents' map (no scenario obstacles): published once with history, so every later
+    /// subscriber gets it.
     pub fn map(&self, node: &Node<Svc>, role: Role) -> Result<MapService, ServicesError> {
+        self.map_named(node, role, service::MAP)
+    }
+
+    /// The observers' map (with the scenario's obstacles), like [`Session::map`].
+    pub fn observer_map(&self, node: &Node<Svc>, role: Role) -> Result<MapService, ServicesError> {
+        self.map_named(node, role, service::OBSERVER_MAP)
+    }
+
+    fn map_named(&self, node: &Node<Svc>, role: Role, part: &'static str) -> Result<MapService, ServicesError> {
         let b = node
-            .service_builder(&self.iox_name(service::MAP)?)
+            .service_builder(&self.iox_name(part)?)
             .publish_subscribe::<[MapItem]>()
             .user_header::<MapHeader>()
             .max_publishers(1)
@@ -271,7 +281,7 @@ impl Session {
             .subscriber_max_buffer_size(1)
             .subscriber_max_borrowed_samples(1)
             .enable_safe_overflow(true);
-        finish!(self, b, role, service::MAP)
+        finish!(self, b, role, part)
     }
 
     /// Sensor geometry of every robot: republished with history when the robots change, so

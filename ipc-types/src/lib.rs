@@ -49,8 +49,13 @@ pub mod service {
     /// World snapshots (pub/sub, slice of [`crate::RobotState`] with a [`crate::WorldHeader`]),
     /// and the tick doorbell (event) under the same name.
     pub const WORLD: &str = "world";
-    /// The map (pub/sub with history, slice of [`crate::MapItem`] with a [`crate::MapHeader`]).
+    /// The map agents get (pub/sub with history, slice of [`crate::MapItem`] with a
+    /// [`crate::MapHeader`]): the lab's walls, beacons, targets, grid and route, without the
+    /// scenario's obstacles (an agent's sensors must find those).
     pub const MAP: &str = "map";
+    /// The map observers get (viewer, recorder, runner, the UDP bridge's viewers): the same
+    /// layout as [`MAP`], with the scenario's obstacles as walls flagged `c = 1`.
+    pub const OBSERVER_MAP: &str = "observer/map";
     /// Actions from every agent (pub/sub, slice of [`crate::ActionBlock`] with an
     /// [`crate::ActionHeader`]), and the agents' doorbell to the hub (event).
     pub const ACTIONS: &str = "actions";
@@ -306,10 +311,11 @@ pub struct InboxEntry {
 const _: () = assert!(core::mem::size_of::<InboxEntry>() == 8);
 const _: () = assert!(core::mem::align_of::<InboxEntry>() == 4);
 
-/// One robot's sensor readings for one tick.
+/// One robot's sensor readings for one tick: only what its sensors measure (with their noise),
+/// never where it truly is. True poses are for observers (the world service).
 #[repr(C)]
 #[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable, ZeroCopySend)]
-#[type_name("iwsim::SensorBlock.v1")]
+#[type_name("iwsim::SensorBlock.v2")]
 pub struct SensorBlock {
     /// Tick these readings belong to.
     pub tick: u64,
@@ -331,8 +337,6 @@ pub struct SensorBlock {
     pub beacons_deg: [f64; MAX_BEACONS],
     /// Cumulative encoder ticks, left and right.
     pub encoder_ticks: [i64; 2],
-    /// Pose as the hub has it (ground truth, for logging and Real robots), metres/degrees.
-    pub pose: [f64; 3],
     /// Contacts so far.
     pub collision_count: u32,
     /// Index of the target under the robot (valid with `HAS_GROUND`).
@@ -350,7 +354,7 @@ pub struct SensorBlock {
     /// The bytes of the messages heard.
     pub inbox_bytes: [u8; INBOX_BYTES],
 }
-const _: () = assert!(core::mem::size_of::<SensorBlock>() == 832);
+const _: () = assert!(core::mem::size_of::<SensorBlock>() == 808);
 const _: () = assert!(core::mem::align_of::<SensorBlock>() == 8);
 
 impl SensorBlock {
@@ -874,14 +878,14 @@ const _: () = assert!(core::mem::size_of::<MapItem>() == 32);
 const _: () = assert!(core::mem::align_of::<MapItem>() == 8);
 
 /// Bytes of a [`Ping`] after its header, so a ping is as large as a [`SensorBlock`].
-pub const PING_PAYLOAD_BYTES: usize = 816;
+pub const PING_PAYLOAD_BYTES: usize = 792;
 
 /// The sample of `iwsim bench latency`'s raw iceoryx2 ping-pong, the baseline the hub's
 /// latency is compared with. Only the benchmark sends it; it is as large as a sensor block so
 /// both measurements move the same bytes.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Pod, Zeroable, ZeroCopySend)]
-#[type_name("iwsim::bench::Ping.v1")]
+#[type_name("iwsim::bench::Ping.v2")]
 pub struct Ping {
     /// Sequence number; the peer answers with it.
     pub seq: u64,
@@ -890,7 +894,7 @@ pub struct Ping {
     /// Filler.
     pub payload: [u8; PING_PAYLOAD_BYTES],
 }
-const _: () = assert!(core::mem::size_of::<Ping>() == 832);
+const _: () = assert!(core::mem::size_of::<Ping>() == 808);
 const _: () = assert!(core::mem::align_of::<Ping>() == 8);
 const _: () = assert!(core::mem::size_of::<Ping>() == core::mem::size_of::<SensorBlock>());
 
@@ -914,11 +918,11 @@ mod tests {
         assert_eq!(type_name_of::<WorldHeader>(), "iwsim::WorldHeader.v1");
         assert_eq!(type_name_of::<RobotState>(), "iwsim::RobotState.v2");
         assert_eq!(type_name_of::<RobotSensors>(), "iwsim::RobotSensors.v1");
-        assert_eq!(type_name_of::<SensorBlock>(), "iwsim::SensorBlock.v1");
+        assert_eq!(type_name_of::<SensorBlock>(), "iwsim::SensorBlock.v2");
         assert_eq!(type_name_of::<ActionBlock>(), "iwsim::ActionBlock.v1");
         assert_eq!(type_name_of::<RegisterRequest>(), "iwsim::RegisterRequest.v2");
         assert_eq!(type_name_of::<MapItem>(), "iwsim::MapItem.v1");
-        assert_eq!(type_name_of::<Ping>(), "iwsim::bench::Ping.v1");
+        assert_eq!(type_name_of::<Ping>(), "iwsim::bench::Ping.v2");
     }
 
     #[test]

@@ -149,6 +149,7 @@ fn agents_adapters_and_the_viewer_never_link_the_hub_or_the_world() {
             "sim-model",
             "records",
             "runner",
+            "recorder",
             "plot",
             "bench-harness",
         ]
@@ -174,9 +175,9 @@ fn ipc_types_depends_on_nothing_in_the_workspace() {
 
 #[test]
 fn the_shared_formulas_and_formats_link_no_ipc_runtime() {
-    // Architecture invariant: sim-model depends on nothing; records, plot and the world link
-    // no iceoryx2 runtime (nothing of iceoryx2 beyond the no_std traits ipc-types uses), so
-    // drawing a log or checking a map never needs shared memory.
+    // Architecture invariant: sim-model depends on nothing; records, recorder, plot and the
+    // world link no iceoryx2 runtime (nothing of iceoryx2 beyond the no_std traits ipc-types
+    // uses), so drawing a log, reading a recording or checking a map never needs shared memory.
     let g = graph();
     assert!(
         g.direct("sim-model", &g.normal).is_empty(),
@@ -184,7 +185,7 @@ fn the_shared_formulas_and_formats_link_no_ipc_runtime() {
         g.direct("sim-model", &g.normal)
     );
     let payload_traits: BTreeSet<String> = g.linked("ipc-types").into_keys().collect();
-    for c in ["records", "plot", "world"] {
+    for c in ["records", "recorder", "plot", "world"] {
         assert_links_none(
             &g,
             c,
@@ -391,4 +392,23 @@ fn only_the_sdk_decodes_the_hubs_map_stream() {
         r == "ipc-types/src/lib.rs" || r == "hub/src/core.rs" || r == "agents/agent-sdk/src/map.rs"
     });
     assert!(bad.is_empty(), "the hub's map stream decoded outside agent_sdk::map:\n  {}", bad.join("\n  "));
+}
+
+#[test]
+fn the_recorder_never_links_the_hub() {
+    // Architecture invariant: the recorder (MCAP files) depends on world, ipc-types and records,
+    // never on the hub: the hub uses it, replay tools and plots read with it.
+    let g = graph();
+    assert_links_none(&g, "recorder", |d| d == "hub" || d == "runner", "the recorder must not link the hub");
+}
+
+#[test]
+fn agents_never_name_the_observers_services() {
+    // Architecture invariant: agents see only their robots' sensors and the agents' map. No
+    // agent's source names the SDK's Observer (true poses, the scenario's obstacles) or the
+    // world and observer-map services; the UDP bridge does only to serve its viewers.
+    let bad = offending(&["Observer", "observer_map", "service::WORLD", ".world(&"], |r| {
+        !["agents/navigator/", "agents/door/", "agents/wheelchair/", "agents/teleop/"].iter().any(|a| r.starts_with(a))
+    });
+    assert!(bad.is_empty(), "agents reading the truth:\n{}", bad.join("\n"));
 }

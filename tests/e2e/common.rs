@@ -6,7 +6,7 @@ use std::process::{Child, Command, Output, Stdio};
 use std::sync::atomic::{AtomicU32, Ordering};
 use std::time::{Duration, Instant};
 
-use agent_sdk::Agent;
+use agent_sdk::Observer;
 
 pub fn session(tag: &str) -> String {
     static N: AtomicU32 = AtomicU32::new(0);
@@ -109,10 +109,9 @@ pub fn text(b: &[u8]) -> String {
     String::from_utf8_lossy(b).into_owned()
 }
 
-/// Connects as an observer (an agent without robots) and waits until the hub's world has
-/// reached `tick`.
-pub fn wait_for_tick(session: &str, tick: u64, timeout: Duration) -> Agent {
-    let mut observer = Agent::connect_within(session, "observer", timeout).expect("hub comes up");
+/// Attaches as an observer and waits until the hub's world has reached `tick`.
+pub fn wait_for_tick(session: &str, tick: u64, timeout: Duration) -> Observer {
+    let mut observer = Observer::connect_within(session, "observer", timeout).expect("hub comes up");
     let start = Instant::now();
     loop {
         let (h, _) = observer.world().expect("world snapshot");
@@ -179,4 +178,21 @@ pub fn shared_memory_files(prefix: &str) -> Vec<String> {
         .filter_map(|e| e.ok().map(|e| e.file_name().to_string_lossy().into_owned()))
         .filter(|n| n.starts_with(prefix))
         .collect()
+}
+
+/// Every robot's true pose at every tick of a recorded run, by name: `[tick, x, y, heading°]`
+/// rows, replayed from the recording's journal (what the runner judges from).
+pub fn truth(recording: &std::path::Path) -> std::collections::BTreeMap<String, Vec<[f64; 4]>> {
+    let rec = recorder::Recording::open(recording).unwrap_or_else(|e| panic!("{}: {e}", recording.display()));
+    let mut out: std::collections::BTreeMap<String, Vec<[f64; 4]>> = Default::default();
+    hub::replay::replay_observed(&rec, true, None, |stage| {
+        let tick = stage.world().tick() as f64;
+        for id in stage.ids() {
+            if let Some(r) = stage.robot(id) {
+                out.entry(r.spec.name.clone()).or_default().push([tick, r.pose.x, r.pose.y, r.pose.heading_deg()]);
+            }
+        }
+    })
+    .expect("the recording replays");
+    out
 }

@@ -3,7 +3,7 @@
 
 use std::time::{Duration, Instant};
 
-use super::common::{Proc, assert_no_shared_memory_left, session, text, wait_for_tick};
+use super::common::{Proc, assert_no_shared_memory_left, session, text, truth, wait_for_tick};
 
 use agent_sdk::{Agent, AgentError, control};
 use ipc_types::{Command as Cmd, REG_HAS_POSE, ROBOT_FROZEN, Refusal, RobotRegistration};
@@ -288,8 +288,22 @@ fn a_real_chair_pushes_its_own_poses_and_the_hub_takes_them() {
         )
     };
     std::fs::write(&config, chair("sim", "simulated", 12.0) + &chair("real", "real", 16.0)).expect("config written");
-    let hub =
-        Proc::spawn(&["hub", "--session", &s, "--lockstep", "--ticks", "40", "--wait-agents", "1", "--seed", "5"]);
+    let recording = dir.join("run.mcap");
+    let rec = recording.to_str().expect("utf-8");
+    let hub = Proc::spawn(&[
+        "hub",
+        "--session",
+        &s,
+        "--lockstep",
+        "--ticks",
+        "40",
+        "--wait-agents",
+        "1",
+        "--seed",
+        "5",
+        "--record",
+        rec,
+    ]);
     let agent = Proc::spawn(&[
         "agent",
         "wheelchair",
@@ -304,17 +318,13 @@ fn a_real_chair_pushes_its_own_poses_and_the_hub_takes_them() {
     assert!(out.status.success(), "{}", text(&out.stderr));
     let a = agent.wait(Duration::from_secs(10));
     assert!(a.status.success(), "{}", text(&a.stderr));
-    let track = |name: &str| {
-        let path = dir.join(format!("{name}.csv"));
-        let log = agent_sdk::log::LogTable::read(&path).expect("a log");
-        let col = |c| log.column(c).expect("a column");
-        let (x, y, h) = (col("x_m"), col("y_m"), col("heading_deg"));
-        log.rows.iter().map(|r| [r[x], r[y], r[h]]).collect::<Vec<_>>()
-    };
+    // Where the chairs truly were, tick by tick: the hub's record.
+    let truth = truth(&recording);
+    let track = |name: &str| truth[name].iter().map(|r| [r[1], r[2], r[3]]).collect::<Vec<_>>();
     let (sim, real) = (track("sim"), track("real"));
     assert!(sim.len() >= 40 && real.len() >= 40, "{} and {} rows", sim.len(), real.len());
-    // The same chair and script, noiseless, in this process: row k of a log is the pose after
-    // k ticks.
+    // The same chair and script, noiseless, in this process: row k of the track is the pose
+    // after k ticks.
     let map = builtin::map("liacc").expect("built in");
     let mut world = World::new(&map.lab, Params { noise: NoiseParams::NONE, ..Params::default() }, 1).expect("valid");
     let r = world.add_robot(RobotSpec::at(16.0, 6.0, 0.0).body(0.6, 0.5, 0.5).motors(0.5, 0.7)).expect("free");
@@ -327,10 +337,10 @@ fn a_real_chair_pushes_its_own_poses_and_the_hub_takes_them() {
     // It turned left as it went: the script is not trivially straight.
     let last = model[model.len() - 1];
     assert!(last[0] - 16.0 > 1.0 && last[1] - 6.0 > 0.05 && last[2] > 5.0, "{last:?}");
-    // The logs round positions to 0.1 mm and headings to 0.001°.
+    // The agent computes with the hub's own formulas: equal to within rounding.
     for (k, (m, q)) in model.iter().zip(&real).enumerate() {
         let d = [q[0] - m[0], q[1] - m[1], q[2] - m[2]];
-        assert!(d[0].abs() <= 1e-4 && d[1].abs() <= 1e-4 && d[2].abs() <= 1e-3, "tick {k}: model {m:?}, real {q:?}");
+        assert!(d[0].abs() <= 1e-9 && d[1].abs() <= 1e-9 && d[2].abs() <= 1e-7, "tick {k}: model {m:?}, real {q:?}");
     }
     // The simulated chair's noisy motors took it elsewhere.
     let (p, m) = (sim[sim.len() - 1], last);

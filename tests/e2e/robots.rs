@@ -68,7 +68,7 @@ fn robots_past_the_size_speed_and_range_limits_are_refused_on_every_way_in() {
     assert!(ok.starts_with("<Reply Status=\"Ok\">"), "{ok}");
 
     // Only the robots within the limits are in the world (in id order).
-    let mut observer = Agent::connect_within(&s, "observer", Duration::from_secs(5)).expect("hub answers");
+    let mut observer = Observer::connect_within(&s, "observer", Duration::from_secs(5)).expect("hub answers");
     let start = Instant::now();
     loop {
         let (_, robots) = observer.world().expect("snapshot");
@@ -91,7 +91,7 @@ fn robots_past_the_size_speed_and_range_limits_are_refused_on_every_way_in() {
 }
 
 /// Robot 1 in the latest snapshot once `done` holds for it, polling for up to 20 s.
-fn robot_one_when(observer: &mut Agent, what: &str, done: impl Fn(&RobotState, usize) -> bool) -> RobotState {
+fn robot_one_when(observer: &mut Observer, what: &str, done: impl Fn(&RobotState, usize) -> bool) -> RobotState {
     let start = Instant::now();
     loop {
         let (h, robots) = observer.world().expect("snapshot");
@@ -140,7 +140,7 @@ fn a_restarted_agent_takes_back_the_robot_its_killed_predecessor_left_frozen() {
 }
 
 /// The newest world snapshot, waiting for one past `after`.
-fn world_after(observer: &Observer, after: u64) -> (u64, Vec<RobotState>) {
+fn world_after(observer: &mut Observer, after: u64) -> (u64, Vec<RobotState>) {
     let start = Instant::now();
     loop {
         if let Some((h, robots)) = observer.try_world().expect("world")
@@ -163,8 +163,8 @@ fn a_process_acting_in_another_agents_name_changes_nothing() {
         Proc::spawn(&["hub", "--session", &s, "--lockstep", "--wait-agents", "1", "--deadline-ms", "20000", "--json"]);
     // The victim: a real agent process holding its chair still.
     let victim = Proc::spawn(&["agent", "wheelchair", "--session", &s, "--id", "1", "--name", "chair", "--powers=0,0"]);
-    let observer = Observer::connect_within(&s, "spoof-observer", Duration::from_secs(20)).expect("hub comes up");
-    let (mut tick, robots) = world_after(&observer, 5);
+    let mut observer = Observer::connect_within(&s, "spoof-observer", Duration::from_secs(20)).expect("hub comes up");
+    let (mut tick, robots) = world_after(&mut observer, 5);
     let before = robots.iter().find(|r| r.id == 1).copied().expect("the victim's chair");
     let victim_agent = before.agent_id;
 
@@ -211,7 +211,7 @@ fn a_process_acting_in_another_agents_name_changes_nothing() {
         *sample.user_header_mut() = ActionHeader { tick, agent_id: victim_agent, count: 1 };
         sample.write_from_slice(&[ActionBlock::motors(1, 1.0, 1.0)]).send().expect("sent");
         doorbell.notify().expect("rang");
-        let (now, robots) = world_after(&observer, tick);
+        let (now, robots) = world_after(&mut observer, tick);
         let chair = robots.iter().find(|r| r.id == 1).expect("the chair is still there");
         assert_eq!(chair.motor_out, [0.0, 0.0], "tick {now}: the spoofed powers reached the motors");
         assert_eq!((chair.x_m, chair.y_m, chair.heading_deg), (before.x_m, before.y_m, before.heading_deg));
@@ -230,5 +230,22 @@ fn a_process_acting_in_another_agents_name_changes_nothing() {
     assert_eq!(outcome.robots.len(), 1, "{json}");
     assert!(victim.wait(Duration::from_secs(10)).status.success(), "the victim ran to the end");
     drop(session);
+    assert_no_shared_memory_left(&s);
+}
+
+#[test]
+fn an_agent_gets_the_map_without_the_obstacles_and_an_observer_with_them() {
+    let s = session("truthmap");
+    let hub = Proc::spawn(&["hub", "--session", &s, "--obstacle", "17,6.1,17.6,6.4", "--obstacle", "19.4,5.5,20,5.9"]);
+    let agent = Agent::connect_within(&s, "map-agent", Duration::from_secs(20)).expect("hub comes up");
+    let observer = Observer::connect_within(&s, "map-observer", Duration::from_secs(20)).expect("hub comes up");
+    let (mine, truth) = (agent.map().expect("the agents' map"), observer.map().expect("the observers' map"));
+    assert_eq!(truth.walls.len(), mine.walls.len() + 2, "the observer sees the two obstacles");
+    assert!(mine.walls.iter().all(|w| !w.obstacle), "the agent's map has no obstacle");
+    assert_eq!(truth.walls.iter().filter(|w| w.obstacle).count(), 2);
+    agent.close();
+    observer.close();
+    assert_eq!(control(&s, Cmd::Stop, 0).expect("hub answers").status, 0);
+    assert!(hub.wait(Duration::from_secs(10)).status.success());
     assert_no_shared_memory_left(&s);
 }

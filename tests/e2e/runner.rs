@@ -87,7 +87,10 @@ fn interrupt_a_run(tag: &str, extra: &[&str], viewer: bool, signal: &str, name: 
     assert_eq!(output.status.code(), Some(code), "{stdout}\n{}", stderr.join("\n"));
     assert!(stderr.iter().any(|l| l.contains(&format!("iwsim run: {name} received"))), "{stderr:?}");
     assert!(stdout.contains(&format!("FAIL: interrupted by {name}")), "{stdout}");
-    assert!(stdout.contains(&format!("logs and summary.json in {}", out.display())), "{stdout}");
+    assert!(
+        stdout.contains(&format!("logs, the recording (run.mcap) and summary.json in {}", out.display())),
+        "{stdout}"
+    );
     let summary = RunSummary::read(&out.join("summary.json")).unwrap_or_else(|e| panic!("{e}"));
     assert!(!summary.passed, "{summary:?}");
     assert!(summary.failures.iter().any(|f| f.starts_with(&format!("interrupted by {name}"))), "{summary:?}");
@@ -166,7 +169,7 @@ fn a_run_with_a_session_name_can_be_watched_from_another_process() {
         Proc::spawn(&["run", &scenario, "--headless", "--session", &name, "--out", out.to_str().expect("utf-8")]);
     let lines = run.stderr_lines();
     wait_for_lines(&lines, &["wheelchair: agent"], Duration::from_secs(60));
-    let observer = agent_sdk::Observer::connect_within(&name, "e2e-runner-watch", Duration::from_secs(10))
+    let mut observer = agent_sdk::Observer::connect_within(&name, "e2e-runner-watch", Duration::from_secs(10))
         .expect("an observer joins the run's session");
     let start = Instant::now();
     let robots = loop {

@@ -5,11 +5,11 @@ use std::path::{Path, PathBuf};
 use std::time::Duration;
 
 use agent_sdk::log::LogTable;
-use agent_sdk::{Agent, Wait};
+use agent_sdk::{Agent, Observer, Wait};
 use ipc_types::{ActionBlock, REG_HAS_POSE, RobotKind, RobotRegistration};
 use records::summary::{RobotSummary, RunSummary};
 
-use super::common::{Proc, assert_no_shared_memory_left, session, text};
+use super::common::{Proc, assert_no_shared_memory_left, session, text, truth};
 
 fn out_dir(tag: &str) -> PathBuf {
     std::env::temp_dir().join(format!("iwsim-e2e-{tag}-{}", std::process::id()))
@@ -158,6 +158,9 @@ fn the_door_opens_on_request_stops_on_contact_retries_and_closes() {
         "1.0",
     ]);
     let mut me = Agent::connect_within(&s, "test-visitor", Duration::from_secs(20)).expect("hub up");
+    // The test is the referee: it watches the door's true heading as an observer, beside the
+    // robot it drives as an agent.
+    let mut referee = Observer::connect_within(&s, "test-referee", Duration::from_secs(20)).expect("hub up");
     let mut reg = RobotRegistration::new("visitor");
     reg.kind = RobotKind::Real as u32;
     reg.flags |= REG_HAS_POSE;
@@ -174,7 +177,7 @@ fn the_door_opens_on_request_stops_on_contact_retries_and_closes() {
     let mut in_way_since = 0;
     while let Some(tick) = me.wait_tick(Wait::Blocking).expect("hub alive") {
         let t = tick.tick;
-        let door_heading = me
+        let door_heading = referee
             .world()
             .expect("world")
             .1
@@ -220,44 +223,133 @@ fn plot_draws_a_runs_trajectory_as_svg() {
         Duration::from_secs(60),
     );
     assert!(ok, "{out}\n{err}");
-    let log = dir.join("chair1.csv");
+    let recording = dir.join("run.mcap");
     let svg_path = dir.join("chair1.svg");
     let (ok, out, err) = iwsim(
-        &["plot", log.to_str().expect("utf-8"), "--out", svg_path.to_str().expect("utf-8")],
+        &["plot", recording.to_str().expect("utf-8"), "--robot", "chair1", "--out", svg_path.to_str().expect("utf-8")],
         Duration::from_secs(30),
     );
     assert!(ok, "{out}\n{err}");
     assert!(out.contains("chair1.svg"), "prints the path written: {out}");
     let svg = std::fs::read_to_string(&svg_path).expect("svg written");
-    // Well-formed XML with an <svg> root.
-    let mut reader = quick_xml::Reader::from_str(&svg);
-    let mut depth = 0i32;
-    let mut root = None;
-    let mut polyline_points = Vec::new();
-    loop {
-        match reader.read_event().expect("well-formed SVG") {
-            quick_xml::events::Event::Start(e) => {
-                root.get_or_insert_with(|| e.name().into_inner().to_owned());
-                depth += 1;
-            }
-            quick_xml::events::Event::Empty(e) => {
-                if e.name().into_inner() == "polyline"
-                    && let Some(Ok(a)) =
-                        e.attributes().find(|a| a.as_ref().is_ok_and(|a| a.key.into_inner() == "points"))
-                {
-                    polyline_points.push(a.value.split_whitespace().count());
-                }
-            }
-            quick_xml::events::Event::End(_) => depth -= 1,
-            quick_xml::events::Event::Eof => break,
-            _ => {}
-        }
+    let Outline { root, depth, polylines, texts } = svg_outline(&svg);
+    assert_eq!((root.as_deref(), depth), (Some("svg"), 0), "well-formed XML with an <svg> root");
+    for want in ["run.mcap: chair1", "x (m)", "y (m)", "speed (m/s)", "1"] {
+        assert!(texts.iter().any(|t| t == want), "text {want:?} missing from {texts:?}");
     }
-    assert_eq!((root.as_deref(), depth), (Some("svg"), 0));
-    // The trajectory: a polyline with a point per logged tick.
-    let rows = std::fs::read_to_string(&log).expect("log").lines().count() - 1;
-    assert!(polyline_points.contains(&rows), "a {rows}-point trajectory among polylines of {polyline_points:?} points");
+    assert!(texts.iter().any(|t| t.starts_with("lab IW_LIACC")), "the run's lab: {texts:?}");
+
+    // The trajectory: a polyline with a point per recorded frame of chair1, each at chair1's
+    // true place. Equal scales on both axes, so its first and last points give the pixels of
+    // every metre; every point then maps back into the lab, onto the recorded pose.
+    let track = recorder::WorldTrack::open(&recording).expect("the recording reads");
+    let truth: Vec<(f64, f64)> = track
+        .frames
+        .iter()
+        .flat_map(|f| f.robots.iter().filter(|r| r.name == "chair1").map(|r| (r.x_m, r.y_m)))
+        .collect();
+    assert!(truth.len() > 100, "chair1 in {} frames", truth.len());
+    let trajectory = polylines.iter().find(|p| p.len() == truth.len()).unwrap_or_else(|| {
+        panic!("a {}-point trajectory among polylines of {:?} points", truth.len(), lengths(&polylines))
+    });
+    let (first, last) = (truth[0], truth[truth.len() - 1]);
+    let (p0, p1) = (trajectory[0], trajectory[trajectory.len() - 1]);
+    assert!((first.0 - last.0).abs() > 5.0, "chair1 drove west through the door: {first:?} to {last:?}");
+    let sx = (p1.0 - p0.0) / (last.0 - first.0);
+    assert!(sx > 10.0, "x to the right, {sx} px/m");
+    for (k, (&(px, py), &(x, y))) in trajectory.iter().zip(&truth).enumerate() {
+        let (mx, my) = (first.0 + (px - p0.0) / sx, first.1 - (py - p0.1) / sx);
+        assert!(
+            (0.0..=44.0).contains(&mx) && (0.0..=17.75).contains(&my),
+            "point {k} at {mx},{my} m is outside the lab"
+        );
+        assert!((mx - x).hypot(my - y) * sx <= 3.0, "point {k} drawn at {mx},{my} m, recorded at {x},{y}");
+    }
+    // The speed over time: a point per interval.
+    assert!(polylines.iter().any(|p| p.len() == truth.len() - 1), "a speed line: {:?}", lengths(&polylines));
+
+    // Every robot of the run by default: the chair and the door.
+    let all = dir.join("run.svg");
+    let (ok, out, err) = iwsim(&["plot", recording.to_str().expect("utf-8")], Duration::from_secs(30));
+    assert!(ok, "{out}\n{err}");
+    let texts = svg_outline(&std::fs::read_to_string(&all).expect("run.svg beside the recording")).texts;
+    for want in ["run.mcap", "chair1", "door1"] {
+        assert!(texts.iter().any(|t| t == want), "text {want:?} missing from {texts:?}");
+    }
+
+    // The chair's CSV log: the run has no GPS, so it holds no trajectory, and says where one is.
+    let log = dir.join("chair1.csv");
+    let (ok, out, err) = iwsim(
+        &["plot", log.to_str().expect("utf-8"), "--out", svg_path.to_str().expect("utf-8")],
+        Duration::from_secs(30),
+    );
+    assert!(!ok, "plotting a log without positions fails: {out}");
+    let want = format!(
+        "{} has no positions (the run has no GPS: its x_m, y_m columns are NaN); draw the run's recording instead: iwsim plot {}",
+        log.display(),
+        recording.display()
+    );
+    assert!(err.contains(&want), "{err}");
     let _ = std::fs::remove_dir_all(dir);
+
+    /// What the checks read from an SVG.
+    struct Outline {
+        /// The root element's name.
+        root: Option<String>,
+        /// Nesting depth at the end: 0 when every element closed.
+        depth: i32,
+        /// Each polyline's points, pixels.
+        polylines: Vec<Vec<(f64, f64)>>,
+        /// Each text's words.
+        texts: Vec<String>,
+    }
+
+    /// Reads an SVG's outline; panics on malformed XML.
+    fn svg_outline(svg: &str) -> Outline {
+        let mut reader = quick_xml::Reader::from_str(svg);
+        let mut depth = 0i32;
+        let mut root = None;
+        let mut polylines = Vec::new();
+        let mut texts = Vec::new();
+        loop {
+            match reader.read_event().expect("well-formed SVG") {
+                quick_xml::events::Event::Start(e) => {
+                    root.get_or_insert_with(|| e.name().into_inner().to_owned());
+                    depth += 1;
+                }
+                quick_xml::events::Event::Empty(e) => {
+                    if e.name().into_inner() == "polyline"
+                        && let Some(Ok(a)) =
+                            e.attributes().find(|a| a.as_ref().is_ok_and(|a| a.key.into_inner() == "points"))
+                    {
+                        let points = a
+                            .value
+                            .split_whitespace()
+                            .map(|p| {
+                                let (x, y) = p.split_once(',').expect("x,y");
+                                (x.parse().expect("x"), y.parse().expect("y"))
+                            })
+                            .collect();
+                        polylines.push(points);
+                    }
+                }
+                quick_xml::events::Event::Text(t) => {
+                    let text = t.xml10_content().trim().to_owned();
+                    if !text.is_empty() {
+                        texts.push(text);
+                    }
+                }
+                quick_xml::events::Event::End(_) => depth -= 1,
+                quick_xml::events::Event::Eof => break,
+                _ => {}
+            }
+        }
+        Outline { root, depth, polylines, texts }
+    }
+
+    fn lengths(polylines: &[Vec<(f64, f64)>]) -> Vec<usize> {
+        polylines.iter().map(Vec::len).collect()
+    }
 }
 
 #[test]
@@ -272,22 +364,20 @@ fn builtin_slalom_reaches_checkpoint_2_without_contact_for_three_seeds_with_nois
     for seed in 1..=3 {
         let s = summary(&dir.join(format!("seed-{seed}")));
         let c = robot(&s, "chair1");
-        assert_eq!((c.checkpoints_reached, c.collisions), (2, 0), "{c:?}");
+        assert_eq!((c.checkpoints_reached, c.collisions), (1, 0), "{c:?}");
         // It went round obstacle A below it and B above it: between x 17 and 17.6 it was
-        // under y 6.1, between 19.4 and 20 above 5.9 (the log has every tick).
-        let track = trajectory(&dir.join(format!("seed-{seed}/chair1.csv")));
+        // under y 6.1, between 19.4 and 20 above 5.9 (the recording has every tick).
+        let track = trajectory(&dir.join(format!("seed-{seed}")), "chair1");
+        assert!(track.iter().any(|r| (17.0..17.6).contains(&r[1])), "seed {seed}: it passed A");
         assert!(track.iter().filter(|r| (17.0..17.6).contains(&r[1])).all(|r| r[2] < 6.1), "seed {seed}: below A");
         assert!(track.iter().filter(|r| (19.4..20.0).contains(&r[1])).all(|r| r[2] > 5.9), "seed {seed}: above B");
     }
     let _ = std::fs::remove_dir_all(dir);
 }
 
-/// A robot's log as rows of (tick, x, y).
-fn trajectory(path: &Path) -> Vec<[f64; 3]> {
-    let log = agent_sdk::log::LogTable::read(path).expect("a readable log");
-    let col = |name| log.column(name).expect("a column of the log");
-    let (t, x, y) = (col("tick"), col("x_m"), col("y_m"));
-    log.rows.iter().map(|r| [r[t], r[x], r[y]]).collect()
+/// A robot's true track in a run, from its recording: rows of (tick, x, y).
+fn trajectory(run: &Path, name: &str) -> Vec<[f64; 3]> {
+    truth(&run.join("run.mcap")).remove(name).unwrap_or_default().into_iter().map(|r| [r[0], r[1], r[2]]).collect()
 }
 
 #[test]
@@ -309,7 +399,7 @@ fn builtin_corridor_swap_both_chairs_pass_each_other_without_contact_for_two_see
         // They went by each other side by side: chair2, which yields (its name sorts last),
         // had pulled over to its right (north) and stood still while chair1 went by south
         // of it, with the two chairs' 0.65 m widths and a gap between their centre lines.
-        let (one, two) = (trajectory(&run.join("chair1.csv")), trajectory(&run.join("chair2.csv")));
+        let (one, two) = (trajectory(&run, "chair1"), trajectory(&run, "chair2"));
         let beside = one
             .iter()
             .zip(&two)

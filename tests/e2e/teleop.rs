@@ -122,7 +122,7 @@ fn teleop_drives_a_chair_from_a_pseudo_terminal_and_restores_the_terminal_on_qui
     let frame = screen.wait_for("a proximity reading", Duration::from_secs(20), |f| {
         f.contains("proximity (4 sensors") && first_proximity(f).is_some_and(|d| d > 0.0 && d <= 3.0)
     });
-    assert!(frame.contains("pose") && frame.contains("space stop"), "{frame}");
+    assert!(frame.contains("encoders") && frame.contains("space stop"), "{frame}");
     let raw = local_modes(pty.slave()).expect("termios");
     assert!(!raw.canonical && !raw.echo, "the teleop switched its terminal to raw input: {raw:?}");
 

@@ -359,7 +359,7 @@ fn a_websocket_message_over_the_size_bound_closes_its_connection_only() {
 
 /// Waits for a world snapshot that satisfies `done`; returns it, or the last one seen.
 fn watch(
-    obs: &agent_sdk::Observer,
+    obs: &mut agent_sdk::Observer,
     timeout: Duration,
     done: impl Fn(&ipc_types::WorldHeader, &[ipc_types::RobotState]) -> bool,
 ) -> (ipc_types::WorldHeader, Vec<ipc_types::RobotState>) {
@@ -392,8 +392,9 @@ fn udp_viewers_control_the_run_only_with_allow_control() {
         let mut bridge = Proc::spawn(&bargs);
         let lines = bridge.stderr_lines();
         let reg: SocketAddr = said(&lines, "registrations on ").parse().expect("address");
-        let obs = agent_sdk::Observer::connect_within(&s, "udp-ctl-test", Duration::from_secs(20)).expect("observer");
-        let (_, robots) = watch(&obs, Duration::from_secs(20), |h, r| h.run_state == 1 && r.len() == 2);
+        let mut obs =
+            agent_sdk::Observer::connect_within(&s, "udp-ctl-test", Duration::from_secs(20)).expect("observer");
+        let (_, robots) = watch(&mut obs, Duration::from_secs(20), |h, r| h.run_state == 1 && r.len() == 2);
         assert_eq!(robots.len(), 2, "both chairs registered");
         let victim = robots[0].id;
 
@@ -423,16 +424,16 @@ fn udp_viewers_control_the_run_only_with_allow_control() {
         };
         send(&format!("<Robot Id=\"{victim}\" Removed=\"Yes\"/>\n\0"));
         handled();
-        let (h, robots) = watch(&obs, Duration::from_secs(5), |_, r| r.len() == 1);
+        let (h, robots) = watch(&mut obs, Duration::from_secs(5), |_, r| r.len() == 1);
         assert_eq!(robots.len(), if allow { 1 } else { 2 }, "allow={allow}: robots at tick {}", h.tick);
         send("<Stop/>\n\0");
         handled();
-        let (h, _) = watch(&obs, Duration::from_secs(5), |h, _| h.run_state == 2);
+        let (h, _) = watch(&mut obs, Duration::from_secs(5), |h, _| h.run_state == 2);
         assert_eq!(h.run_state == 2, allow, "allow={allow}: paused?");
         send("<Start/>\n\0");
         handled();
         if allow {
-            let (h, _) = watch(&obs, Duration::from_secs(5), |h, _| h.run_state == 1);
+            let (h, _) = watch(&mut obs, Duration::from_secs(5), |h, _| h.run_state == 1);
             assert_eq!(h.run_state, 1, "started again");
         }
         obs.close();

@@ -245,7 +245,7 @@ impl Viewer {
     /// process goes away without ending it (`ViewerError::Hub` with `AgentError::HubGone`):
     /// then the viewer leaves at once, so its ports do not keep a restarted hub of the same
     /// session from creating its services.
-    pub fn run(self) -> Result<(), ViewerError> {
+    pub fn run(mut self) -> Result<(), ViewerError> {
         let shared: Shared = Arc::new((Mutex::new(Latest::default()), Condvar::new()));
         // Declared before anything that can fail: dropped first on every way out, so its
         // node is gone before the observer's.

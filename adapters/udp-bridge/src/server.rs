@@ -15,7 +15,7 @@ use std::time::{Duration, Instant};
 
 use agent_sdk::map::Map;
 use agent_sdk::pending::PendingRequest;
-use agent_sdk::{Agent, AgentError};
+use agent_sdk::{Agent, AgentError, Observer};
 use ipc_types::{
     ACT_MOTORS, ACT_POSE, ActionBlock, COLLISION, Command, HAS_COMPASS, HAS_GPS, HAS_GROUND, LED_END, LED_RETURNING,
     LED_VISITING, REG_HAS_POSE, RobotKind, RunState, SENSOR_BEACON, SENSOR_COLLISION, SENSOR_COMPASS, SENSOR_GPS,
@@ -309,7 +309,13 @@ pub fn measures(
 pub struct Bridge {
     cfg: BridgeConfig,
     agent: Agent,
+    /// The map as the UDP robots' agent may know it (parameters, beacons, targets).
     map: Map,
+    /// The bridge's observer side: the truth it serves to Ciber-Rato viewers (every robot's
+    /// pose, the lab with the scenario's obstacles), as the Ciber-Rato simulator serves them.
+    /// Its robots' Measures never come from it.
+    observer: Observer,
+    viewer_map: Map,
     reg: UdpSocket,
     clients: Vec<Client>,
     /// The hub tick the clients' actions answer, and when it arrived.
@@ -343,12 +349,20 @@ impl Bridge {
         // Ready only once a UDP robot exists: a bridge with no robots must not count towards
         // a hub's --wait-agents.
         let map = agent.map()?;
+        let observer = Observer::connect_within(
+            &cfg.session,
+            &format!("udp-bridge-viewers-{}", std::process::id()),
+            cfg.connect_timeout,
+        )?;
+        let viewer_map = observer.map()?;
         let reg = UdpSocket::bind((cfg.bind, cfg.port)).map_err(io(format!("bind UDP {}:{}", cfg.bind, cfg.port)))?;
         reg.set_nonblocking(true).map_err(io("make the registration socket non-blocking"))?;
         Ok(Self {
             cfg,
             agent,
             map,
+            observer,
+            viewer_map,
             reg,
             clients: Vec::new(),
             tick: None,
@@ -642,7 +656,7 @@ impl Bridge {
 
     fn viewer_command(&mut self, socket: &UdpSocket, peer: SocketAddr, cmd: ViewerCommand) {
         match cmd {
-            ViewerCommand::LabReq => send(socket, peer, &codec::encode_lab(&self.map)),
+            ViewerCommand::LabReq => send(socket, peer, &codec::encode_lab(&self.viewer_map)),
             ViewerCommand::GridReq => send(socket, peer, &codec::encode_grid(&self.map)),
             // Any registered viewer or panel (with --bind 0.0.0.0, any machine on the LAN)
             // would otherwise control every robot, shared-memory ones included.
@@ -688,7 +702,7 @@ impl Bridge {
     /// Viewers get one `<Robot>` per robot for every world snapshot, whoever drives the robots.
     fn serve_viewers(&mut self) -> Result<(), BridgeError> {
         let viewers = self.clients.iter().any(|c| matches!(c.kind, Kind::Viewer));
-        let Some((h, robots)) = self.agent.try_world()? else { return Ok(()) };
+        let Some((h, robots)) = self.observer.try_world()? else { return Ok(()) };
         if !viewers {
             return Ok(());
         }

@@ -16,6 +16,30 @@
 //! ```
 //!
 //! Agents depend on `ipc-types` and `ipc-services` only, never on the hub.
+//!
+//! # What an agent may know
+//!
+//! An [`Agent`] gets its own robots' sensor blocks (what their sensors measure, with their
+//! noise: proximity, compass, GPS when the run has it, beacons, ground, encoders, the collision
+//! flag, messages heard) and the agents' map (walls, beacons, targets, grid, route — not the
+//! scenario's obstacles, which its sensors must find). Where it truly is, where the other
+//! robots are and where the obstacles stand are for observers ([`Observer`]: viewers,
+//! recorders, referees), and an agent has no call that returns them:
+//!
+//! ```compile_fail,E0599
+//! fn cheat(agent: &mut agent_sdk::Agent) {
+//!     let _every_true_pose = agent.world(); // no such call: the world snapshot is for observers
+//! }
+//! ```
+//!
+//! ```compile_fail,E0609
+//! fn cheat(block: &ipc_types::SensorBlock) -> [f64; 3] {
+//!     block.pose // no such field: a sensor block carries what the sensors measure
+//! }
+//! ```
+//!
+//! To know where it is, an agent estimates it: [`odometry::Odometry`] on its encoders and
+//! compass, or its GPS.
 #![warn(missing_docs)]
 
 pub use ipc_services::report;
@@ -24,6 +48,7 @@ pub use records::{args, files, log};
 pub mod cli;
 pub mod logs;
 pub mod map;
+pub mod odometry;
 pub mod pending;
 
 use std::time::{Duration, Instant};
@@ -157,6 +182,7 @@ pub struct Observer {
     world: Subscriber<Svc, [RobotState], WorldHeader>,
     sensors: Subscriber<Svc, [RobotSensors], ()>,
     map_svc: ipc_services::MapService,
+    last_world: Option<(WorldHeader, Vec<RobotState>)>,
     /// Last, so it runs after every port and the node are gone.
     _release: ipc_services::SessionRelease,
 }
@@ -179,7 +205,7 @@ impl Observer {
             let opened = (|| {
                 Ok((
                     session.world(&node, Role::Client)?,
-                    session.map(&node, Role::Client)?,
+                    session.observer_map(&node, Role::Client)?,
                     session.robot_sensors(&node, Role::Client)?,
                 ))
             })();
@@ -196,7 +222,7 @@ impl Observer {
         // The hub creates its node before its services, so a hub whose services opened is
         // listed; one that died in between is found dead at the first check.
         let hub_pid = session.hub_pid();
-        Ok(Self { session, hub_pid, _node: node, world, sensors, map_svc, _release: release })
+        Ok(Self { session, hub_pid, _node: node, world, sensors, map_svc, last_world: None, _release: release })
     }
 
     /// Fails with [`AgentError::HubGone`] once the hub's process has exited (however it ended:
@@ -217,12 +243,35 @@ impl Observer {
     }
 
     /// The newest world snapshot if one arrived since the last call.
-    pub fn try_world(&self) -> Result<Option<(WorldHeader, Vec<RobotState>)>, AgentError> {
+    pub fn try_world(&mut self) -> Result<Option<(WorldHeader, Vec<RobotState>)>, AgentError> {
         let mut newest = None;
         while let Some(s) = self.world.receive().map_err(ipc("receive the world"))? {
             newest = Some((*s.user_header(), s.payload().to_vec()));
         }
+        if let Some(latest) = &newest {
+            self.last_world = Some(latest.clone());
+        }
         Ok(newest)
+    }
+
+    /// The latest world snapshot: every robot's true state. The first call gets the snapshot
+    /// the hub keeps for late subscribers (waiting up to 5 s for it); later calls return the
+    /// newest one.
+    pub fn world(&mut self) -> Result<(WorldHeader, Vec<RobotState>), AgentError> {
+        let start = Instant::now();
+        loop {
+            if let Some(latest) = self.try_world()? {
+                return Ok(latest);
+            }
+            if let Some(last) = &self.last_world {
+                return Ok(last.clone());
+            }
+            self.check_alive()?;
+            if start.elapsed() > ANSWER_TIMEOUT {
+                return Err(AgentError::NoAnswer(self.session.name().to_owned()));
+            }
+            std::thread::sleep(Duration::from_millis(1));
+        }
     }
 
     /// Every robot's proximity-sensor geometry, if the hub republished it since the last call
@@ -235,7 +284,8 @@ impl Observer {
         Ok(newest)
     }
 
-    /// The map, decoded (waits up to 5 s for the hub's kept sample).
+    /// The observers' map, decoded: the lab with the scenario's obstacles flagged (waits up to
+    /// 5 s for the hub's kept sample).
     pub fn map(&self) -> Result<map::Map, AgentError> {
         receive_map(&self.map_svc, &self.session, || Ok(()))
     }
@@ -375,8 +425,6 @@ pub struct Agent {
     last_tick: Option<u64>,
     last_header: TickHeader,
     received_ns: u64,
-    world_sub: Option<Subscriber<Svc, [RobotState], WorldHeader>>,
-    last_world: Option<(WorldHeader, Vec<RobotState>)>,
     blocks: Vec<SensorBlock>,
     finished: bool,
     /// Last, so it runs after every port and the node are gone: an agent that ends any way
@@ -447,8 +495,6 @@ impl Agent {
             last_tick: None,
             last_header: TickHeader::default(),
             received_ns: 0,
-            world_sub: None,
-            last_world: None,
             blocks: Vec::new(),
             finished: false,
             _release: release,
@@ -611,23 +657,6 @@ impl Agent {
         Ok(None)
     }
 
-    /// The newest world snapshot if one arrived since the last call, without waiting.
-    pub fn try_world(&mut self) -> Result<Option<(WorldHeader, Vec<RobotState>)>, AgentError> {
-        if self.world_sub.is_none() {
-            let svc = self.session.world(&self.node, Role::Client)?;
-            self.world_sub = Some(svc.subscriber_builder().create().map_err(ipc("create a world subscriber"))?);
-        }
-        let sub = self.world_sub.as_ref().ok_or_else(|| AgentError::Ipc("world subscriber".into()))?;
-        let mut newest = None;
-        while let Some(s) = sub.receive().map_err(ipc("receive the world"))? {
-            newest = Some((*s.user_header(), s.payload().to_vec()));
-        }
-        if let Some(latest) = &newest {
-            self.last_world = Some(latest.clone());
-        }
-        Ok(newest)
-    }
-
     /// Whether the hub has said the run is over.
     pub fn finished(&self) -> bool {
         self.finished
@@ -733,33 +762,9 @@ impl Agent {
         }
     }
 
-    /// The latest world snapshot: every robot's state. The first call subscribes (and gets
-    /// the snapshot the hub keeps for late subscribers); later calls return the newest one.
-    pub fn world(&mut self) -> Result<(WorldHeader, Vec<RobotState>), AgentError> {
-        if self.world_sub.is_none() {
-            let svc = self.session.world(&self.node, Role::Client)?;
-            self.world_sub = Some(svc.subscriber_builder().create().map_err(ipc("create a world subscriber"))?);
-        }
-        let start = Instant::now();
-        loop {
-            let sub = self.world_sub.as_ref().ok_or_else(|| AgentError::Ipc("world subscriber".into()))?;
-            let mut newest = None;
-            while let Some(s) = sub.receive().map_err(ipc("receive the world"))? {
-                newest = Some((*s.user_header(), s.payload().to_vec()));
-            }
-            if let Some(latest) = newest.or_else(|| self.last_world.take()) {
-                self.last_world = Some(latest.clone());
-                return Ok(latest);
-            }
-            self.check()?;
-            if start.elapsed() > ANSWER_TIMEOUT {
-                return Err(AgentError::NoAnswer(self.session.name().to_owned()));
-            }
-            std::thread::sleep(Duration::from_millis(1));
-        }
-    }
-
-    /// The map, decoded (waits up to 5 s for the hub's kept sample).
+    /// The map as this agent's robots may know it, decoded: walls, beacons, targets, grid and
+    /// route, without the scenario's obstacles (its sensors must find those). Waits up to 5 s
+    /// for the hub's kept sample.
     pub fn map(&self) -> Result<map::Map, AgentError> {
         let svc = self.session.map(&self.node, Role::Client)?;
         receive_map(&svc, &self.session, || self.check())

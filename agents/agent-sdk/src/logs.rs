@@ -144,7 +144,8 @@ mod tests {
     fn block(robot_id: u32, tick: u64, proximity_count: u32) -> SensorBlock {
         let mut b = SensorBlock::zeroed();
         (b.robot_id, b.tick, b.proximity_count) = (robot_id, tick, proximity_count);
-        b.pose = [tick as f64, 1.0, 0.0];
+        b.gps_x_m = tick as f64;
+        b.present = ipc_types::HAS_GPS;
         b
     }
 

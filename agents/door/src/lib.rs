@@ -15,9 +15,10 @@ use std::process::ExitCode;
 
 use agent_sdk::cli::CommonArgs;
 use agent_sdk::logs::RobotLogs;
+use agent_sdk::odometry::Odometry;
 use agent_sdk::{Agent, Wait};
 use anyhow::Context as _;
-use ipc_types::{ActionBlock, COLLISION, RobotKind, RobotRegistration, SensorBlock, SensorSpec};
+use ipc_types::{ActionBlock, COLLISION, HAS_COMPASS, RobotKind, RobotRegistration, SensorBlock, SensorSpec};
 use serde::Deserialize;
 use sim_model::wrap_rad;
 
@@ -315,9 +316,29 @@ impl Door {
         }
     }
 
+    /// Powers that hold the door at `target` progress while it rests: nothing while it is
+    /// within twice the tolerance it stops at (so it does not hunt on its compass's noise),
+    /// back to the target once its estimate, which keeps converging on the compass at rest,
+    /// says it has drifted further — as a door closer does.
+    fn hold(&self, pose: [f64; 3], target: f64) -> [f64; 2] {
+        let slack = match self.cfg.preset {
+            Preset::Normal => 2f64.to_radians(),
+            Preset::Sliding => 0.02,
+            Preset::Rotating => return [0.0, 0.0],
+        };
+        if (target - self.progress(pose)).abs() > slack {
+            self.drive_to(pose, target).unwrap_or([0.0, 0.0])
+        } else {
+            [0.0, 0.0]
+        }
+    }
+
     /// One tick: what the sensors see, whether it is touching something, whether a robot asked
     /// it to open. Returns the powers and, when the state changed, the new state.
-    pub fn step(&mut self, b: &SensorBlock, now_s: f64, asked: bool) -> ([f64; 2], Option<DoorState>) {
+    ///
+    /// `pose` is where the door thinks its leaf is (x, y metres, heading degrees), from its own
+    /// encoders and compass (see [`serve`]): an agent never gets its robot's true pose.
+    pub fn step(&mut self, b: &SensorBlock, pose: [f64; 3], now_s: f64, asked: bool) -> ([f64; 2], Option<DoorState>) {
         let readings = b.proximity_m[..(b.proximity_count as usize).min(b.proximity_m.len())].to_vec();
         let seen = self.observe(&readings) || asked;
         if seen {
@@ -330,8 +351,10 @@ impl Door {
             DoorState::Closed => {
                 if seen {
                     self.state = DoorState::Opening;
+                    [0.0, 0.0]
+                } else {
+                    self.hold(pose, 0.0)
                 }
-                [0.0, 0.0]
             }
             DoorState::Opening | DoorState::Closing if contact => {
                 self.state =
@@ -345,7 +368,7 @@ impl Door {
                     }
                     spin
                 }
-                _ => match self.drive_to(b.pose, self.open_amount()) {
+                _ => match self.drive_to(pose, self.open_amount()) {
                     Some(p) => p,
                     None => {
                         // Open for at least the quiet period, whoever is still on the way.
@@ -358,8 +381,10 @@ impl Door {
             DoorState::Open => {
                 if now_s - self.last_seen_s >= self.cfg.quiet {
                     self.state = DoorState::Closing;
+                    [0.0, 0.0]
+                } else {
+                    self.hold(pose, self.open_amount())
                 }
-                [0.0, 0.0]
             }
             DoorState::Closing => {
                 if asked {
@@ -367,7 +392,7 @@ impl Door {
                     [0.0, 0.0]
                 } else if self.cfg.preset == Preset::Rotating {
                     // A revolving leaf stops square with its frame, either way round.
-                    let p = self.progress(b.pose);
+                    let p = self.progress(pose);
                     let to_square = wrap_rad(2.0 * p) / 2.0;
                     if to_square.abs() < 1f64.to_radians() {
                         self.state = DoorState::Closed;
@@ -376,7 +401,7 @@ impl Door {
                         spin
                     }
                 } else {
-                    match self.drive_to(b.pose, 0.0) {
+                    match self.drive_to(pose, 0.0) {
                         Some(p) => p,
                         None => {
                             self.state = DoorState::Closed;
@@ -443,11 +468,21 @@ pub fn run(args: &DoorArgs) -> anyhow::Result<ExitCode> {
     result
 }
 
+/// Serves the doors. Each knows where its leaf is by dead reckoning on its own encoders from
+/// the pose it was registered at, its heading held by its compass (when the run has one).
 fn serve(agent: &mut Agent, mut doors: Vec<Door>, log: Option<&Path>) -> anyhow::Result<ExitCode> {
     let mut ids = Vec::new();
     for d in &doors {
         ids.push(agent.register(&d.registration()).with_context(|| format!("registering {}", d.cfg.name))?);
     }
+    let ticks_per_m = agent.map()?.header.params.encoder_ticks_per_m;
+    let mut odometry: Vec<Odometry> = doors
+        .iter()
+        .map(|d| {
+            let [x, y, h] = d.cfg.pose;
+            Odometry::new([x, y, h.to_radians()], ticks_per_m, d.body[1])
+        })
+        .collect();
     agent.ready()?;
     let mut logs = RobotLogs::new(log);
     for (d, &id) in doors.iter().zip(&ids) {
@@ -456,10 +491,12 @@ fn serve(agent: &mut Agent, mut doors: Vec<Door>, log: Option<&Path>) -> anyhow:
     let mut actions = Vec::with_capacity(doors.len());
     while let Some(tick) = agent.wait_tick(Wait::Blocking)? {
         actions.clear();
-        for (k, (door, &id)) in doors.iter_mut().zip(&ids).enumerate() {
-            let Some(b) = agent.sensors().get(k) else { continue };
+        for ((door, odo), &id) in doors.iter_mut().zip(&mut odometry).zip(&ids) {
+            let Some(b) = agent.sensors().iter().find(|b| b.robot_id == id) else { continue };
+            let compass = (b.present & HAS_COMPASS != 0).then_some(b.compass_deg);
+            let [x, y, h] = odo.update(b.encoder_ticks, compass);
             let asked = b.messages().any(|(_, m)| asks_to_open(m, &door.cfg.name));
-            let (powers, changed) = door.step(b, tick.sim_time_s, asked);
+            let (powers, changed) = door.step(b, [x, y, h.to_degrees()], tick.sim_time_s, asked);
             if let Some(s) = changed {
                 agent_sdk::report!("door {}: {} at t {:.1} s", door.cfg.name, s.label(), tick.sim_time_s);
             }
@@ -478,9 +515,8 @@ mod tests {
     use bytemuck::Zeroable as _;
     use ipc_types::MAX_PROXIMITY;
 
-    fn block(pose: [f64; 3], near: Option<f64>, contact: bool) -> SensorBlock {
+    fn block(near: Option<f64>, contact: bool) -> SensorBlock {
         let mut b = SensorBlock::zeroed();
-        b.pose = pose;
         b.proximity_count = 4;
         b.proximity_m = [3.0; MAX_PROXIMITY];
         if let Some(d) = near {
@@ -511,7 +547,7 @@ mod tests {
         let mut changes = Vec::new();
         let mut last = [0.0; 2];
         for _ in 0..n {
-            let (p, c) = d.step(&block(pose, near, false), *t, false);
+            let (p, c) = d.step(&block(near, false), pose, *t, false);
             last = p;
             changes.extend(c);
             *t += 0.1;
@@ -548,7 +584,7 @@ mod tests {
         let mut d = door(Preset::Normal);
         let mut t = 0.0;
         run(&mut d, &mut t, 5, [0.0, 0.0, 0.0], None);
-        d.step(&block([0.0, 0.0, 0.0], None, false), t, true);
+        d.step(&block(None, false), [0.0, 0.0, 0.0], t, true);
         run(&mut d, &mut t, 1, [0.0, 0.0, 90.0], None);
         assert_eq!(d.state, DoorState::Open);
         run(&mut d, &mut t, 20, [0.0, 0.0, 90.0], Some(1.4));
@@ -564,31 +600,31 @@ mod tests {
     #[test]
     fn contact_stops_the_door_and_it_retries() {
         let mut d = door(Preset::Normal);
-        d.step(&block([0.0, 0.0, 0.0], None, false), 0.0, true);
-        let (p, s) = d.step(&block([0.0, 0.0, 30.0], Some(1.0), true), 1.0, false);
+        d.step(&block(None, false), [0.0, 0.0, 0.0], 0.0, true);
+        let (p, s) = d.step(&block(Some(1.0), true), [0.0, 0.0, 30.0], 1.0, false);
         assert_eq!((p, s), ([0.0, 0.0], Some(DoorState::Blocked { opening: true, until_s: 3.0 })));
-        assert_eq!(d.step(&block([0.0, 0.0, 30.0], Some(1.0), false), 2.9, false).1, None);
-        assert_eq!(d.step(&block([0.0, 0.0, 30.0], Some(1.0), false), 3.0, false).1, Some(DoorState::Opening));
+        assert_eq!(d.step(&block(Some(1.0), false), [0.0, 0.0, 30.0], 2.9, false).1, None);
+        assert_eq!(d.step(&block(Some(1.0), false), [0.0, 0.0, 30.0], 3.0, false).1, Some(DoorState::Opening));
         // Closing into something: stop, wait, open again.
-        d.step(&block([0.0, 0.0, 90.0], None, false), 3.1, false);
-        assert_eq!(d.step(&block([0.0, 0.0, 90.0], None, false), 6.2, false).1, Some(DoorState::Closing));
-        let (p, s) = d.step(&block([0.0, 0.0, 70.0], None, true), 6.3, false);
+        d.step(&block(None, false), [0.0, 0.0, 90.0], 3.1, false);
+        assert_eq!(d.step(&block(None, false), [0.0, 0.0, 90.0], 6.2, false).1, Some(DoorState::Closing));
+        let (p, s) = d.step(&block(None, true), [0.0, 0.0, 70.0], 6.3, false);
         assert_eq!((p, s), ([0.0, 0.0], Some(DoorState::Blocked { opening: false, until_s: 8.3 })));
-        assert_eq!(d.step(&block([0.0, 0.0, 70.0], None, false), 8.3, false).1, Some(DoorState::Opening));
+        assert_eq!(d.step(&block(None, false), [0.0, 0.0, 70.0], 8.3, false).1, Some(DoorState::Opening));
     }
 
     #[test]
     fn messages_open_a_sliding_door_and_reopen_it_while_it_closes() {
         let mut d = door(Preset::Sliding);
-        assert_eq!(d.step(&block([0.0, 0.0, 0.0], None, false), 0.0, true).1, Some(DoorState::Opening));
-        let (p, _) = d.step(&block([0.3, 0.0, 0.0], None, false), 0.1, false);
+        assert_eq!(d.step(&block(None, false), [0.0, 0.0, 0.0], 0.0, true).1, Some(DoorState::Opening));
+        let (p, _) = d.step(&block(None, false), [0.3, 0.0, 0.0], 0.1, false);
         assert!(p[0] > 0.0 && p[0] == p[1], "slides forward: {p:?}");
-        assert_eq!(d.step(&block([0.995, 0.0, 0.0], None, false), 1.0, false).1, Some(DoorState::Open));
-        assert_eq!(d.step(&block([0.995, 0.0, 0.0], None, false), 3.9, false).1, None);
-        assert_eq!(d.step(&block([0.995, 0.0, 0.0], None, false), 4.0, false).1, Some(DoorState::Closing));
-        let (p, _) = d.step(&block([0.8, 0.0, 0.0], None, false), 4.1, false);
+        assert_eq!(d.step(&block(None, false), [0.995, 0.0, 0.0], 1.0, false).1, Some(DoorState::Open));
+        assert_eq!(d.step(&block(None, false), [0.995, 0.0, 0.0], 3.9, false).1, None);
+        assert_eq!(d.step(&block(None, false), [0.995, 0.0, 0.0], 4.0, false).1, Some(DoorState::Closing));
+        let (p, _) = d.step(&block(None, false), [0.8, 0.0, 0.0], 4.1, false);
         assert!(p[0] < 0.0, "slides back: {p:?}");
-        assert_eq!(d.step(&block([0.8, 0.0, 0.0], None, false), 4.2, true).1, Some(DoorState::Opening));
+        assert_eq!(d.step(&block(None, false), [0.8, 0.0, 0.0], 4.2, true).1, Some(DoorState::Opening));
         assert!(asks_to_open(b"door open d", "d") && asks_to_open(b"door open *", "d"));
         assert!(!asks_to_open(b"door open e", "d") && !asks_to_open(b"doors open d", "d") && !asks_to_open(b"", "d"));
     }

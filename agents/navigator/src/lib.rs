@@ -47,6 +47,7 @@
 //!     proximity_count: 8,
 //!     encoder_ticks: [0, 0],
 //!     gps: None,
+//!     compass_deg: Some(0.0),
 //!     collision: false,
 //! };
 //! let out = nav.step(&input);

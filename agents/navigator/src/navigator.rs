@@ -802,6 +802,7 @@ mod tests {
                     (self.travel[1] * ticks_per_m).floor() as i64,
                 ],
                 gps: None,
+                compass_deg: None,
                 collision: false,
             }
         }

@@ -1,5 +1,12 @@
 //! Where the chair thinks it is: wheel-encoder odometry (the default), GPS, or the two fused.
-//! Never the hub's ground truth (`SensorBlock::pose`), which is for logs only.
+//! Never the hub's ground truth, which agents do not receive.
+//!
+//! Wheels slip (the hub's encoder slip, on whenever noise is), and what slip does most harm
+//! to is the heading: the two wheels' errors differ, the difference turns the estimate, and a
+//! heading off by a degree puts the chair 17 cm to the side after 10 m. So whenever the chair
+//! has a compass, odometry's heading is pulled towards it by [`COMPASS_GAIN`] each tick: the
+//! heading follows the wheels over a second and the compass over a few seconds, and cannot
+//! drift. The position still comes from the wheels, whose error along the way is small.
 
 use crate::geom::{Pose, V2, wrap_rad};
 use crate::sensors::Input;
@@ -10,60 +17,75 @@ pub trait PoseSource: std::fmt::Debug {
     fn update(&mut self, input: &Input) -> Pose;
 }
 
+/// The share of the compass's disagreement with odometry's heading taken each tick (the SDK's,
+/// [`agent_sdk::odometry::COMPASS_GAIN`]). At 10 Hz it averages the compass over about 2 s: its
+/// 2° noise (Ciber-Rato's default) shrinks to about a third of a degree, and slip's heading walk
+/// (about 0.1° a tick at the hub's default 2 % and a chair's cruise) has no time to build up;
+/// together about half a degree (1σ), against a walk without bound on the wheels alone. It is
+/// near the best constant gain for those two noises (√(walk² / compass²) ≈ 0.06).
+pub const COMPASS_GAIN: f64 = agent_sdk::odometry::COMPASS_GAIN;
+
 /// Which pose source to use.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
 pub enum PoseSourceKind {
-    /// Wheel-encoder odometry from the start pose: smooth and, on the simulator's wheels,
-    /// exact up to one encoder tick.
+    /// Wheel-encoder odometry from the start pose, its heading held by the compass when the
+    /// chair has one: smooth, and off by centimetres over a run however the wheels slip.
     Odometry,
     /// The GPS fix as it comes (0.5 m noise by default: too coarse for doorways).
     Gps,
-    /// Odometry pulled slowly towards GPS, so drift cannot grow without bound.
+    /// Odometry (compass-held, as above) pulled slowly towards GPS, so drift cannot grow
+    /// without bound even without a compass.
     Fused,
 }
 
-/// Dead reckoning from cumulative wheel-encoder ticks.
+/// Dead reckoning from cumulative wheel-encoder ticks: the SDK's [`agent_sdk::odometry::Odometry`]
+/// in the navigator's [`Pose`].
 #[derive(Debug, Clone, PartialEq)]
 pub struct Odometry {
-    pose: Pose,
-    ticks_per_m: f64,
-    track_m: f64,
-    last: Option<[i64; 2]>,
+    inner: agent_sdk::odometry::Odometry,
+}
+
+fn pose_of([x, y, theta]: [f64; 3]) -> Pose {
+    Pose::new(x, y, theta)
 }
 
 impl Odometry {
     /// Odometry starting at `start`, for encoders of `ticks_per_m` and wheels `track_m` apart.
     pub fn new(start: Pose, ticks_per_m: f64, track_m: f64) -> Self {
-        Self { pose: start, ticks_per_m, track_m, last: None }
+        Self { inner: agent_sdk::odometry::Odometry::new([start.x, start.y, start.theta], ticks_per_m, track_m) }
     }
 
     /// Advances the estimate by the ticks counted since the last call. The hub integrates a
     /// tick's motion along the heading the tick began with (thesis eq. 4.7), and so does this.
     pub fn advance(&mut self, ticks: [i64; 2]) -> Pose {
-        if let Some(last) = self.last
-            && self.ticks_per_m > 0.0
-        {
-            let dl = (ticks[0] - last[0]) as f64 / self.ticks_per_m;
-            let dr = (ticks[1] - last[1]) as f64 / self.ticks_per_m;
-            let ds = (dl + dr) / 2.0;
-            let dth = (dr - dl) / self.track_m;
-            // The hub's step (sim_model::advance), the tick's distance and turn taken as speeds
-            // over one unit of time: along the heading the tick began with.
-            self.pose = self.pose.advanced(ds, dth, 1.0);
-        }
-        self.last = Some(ticks);
-        self.pose
+        pose_of(self.inner.advance(ticks))
+    }
+
+    /// Turns the estimate's heading by `gain` of its difference to `heading_rad` (taken the
+    /// short way round): a complementary filter with an absolute heading sensor.
+    pub fn steer_heading(&mut self, heading_rad: f64, gain: f64) -> Pose {
+        pose_of(self.inner.steer_heading(heading_rad, gain))
+    }
+
+    /// Advances by this tick's encoder counts, then steers the heading towards the compass
+    /// when there is one.
+    fn update_with_compass(&mut self, input: &Input) -> Pose {
+        pose_of(self.inner.update(input.encoder_ticks, input.compass_deg))
     }
 
     /// The estimate.
     pub fn pose(&self) -> Pose {
-        self.pose
+        pose_of(self.inner.pose())
+    }
+
+    fn set_pose(&mut self, p: Pose) {
+        self.inner.set_pose([p.x, p.y, p.theta]);
     }
 }
 
 impl PoseSource for Odometry {
     fn update(&mut self, input: &Input) -> Pose {
-        self.advance(input.encoder_ticks)
+        self.update_with_compass(input)
     }
 }
 
@@ -94,7 +116,8 @@ impl PoseSource for GpsPose {
 }
 
 /// Odometry corrected towards GPS by a small gain each tick (a complementary filter): the
-/// position follows odometry over seconds and GPS over minutes; the heading is odometry's.
+/// position follows odometry over seconds and GPS over minutes; the heading is odometry's,
+/// held by the compass when there is one.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Fused {
     odometry: Odometry,
@@ -110,14 +133,14 @@ impl Fused {
 
 impl PoseSource for Fused {
     fn update(&mut self, input: &Input) -> Pose {
-        let mut p = self.odometry.advance(input.encoder_ticks);
+        let mut p = self.odometry.update_with_compass(input);
         if let Some(g) = input.gps
             && g.x_m.is_finite()
             && g.y_m.is_finite()
         {
             let pos = p.pos() + (V2::new(g.x_m, g.y_m) - p.pos()) * self.gain;
             p = Pose::new(pos.x, pos.y, wrap_rad(p.theta));
-            self.odometry.pose = p;
+            self.odometry.set_pose(p);
         }
         p
     }
@@ -197,6 +220,7 @@ mod tests {
             proximity_count: 0,
             encoder_ticks: [0, 0],
             gps: None,
+            compass_deg: None,
             collision: false,
         };
         let start = Pose::from_deg(1.0, 1.0, 0.0);
@@ -207,5 +231,72 @@ mod tests {
         let mut fused = Fused::new(Odometry::new(start, TICKS_PER_M, 0.65), 0.5);
         let p = fused.update(&input);
         assert!((p.x - 1.5).abs() < 1e-12 && p.theta == 0.0, "half way, odometry's heading: {p:?}");
+    }
+
+    fn still(ticks: [i64; 2], compass_deg: Option<f64>) -> Input {
+        Input {
+            tick: 1,
+            time_s: 0.1,
+            proximity_m: [0.0; 8],
+            proximity_count: 0,
+            encoder_ticks: ticks,
+            gps: None,
+            compass_deg,
+            collision: false,
+        }
+    }
+
+    #[test]
+    fn the_compass_pulls_a_slipped_heading_back_the_short_way_round() {
+        // Odometry believes 175°; the compass says −175° (10° away across ±180°).
+        let mut o = Odometry::new(Pose::from_deg(0.0, 0.0, 175.0), TICKS_PER_M, 0.65);
+        let p = o.update(&still([0, 0], Some(-175.0)));
+        let turned = wrap_rad(p.theta - 175f64.to_radians()).to_degrees();
+        assert!((turned - 10.0 * COMPASS_GAIN).abs() < 1e-9, "turned {turned}°");
+        for _ in 0..200 {
+            o.update(&still([0, 0], Some(-175.0)));
+        }
+        assert!(wrap_rad(o.pose().theta - (-175f64).to_radians()).abs() < 1e-3, "{:?}", o.pose());
+    }
+
+    #[test]
+    fn without_a_compass_odometry_is_pure_dead_reckoning() {
+        let mut o = Odometry::new(Pose::from_deg(0.0, 0.0, 30.0), TICKS_PER_M, 0.65);
+        o.update(&still([0, 0], None));
+        let p = o.update(&still([0, 0], None));
+        assert_eq!(p, Pose::from_deg(0.0, 0.0, 30.0));
+    }
+
+    #[test]
+    fn a_noisy_compass_holds_a_slipping_heading_to_a_fraction_of_a_degree() {
+        // 30 m straight ahead in 600 ticks, each wheel's count off by a random 2 % a tick (the
+        // hub's default slip), the compass off by a random 2° (Ciber-Rato's default).
+        let mut seed = 0x2545_f491_4f6c_dd1d_u64;
+        let mut uniform = move || {
+            seed ^= seed << 13;
+            seed ^= seed >> 7;
+            seed ^= seed << 17;
+            (seed >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0
+        };
+        // A uniform draw in ±√3·sd has that standard deviation.
+        let mut noisy = |sd: f64| sd * 3f64.sqrt() * uniform();
+        let mut odo = Odometry::new(Pose::from_deg(0.0, 0.0, 0.0), TICKS_PER_M, 0.65);
+        let mut held = odo.clone();
+        let (mut l, mut r) = (0.0, 0.0);
+        odo.advance([0, 0]);
+        held.update(&still([0, 0], Some(0.0)));
+        let (mut odo_sq, mut held_sq) = (0.0, 0.0);
+        for _ in 0..600 {
+            l += 0.05 * (1.0 + noisy(0.02));
+            r += 0.05 * (1.0 + noisy(0.02));
+            let ticks = [(l * TICKS_PER_M) as i64, (r * TICKS_PER_M) as i64];
+            odo_sq += odo.advance(ticks).theta.powi(2);
+            held_sq += held.update(&still(ticks, Some(noisy(2.0)))).theta.powi(2);
+        }
+        let rms_deg = |sq: f64| (sq / 600.0).sqrt().to_degrees();
+        let (odo_deg, held_deg) = (rms_deg(odo_sq), rms_deg(held_sq));
+        assert!(held_deg < 0.8, "held heading off by {held_deg}° (rms)");
+        assert!(odo_deg > 1.5 * held_deg, "dead reckoning {odo_deg}°, held {held_deg}°");
+        assert!(held.pose().y.abs() < 0.1, "held stays on the line: {:?}", held.pose());
     }
 }

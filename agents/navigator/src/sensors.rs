@@ -7,7 +7,7 @@
 //! the navigator: a [`RealChair`] gives the physical readings, and [`AugmentedSensors`]
 //! merges them with the hub's by [`augment`].
 
-use ipc_types::{HAS_GPS, MAX_PROXIMITY, SensorBlock, SensorSpec};
+use ipc_types::{HAS_COMPASS, HAS_GPS, MAX_PROXIMITY, SensorBlock, SensorSpec};
 
 use crate::geom::{Cone, Footprint, Pose, V2};
 
@@ -114,6 +114,8 @@ pub struct Input {
     pub encoder_ticks: [i64; 2],
     /// The GPS fix, when the run has GPS on.
     pub gps: Option<GpsFix>,
+    /// The compass heading, degrees, when the run has the compass on.
+    pub compass_deg: Option<f64>,
     /// The collision sensor.
     pub collision: bool,
 }
@@ -124,8 +126,8 @@ impl Input {
         &self.proximity_m[..self.proximity_count.min(MAX_PROXIMITY)]
     }
 
-    /// The readings of the hub's sensor block (the virtual sensors). The block's `pose` is
-    /// the hub's ground truth and is deliberately not read.
+    /// The readings of the hub's sensor block (the virtual sensors), which carries what the
+    /// chair's sensors measure and never where it truly is.
     pub fn from_block(b: &SensorBlock, time_s: f64) -> Self {
         let gps = (b.present & HAS_GPS != 0).then_some(GpsFix {
             x_m: b.gps_x_m,
@@ -139,6 +141,7 @@ impl Input {
             proximity_count: (b.proximity_count as usize).min(MAX_PROXIMITY),
             encoder_ticks: b.encoder_ticks,
             gps,
+            compass_deg: (b.present & HAS_COMPASS != 0).then_some(b.compass_deg),
             collision: b.present & ipc_types::COLLISION != 0,
         }
     }
@@ -282,12 +285,15 @@ mod tests {
         b.proximity_count = 2;
         b.proximity_m[..2].copy_from_slice(&[0.5, 2.5]);
         b.encoder_ticks = [100, 120];
-        b.pose = [1.0, 2.0, 3.0];
         let i = Input::from_block(&b, 0.4);
         assert_eq!((i.tick, i.proximity(), i.encoder_ticks, i.gps), (4, &[0.5, 2.5][..], [100, 120], None));
         b.present = HAS_GPS;
         b.gps_x_m = 9.0;
         assert_eq!(Input::from_block(&b, 0.4).gps.map(|g| g.x_m), Some(9.0));
+        assert_eq!(i.compass_deg, None, "no compass bit, no heading");
+        b.present = HAS_COMPASS;
+        b.compass_deg = -135.0;
+        assert_eq!(Input::from_block(&b, 0.4).compass_deg, Some(-135.0));
     }
 
     #[test]

@@ -1,7 +1,7 @@
 //! The navigator in closed loop with the hub's world model, in-process: the world steps with
-//! noise on, its readings reach the navigator as the SDK's sensor blocks carry them, and the
-//! map reaches it as the hub publishes it (scenario obstacles flagged, so the navigator must
-//! find them with its sensors).
+//! noise on (the wheels slipping as the hub's default has them), its readings reach the
+//! navigator as the SDK's sensor blocks carry them, and the map reaches it as the hub
+//! publishes it (scenario obstacles flagged, so the navigator must find them with its sensors).
 //!
 //! Each run prints a line (time, contacts, the chair's closest approach to anything, where it
 //! stopped) with `--nocapture`. For development: `NAV_SEEDS=21-120` runs other seeds (lists
@@ -14,7 +14,7 @@ use navigator::geom::{Footprint, Pose, V2};
 use navigator::map::NavMap;
 use navigator::sensors::{SensorSource, VirtualSensors};
 use navigator::{Body, Checkpoint, NavConfig, NavEvent, Navigator, PoseSourceKind};
-use world::map::{Grid, Lab, Params, Wall, builtin};
+use world::map::{Grid, Lab, NoiseParams, Params, Wall, builtin};
 use world::{Action, ProximitySpec, Robot, RobotSpec, World};
 
 /// A run to simulate.
@@ -31,11 +31,13 @@ struct Scenario {
     pose_source: PoseSourceKind,
     /// GPS on with this noise (metres, degrees); off when `None`.
     gps: Option<[f64; 2]>,
+    /// Encoder slip, a fraction per tick.
+    encoder_slip_frac: f64,
 }
 
 impl Scenario {
     /// The Intellwheels chair on `map` from `start` through `checkpoints` (X, Y, radius),
-    /// no obstacles, pose from odometry, GPS off.
+    /// no obstacles, pose from odometry, GPS off, the hub's default noise and wheel slip.
     fn route(map: &'static str, start: [f64; 3], checkpoints: &[[f64; 3]], time_limit_s: f64) -> Self {
         Self {
             map,
@@ -49,6 +51,7 @@ impl Scenario {
             time_limit_s,
             pose_source: PoseSourceKind::Odometry,
             gps: None,
+            encoder_slip_frac: NoiseParams::default().encoder_slip_frac,
         }
     }
 }
@@ -65,6 +68,10 @@ struct Outcome {
     end: V2,
     plans: u32,
     expansions: u64,
+    /// The farthest the navigator's estimate was from the chair's true position, metres.
+    max_position_error_m: f64,
+    /// Likewise for the heading, degrees.
+    max_heading_error_deg: f64,
 }
 
 /// The map exactly as the hub publishes it (`hub::core::pack_map`): walls from `obstacle_from`
@@ -158,6 +165,7 @@ fn simulate(s: &Scenario, seed: u64) -> Outcome {
     }
     let mut params = Params::default();
     assert!(params.noise.proximity_m > 0.0 && params.noise.motor_frac > 0.0, "noise on");
+    params.noise.encoder_slip_frac = s.encoder_slip_frac;
     if let Some([pos_m, heading_deg]) = s.gps {
         params.sensors.gps = true;
         (params.noise.gps_pos_m, params.noise.gps_heading_deg) = (pos_m, heading_deg);
@@ -186,6 +194,7 @@ fn simulate(s: &Scenario, seed: u64) -> Outcome {
     let mut finished_at = None;
     let limit = (s.time_limit_s / 0.1).round() as u64;
     let mut last_plans = 0;
+    let (mut max_position_error, mut max_heading_error) = (0.0f64, 0.0f64);
     for tick in 0..=limit {
         let robot = world.robot(handle).expect("the chair");
         min_clearance = min_clearance.min(clearance(&lab, &fp, robot));
@@ -193,6 +202,10 @@ fn simulate(s: &Scenario, seed: u64) -> Outcome {
         let block = sensor_block(robot, tick);
         let input = source.read(&block, time_s);
         let out = nav.step(&input);
+        // The estimate the navigator steered by this tick, against where the chair was.
+        let est = nav.pose();
+        max_position_error = max_position_error.max((est.pos() - V2::new(robot.pose.x, robot.pose.y)).norm());
+        max_heading_error = max_heading_error.max(sim_model::wrap_rad(est.theta - robot.pose.theta).abs().to_degrees());
         if trace {
             eprintln!(
                 "seed {seed} t {time_s:5.1} {} clr {:.3}",
@@ -245,6 +258,8 @@ fn simulate(s: &Scenario, seed: u64) -> Outcome {
         end: V2::new(robot.pose.x, robot.pose.y),
         plans: nav.stats().plans,
         expansions: nav.stats().expansions,
+        max_position_error_m: max_position_error,
+        max_heading_error_deg: max_heading_error,
     }
 }
 
@@ -292,7 +307,7 @@ fn simulate_seeds(s: &Scenario, seeds: std::ops::RangeInclusive<u64>) -> Vec<Out
     out.sort_by_key(|o| o.seed);
     for o in &out {
         eprintln!(
-            "{}: seed {:2}: {} of {} checkpoints, t {:.1} s, {} contacts, min clearance {:.3} m, end ({:.2}, {:.2}), {} plans, {} expansions",
+            "{}: seed {:2}: {} of {} checkpoints, t {:.1} s, {} contacts, min clearance {:.3} m, end ({:.2}, {:.2}), {} plans, {} expansions, pose error up to {:.3} m / {:.1}°",
             s.map,
             o.seed,
             o.reached,
@@ -303,7 +318,9 @@ fn simulate_seeds(s: &Scenario, seeds: std::ops::RangeInclusive<u64>) -> Vec<Out
             o.end.x,
             o.end.y,
             o.plans,
-            o.expansions
+            o.expansions,
+            o.max_position_error_m,
+            o.max_heading_error_deg
         );
     }
     out
@@ -407,6 +424,56 @@ mod untuned_maps {
     }
 }
 
+mod slip {
+    use super::*;
+
+    /// What a run with slipping wheels must show: it arrives untouched, and the navigator knew
+    /// where it was all along, to within what its clearances can absorb.
+    fn check(s: &Scenario, seeds: std::ops::RangeInclusive<u64>) -> Vec<Outcome> {
+        assert!(s.encoder_slip_frac > 0.0, "the wheels slip");
+        let outcomes = simulate_seeds(s, seeds);
+        assert!(!outcomes.is_empty());
+        for o in &outcomes {
+            assert!(o.finished && o.reached == s.checkpoints.len(), "seed {} did not arrive: {o:?}", o.seed);
+            assert_eq!(o.contacts, 0, "seed {} touched something: {o:?}", o.seed);
+            assert!(
+                o.max_position_error_m < 0.10,
+                "seed {}: the estimate strayed {:.3} m",
+                o.seed,
+                o.max_position_error_m
+            );
+            assert!(
+                o.max_heading_error_deg < 3.0,
+                "seed {}: the heading strayed {:.1}°",
+                o.seed,
+                o.max_heading_error_deg
+            );
+        }
+        outcomes
+    }
+
+    /// The slalom with the hub's default slip (2 % a tick): the drift that pure dead reckoning
+    /// would gather over the 10 m (about 2° and 0.2 m, see `world::map::NoiseParams::WHEELCHAIR`)
+    /// is more than the 0.2–0.4 m gaps past boxes A and B allow; the compass-held odometry
+    /// keeps the estimate within 10 cm.
+    #[test]
+    fn with_the_wheels_slipping_the_chair_knows_where_it_is_through_the_slalom() {
+        let s = slalom::scenario();
+        assert_eq!(s.encoder_slip_frac, NoiseParams::WHEELCHAIR.encoder_slip_frac);
+        check(&s, 1..=5);
+    }
+
+    /// Twice the default slip on the longest route (the maze, about 20 m with many turns).
+    #[test]
+    fn with_twice_the_slip_the_chair_still_knows_where_it_is_through_the_maze() {
+        let s = Scenario {
+            encoder_slip_frac: 2.0 * NoiseParams::WHEELCHAIR.encoder_slip_frac,
+            ..Scenario::route("maze", [1.0, 7.0, 90.0], &[[1.0, 7.0, 0.5], [9.0, 1.0, 0.5]], 200.0)
+        };
+        check(&s, 1..=3);
+    }
+}
+
 mod corridor_swap {
     use super::*;
     use navigator::Pilot;
@@ -452,6 +519,7 @@ mod corridor_swap {
         let trace = std::env::var_os("NAV_TRACE").is_some();
         let lab = builtin::map("liacc").expect("a built-in map").lab.clone();
         let params = Params::default();
+        assert!(params.noise.encoder_slip_frac > 0.0, "the wheels slip");
         let mut world = World::new(&lab, params, seed).expect("a valid world");
         let body = Body::INTELLWHEELS;
         let fp = body.footprint();

@@ -79,12 +79,8 @@ pub fn screen_lines(s: &Status) -> Vec<String> {
     match s.block {
         None => lines.push("no sensor readings yet".to_owned()),
         Some(b) => {
-            lines.push(format!(
-                "pose     x {} m  y {} m  heading {} deg",
-                num(b.pose[0], 8, 3),
-                num(b.pose[1], 8, 3),
-                num(b.pose[2], 7, 1)
-            ));
+            // What the chair's own sensors say; where it truly is, the viewer shows.
+            lines.push(format!("encoders left {:>10} right {:>10} ticks", b.encoder_ticks[0], b.encoder_ticks[1]));
             lines.push(if b.present & HAS_GPS != 0 {
                 format!(
                     "gps      x {} m  y {} m  heading {} deg",
@@ -128,7 +124,7 @@ pub fn status_line(s: &Status) -> String {
     let [l, r] = s.drive.powers();
     let _ = write!(line, " | speed {:+.2} turn {:+.2} power {:+.2} {:+.2}", s.drive.speed(), s.drive.turn(), l, r);
     if let Some(b) = s.block {
-        let _ = write!(line, " | pose {:.3} {:.3} {:.1}", b.pose[0], b.pose[1], b.pose[2]);
+        let _ = write!(line, " | encoders {} {}", b.encoder_ticks[0], b.encoder_ticks[1]);
         if b.present & HAS_GPS != 0 {
             let _ = write!(line, " | gps {:.3} {:.3}", b.gps_x_m, b.gps_y_m);
         }
@@ -213,8 +209,7 @@ mod tests {
             gps_y_m: 0.0,
             gps_heading_deg: 0.0,
             beacons_deg: [0.0; MAX_BEACONS],
-            encoder_ticks: [0, 0],
-            pose: [10.25, 6.1, 12.5],
+            encoder_ticks: [1520, -37],
             collision_count: 2,
             ground: 0,
             proximity_count: 4,
@@ -251,8 +246,7 @@ mod tests {
             "running",
             "speed +0.10  turn +0.10",
             "power left +0.00 right +0.20",
-            "x   10.250 m",
-            "heading    12.5 deg",
+            "encoders left       1520 right        -37 ticks",
             "gps      off",
             "compass     12.0 deg",
             "proximity (4 sensors",
@@ -286,7 +280,7 @@ mod tests {
         let line = status_line(&status(Some(&b), &d));
         assert_eq!(
             line,
-            "tick 42 t 4.20s running | speed +0.00 turn +0.00 power +0.00 +0.00 | pose 10.250 6.100 12.5 \
+            "tick 42 t 4.20s running | speed +0.00 turn +0.00 power +0.00 +0.00 | encoders 1520 -37 \
              | gps 10.000 6.000 | compass 12.0 | proximity 0.750 3.000 1.500 NaN | collision yes contacts 2"
         );
     }

@@ -7,9 +7,12 @@ use std::process::ExitCode;
 
 use agent_sdk::cli::{BodyArgs, CommonArgs};
 use agent_sdk::logs::RobotLogs;
+use agent_sdk::odometry::Odometry;
 use agent_sdk::{Agent, Wait};
 use anyhow::Context as _;
-use ipc_types::{ActionBlock, COLLISION, MAX_PROXIMITY, RobotKind, RobotRegistration, SensorBlock, SensorSpec};
+use ipc_types::{
+    ActionBlock, COLLISION, HAS_COMPASS, MAX_PROXIMITY, RobotKind, RobotRegistration, SensorBlock, SensorSpec,
+};
 use serde::Deserialize;
 
 use clap::Args;
@@ -235,6 +238,11 @@ impl OwnMotion {
         Self { out: [0.0; 2], pose: [pose[0], pose[1], pose[2].to_radians()] }
     }
 
+    /// The pose as x, y metres, heading degrees.
+    pub fn pose_deg(&self) -> [f64; 3] {
+        [self.pose[0], self.pose[1], self.pose[2].to_degrees()]
+    }
+
     /// One tick of `dt` seconds with `powers`; returns the new pose as x, y, heading degrees.
     /// The formulas are the hub's own (`sim_model`), so only the hub's noise tells the two apart.
     pub fn step(&mut self, c: &ChairConfig, powers: [f64; 2], dt: f64) -> [f64; 3] {
@@ -307,15 +315,31 @@ fn drive(agent: &mut Agent, args: &WheelchairArgs, chairs: &[ChairConfig]) -> an
     }
     let wait = if args.busy_poll { Wait::BusyPoll } else { Wait::Blocking };
     let mut next_waypoint = vec![0usize; chairs.len()];
+    let map = agent.map().context("reading the hub's map")?;
     // Real chairs move themselves by the simulated time since the tick they last answered
     // (in real time a slow agent may miss ticks); the first step is one cycle.
-    let cycle_s = if chairs.iter().any(|c| c.kind == ChairKind::Real) {
-        let cycle_ms = agent.map().context("reading the hub's map header for its cycle")?.header.cycle_ms;
-        f64::from(cycle_ms.max(1)) / 1000.0
-    } else {
-        0.1
-    };
-    let mut own: Vec<Option<OwnMotion>> = chairs.iter().map(|_| None).collect();
+    let cycle_s = f64::from(map.header.cycle_ms.max(1)) / 1000.0;
+    // Where each chair starts: the pose it asked for, or its grid slot. From there a simulated
+    // chair knows where it is only by its encoders and compass (an agent never gets the true
+    // pose), a real one by its own motion.
+    let starts: Vec<[f64; 3]> = chairs
+        .iter()
+        .zip(&ids)
+        .map(|(c, &id)| {
+            c.pose.unwrap_or_else(|| {
+                map.grid.get(id as usize - 1).map_or([0.0; 3], |g| [g.pos.x, g.pos.y, g.heading_deg])
+            })
+        })
+        .collect();
+    let mut odometry: Vec<Odometry> = chairs
+        .iter()
+        .zip(&starts)
+        .map(|(c, &[x, y, h])| Odometry::new([x, y, h.to_radians()], map.header.params.encoder_ticks_per_m, c.body[1]))
+        .collect();
+    let mut own: Vec<OwnMotion> = starts.iter().map(|&p| OwnMotion::at(p)).collect();
+    // A real chair's motion before its last step: where it goes back to when the hub refuses
+    // the pose it pushed (the chair stopped against something).
+    let mut before: Vec<Option<OwnMotion>> = chairs.iter().map(|_| None).collect();
     let mut last_time: Option<f64> = None;
     let mut actions: Vec<ActionBlock> = Vec::with_capacity(chairs.len());
     let mut answered = 0u64;
@@ -326,6 +350,18 @@ fn drive(agent: &mut Agent, args: &WheelchairArgs, chairs: &[ChairConfig]) -> an
         last_time = Some(tick.sim_time_s);
         for (k, (c, &id)) in chairs.iter().zip(&ids).enumerate() {
             let Some(b) = sensor_block_of(agent.sensors(), k, id) else { continue };
+            let compass = (b.present & HAS_COMPASS != 0).then_some(b.compass_deg);
+            let [ox, oy, oh] = odometry[k].update(b.encoder_ticks, compass);
+            if c.kind == ChairKind::Real
+                && b.present & COLLISION != 0
+                && let Some(m) = before[k]
+            {
+                own[k] = m;
+            }
+            let pose = match c.kind {
+                ChairKind::Simulated => [ox, oy, oh.to_degrees()],
+                ChairKind::Real => own[k].pose_deg(),
+            };
             let powers = if tick.sim_time_s < c.start_s {
                 [0.0, 0.0]
             } else if let Some(p) = c.powers {
@@ -333,7 +369,7 @@ fn drive(agent: &mut Agent, args: &WheelchairArgs, chairs: &[ChairConfig]) -> an
             } else {
                 loop {
                     let Some(&goal) = c.waypoints.get(next_waypoint[k]) else { break [0.0, 0.0] };
-                    match toward(b.pose, goal, c.speed) {
+                    match toward(pose, goal, c.speed) {
                         Some(p) => break p,
                         None => {
                             agent_sdk::report!(
@@ -351,13 +387,8 @@ fn drive(agent: &mut Agent, args: &WheelchairArgs, chairs: &[ChairConfig]) -> an
             actions.push(match c.kind {
                 ChairKind::Simulated => ActionBlock::motors(id, powers[0], powers[1]),
                 ChairKind::Real => {
-                    // Start from where the hub placed it; a pose the hub refused (it would
-                    // overlap something) means the chair stopped against it.
-                    let m = own[k].get_or_insert_with(|| OwnMotion::at(b.pose));
-                    if b.present & COLLISION != 0 {
-                        *m = OwnMotion::at(b.pose);
-                    }
-                    let [x, y, dir] = m.step(c, powers, dt);
+                    before[k] = Some(own[k]);
+                    let [x, y, dir] = own[k].step(c, powers, dt);
                     ActionBlock::pose(id, x, y, dir)
                 }
             });
@@ -395,11 +426,11 @@ mod tests {
 
     #[test]
     fn chairs_are_paired_with_their_own_sensor_blocks_after_a_removal() {
-        let block = |robot_id: u32, x: f64| SensorBlock { robot_id, pose: [x, 0.0, 0.0], ..SensorBlock::zeroed() };
+        let block = |robot_id: u32, x: f64| SensorBlock { robot_id, gps_x_m: x, ..SensorBlock::zeroed() };
         let ids = [1, 2, 3];
         let all = [block(1, 10.0), block(2, 20.0), block(3, 30.0)];
         let paired: Vec<_> =
-            ids.iter().enumerate().map(|(k, &id)| sensor_block_of(&all, k, id).map(|b| b.pose[0])).collect();
+            ids.iter().enumerate().map(|(k, &id)| sensor_block_of(&all, k, id).map(|b| b.gps_x_m)).collect();
         assert_eq!(paired, vec![Some(10.0), Some(20.0), Some(30.0)]);
         // Robot 1 removed: its chair gets nothing, and chair 2 still gets robot 2's data.
         let after = [block(2, 20.0), block(3, 30.0)];

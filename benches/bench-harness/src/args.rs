@@ -72,10 +72,21 @@ pub struct BenchLockstepArgs {
     /// with and without the flood and the bridge's stderr bytes (0: no flood run).
     #[arg(long, default_value_t = 0)]
     pub flood: u64,
+    /// Also run over shared memory with the hub recording the run (`iwsim hub --record`), and
+    /// report ticks/s with and without and the recording's bytes per robot per tick.
+    #[arg(long)]
+    pub record: bool,
+    /// Runs of each variant (shm, udp, udp+flood, shm+record), interleaved round by round; each figure is
+    /// the median of its runs with min and max.
+    #[arg(long, default_value_t = 5, value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..=MAX_RUNS))]
+    pub runs: usize,
     /// Print one JSON object instead of text.
     #[arg(long)]
     pub json: bool,
 }
+
+/// The most runs `--runs` takes: one run of a variant is seconds, so a thousand is hours.
+pub const MAX_RUNS: u64 = 1000;
 
 /// How bench agents attach to the hub.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]

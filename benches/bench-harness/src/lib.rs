@@ -7,6 +7,8 @@
 #![warn(missing_docs)]
 
 pub mod args;
+mod crew;
+pub mod repeat;
 pub mod tiled;
 pub mod viewer;
 
@@ -34,6 +36,7 @@ use ipc_services::{RawPingPong, Role};
 use ipc_types::{PING_PAYLOAD_BYTES, Ping};
 
 use crate::args::{BenchLatencyArgs, BenchLockstepArgs, BenchWorldArgs, RawPeerArgs, Transport, UdpClientArgs};
+use crate::repeat::Spread;
 
 /// Result of `iwsim bench world`.
 #[derive(Debug, Clone, PartialEq)]
@@ -303,6 +306,8 @@ pub struct LockstepBench {
     pub flood_sent: u64,
     /// Bytes the bridge wrote to stderr (UDP only).
     pub bridge_stderr_bytes: u64,
+    /// Bytes of the hub's recording (0: not recorded).
+    pub recorded_bytes: u64,
 }
 
 /// A hub in lock-step with `agents` agent processes of `robots_per_agent` robots each, physics
@@ -318,8 +323,13 @@ pub fn measure_lockstep(
     ticks: u64,
     udp: bool,
     flood: u64,
+    record: bool,
 ) -> anyhow::Result<LockstepBench> {
-    let tag = format!("{}-{}", udp as u8, (flood > 0) as u8);
+    // Repeated runs in one invocation each get a session and folder of their own, so nothing a
+    // run leaves behind can be mistaken for the next run's.
+    static RUN: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
+    let run = RUN.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+    let tag = format!("{}-{}-{}-{run}", udp as u8, (flood > 0) as u8, record as u8);
     let dir = std::env::temp_dir().join(format!("iwsim-bench-{}-{tag}", std::process::id()));
     std::fs::create_dir_all(&dir)?;
     let lab = dir.join("lab.xml");
@@ -328,12 +338,44 @@ pub fn measure_lockstep(
         "<Lab Name=\"bench\" Width=\"400\" Height=\"400\">\n  <Wall Height=\"2\"><Corner X=\"200\" Y=\"0\"/><Corner X=\"201\" Y=\"0\"/><Corner X=\"201\" Y=\"150\"/><Corner X=\"200\" Y=\"150\"/></Wall>\n</Lab>\n",
     )?;
     let session = format!("bench-ls-{}-{tag}", std::process::id());
+    let recording = record.then(|| dir.join("run.mcap"));
+    let run = run_lockstep(&session, &lab, (agents, robots_per_agent, ticks), udp, flood, recording.as_deref());
+    let _ = std::fs::remove_dir_all(&dir);
+    // A run that failed stopped its hub, perhaps before the hub could clean up (a helper that
+    // fails at once stops it while it starts): remove what a dead hub left of the session.
+    if let Ok(s) = ipc_services::Session::new(&session) {
+        s.release_if_unused();
+    }
+    let (out, flood_sent, bridge_stderr_bytes) = run?;
+    let hub_out = HubOutcome::from_stdout(&out).context("reading how the hub's run ended")?;
+    let ticks_per_s = hub_out.ticks as f64 / hub_out.run_s.max(1e-9);
+    Ok(LockstepBench {
+        agents,
+        robots_per_agent,
+        ticks: hub_out.ticks,
+        ticks_per_s,
+        flood_sent,
+        bridge_stderr_bytes,
+        recorded_bytes: hub_out.recorded_bytes,
+    })
+}
+
+/// One lock-step run in `session` on `lab`: the hub's stdout, the junk datagrams sent and the
+/// bytes the bridge wrote to stderr.
+fn run_lockstep(
+    session: &str,
+    lab: &std::path::Path,
+    (agents, robots_per_agent, ticks): (usize, usize, u64),
+    udp: bool,
+    flood: u64,
+    record: Option<&std::path::Path>,
+) -> anyhow::Result<(String, u64, u64)> {
     // Over UDP the bridge is the hub's one agent, whatever the number of UDP clients.
     let hub_agents = if udp { 1 } else { agents };
-    let hub = spawn_self(&[
+    let mut hub_args = vec![
         "hub".into(),
         "--session".into(),
-        session.clone(),
+        session.to_owned(),
         "--lab".into(),
         lab.display().to_string(),
         "--lockstep".into(),
@@ -342,35 +384,36 @@ pub fn measure_lockstep(
         "--wait-agents".into(),
         hub_agents.to_string(),
         "--json".into(),
-    ])?;
+    ];
+    if let Some(path) = record {
+        hub_args.extend(["--record".into(), path.display().to_string()]);
+    }
+    let mut crew = crew::Crew::new(spawn_self(&hub_args)?);
     const SPACING: f64 = 5.0;
     let rows = robots_per_agent.div_ceil(10).max(1) as f64 * SPACING + SPACING;
     let origin = |i: usize| (5.0 + (10.0 * SPACING + SPACING) * (i % 7) as f64, 5.0 + rows * (i / 7) as f64);
-    let mut children = Vec::new();
-    let mut bridge = None;
     let mut flooder = None;
     let mut stderr_bytes = None;
     if udp {
-        let mut b = spawn_self(&[
+        let mut bridge = spawn_self(&[
             "udp".into(),
             "--session".into(),
-            session.clone(),
+            session.to_owned(),
             "--port".into(),
             "0".into(),
             "--connect-timeout".into(),
             "30".into(),
         ])?;
-        let (server, bytes) = bridge_address(&mut b)?;
+        let announced = bridge_address(&mut bridge);
+        crew.push(bridge, "bridge");
+        let (server, bytes) = announced?;
         stderr_bytes = Some(bytes);
-        bridge = Some(b);
-        if flood > 0 {
-            flooder = Some(start_flood(server, flood)?);
-        }
         // The hub starts when the bridge is ready, i.e. at its first robot: register every
         // client's robots before the first tick matters, which the clients do at once.
+        let mut registered = Vec::new();
         for i in 0..agents {
             let (bx, by) = origin(i);
-            children.push(spawn_self(&[
+            let mut client = spawn_self(&[
                 "bench".into(),
                 "udp-client".into(),
                 "--server".into(),
@@ -379,59 +422,75 @@ pub fn measure_lockstep(
                 robots_per_agent.to_string(),
                 "--pose".into(),
                 format!("{bx},{by}"),
-            ])?);
+            ])?;
+            registered.push(client.stdout.take().context("a UDP client's stdout")?);
+            crew.push(client, "UDP client");
+        }
+        // The bridge is helper 0, the clients follow.
+        // The flood starts once every robot is in: a registration lost in it would leave the
+        // hub waiting for ever, and what is measured is the run under the flood.
+        for (i, out) in registered.into_iter().enumerate() {
+            let mut line = String::new();
+            let _ = std::io::BufRead::read_line(&mut std::io::BufReader::new(out), &mut line);
+            if !line.starts_with(UDP_CLIENT_REGISTERED) {
+                return Err(crew.helper_failed(1 + i, "a UDP client ended before registering its robots"));
+            }
+        }
+        if flood > 0 {
+            flooder = Some(start_flood(server, flood)?);
         }
     } else {
         for i in 0..agents {
             let (bx, by) = origin(i);
-            children.push(spawn_self(&[
-                "agent".into(),
-                "wheelchair".into(),
-                "--session".into(),
-                session.clone(),
-                "--robots".into(),
-                robots_per_agent.to_string(),
-                "--pose".into(),
-                format!("{bx},{by},0"),
-                "--spacing".into(),
-                SPACING.to_string(),
-                "--powers".into(),
-                "0.3,0.28".into(),
-                "--connect-timeout".into(),
-                "30".into(),
-            ])?);
+            crew.push(
+                spawn_self(&[
+                    "agent".into(),
+                    "wheelchair".into(),
+                    "--session".into(),
+                    session.to_owned(),
+                    "--robots".into(),
+                    robots_per_agent.to_string(),
+                    "--pose".into(),
+                    format!("{bx},{by},0"),
+                    "--spacing".into(),
+                    SPACING.to_string(),
+                    "--powers".into(),
+                    "0.3,0.28".into(),
+                    "--connect-timeout".into(),
+                    "30".into(),
+                ])?,
+                "agent",
+            );
         }
     }
-    let out = finish(hub, "hub")?;
-    for c in children {
-        finish(c, "agent")?;
-    }
-    if let Some(b) = bridge {
-        finish(b, "bridge")?;
-    }
-    let flood_sent = match flooder {
-        Some(f) => f.stop(),
-        None => 0,
-    };
+    let out = crew.finish()?;
+    let flood_sent = flooder.map_or(0, Flood::stop);
     // The bridge has exited: its stderr is closed and the counting thread ends.
     let bridge_stderr_bytes = stderr_bytes.map_or(0, |h| h.join().unwrap_or(0));
-    let _ = std::fs::remove_dir_all(&dir);
-    let hub_out = HubOutcome::from_stdout(&out).context("reading how the hub's run ended")?;
-    let ticks_per_s = hub_out.ticks as f64 / hub_out.run_s.max(1e-9);
-    Ok(LockstepBench { agents, robots_per_agent, ticks: hub_out.ticks, ticks_per_s, flood_sent, bridge_stderr_bytes })
+    Ok((out, flood_sent, bridge_stderr_bytes))
 }
 
-/// A thread sending junk datagrams at a bridge until it has sent its count or is stopped.
+/// What the UDP bench client prints on stdout once all its robots are registered.
+const UDP_CLIENT_REGISTERED: &str = "registered";
+
+/// A thread sending junk datagrams at a bridge until it has sent its count or is stopped
+/// (at the latest when dropped, as when a run fails).
 struct Flood {
     stop: std::sync::Arc<std::sync::atomic::AtomicBool>,
-    thread: std::thread::JoinHandle<u64>,
+    thread: Option<std::thread::JoinHandle<u64>>,
 }
 
 impl Flood {
     /// Stops the flood; the datagrams it sent.
-    fn stop(self) -> u64 {
+    fn stop(mut self) -> u64 {
         self.stop.store(true, std::sync::atomic::Ordering::Relaxed);
-        self.thread.join().unwrap_or(0)
+        self.thread.take().map_or(0, |t| t.join().unwrap_or(0))
+    }
+}
+
+impl Drop for Flood {
+    fn drop(&mut self) {
+        self.stop.store(true, std::sync::atomic::Ordering::Relaxed);
     }
 }
 
@@ -460,7 +519,7 @@ fn start_flood(server: std::net::SocketAddr, count: u64) -> anyhow::Result<Flood
         }
         sent
     });
-    Ok(Flood { stop, thread })
+    Ok(Flood { stop, thread: Some(thread) })
 }
 
 /// Reads the bridge's "registrations on ADDR" line from its stderr; the thread that drains
@@ -508,6 +567,7 @@ pub fn udp_client(args: &UdpClientArgs) -> anyhow::Result<ExitCode> {
         s.connect(from)?;
         socks.push(s);
     }
+    println!("{UDP_CLIENT_REGISTERED} {} robots", socks.len());
     let mut answered = 0u64;
     let mut buf = [0u8; 4096];
     'run: loop {
@@ -528,74 +588,350 @@ pub fn udp_client(args: &UdpClientArgs) -> anyhow::Result<ExitCode> {
     Ok(ExitCode::SUCCESS)
 }
 
-/// `iwsim bench lockstep`.
-pub fn lockstep(args: &BenchLockstepArgs) -> anyhow::Result<ExitCode> {
-    let m = |udp: bool, flood: u64| measure_lockstep(args.agents, args.robots_per_agent, args.ticks, udp, flood);
-    let mut runs: Vec<(&str, LockstepBench)> = match args.transport {
-        Transport::Shm if args.flood == 0 => vec![("shm", m(false, 0)?)],
+/// One variant of `iwsim bench lockstep` (shared memory, UDP, UDP under a flood) and its runs.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LockstepVariant {
+    /// `shm`, `udp` or `udp+flood`.
+    pub name: &'static str,
+    /// Every run, in the order they ran.
+    pub runs: Vec<LockstepBench>,
+}
+
+impl LockstepVariant {
+    /// Median, min and max ticks per second over the runs.
+    pub fn ticks_per_s(&self) -> Spread {
+        let rates: Vec<f64> = self.runs.iter().map(|b| b.ticks_per_s).collect();
+        Spread::of(&rates).unwrap_or(Spread { median: 0.0, min: 0.0, max: 0.0, runs: 0 })
+    }
+
+    /// The fewest junk datagrams any run sent: every run had at least this flood.
+    pub fn flood_sent(&self) -> u64 {
+        self.runs.iter().map(|b| b.flood_sent).min().unwrap_or(0)
+    }
+
+    /// The most bytes the bridge wrote to stderr in one run: the bound a user cares about.
+    pub fn bridge_stderr_bytes(&self) -> u64 {
+        self.runs.iter().map(|b| b.bridge_stderr_bytes).max().unwrap_or(0)
+    }
+}
+
+/// A ratio of two variants: of their medians, and its spread over the rounds, each round's two
+/// runs having run back to back.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LockstepRatio {
+    /// Median of the first variant over median of the second.
+    pub of_medians: f64,
+    /// The ratio round by round.
+    pub by_round: Spread,
+}
+
+impl LockstepRatio {
+    /// `a` against `b`.
+    pub fn of(a: &LockstepVariant, b: &LockstepVariant) -> LockstepRatio {
+        let per_round: Vec<f64> =
+            a.runs.iter().zip(&b.runs).map(|(x, y)| x.ticks_per_s / y.ticks_per_s.max(1e-9)).collect();
+        let of_medians = a.ticks_per_s().median / b.ticks_per_s().median.max(1e-9);
+        let by_round =
+            Spread::of(&per_round).unwrap_or(Spread { median: of_medians, min: of_medians, max: of_medians, runs: 0 });
+        LockstepRatio { of_medians, by_round }
+    }
+}
+
+/// The variants `args` asks for, in the order each round runs them: (name, over UDP, flood).
+/// The variants one invocation runs: (name, over UDP, junk datagrams, recorded).
+fn lockstep_variants(args: &BenchLockstepArgs) -> Vec<(&'static str, bool, u64, bool)> {
+    let mut v = match args.transport {
+        Transport::Shm if args.flood == 0 || args.record => vec![("shm", false, 0, false)],
         Transport::Shm => vec![],
-        Transport::Udp => vec![("udp", m(true, 0)?)],
-        Transport::Both => vec![("shm", m(false, 0)?), ("udp", m(true, 0)?)],
+        Transport::Udp => vec![("udp", true, 0, false)],
+        Transport::Both => vec![("shm", false, 0, false), ("udp", true, 0, false)],
     };
     if args.flood > 0 {
         // The flood is at the bridge: compare UDP runs with and without it, in one invocation.
-        if !runs.iter().any(|(name, _)| *name == "udp") {
-            runs.push(("udp", m(true, 0)?));
+        if !v.iter().any(|(name, ..)| *name == "udp") {
+            v.push(("udp", true, 0, false));
         }
-        runs.push(("udp+flood", m(true, args.flood)?));
+        v.push(("udp+flood", true, args.flood, false));
     }
-    let shm_udp = match (runs.first(), runs.get(1)) {
-        (Some(("shm", a)), Some(("udp", b))) => Some(a.ticks_per_s / b.ticks_per_s.max(1e-9)),
+    if args.record {
+        // The recorder's cost: the same shared-memory run with the hub recording.
+        if !v.iter().any(|(name, ..)| *name == "shm") {
+            v.push(("shm", false, 0, false));
+        }
+        v.push(("shm+record", false, 0, true));
+    }
+    v
+}
+
+/// Runs every variant `args.runs` times, interleaved round by round.
+pub fn measure_lockstep_runs(args: &BenchLockstepArgs) -> anyhow::Result<Vec<LockstepVariant>> {
+    let variants = lockstep_variants(args);
+    let runs = repeat::interleaved(args.runs, variants.len(), |round, i| {
+        let (name, udp, flood, record) = variants[i];
+        measure_lockstep(args.agents, args.robots_per_agent, args.ticks, udp, flood, record)
+            .with_context(|| format!("run {} of {name}", round + 1))
+    })?;
+    Ok(variants.iter().zip(runs).map(|(&(name, ..), runs)| LockstepVariant { name, runs }).collect())
+}
+
+/// What `iwsim bench lockstep` prints for `variants` (text, or one JSON object with `--json`).
+pub fn lockstep_report(args: &BenchLockstepArgs, variants: &[LockstepVariant]) -> String {
+    let find = |n: &str| variants.iter().find(|v| v.name == n);
+    let shm_udp = match (variants.first(), variants.get(1)) {
+        (Some(a), Some(b)) if a.name == "shm" && b.name == "udp" => Some(LockstepRatio::of(a, b)),
         _ => None,
     };
-    let flood = runs.iter().find(|(name, _)| *name == "udp+flood").map(|(_, f)| f);
-    let quiet = runs.iter().find(|(name, _)| *name == "udp").map(|(_, q)| q);
+    let (flood, quiet) = (find("udp+flood"), find("udp"));
     let flood_ratio = match (flood, quiet) {
-        (Some(f), Some(q)) => Some(f.ticks_per_s / q.ticks_per_s.max(1e-9)),
+        (Some(f), Some(q)) => Some(LockstepRatio::of(f, q)),
         _ => None,
     };
+    let recorded = find("shm+record");
+    let record_ratio = match (recorded, find("shm")) {
+        (Some(r), Some(q)) => Some(LockstepRatio::of(r, q)),
+        _ => None,
+    };
+    // The recording's size per robot per tick, from the median-sized file.
+    let bytes_per_robot_tick = recorded.map(|r| {
+        let mut b: Vec<u64> = r.runs.iter().map(|b| b.recorded_bytes).collect();
+        b.sort_unstable();
+        let robots = (args.agents * args.robots_per_agent).max(1) as f64;
+        b.get(b.len() / 2).copied().unwrap_or(0) as f64 / robots / r.runs.first().map_or(1, |b| b.ticks.max(1)) as f64
+    });
+    let ticks = variants.first().and_then(|v| v.runs.first()).map_or(0, |b| b.ticks);
+    let mut s = String::new();
     if args.json {
-        let mut s = format!(
-            "{{\"agents\":{},\"robots_per_agent\":{},\"ticks\":{}",
-            args.agents, args.robots_per_agent, runs[0].1.ticks
+        s += &format!(
+            "{{\"agents\":{},\"robots_per_agent\":{},\"ticks\":{ticks},\"runs\":{}",
+            args.agents, args.robots_per_agent, args.runs
         );
-        if runs.len() == 1 {
-            s += &format!(",\"transport\":\"{}\",\"ticks_per_s\":{:.1}", runs[0].0, runs[0].1.ticks_per_s);
-        } else {
-            for (name, b) in &runs {
-                s += &format!(",\"{}_ticks_per_s\":{:.1}", name.replace('+', "_"), b.ticks_per_s);
-            }
-        }
-        if let Some(r) = shm_udp {
-            s += &format!(",\"ratio_shm_over_udp\":{r:.2}");
-        }
-        if let (Some(f), Some(r), Some(q)) = (flood, flood_ratio, quiet) {
-            s += &format!(
-                ",\"flood_sent\":{},\"ratio_flood_over_udp\":{r:.2},\"udp_stderr_bytes\":{},\"flood_stderr_bytes\":{}",
-                f.flood_sent, q.bridge_stderr_bytes, f.bridge_stderr_bytes
-            );
-        }
-        println!("{s}}}");
-    } else {
-        for (name, b) in &runs {
-            let flooded =
-                if b.flood_sent > 0 { format!(", {} junk datagrams sent", b.flood_sent) } else { String::new() };
-            let stderr = if args.flood > 0 && name.starts_with("udp") {
-                format!("; bridge stderr {} bytes", b.bridge_stderr_bytes)
+        for v in variants {
+            let t = v.ticks_per_s();
+            // One variant keeps the old `transport` and `ticks_per_s` keys; several are named.
+            let key = if variants.len() == 1 {
+                s += &format!(",\"transport\":\"{}\"", v.name);
+                "ticks_per_s".to_owned()
             } else {
-                String::new()
+                format!("{}_ticks_per_s", v.name.replace('+', "_"))
             };
-            println!(
-                "lockstep over {name}: {} agents x {} robots, physics and sensors on: {:.1} ticks/s over {} ticks{flooded}{stderr}",
-                b.agents, b.robots_per_agent, b.ticks_per_s, b.ticks
+            s += &format!(",\"{key}\":{:.1},\"{key}_min\":{:.1},\"{key}_max\":{:.1}", t.median, t.min, t.max);
+        }
+        let ratio = |s: &mut String, key: &str, r: &LockstepRatio| {
+            *s += &format!(
+                ",\"{key}\":{:.2},\"{key}_min\":{:.2},\"{key}_max\":{:.2}",
+                r.of_medians, r.by_round.min, r.by_round.max
+            );
+        };
+        if let Some(r) = &shm_udp {
+            ratio(&mut s, "ratio_shm_over_udp", r);
+        }
+        if let (Some(f), Some(r), Some(q)) = (flood, &flood_ratio, quiet) {
+            s += &format!(",\"flood_sent\":{}", f.flood_sent());
+            ratio(&mut s, "ratio_flood_over_udp", r);
+            s += &format!(
+                ",\"udp_stderr_bytes\":{},\"flood_stderr_bytes\":{}",
+                q.bridge_stderr_bytes(),
+                f.bridge_stderr_bytes()
             );
         }
-        if let Some(r) = shm_udp {
-            println!("  shared memory / UDP: {r:.2}x");
+        if let (Some(r), Some(bytes)) = (&record_ratio, bytes_per_robot_tick) {
+            ratio(&mut s, "ratio_record_over_shm", r);
+            s += &format!(",\"recorded_bytes_per_robot_tick\":{bytes:.0}");
         }
-        if let Some(r) = flood_ratio {
-            println!("  UDP with the flood / without: {r:.2}x");
+        s += "}\n";
+        return s;
+    }
+    for v in variants {
+        let t = v.ticks_per_s();
+        let rate = if t.runs > 1 {
+            format!("{:.1} ticks/s (median of {} runs, min {:.1}, max {:.1})", t.median, t.runs, t.min, t.max)
+        } else {
+            format!("{:.1} ticks/s", t.median)
+        };
+        let flooded =
+            if v.flood_sent() > 0 { format!(", {} junk datagrams sent", v.flood_sent()) } else { String::new() };
+        let stderr = match (args.flood > 0 && v.name.starts_with("udp"), t.runs > 1) {
+            (true, true) => format!("; bridge stderr {} bytes (most in one run)", v.bridge_stderr_bytes()),
+            (true, false) => format!("; bridge stderr {} bytes", v.bridge_stderr_bytes()),
+            _ => String::new(),
+        };
+        s += &format!(
+            "lockstep over {}: {} agents x {} robots, physics and sensors on: {rate} over {ticks} ticks{flooded}{stderr}\n",
+            v.name, args.agents, args.robots_per_agent
+        );
+    }
+    let ratio = |r: &LockstepRatio| {
+        if r.by_round.runs > 1 {
+            format!(
+                "{:.2}x (of the medians; {:.2}x to {:.2}x run by run)",
+                r.of_medians, r.by_round.min, r.by_round.max
+            )
+        } else {
+            format!("{:.2}x", r.of_medians)
+        }
+    };
+    if let Some(r) = &shm_udp {
+        s += &format!("  shared memory / UDP: {}\n", ratio(r));
+    }
+    if let Some(r) = &flood_ratio {
+        s += &format!("  UDP with the flood / without: {}\n", ratio(r));
+    }
+    if let (Some(r), Some(bytes)) = (&record_ratio, bytes_per_robot_tick) {
+        s += &format!("  recording / not: {} ticks/s; {bytes:.0} bytes per robot per tick recorded\n", ratio(r));
+    }
+    s
+}
+
+/// `iwsim bench lockstep`.
+pub fn lockstep(args: &BenchLockstepArgs) -> anyhow::Result<ExitCode> {
+    let variants = measure_lockstep_runs(args)?;
+    print!("{}", lockstep_report(args, &variants));
+    Ok(ExitCode::SUCCESS)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clap::Parser as _;
+
+    #[derive(Debug, clap::Parser)]
+    struct Cli {
+        #[command(subcommand)]
+        command: BenchCommand,
+    }
+
+    fn lockstep_args(line: &[&str]) -> Result<BenchLockstepArgs, clap::Error> {
+        let argv = ["bench", "lockstep"].iter().chain(line);
+        match Cli::try_parse_from(argv)?.command {
+            BenchCommand::Lockstep(a) => Ok(a),
+            other => panic!("parsed as {other:?}"),
         }
     }
-    Ok(ExitCode::SUCCESS)
+
+    fn run(ticks_per_s: f64, flood_sent: u64, bridge_stderr_bytes: u64) -> LockstepBench {
+        LockstepBench {
+            agents: 1,
+            robots_per_agent: 10,
+            ticks: 2000,
+            ticks_per_s,
+            flood_sent,
+            bridge_stderr_bytes,
+            recorded_bytes: 0,
+        }
+    }
+
+    /// A flood invocation's three rounds: udp, then udp+flood, in each.
+    fn flood_variants() -> Vec<LockstepVariant> {
+        vec![
+            LockstepVariant { name: "udp", runs: vec![run(4000.0, 0, 90), run(3000.0, 0, 95), run(3800.0, 0, 90)] },
+            LockstepVariant {
+                name: "udp+flood",
+                runs: vec![run(2000.0, 100_000, 603), run(2400.0, 99_000, 700), run(1900.0, 100_000, 603)],
+            },
+        ]
+    }
+
+    #[test]
+    fn lockstep_runs_five_times_unless_told() {
+        assert_eq!(lockstep_args(&[]).expect("parses").runs, 5);
+        assert_eq!(lockstep_args(&["--runs", "1"]).expect("parses").runs, 1);
+    }
+
+    #[test]
+    fn lockstep_refuses_zero_runs_naming_the_option() {
+        let err = lockstep_args(&["--runs", "0"]).expect_err("0 runs is refused").to_string();
+        let first = err.lines().next().expect("a line");
+        assert!(first.contains("--runs"), "{err}");
+    }
+
+    #[test]
+    fn a_flood_invocation_runs_udp_quiet_and_flooded() {
+        let a = lockstep_args(&["--transport", "udp", "--flood", "10"]).expect("parses");
+        assert_eq!(lockstep_variants(&a), vec![("udp", true, 0, false), ("udp+flood", true, 10, false)]);
+        let a = lockstep_args(&["--transport", "both"]).expect("parses");
+        assert_eq!(lockstep_variants(&a), vec![("shm", false, 0, false), ("udp", true, 0, false)]);
+    }
+
+    #[test]
+    fn a_record_invocation_runs_shared_memory_with_and_without_the_recorder() {
+        let a = lockstep_args(&["--record"]).expect("parses");
+        assert_eq!(lockstep_variants(&a), vec![("shm", false, 0, false), ("shm+record", false, 0, true)]);
+        let mut quiet = run(1000.0, 0, 0);
+        let mut recorded = run(900.0, 0, 0);
+        (quiet.robots_per_agent, recorded.robots_per_agent) = (100, 100);
+        recorded.recorded_bytes = 2000 * 100 * 700;
+        let variants = [
+            LockstepVariant { name: "shm", runs: vec![quiet] },
+            LockstepVariant { name: "shm+record", runs: vec![recorded] },
+        ];
+        let a = lockstep_args(&["--record", "--robots-per-agent", "100", "--runs", "1"]).expect("parses");
+        let out = lockstep_report(&a, &variants);
+        assert!(out.contains("recording / not: 0.90x ticks/s; 700 bytes per robot per tick recorded"), "{out}");
+    }
+
+    #[test]
+    fn the_json_report_keeps_the_old_keys_and_adds_medians_min_max_and_runs() {
+        let a = lockstep_args(&["--transport", "udp", "--flood", "100000", "--runs", "3", "--json"]).expect("parses");
+        let out = lockstep_report(&a, &flood_variants());
+        let j: serde_json::Value = serde_json::from_str(&out).expect("one JSON object");
+        assert_eq!(j["runs"], 3);
+        assert_eq!(j["ticks"], 2000);
+        assert_eq!(j["udp_ticks_per_s"], 3800.0, "the median");
+        assert_eq!(j["udp_ticks_per_s_min"], 3000.0);
+        assert_eq!(j["udp_ticks_per_s_max"], 4000.0);
+        assert_eq!(j["udp_flood_ticks_per_s"], 2000.0);
+        assert_eq!(j["ratio_flood_over_udp"], 0.53, "2000 / 3800, the ratio of the medians");
+        assert_eq!(j["ratio_flood_over_udp_min"], 0.5, "round 1: 2000 / 4000");
+        assert_eq!(j["ratio_flood_over_udp_max"], 0.8, "round 2: 2400 / 3000");
+        assert_eq!(j["flood_sent"], 99_000, "every run sent at least this many");
+        assert_eq!(j["flood_stderr_bytes"], 700, "the most in one run");
+        assert_eq!(j["udp_stderr_bytes"], 95);
+    }
+
+    #[test]
+    fn one_variant_keeps_its_transport_and_ticks_per_s_keys() {
+        let a = lockstep_args(&["--runs", "2", "--json"]).expect("parses");
+        let v = [LockstepVariant { name: "shm", runs: vec![run(6000.0, 0, 0), run(7000.0, 0, 0)] }];
+        let j: serde_json::Value = serde_json::from_str(&lockstep_report(&a, &v)).expect("one JSON object");
+        assert_eq!(j["transport"], "shm");
+        assert_eq!(j["ticks_per_s"], 6500.0);
+        assert_eq!(j["ticks_per_s_min"], 6000.0);
+        assert_eq!(j["ticks_per_s_max"], 7000.0);
+    }
+
+    #[test]
+    fn the_text_report_gives_median_min_max_and_the_ratio_of_medians() {
+        let a = lockstep_args(&["--transport", "udp", "--flood", "100000", "--runs", "3"]).expect("parses");
+        let out = lockstep_report(&a, &flood_variants());
+        let lines: Vec<&str> = out.lines().collect();
+        assert_eq!(lines.len(), 3, "{out}");
+        assert!(
+            lines[0].contains("over udp:")
+                && lines[0].contains("3800.0 ticks/s (median of 3 runs, min 3000.0, max 4000.0)"),
+            "{out}"
+        );
+        assert!(
+            lines[1].contains("over udp+flood:") && lines[1].contains("bridge stderr 700 bytes (most in one run)"),
+            "{out}"
+        );
+        assert!(
+            lines[2].contains("UDP with the flood / without: 0.53x (of the medians; 0.50x to 0.80x run by run)"),
+            "{out}"
+        );
+    }
+
+    #[test]
+    fn one_run_prints_as_before() {
+        let a = lockstep_args(&["--transport", "udp", "--flood", "100000", "--runs", "1"]).expect("parses");
+        let v: Vec<LockstepVariant> = flood_variants()
+            .into_iter()
+            .map(|mut v| {
+                v.runs.truncate(1);
+                v
+            })
+            .collect();
+        let out = lockstep_report(&a, &v);
+        assert!(out.contains(": 4000.0 ticks/s over 2000 ticks; bridge stderr 90 bytes\n"), "{out}");
+        assert!(out.contains("UDP with the flood / without: 0.50x\n"), "{out}");
+    }
 }

@@ -3,8 +3,9 @@
 //! x_m,y_m,collision,contacts,power_left,power_right`.
 //!
 //! Every agent writes its own robots' logs (it has their sensor blocks), so a run's logs are
-//! complete whatever the tick rate; `iwsim run` reads them back for its summary and `iwsim
-//! plot` draws them.
+//! complete whatever the tick rate. They hold what the robot measured: `heading_deg` is its
+//! compass and `x_m`, `y_m` its GPS fix (NaN when the run has no such sensor), never its true
+//! pose, which only observers see; `iwsim run` judges a run from the hub's recording instead.
 
 use std::fs::File;
 use std::io::{BufWriter, Write};
@@ -62,11 +63,16 @@ impl RobotLog {
             let d = if k < b.proximity_count as usize { b.proximity_m[k] } else { f64::NAN };
             line += &format!(",{d:.4}");
         }
+        // What the robot's own sensors say (an agent never gets its true pose): the compass's
+        // heading and the GPS fix, NaN for a sensor the run does not have.
+        let has = |bit: u32| b.present & bit != 0;
+        let heading = if has(ipc_types::HAS_COMPASS) { b.compass_deg } else { f64::NAN };
+        let (x, y) = if has(ipc_types::HAS_GPS) { (b.gps_x_m, b.gps_y_m) } else { (f64::NAN, f64::NAN) };
         line += &format!(
             ",{:.3},{:.4},{:.4},{},{},{:.3},{:.3}\n",
-            b.pose[2],
-            b.pose[0],
-            b.pose[1],
+            heading,
+            x,
+            y,
             u8::from(b.present & ipc_types::COLLISION != 0),
             b.collision_count,
             powers[0],
@@ -370,22 +376,28 @@ mod tests {
         b.proximity_count = 2;
         b.proximity_m[..2].copy_from_slice(&[0.5, 1.25]);
         b.encoder_ticks = [10, -4];
-        b.pose = [10.5, 6.1, 90.0];
-        b.present = ipc_types::COLLISION;
+        (b.compass_deg, b.gps_x_m, b.gps_y_m) = (90.0, 10.5, 6.1);
+        b.present = ipc_types::COLLISION | ipc_types::HAS_COMPASS | ipc_types::HAS_GPS;
         b.collision_count = 2;
         log.row(&b, 0.3, [0.5, -0.5]).expect("row");
         log.row(&b, 0.3, [0.5, -0.5]).expect("repeat skipped");
+        // Without GPS and compass, the pose columns say so.
+        b.tick = 4;
+        b.present = 0;
+        log.row(&b, 0.4, [0.5, -0.5]).expect("row");
         log.flush().expect("flush");
         assert_eq!(log.path(), dir.join("chair%201.csv"));
         let text = std::fs::read_to_string(log.path()).expect("file");
         assert_eq!(
             text,
             "tick,time_s,encoder_left_ticks,encoder_right_ticks,proximity0_m,proximity1_m,heading_deg,x_m,y_m,collision,contacts,power_left,power_right\n\
-             3,0.300,10,-4,0.5000,1.2500,90.000,10.5000,6.1000,1,2,0.500,-0.500\n"
+             3,0.300,10,-4,0.5000,1.2500,90.000,10.5000,6.1000,1,2,0.500,-0.500\n\
+             4,0.400,10,-4,0.5000,1.2500,NaN,NaN,NaN,0,2,0.500,-0.500\n"
         );
         let table = LogTable::read(&dir.join("chair%201.csv")).expect("reads back");
-        assert_eq!(table.rows.len(), 1);
+        assert_eq!(table.rows.len(), 2);
         assert_eq!(table.rows[0][table.column("x_m").expect("x")], 10.5);
+        assert!(table.rows[1][table.column("x_m").expect("x")].is_nan());
         let _ = std::fs::remove_dir_all(dir);
     }
 

@@ -75,6 +75,13 @@ pub struct HubOutcome {
     /// the client that said hello, not the publisher it named), dropped unread.
     #[serde(default)]
     pub foreign_dropped: u64,
+    /// Bytes of the run's recording (0: not recorded).
+    #[serde(default)]
+    pub recorded_bytes: u64,
+    /// World frames for people the recorder dropped because its writer was behind (the
+    /// replay journal is never dropped).
+    #[serde(default)]
+    pub recording_dropped_frames: u64,
     /// Stopped by SIGINT/SIGTERM.
     pub interrupted: bool,
     /// Robots at the end.
@@ -119,12 +126,14 @@ mod tests {
             agents_seen: 2,
             agents_died: 1,
             foreign_dropped: 4,
+            recorded_bytes: 0,
+            recording_dropped_frames: 0,
             interrupted: false,
             robots: vec![RobotAtEnd { id: 3, x_m: 10.5, y_m: 6.1, heading_deg: -90.0, flags: 4 }],
         };
         assert_eq!(
             out.json_line(),
-            r#"{"ticks":60,"run_s":0.123457,"state_hash":"0123456789abcdef","agents_seen":2,"agents_died":1,"foreign_dropped":4,"interrupted":false,"robots":[{"id":3,"x_m":10.5,"y_m":6.1,"heading_deg":-90.0,"flags":4}]}"#
+            r#"{"ticks":60,"run_s":0.123457,"state_hash":"0123456789abcdef","agents_seen":2,"agents_died":1,"foreign_dropped":4,"recorded_bytes":0,"recording_dropped_frames":0,"interrupted":false,"robots":[{"id":3,"x_m":10.5,"y_m":6.1,"heading_deg":-90.0,"flags":4}]}"#
         );
     }
 

@@ -22,7 +22,7 @@ pub struct RunArgs {
     /// A batch of runs, one per seed, A..B inclusive (headless), with a table at the end.
     #[arg(long, value_name = "A..B")]
     pub seeds: Option<String>,
-    /// Where logs and summary.json go (default runs/<scenario>; a batch uses seed-N/ below it).
+    /// Where logs, the recording (run.mcap) and summary.json go (default runs/<scenario>; a batch uses seed-N/ below it).
     #[arg(long)]
     pub out: Option<PathBuf>,
     /// Where the viewer serves (use 0.0.0.0:8080 to watch from another machine).
@@ -49,7 +49,7 @@ pub struct DemoArgs {
     /// Seed for the world's noise.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
-    /// Where the logs and summary.json go.
+    /// Where the logs, the recording (run.mcap) and summary.json go.
     #[arg(long, default_value = "runs/demo")]
     pub out: PathBuf,
     /// No viewer.

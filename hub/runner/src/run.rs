@@ -1,9 +1,15 @@
 //! `iwsim run`: a scenario as real processes — the hub, every agent and (unless headless) the
-//! viewer — then a summary read back from the agents' per-robot logs.
+//! viewer — then a summary judged from the hub's record of the run.
 //!
-//! The logs are the record: each agent writes one CSV line per robot per tick, so the summary
-//! (checkpoints reached, contacts, times, speeds) is exact whatever the tick rate, and the same
-//! seed in lock-step gives the same summary, bit for bit.
+//! The hub records every run (`run.mcap`): the replay journal holds every change it made to
+//! its world, so replaying it gives the truth at every tick — true poses, the world's contact
+//! count — whatever the tick rate. The summary (checkpoints reached, contacts, times, speeds)
+//! is measured from that truth, never from what the agents under test write about themselves
+//! (their per-robot CSV logs stay, for people and `iwsim plot`), and the same seed in
+//! lock-step gives the same summary, bit for bit.
+
+/// The recording's file name in a run's output folder.
+pub const RECORDING: &str = "run.mcap";
 
 use std::fmt::Write as _;
 use std::io::{BufRead, IsTerminal, Write as _};
@@ -14,7 +20,6 @@ use std::sync::mpsc::{Receiver, RecvTimeoutError, Sender, TryRecvError};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
-use agent_sdk::log::LogTable;
 use anyhow::Context as _;
 use records::outcome::HubOutcome;
 pub use records::summary::{RobotSummary, RunSummary};
@@ -23,54 +28,121 @@ use crate::args::RunArgs;
 use crate::scenario::{Scenario, option_flags};
 use crate::signals::{Signal, Signals};
 
-/// Reads a robot's log and measures what the summary reports.
-pub fn summarise_log(path: &Path, route: &[usize], scenario: &Scenario) -> anyhow::Result<RobotSummary> {
-    let t = LogTable::read(path)?;
-    let col = |n: &str| t.column(n);
-    let (ct, cx, cy, ch, cc) = (col("time_s")?, col("x_m")?, col("y_m")?, col("heading_deg")?, col("contacts")?);
-    let mut s = RobotSummary {
-        name: records::log::robot_name_of(path),
-        log: path.file_name().map(|f| f.to_string_lossy().into_owned()).unwrap_or_default(),
-        route: route.to_vec(),
-        checkpoints_reached: 0,
-        checkpoints_total: route.len(),
-        reached_at_s: Vec::new(),
-        time_s: None,
-        collisions: 0,
-        ticks: t.rows.len(),
-        distance_m: 0.0,
-        top_speed_mps: 0.0,
-        rise_time_s: 0.0,
-        final_pose: [0.0; 3],
-    };
-    let mut speeds: Vec<(f64, f64)> = Vec::new();
-    let mut last: Option<&Vec<f64>> = None;
-    for row in &t.rows {
-        if let Some(&n) = route.get(s.checkpoints_reached)
-            && scenario.checkpoints[n - 1].contains(row[cx], row[cy])
-        {
-            s.checkpoints_reached += 1;
-            s.reached_at_s.push(row[ct]);
+/// One robot's truth over a run, measured as the summary reports it.
+struct Judge {
+    s: RobotSummary,
+    /// Whether the robot has been outside the next checkpoint of its route since it last
+    /// reached one (or since it started): a checkpoint counts when the robot enters it, so one
+    /// at its start pose is not reached at t = 0.
+    armed: bool,
+    speeds: Vec<(f64, f64)>,
+    last: Option<(f64, f64, f64)>,
+}
+
+impl Judge {
+    fn new(name: &str, route: &[usize], log: String) -> Self {
+        Self {
+            s: RobotSummary {
+                name: name.to_owned(),
+                log,
+                route: route.to_vec(),
+                checkpoints_reached: 0,
+                checkpoints_total: route.len(),
+                reached_at_s: Vec::new(),
+                time_s: None,
+                collisions: 0,
+                ticks: 0,
+                distance_m: 0.0,
+                top_speed_mps: 0.0,
+                rise_time_s: 0.0,
+                final_pose: [0.0; 3],
+            },
+            armed: false,
+            speeds: Vec::new(),
+            last: None,
         }
-        if let Some(prev) = last {
-            let d = (row[cx] - prev[cx]).hypot(row[cy] - prev[cy]);
-            let dt = row[ct] - prev[ct];
-            s.distance_m += d;
-            if dt > 0.0 {
-                speeds.push((row[ct], d / dt));
+    }
+
+    /// The robot at `t` seconds: where it truly is and how many contacts it has had.
+    fn observe(&mut self, scenario: &Scenario, t: f64, [x, y, heading]: [f64; 3], contacts: u64) {
+        let s = &mut self.s;
+        if let Some(&n) = s.route.get(s.checkpoints_reached)
+            && let Some(c) = scenario.checkpoints.get(n.wrapping_sub(1))
+        {
+            if !c.contains(x, y) {
+                self.armed = true;
+            } else if self.armed {
+                s.checkpoints_reached += 1;
+                s.reached_at_s.push(t);
+                self.armed = false;
             }
         }
-        s.collisions = row[cc] as u64;
-        s.final_pose = [row[cx], row[cy], row[ch]];
-        last = Some(row);
+        if let Some((t0, x0, y0)) = self.last {
+            let d = (x - x0).hypot(y - y0);
+            s.distance_m += d;
+            if t > t0 {
+                self.speeds.push((t, d / (t - t0)));
+            }
+        }
+        s.ticks += 1;
+        s.collisions = contacts;
+        s.final_pose = [x, y, heading];
+        self.last = Some((t, x, y));
     }
-    s.time_s = s.reached_at_s.last().copied();
-    s.top_speed_mps = speeds.iter().map(|&(_, v)| v).fold(0.0, f64::max);
-    let first = |f: f64| speeds.iter().find(|&&(_, v)| v >= f * s.top_speed_mps).map(|&(t, _)| t);
-    if let (Some(t10), Some(t90)) = (first(0.1), first(0.9)) {
-        s.rise_time_s = t90 - t10;
+
+    fn finish(mut self) -> RobotSummary {
+        let s = &mut self.s;
+        s.time_s = s.reached_at_s.last().copied();
+        s.top_speed_mps = self.speeds.iter().map(|&(_, v)| v).fold(0.0, f64::max);
+        let top = s.top_speed_mps;
+        let first = |f: f64| self.speeds.iter().find(|&&(_, v)| v >= f * top).map(|&(t, _)| t);
+        if let (Some(t10), Some(t90)) = (first(0.1), first(0.9)) {
+            s.rise_time_s = t90 - t10;
+        }
+        self.s
     }
-    Ok(s)
+}
+
+/// What a run's record says: every robot measured from the hub's truth (true poses, the
+/// world's contact count), the world's final tick and state hash, and what a cut-short file
+/// lost.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Judged {
+    /// Every robot that was in the run, by name.
+    pub robots: Vec<RobotSummary>,
+    /// The world's last tick.
+    pub ticks: u64,
+    /// Its state hash then.
+    pub state_hash: records::outcome::StateHash,
+    /// Where a cut-short recording ends.
+    pub truncated: Option<String>,
+}
+
+/// Replays a run's recording and measures every robot from the truth it holds (never from
+/// what the agents under test wrote). `logs` is where the agents' CSV logs are, named in
+/// each robot's summary when present.
+pub fn judge_recording(path: &Path, scenario: &Scenario, logs: &Path) -> anyhow::Result<Judged> {
+    let recording = recorder::Recording::open(path).with_context(|| format!("reading {}", path.display()))?;
+    let dt = recording.start.dt_s;
+    let mut judges: std::collections::BTreeMap<String, Judge> = std::collections::BTreeMap::new();
+    let replayed = hub::replay::replay_observed(&recording, false, None, |stage| {
+        let t = stage.world().tick() as f64 * dt;
+        for id in stage.ids() {
+            let Some(r) = stage.robot(id) else { continue };
+            let judge = judges.entry(r.spec.name.clone()).or_insert_with(|| {
+                let log = format!("{}.csv", records::log::file_stem(&r.spec.name));
+                let log = if logs.join(&log).exists() { log } else { String::new() };
+                Judge::new(&r.spec.name, scenario.routes.get(&r.spec.name).map_or(&[], Vec::as_slice), log)
+            });
+            judge.observe(scenario, t, [r.pose.x, r.pose.y, r.pose.heading_deg()], r.collision_count);
+        }
+    })?;
+    Ok(Judged {
+        robots: judges.into_values().map(Judge::finish).collect(),
+        ticks: replayed.outcome.ticks,
+        state_hash: replayed.outcome.state_hash,
+        truncated: replayed.truncated,
+    })
 }
 
 /// Checks a run against the scenario's expectations.
@@ -424,10 +496,11 @@ pub fn run_once(
 ) -> anyhow::Result<RunEnd> {
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
     for e in std::fs::read_dir(out)?.flatten() {
-        if e.path().extension().is_some_and(|x| x == "csv") {
+        if e.path().extension().is_some_and(|x| x == "csv" || x == "mcap") {
             std::fs::remove_file(e.path())?;
         }
     }
+    let recording = out.join(RECORDING);
     let session =
         opts.session.clone().unwrap_or_else(|| format!("run-{}-{seed}-{}", std::process::id(), crate::run::unique()));
     let ticks = scenario.ticks();
@@ -447,6 +520,8 @@ pub fn run_once(
         s("--wait-agents"),
         scenario.agents.len().to_string(),
         s("--json"),
+        s("--record"),
+        recording.display().to_string(),
     ];
     if let Some(g) = scenario.grid_spec() {
         hub_args.extend([s("--grid"), g]);
@@ -605,24 +680,27 @@ pub fn run_once(
         Err(_) if interrupted.is_some() => HubOutcome::default(),
         Err(e) => return Err(e).context("reading how the hub's run ended"),
     };
-    let mut robots = Vec::new();
+    // The record is the judge: the hub's truth, replayed; never what the agents wrote.
     let mut failures = Vec::new();
-    let mut logs: Vec<PathBuf> = std::fs::read_dir(out)?
-        .flatten()
-        .map(|e| e.path())
-        .filter(|p| p.extension().is_some_and(|x| x == "csv"))
-        .collect();
-    logs.sort();
-    for log in logs {
-        let name = records::log::robot_name_of(&log);
-        let route = scenario.routes.get(&name).cloned().unwrap_or_default();
-        match summarise_log(&log, &route, scenario) {
-            Ok(r) => robots.push(r),
-            // A log cut short by the interruption still leaves the others to summarise.
-            Err(e) if interrupted.is_some() => failures.push(format!("{}: {e}", log.display())),
-            Err(e) => return Err(e),
+    let robots = match judge_recording(&recording, scenario, out) {
+        Ok(judged) => {
+            if let Some(lost) = &judged.truncated {
+                failures.push(format!("{}: {lost}", recording.display()));
+            } else if interrupted.is_none() && judged.state_hash != hub_outcome.state_hash {
+                failures.push(format!(
+                    "the record replays to state hash {} but the hub ended on {}",
+                    judged.state_hash, hub_outcome.state_hash
+                ));
+            }
+            judged.robots
         }
-    }
+        // A recording cut short by the interruption still says what it can.
+        Err(e) if interrupted.is_some() => {
+            failures.push(format!("{e:#}"));
+            Vec::new()
+        }
+        Err(e) => return Err(e),
+    };
     if let Some(signal) = interrupted {
         failures.push(format!("interrupted by {} at tick {}", signal.name(), hub_outcome.ticks));
     } else {
@@ -660,7 +738,7 @@ pub fn unique() -> u32 {
 fn watch_loop(session: &str, ticks: u64, verbose: bool, watch: &Watch, stop: &Receiver<()>) {
     let stopped = || matches!(stop.recv_timeout(Duration::from_millis(20)), Err(RecvTimeoutError::Disconnected));
     // Short attempts, so that a run that ends before its hub serves does not wait for this.
-    let obs = loop {
+    let mut obs = loop {
         match agent_sdk::Observer::connect_within(session, "iwsim-run-progress", Duration::from_millis(100)) {
             Ok(obs) => break obs,
             Err(_) if stopped() => return,
@@ -732,7 +810,7 @@ pub fn print_summary(s: &RunSummary, out: &Path) {
             println!("  FAIL: {f}");
         }
     }
-    println!("  logs and summary.json in {}", out.display());
+    println!("  logs, the recording (run.mcap) and summary.json in {}", out.display());
 }
 
 /// A run's exit code: 0 when the expected outcome holds, 1 when not, and 128 + the signal's

@@ -7,7 +7,7 @@
 //! lab = "builtin:liacc"          # or a lab file, relative to this file
 //! seconds = 90                   # simulated time limit
 //! cycle_ms = 100                 # tick (default 100)
-//! noise = true                   # Ciber-Rato noise (default true)
+//! noise = true                   # Ciber-Rato's sensor and motor noise, 2 % wheel slip (default true)
 //!
 //! [[checkpoints]]                # numbered from 1 in file order
 //! x = 10.0
@@ -75,7 +75,8 @@ pub struct Scenario {
     pub cycle_ms: u32,
     /// Simulated time limit, seconds.
     pub seconds: f64,
-    /// Ciber-Rato noise on (true) or every noise off.
+    /// Noise on (true: `world::map::NoiseParams::WHEELCHAIR`, Ciber-Rato's sensor and motor
+    /// noise with a real chair's encoder slip, the hub's default) or every noise off.
     #[serde(default = "yes")]
     pub noise: bool,
     /// Seed, unless the command line gives one.

@@ -751,21 +751,32 @@ impl World {
             let (hit, enforce) = self.scratch.blocked[i];
             let m = &self.motion[i];
             let moved = m.moving && !(hit && enforce);
+            // A chair's encoders count what its wheels turn, not where the body went: held by a
+            // wall or another body, its driven wheels spin on the floor and keep counting, as a
+            // real chair's do, and tyres slip. A door's encoder sits on its mechanism, which
+            // neither slips nor turns while the leaf is held: it counts the leaf's own motion.
+            let (counts, slips) = match r.spec.kind {
+                RobotKind::Simulated => (m.moving, slip > 0.0),
+                RobotKind::Door => (moved, false),
+                RobotKind::Real => (false, false),
+            };
+            if counts {
+                for w in 0..2 {
+                    let mut travel = r.spec.max_speed_mps * r.motor_out[w] * dt;
+                    // Only wheels that turn draw slip, so a parked chair leaves the generator
+                    // (and every other robot's noise) alone.
+                    if slips && travel != 0.0 {
+                        travel *= 1.0 + slip * self.rng.gaussian();
+                    }
+                    r.encoder_travel[w] += travel;
+                }
+                r.readings.encoder_ticks = [
+                    (r.encoder_travel[0] * ticks_per_m).floor() as i64,
+                    (r.encoder_travel[1] * ticks_per_m).floor() as i64,
+                ];
+            }
             if moved {
                 r.pose = m.next_pose;
-                if r.spec.kind != RobotKind::Real {
-                    for w in 0..2 {
-                        let mut travel = r.spec.max_speed_mps * r.motor_out[w] * dt;
-                        if slip > 0.0 {
-                            travel *= 1.0 + slip * self.rng.gaussian();
-                        }
-                        r.encoder_travel[w] += travel;
-                    }
-                    r.readings.encoder_ticks = [
-                        (r.encoder_travel[0] * ticks_per_m).floor() as i64,
-                        (r.encoder_travel[1] * ticks_per_m).floor() as i64,
-                    ];
-                }
                 self.geo[i] = Geo::of_cs(r, m.next_cs.0, m.next_cs.1);
             }
             if hit && !r.collision {

@@ -378,6 +378,96 @@ fn encoders_count_wheel_travel() {
 }
 
 #[test]
+fn encoders_keep_counting_while_a_wall_holds_the_chair() {
+    let mut lab = empty_lab(20.0, 8.0);
+    lab.walls.push(rect_wall(6.0, 0.0, 7.0, 8.0, 2.0));
+    let mut w = world(lab, quiet());
+    let r = w.add_robot(RobotSpec::at(4.0, 4.0, 0.0).motors(1.0, 0.0)).expect("valid");
+    for _ in 0..40 {
+        w.step(&[Action::motors(r, 1.0, 1.0)], 0.1);
+    }
+    let held = w.robot(r).expect("alive");
+    assert!(held.collision, "pressed against the wall");
+    let (x, ticks) = (held.pose.x, held.readings.encoder_ticks);
+    for _ in 0..10 {
+        w.step(&[Action::motors(r, 1.0, 1.0)], 0.1);
+    }
+    let rb = w.robot(r).expect("alive");
+    assert_eq!(rb.pose.x, x, "the wall holds the body");
+    // Full power for 1 s: each wheel turns 1 m on the spot, as a real chair's wheels spin.
+    let per_m = sim_model::encoder_ticks_per_m(1024.0, 0.17);
+    for (w, (now, then)) in rb.readings.encoder_ticks.iter().zip(ticks).enumerate() {
+        let counted = (now - then) as Real / per_m;
+        assert!(close(counted, 1.0, 2.0 / per_m), "wheel {w} counted {counted} m");
+    }
+}
+
+#[test]
+fn a_doors_encoder_counts_its_leaf_exactly_whatever_the_slip() {
+    let p = Params { noise: NoiseParams { encoder_slip_frac: 0.5, ..NoiseParams::NONE }, ..Params::default() };
+    let mut w = World::new(&empty_lab(20.0, 8.0), p, 5).expect("valid");
+    let door = RobotSpec::at(5.0, 4.0, 0.0).body(1.0, 0.1, 0.99).motors(0.5, 0.0).kind(RobotKind::Door);
+    let d = w.add_robot(door).expect("valid");
+    let chair = w.add_robot(RobotSpec::at(12.0, 4.0, 0.0).motors(0.5, 0.0)).expect("valid");
+    for _ in 0..10 {
+        w.step(&[Action::motors(d, -0.1, 0.1), Action::motors(chair, 1.0, 1.0)], 0.1);
+    }
+    // 0.05 m/s a wheel for 1 s; the chair's counts, at 50 % slip, are nowhere near exact.
+    let per_m = sim_model::encoder_ticks_per_m(1024.0, 0.17);
+    let [l, r] = w.robot(d).expect("alive").readings.encoder_ticks;
+    assert!(
+        (l as Real / per_m + 0.05).abs() <= 1.0 / per_m && (r as Real / per_m - 0.05).abs() <= 1.0 / per_m,
+        "{l} {r}"
+    );
+    let truth = w.robot(chair).expect("alive").pose.x - 12.0;
+    let [cl, cr] = w.robot(chair).expect("alive").readings.encoder_ticks;
+    assert!((cl as Real / per_m - truth).abs() > 0.01 || (cr as Real / per_m - truth).abs() > 0.01, "the chair slips");
+}
+
+/// Dead reckoning as an agent does it: each tick's wheel travel from the encoder counts, along
+/// the heading the tick began with.
+fn dead_reckon(pose: [Real; 3], last: [i64; 2], now: [i64; 2], per_m: Real, track_m: Real) -> [Real; 3] {
+    let dl = (now[0] - last[0]) as Real / per_m;
+    let dr = (now[1] - last[1]) as Real / per_m;
+    let (s, c) = pose[2].sin_cos();
+    sim_model::advance(pose, (dl + dr) / 2.0, (dr - dl) / track_m, c, s, 1.0)
+}
+
+#[test]
+fn default_slip_makes_pure_odometry_drift_by_a_few_percent_of_the_distance() {
+    // A chair (0.65 m track, 0.49 m/s) drives 10 m straight ahead at 10 Hz, many times; the
+    // spread of odometry's error is what NoiseParams::WHEELCHAIR documents.
+    let per_m = sim_model::encoder_ticks_per_m(1024.0, 0.17);
+    let (mut side2, mut heading2, mut along2) = (0.0, 0.0, 0.0);
+    let runs = 60;
+    for seed in 0..runs {
+        let p = Params { noise: NoiseParams { encoder_slip_frac: 0.02, ..NoiseParams::NONE }, ..Params::default() };
+        assert_eq!(p.noise.encoder_slip_frac, Params::default().noise.encoder_slip_frac, "the default");
+        let mut w = World::new(&empty_lab(40.0, 8.0), p, seed).expect("valid");
+        let r = w.add_robot(RobotSpec::at(2.0, 4.0, 0.0).body(1.1, 0.65, 0.8).motors(0.49, 0.83)).expect("valid");
+        let mut est = [2.0, 4.0, 0.0];
+        let mut last = [0, 0];
+        while w.robot(r).expect("alive").pose.x < 12.0 {
+            w.step(&[Action::motors(r, 1.0, 1.0)], 0.1);
+            let now = w.robot(r).expect("alive").readings.encoder_ticks;
+            est = dead_reckon(est, last, now, per_m, 0.65);
+            last = now;
+        }
+        let truth = w.robot(r).expect("alive").pose;
+        assert!(close(truth.y, 4.0, 1e-9), "slip moves only the counts, not the chair");
+        side2 += (est[1] - truth.y).powi(2);
+        along2 += (est[0] - truth.x).powi(2);
+        heading2 += sim_model::wrap_rad(est[2] - truth.theta).powi(2);
+    }
+    let rms = |sum: Real| (sum / runs as Real).sqrt();
+    let (side, along, heading_deg) = (rms(side2), rms(along2), rms(heading2).to_degrees());
+    // Sideways 1–4 % of the 10 m, heading 1–4°: the heading dominates, as on real chairs.
+    assert!((0.1..0.4).contains(&side), "sideways {side} m");
+    assert!((1.0..4.0).contains(&heading_deg), "heading {heading_deg}°");
+    assert!(along < side / 4.0, "along {along} m, sideways {side} m");
+}
+
+#[test]
 fn latency_delays_a_sensor_by_whole_ticks() {
     let mut p = quiet();
     p.latency.compass = 3;

@@ -75,9 +75,10 @@ impl<E: std::error::Error + Send + Sync> From<DrawingAreaErrorKind<E>> for PlotD
 /// What one picture shows.
 #[derive(Debug)]
 pub struct Figure<'a> {
-    /// First line of the title (the log's file name, or the names of several).
+    /// First line of the title (the recording's or log's file name, or the names of several).
     pub title: String,
-    /// The logs with their robots' names: one robot, or several in one run.
+    /// The robots' names and trajectories (from logs or a recording): one robot, or several
+    /// in one run.
     pub logs: Vec<(String, &'a RunLog)>,
     /// Lab, obstacles and checkpoints under the trajectories.
     pub scene: &'a Scene,
@@ -169,14 +170,22 @@ fn draw_title(area: &DrawingArea<SVGBackend, Shift>, fig: &Figure, v: &[Vec<Spee
     let centre = (WIDTH_PX / 2) as i32;
     area.draw(&Text::new(fig.title.clone(), (centre, 12), bold(22.0).pos(Pos::new(HPos::Center, VPos::Top))))?;
     let driven: f64 = fig.logs.iter().map(|(_, l)| l.distance_m()).sum();
-    let collided: usize = fig.logs.iter().map(|(_, l)| l.collision_rows()).sum();
     let rows = if fig.several() {
         format!("{} robots", fig.logs.len())
     } else {
-        format!("{} rows", fig.logs.iter().map(|(_, l)| l.samples.len()).sum::<usize>())
+        format!("{} ticks", fig.logs.iter().map(|(_, l)| l.samples.len()).sum::<usize>())
+    };
+    let unplaced: usize = fig.logs.iter().map(|(_, l)| l.unplaced_rows).sum();
+    let unplaced = if unplaced > 0 { format!(" ({unplaced} without a GPS fix)") } else { String::new() };
+    // A recording's track does not say when a robot touched something: no count rather than 0.
+    let collided = if fig.logs.iter().any(|(_, l)| l.knows_collisions()) {
+        let n: usize = fig.logs.iter().map(|(_, l)| l.collision_rows()).sum();
+        format!("  ·  ticks in collision: {n}")
+    } else {
+        String::new()
     };
     let subtitle = format!(
-        "{lab}  ·  {rows}, {:.1} s  ·  {driven:.1} m driven  ·  top speed {top:.2} m/s  ·  ticks in collision: {collided}",
+        "{lab}  ·  {rows}{unplaced}, {:.1} s  ·  {driven:.1} m driven  ·  top speed {top:.2} m/s{collided}",
         (last - first).max(0.0),
     );
     area.draw(&Text::new(subtitle, (centre, 42), font(14.0).pos(Pos::new(HPos::Center, VPos::Top))))?;

@@ -2,15 +2,43 @@
 //! [`records::log::LogTable`], the project's one log reader, whose errors name the file,
 //! line and column), turned into samples of tick, time, position, heading and collision.
 //! The plot needs `tick`, `time_s`, `x_m` and `y_m`; the tick must be a whole number and the
-//! clock and position finite.
+//! clock finite.
+//!
+//! An agent never knows its true pose: `x_m`, `y_m` are its GPS fix, NaN when the run has no
+//! GPS. Rows without a fix (dropouts) are left out; a log with no fix at all cannot be drawn,
+//! and [`RunLogReadError::NoPositions`] points to the run's recording, which holds the truth.
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 pub use records::log::LogReadError;
 use records::log::LogTable;
 
 /// Columns a log must have: the plot cannot be drawn without them.
 pub const REQUIRED_COLUMNS: [&str; 4] = ["tick", "time_s", "x_m", "y_m"];
+
+/// The recording `iwsim run` writes beside its logs.
+pub const RECORDING_FILE: &str = "run.mcap";
+
+/// Why a log could not be drawn.
+#[derive(Debug, thiserror::Error)]
+pub enum RunLogReadError {
+    /// The file is not a readable log (the message names the file, line and column).
+    #[error(transparent)]
+    Read(#[from] LogReadError),
+    /// No row has a finite position: the run gave its robots no GPS, so the log holds no
+    /// trajectory. The run's recording does.
+    #[error(
+        "{} has no positions (the run has no GPS: its x_m, y_m columns are NaN); draw the run's recording instead: iwsim plot {}",
+        .path.display(),
+        .recording.display()
+    )]
+    NoPositions {
+        /// The log.
+        path: PathBuf,
+        /// The recording of its run, where `iwsim run` puts it (beside the log).
+        recording: PathBuf,
+    },
+}
 
 /// One row of a log, the columns the plot uses.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -34,22 +62,24 @@ pub struct Sample {
 pub struct RunLog {
     /// Column names from the header, in file order.
     pub columns: Vec<String>,
-    /// The rows, in file order.
+    /// The rows with a position, in file order.
     pub samples: Vec<Sample>,
+    /// Rows left out because their position is NaN (no GPS fix at that tick).
+    pub unplaced_rows: usize,
 }
 
 impl RunLog {
     /// Reads and parses the log at `path`.
-    pub fn read(path: &Path) -> Result<Self, LogReadError> {
+    pub fn read(path: &Path) -> Result<Self, RunLogReadError> {
         Self::from_table(LogTable::read(path)?)
     }
 
     /// Parses the text of a log; `path` only names the file in errors.
-    pub fn parse(text: &str, path: &Path) -> Result<Self, LogReadError> {
+    pub fn parse(text: &str, path: &Path) -> Result<Self, RunLogReadError> {
         Self::from_table(LogTable::parse(text, path)?)
     }
 
-    fn from_table(t: LogTable) -> Result<Self, LogReadError> {
+    fn from_table(t: LogTable) -> Result<Self, RunLogReadError> {
         let mut required = [0; REQUIRED_COLUMNS.len()];
         for (slot, name) in required.iter_mut().zip(REQUIRED_COLUMNS) {
             *slot = t.column(name)?;
@@ -57,13 +87,22 @@ impl RunLog {
         let [tick_col, time_col, x_col, y_col] = required;
         let (heading_col, collision_col) = (t.column("heading_deg").ok(), t.column("collision").ok());
         let mut samples = Vec::with_capacity(t.rows.len());
+        let mut unplaced_rows = 0;
         for (k, row) in t.rows.iter().enumerate() {
             let tick = row[tick_col];
             if !(tick >= 0.0 && tick.fract() == 0.0 && tick <= u64::MAX as f64) {
-                return Err(t.bad_field(k, tick_col, "a whole number"));
+                return Err(t.bad_field(k, tick_col, "a whole number").into());
             }
-            if let Some(col) = [time_col, x_col, y_col].into_iter().find(|&c| !row[c].is_finite()) {
-                return Err(t.bad_field(k, col, "a finite number"));
+            if !row[time_col].is_finite() {
+                return Err(t.bad_field(k, time_col, "a finite number").into());
+            }
+            // NaN is the writer's "no fix"; an infinity is no position any sensor gives.
+            if let Some(col) = [x_col, y_col].into_iter().find(|&c| row[c].is_infinite()) {
+                return Err(t.bad_field(k, col, "a finite number or NaN").into());
+            }
+            if row[x_col].is_nan() || row[y_col].is_nan() {
+                unplaced_rows += 1;
+                continue;
             }
             samples.push(Sample {
                 tick: tick as u64,
@@ -74,10 +113,21 @@ impl RunLog {
                 collision: collision_col.is_some_and(|c| row[c] != 0.0 && !row[c].is_nan()),
             });
         }
-        if samples.is_empty() {
-            return Err(LogReadError::NoRows { path: t.path });
+        if t.rows.is_empty() {
+            return Err(LogReadError::NoRows { path: t.path }.into());
         }
-        Ok(Self { columns: t.columns, samples })
+        if samples.is_empty() {
+            let dir = t.path.parent().filter(|d| !d.as_os_str().is_empty()).unwrap_or(Path::new("."));
+            let recording = dir.join(RECORDING_FILE);
+            return Err(RunLogReadError::NoPositions { path: t.path, recording });
+        }
+        Ok(Self { columns: t.columns, samples, unplaced_rows })
+    }
+
+    /// Whether the log says when the robot was in collision (it has a `collision` column; a
+    /// recording's track does not).
+    pub fn knows_collisions(&self) -> bool {
+        self.columns.iter().any(|c| c == "collision")
     }
 
     /// Distance driven along the logged positions, metres.
@@ -134,8 +184,16 @@ mod tests {
 
     const HEADER: &str = "tick,time_s,encoder_left_ticks,encoder_right_ticks,proximity0_m,proximity1_m,heading_deg,x_m,y_m,collision,contacts,power_left,power_right";
 
-    fn parse(text: &str) -> Result<RunLog, LogReadError> {
+    fn parse(text: &str) -> Result<RunLog, RunLogReadError> {
         RunLog::parse(text, Path::new("runs/chair1.csv"))
+    }
+
+    /// The log reader's error for a log that is not readable.
+    fn bad(text: &str) -> LogReadError {
+        match parse(text) {
+            Err(RunLogReadError::Read(e)) => e,
+            other => panic!("expected a read error, got {other:?}"),
+        }
     }
 
     #[test]
@@ -153,6 +211,8 @@ mod tests {
         );
         assert!(!log.samples[0].collision);
         assert_eq!(log.collision_rows(), 1);
+        assert!(log.knows_collisions());
+        assert_eq!(log.unplaced_rows, 0);
         assert!((log.distance_m() - 0.05).abs() < 1e-12);
     }
 
@@ -166,38 +226,38 @@ mod tests {
 
     #[test]
     fn an_empty_file_is_reported() {
-        assert!(matches!(parse("\n\n"), Err(LogReadError::Empty { .. })));
+        assert!(matches!(bad("\n\n"), LogReadError::Empty { .. }));
     }
 
     #[test]
     fn a_log_without_header_is_reported_at_line_1() {
-        let err = parse("1,0.1,10,6.1\n").expect_err("no header");
+        let err = bad("1,0.1,10,6.1\n");
         assert!(matches!(err, LogReadError::NoHeader { line: 1, .. }), "{err:?}");
         assert!(err.to_string().starts_with("runs/chair1.csv:1: no header"), "{err}");
     }
 
     #[test]
     fn a_missing_position_column_is_named() {
-        let err = parse("tick,time_s,x_m\n1,0.1,3\n").expect_err("no y_m");
+        let err = bad("tick,time_s,x_m\n1,0.1,3\n");
         assert!(matches!(&err, LogReadError::MissingColumn { column, line: 1, .. } if column == "y_m"), "{err:?}");
     }
 
     #[test]
     fn a_repeated_column_is_named() {
-        let err = parse("tick,time_s,x_m,y_m,x_m\n").expect_err("x_m twice");
+        let err = bad("tick,time_s,x_m,y_m,x_m\n");
         assert!(matches!(&err, LogReadError::DuplicateColumn { column, .. } if column == "x_m"), "{err:?}");
     }
 
     #[test]
     fn a_short_row_gives_its_line_and_the_counts() {
-        let err = parse("tick,time_s,x_m,y_m\n1,0.1,3,4\n\n2,0.2,3\n").expect_err("short row");
+        let err = bad("tick,time_s,x_m,y_m\n1,0.1,3,4\n\n2,0.2,3\n");
         assert!(matches!(err, LogReadError::FieldCount { line: 4, expected: 4, found: 3, .. }), "{err:?}");
         assert_eq!(err.to_string(), "runs/chair1.csv:4: 3 fields, expected 4 as in the header");
     }
 
     #[test]
     fn a_non_number_gives_its_line_and_column() {
-        let err = parse("tick,time_s,x_m,y_m,proximity0_m\n1,0.1,3,4,0.5\n2,0.2,3,4,far\n").expect_err("far");
+        let err = bad("tick,time_s,x_m,y_m,proximity0_m\n1,0.1,3,4,0.5\n2,0.2,3,4,far\n");
         assert!(
             matches!(&err, LogReadError::BadNumber { line: 3, column: 5, name, text, expected: "a number", .. }
             if name == "proximity0_m" && text == "far"),
@@ -207,11 +267,45 @@ mod tests {
     }
 
     #[test]
-    fn a_fractional_tick_and_a_nan_position_are_refused() {
-        let err = parse("tick,time_s,x_m,y_m\n1.5,0.1,3,4\n").expect_err("tick 1.5");
+    fn a_fractional_tick_and_an_infinite_position_are_refused() {
+        let err = bad("tick,time_s,x_m,y_m\n1.5,0.1,3,4\n");
         assert!(matches!(err, LogReadError::BadNumber { line: 2, column: 1, expected: "a whole number", .. }));
-        let err = parse("tick,time_s,x_m,y_m\n1,0.1,3,NaN\n").expect_err("NaN y");
-        assert!(matches!(err, LogReadError::BadNumber { line: 2, column: 4, expected: "a finite number", .. }));
+        let err = bad("tick,time_s,x_m,y_m\n1,0.1,3,inf\n");
+        assert!(matches!(err, LogReadError::BadNumber { line: 2, column: 4, expected: "a finite number or NaN", .. }));
+        let err = bad("tick,time_s,x_m,y_m\n1,NaN,3,4\n");
+        assert!(matches!(err, LogReadError::BadNumber { line: 2, column: 2, expected: "a finite number", .. }));
+    }
+
+    #[test]
+    fn a_log_without_gps_points_to_the_runs_recording() {
+        let text = format!(
+            "{HEADER}\n1,0.100,0,0,1.5,NaN,NaN,NaN,NaN,0,0,0.5,0.5\n2,0.200,3,3,1.4,NaN,NaN,NaN,NaN,0,0,0.5,0.5\n"
+        );
+        let err = parse(&text).expect_err("no positions");
+        assert!(
+            matches!(&err, RunLogReadError::NoPositions { path, recording }
+                if path == Path::new("runs/chair1.csv") && recording == Path::new("runs/run.mcap")),
+            "{err:?}"
+        );
+        assert_eq!(
+            err.to_string(),
+            "runs/chair1.csv has no positions (the run has no GPS: its x_m, y_m columns are NaN); \
+             draw the run's recording instead: iwsim plot runs/run.mcap"
+        );
+        let err = RunLog::parse("tick,time_s,x_m,y_m\n1,0.1,NaN,NaN\n", Path::new("chair1.csv")).expect_err("none");
+        assert!(err.to_string().ends_with("iwsim plot ./run.mcap"), "{err}");
+    }
+
+    #[test]
+    fn gps_dropouts_are_skipped_and_the_speed_spans_them() {
+        let text = "tick,time_s,x_m,y_m\n1,0.1,0.0,0\n2,0.2,NaN,NaN\n3,0.3,0.2,NaN\n4,0.4,0.3,0\n";
+        let log = parse(text).expect("reads");
+        assert_eq!(log.unplaced_rows, 2);
+        assert_eq!(log.samples.iter().map(|s| s.tick).collect::<Vec<_>>(), [1, 4]);
+        let v = speeds(&log.samples);
+        assert_eq!(v.len(), 1);
+        assert!((v[0].speed_m_s - 1.0).abs() < 1e-9, "0.3 m over 0.3 s: {v:?}");
+        assert!(!log.knows_collisions());
     }
 
     #[test]
@@ -222,13 +316,13 @@ mod tests {
 
     #[test]
     fn a_header_alone_is_reported() {
-        assert!(matches!(parse("tick,time_s,x_m,y_m\n"), Err(LogReadError::NoRows { .. })));
+        assert!(matches!(bad("tick,time_s,x_m,y_m\n"), LogReadError::NoRows { .. }));
     }
 
     #[test]
     fn a_missing_file_names_the_file() {
         let err = RunLog::read(Path::new("/nonexistent/iwsim/chair1.csv")).expect_err("missing");
-        assert!(matches!(err, LogReadError::Io { .. }));
+        assert!(matches!(err, RunLogReadError::Read(LogReadError::Io { .. })));
         assert!(err.to_string().starts_with("/nonexistent/iwsim/chair1.csv: cannot read the log"), "{err}");
     }
 

@@ -1,5 +1,5 @@
-//! `iwsim plot` end to end through the library: a log and a summary.json on disk in, an SVG
-//! file out, read back with quick-xml.
+//! `iwsim plot` end to end through the library: a log and a summary.json, or a recording, on
+//! disk in, an SVG file out, read back with quick-xml.
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -63,7 +63,15 @@ fn write_run(dir: &Path) -> (PathBuf, Vec<(f64, f64)>) {
 }
 
 fn args(log: &Path) -> PlotArgs {
-    PlotArgs { log: vec![log.into()], out: None, lab: None, obstacle: vec![], checkpoint: vec![], no_summary: false }
+    PlotArgs {
+        log: vec![log.into()],
+        robot: vec![],
+        out: None,
+        lab: None,
+        obstacle: vec![],
+        checkpoint: vec![],
+        no_summary: false,
+    }
 }
 
 /// One SVG element: its name, attributes and the text directly inside it.
@@ -321,4 +329,154 @@ fn several_logs_of_one_run_are_drawn_together_a_colour_each() {
     // A log among the inputs is never overwritten.
     a.out = Some(two);
     assert!(plot::plot(&a).expect_err("would overwrite").to_string().contains("overwrite the log"));
+}
+
+/// Records the synthetic run as the hub would: chair1 along [`run_positions`] and a door that
+/// stays put, one frame every 0.1 s, the liacc lab with one scenario obstacle and two
+/// checkpoints.
+fn write_recording(path: &Path) -> Vec<(f64, f64)> {
+    use ipc_types::{FixedName, RobotState};
+    use recorder::journal::{Event, RunStart};
+    use world::map::{Params, Wall, builtin};
+
+    let mut lab = builtin::map("liacc").expect("built in").lab;
+    let obstacle_from = lab.walls.len();
+    lab.walls.push(Wall::rectangle(13.6, 6.0, 14.2, 6.6, 1.0));
+    let start = RunStart {
+        iwsim_version: "0.1.0-test".into(),
+        seed: 1,
+        dt_s: 0.1,
+        lockstep: true,
+        tick_limit: 0,
+        cycle_ms: 100,
+        deadline_ms: 1000,
+        lab,
+        params: Params::default(),
+        grid: Default::default(),
+        obstacle_from,
+        checkpoints: vec![
+            plot::scene::Checkpoint { x: 11.0, y: 6.1, radius: 0.5 },
+            plot::scene::Checkpoint { x: 13.0, y: 8.0, radius: 0.5 },
+        ],
+    };
+    let robot = |id, name: &str, (x_m, y_m): (f64, f64)| RobotState {
+        id,
+        x_m,
+        y_m,
+        width_m: 1.1,
+        height_m: 0.65,
+        com: 0.5,
+        name: FixedName::truncated(name),
+        ..bytemuck::Zeroable::zeroed()
+    };
+    let positions = run_positions();
+    let mut rec = recorder::Recorder::create(path, &start, recorder::RecorderOptions::default()).expect("created");
+    for (k, &p) in positions.iter().enumerate() {
+        let tick = k as u64 + 1;
+        rec.event(&Event::Step { tick: tick - 1, actions: Vec::new(), hash: 0 });
+        rec.world(tick, &[robot(1, "chair1", p), robot(2, "door1", (9.445, 5.46))], &[]);
+    }
+    let stats = rec.finish().expect("finished");
+    assert_eq!(stats.dropped_world_frames, 0);
+    positions
+}
+
+#[test]
+fn a_recording_is_drawn_with_its_lab_obstacles_and_checkpoints_without_a_summary() {
+    let dir = TempDir::new("recording");
+    let recording = dir.0.join("run.mcap");
+    let positions = write_recording(&recording);
+    let out = plot::plot(&args(&recording)).expect("plotted");
+    assert_eq!(out, dir.0.join("run.svg"), "default output beside the recording");
+    let elements = parse_svg(&std::fs::read_to_string(&out).expect("SVG written"));
+    let n = positions.len();
+    let lines = |rgb, n: usize| {
+        elements
+            .iter()
+            .filter(|e| e.name == "polyline" && e.attr("stroke") == hex(rgb) && e.points().len() == n)
+            .collect::<Vec<_>>()
+    };
+    // Both robots, in the order they appear: a trajectory with a point per frame and a speed
+    // line with one per interval each.
+    assert_eq!((lines(ROBOT_RGB[0], n).len(), lines(ROBOT_RGB[0], n - 1).len()), (1, 1), "chair1");
+    assert_eq!((lines(ROBOT_RGB[1], n).len(), lines(ROBOT_RGB[1], n - 1).len()), (1, 1), "door1");
+    let rings = elements
+        .iter()
+        .filter(|e| e.name == "circle" && e.attr("stroke") == hex(CHECKPOINT_RGB) && e.num("r") > 10.0)
+        .count();
+    assert_eq!(rings, 2, "the run start's two checkpoints");
+    let texts: Vec<&str> = elements.iter().filter(|e| e.name == "text").map(|e| e.text.as_str()).collect();
+    for want in ["run.mcap", "chair1", "door1", "A", "1", "2", "speed (m/s)"] {
+        assert!(texts.contains(&want), "text {want:?} missing from {texts:?}");
+    }
+    assert!(texts.iter().any(|t| t.starts_with("lab ") && t.contains("2 robots")), "{texts:?}");
+    assert!(!texts.iter().any(|t| t.contains("ticks in collision")), "a track does not know collisions: {texts:?}");
+    assert!(texts.iter().any(|t| t.starts_with("top speed 0.5")), "chair1 drove 0.5 m/s: {texts:?}");
+
+    // One robot by name: drawn alone, in the first colour, the speed line its own.
+    let mut a = args(&recording);
+    a.robot = vec!["door1".into()];
+    a.out = Some(dir.0.join("door1.svg"));
+    let elements = parse_svg(&std::fs::read_to_string(plot::plot(&a).expect("plotted")).expect("SVG written"));
+    let texts: Vec<&str> = elements.iter().filter(|e| e.name == "text").map(|e| e.text.as_str()).collect();
+    assert!(texts.contains(&"run.mcap: door1"), "{texts:?}");
+    assert!(texts.iter().any(|t| t.contains("top speed 0.00")), "the door stood still: {texts:?}");
+    a.robot = vec!["chair7".into()];
+    let err = format!("{:#}", plot::plot(&a).expect_err("no chair7"));
+    assert!(err.contains("has no robot named \"chair7\"; it has chair1, door1"), "{err}");
+}
+
+#[test]
+fn a_log_without_gps_says_to_draw_the_recording_and_dropouts_are_skipped() {
+    let dir = TempDir::new("no-gps");
+    let log = dir.0.join("chair1.csv");
+    let mut text = format!("{HEADER}\n");
+    for k in 1..=5 {
+        text += &format!("{k},{:.3},0,0,1.5,NaN,NaN,NaN,NaN,0,0,0.5,0.5\n", 0.1 * f64::from(k));
+    }
+    std::fs::write(&log, &text).expect("written");
+    let err = format!("{:#}", plot::plot(&args(&log)).expect_err("no positions"));
+    assert_eq!(
+        err,
+        format!(
+            "{} has no positions (the run has no GPS: its x_m, y_m columns are NaN); \
+             draw the run's recording instead: iwsim plot {}",
+            log.display(),
+            dir.0.join("run.mcap").display()
+        )
+    );
+    assert!(!dir.0.join("chair1.svg").exists(), "no SVG");
+
+    // A GPS that drops out: the rows with a fix are drawn, the others counted.
+    let mut text = format!("{HEADER}\n");
+    for k in 1..=10 {
+        let (x, y) = if (4..=6).contains(&k) { (f64::NAN, f64::NAN) } else { (10.0 + 0.05 * f64::from(k), 6.1) };
+        text += &format!("{k},{:.3},0,0,1.5,NaN,0.0,{x:.4},{y:.4},0,0,0.5,0.5\n", 0.1 * f64::from(k));
+    }
+    std::fs::write(&log, &text).expect("written");
+    let elements = parse_svg(&std::fs::read_to_string(plot::plot(&args(&log)).expect("plotted")).expect("SVG"));
+    assert!(
+        elements
+            .iter()
+            .any(|e| e.name == "polyline" && e.attr("stroke") == hex(TRAJECTORY_RGB) && e.points().len() == 7)
+    );
+    let texts: Vec<&str> = elements.iter().filter(|e| e.name == "text").map(|e| e.text.as_str()).collect();
+    assert!(texts.iter().any(|t| t.contains("7 ticks (3 without a GPS fix)")), "{texts:?}");
+    assert!(texts.iter().any(|t| t.starts_with("top speed 0.5")), "speed over the dropout too: {texts:?}");
+}
+
+#[test]
+fn a_recording_and_logs_are_not_drawn_together_and_robot_needs_a_recording() {
+    let dir = TempDir::new("mixed");
+    let (log, _) = write_run(&dir.0);
+    let recording = dir.0.join("run.mcap");
+    write_recording(&recording);
+    let mut a = args(&recording);
+    a.log.push(log.clone());
+    let err = plot::plot(&a).expect_err("mixed").to_string();
+    assert!(err.contains("give one recording (.mcap) or the CSV logs of one run"), "{err}");
+    let mut a = args(&log);
+    a.robot = vec!["chair1".into()];
+    let err = plot::plot(&a).expect_err("--robot with a log").to_string();
+    assert!(err.contains("--robot picks robots of a recording"), "{err}");
 }

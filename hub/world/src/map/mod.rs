@@ -89,8 +89,10 @@ pub struct Grid {
     pub poses: Vec<StartPose>,
 }
 
-/// Standard deviations of the Gaussian noise on each sensor (Ciber-Rato defaults).
-/// Zero switches that noise off.
+/// Standard deviations of the Gaussian noise on each sensor. Zero switches that noise off.
+///
+/// The default is [`NoiseParams::WHEELCHAIR`]: Ciber-Rato's sensor and motor noise, plus the
+/// wheel slip a real chair's encoders see, so that odometry drifts as it does on a real floor.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct NoiseParams {
     /// Proximity distance, metres (`ObstacleNoise`).
@@ -105,7 +107,13 @@ pub struct NoiseParams {
     pub gps_heading_deg: f64,
     /// Motor output, multiplicative, as a fraction (`MotorsNoise` is in percent: 1.5 → 0.015).
     pub motor_frac: f64,
-    /// Encoder slip, multiplicative on each wheel's travel, as a fraction (`EncoderNoise`, %).
+    /// Encoder slip, as a fraction (`EncoderNoise`, %): each tick, each turning wheel's counted
+    /// travel is its commanded travel times (1 + this × a standard Gaussian draw), drawn apart
+    /// for the two wheels, so the difference turns the odometry's heading as a random walk.
+    /// Chairs' wheels slip (and spin when a wall holds the chair); doors' encoders, on their
+    /// mechanism, do not.
+    /// The draws are per tick: at a shorter cycle the same value drifts less per metre (the
+    /// drift's standard deviation scales with the square root of the cycle).
     pub encoder_slip_frac: f64,
 }
 
@@ -121,6 +129,19 @@ impl NoiseParams {
         motor_frac: 0.015,
         encoder_slip_frac: 0.0,
     };
+    /// What `noise = true` means in a scenario, and what `iwsim hub` uses without a parameters
+    /// file: [`NoiseParams::CIBER_RATO`] plus 2 % encoder slip per 100 ms tick.
+    ///
+    /// Why 2 %: measured odometry on indoor differential-drive platforms is off by one to a few
+    /// percent of the distance travelled (Borenstein and Feng's UMBmark, IEEE Trans. Robotics
+    /// and Automation 12(6), 1996, found errors of the order of 0.1–0.3 m after a 16 m square
+    /// on uncalibrated platforms), and a chair's pneumatic tyres and castors are no better. At
+    /// a chair's cruise (0.5 m/s, 5 cm per wheel per 100 ms tick, wheels 0.65 m apart), 2 % per
+    /// tick makes pure odometry's heading wander by about 2° (1σ) over 10 m and its position
+    /// by about 2 % of the distance sideways, the heading error being, as on real chairs, what
+    /// dominates. Systematic errors (unequal wheel diameters, an uncertain track) are not
+    /// modelled: they would need a per-robot calibration error, which these parameters lack.
+    pub const WHEELCHAIR: NoiseParams = NoiseParams { encoder_slip_frac: 0.02, ..NoiseParams::CIBER_RATO };
     /// Every noise switched off.
     pub const NONE: NoiseParams = NoiseParams {
         proximity_m: 0.0,
@@ -135,7 +156,7 @@ impl NoiseParams {
 
 impl Default for NoiseParams {
     fn default() -> Self {
-        Self::CIBER_RATO
+        Self::WHEELCHAIR
     }
 }
 

@@ -1,0 +1,62 @@
+//! The third-party check of a recording: `python/check_recording.py` run with the PyPI `mcap`
+//! reader and Foxglove's published schema package. This finds (or makes) the Python that has
+//! those packages, so tests, CI and users run the same check.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+/// Why no Python with the checker's packages could be found or made.
+#[derive(Debug, thiserror::Error)]
+pub enum CheckerPythonError {
+    /// A step of making the virtual environment failed.
+    #[error("making the Python environment for the recording check: `{command}` failed: {detail}")]
+    Setup {
+        /// What was run.
+        command: String,
+        /// What it said (or why it could not run).
+        detail: String,
+    },
+}
+
+/// The folder of the checker script and its `requirements.txt`.
+pub fn checker_dir() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("python")
+}
+
+/// The checker script, `check_recording.py`.
+pub fn checker_script() -> PathBuf {
+    checker_dir().join("check_recording.py")
+}
+
+/// A Python with the packages of `requirements.txt`: `$IWSIM_PYTHON` when set (CI sets it),
+/// else `target/pyvenv/bin/python` of this workspace, made on first use with `python3 -m venv`
+/// and `pip install -r requirements.txt` (one process makes it while others wait on a lock).
+pub fn checker_python() -> Result<PathBuf, CheckerPythonError> {
+    if let Some(p) = std::env::var_os("IWSIM_PYTHON") {
+        return Ok(PathBuf::from(p));
+    }
+    let venv = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../target/pyvenv");
+    let python = venv.join("bin/python");
+    let ready = venv.join(".iwsim-ready");
+    let fail = |command: &str, detail: String| CheckerPythonError::Setup { command: command.to_owned(), detail };
+    std::fs::create_dir_all(&venv).map_err(|e| fail("mkdir target/pyvenv", e.to_string()))?;
+    let lock =
+        std::fs::File::create(venv.with_extension("lock")).map_err(|e| fail("lock target/pyvenv", e.to_string()))?;
+    lock.lock().map_err(|e| fail("lock target/pyvenv", e.to_string()))?;
+    if !ready.exists() {
+        let run = |program: &Path, args: &[&str]| {
+            let what = format!("{} {}", program.display(), args.join(" "));
+            let out = Command::new(program).args(args).output().map_err(|e| fail(&what, e.to_string()))?;
+            if !out.status.success() {
+                return Err(fail(&what, String::from_utf8_lossy(&out.stderr).into_owned()));
+            }
+            Ok(())
+        };
+        let venv_s = venv.to_string_lossy().into_owned();
+        run(Path::new("python3"), &["-m", "venv", &venv_s])?;
+        let req = checker_dir().join("requirements.txt").to_string_lossy().into_owned();
+        run(&python, &["-m", "pip", "install", "--quiet", "--disable-pip-version-check", "-r", &req])?;
+        std::fs::write(&ready, "").map_err(|e| fail("mark target/pyvenv ready", e.to_string()))?;
+    }
+    Ok(python)
+}

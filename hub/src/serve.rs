@@ -1,0 +1,742 @@
+//! `iwsim replay FILE --serve`: plays a recording as a live session, so the viewer (`iwsim
+//! view`), the UDP bridge's Ciber-Rato viewers and any other observer watch a recorded run as
+//! they would watch the hub that ran it.
+//!
+//! The session's services are created exactly as a hub creates them (so a replay refuses a
+//! session a hub already serves, and a hub refuses one a replay serves). A [`Player`] rebuilds
+//! the world from the recording's journal one tick at a time, and the loop publishes what the
+//! hub published: both maps (the agents' without the scenario's obstacles, the observers' with
+//! them), a world snapshot per tick paced at the recorded cycle divided by the speed, the tick
+//! doorbell, and the robots' sensor geometry whenever the set of robots changes. Agents may say
+//! hello (the UDP bridge does), but every robot registration is refused with
+//! [`Refusal::RunStarted`]: a recorded world takes no new robots. Run control works as on the
+//! hub: Pause, Start (resume), Step (one tick while paused or waiting), Stop (end).
+//!
+//! At the end of the recording (or `--until`, or a Stop) the replay publishes the `Finished`
+//! run state, as a hub does at its tick limit, so viewers and the bridge end too; it then waits
+//! up to 2 s for its observers and agents to read it and leave, and exits. With `--loop` it
+//! starts over from tick 0 instead of finishing.
+
+use std::collections::BTreeMap;
+use std::os::fd::AsRawFd as _;
+use std::time::{Duration, Instant};
+
+use ipc_services::iceoryx2::port::publisher::Publisher;
+use ipc_services::iceoryx2::port::update_connections::UpdateConnections as _;
+use ipc_services::iceoryx2::prelude::{FileDescriptorBased, PortFactory as _};
+use ipc_services::{HUB_NODE_NAME, Role, SLICE_ALLOCATION, ServicesError, Session, Svc, clean_dead_nodes};
+use ipc_types::{
+    Command, ControlResponse, MAX_AGENTS, MapHeader, MapItem, Refusal, RegisterKind, RegisterResponse, RobotSensors,
+    RobotState, RunState, SensorBlock, TickHeader, WorldHeader,
+};
+use recorder::Recording;
+use recorder::journal::Event;
+use world::WorldBuildError;
+
+use crate::core::{MapAudience, Mode, hub_params, pack_map_for, robot_state, sensor_geometry};
+use crate::replay::outcome_of;
+use crate::stage::{Stage, StageApplyError};
+use crate::{HubOutcome, IDLE_POLL, PidFd, named_publisher, poll_readable};
+
+/// How to serve a recording.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ServeOptions {
+    /// Session name: the replay's services live under `iwsim/<session>/`.
+    pub session: String,
+    /// Playback rate: 1 plays a tick per recorded cycle, 2 twice as fast. Above 0.
+    pub speed: f64,
+    /// Start over from tick 0 at the end instead of finishing.
+    pub looped: bool,
+    /// Wait for a Start (or Step) command before the first tick.
+    pub start_on_command: bool,
+    /// Compare every tick's state hash with the recording's; the first that differs ends it.
+    pub check: bool,
+    /// End after the step that reaches this tick.
+    pub until: Option<u64>,
+}
+
+/// Why a replay could not be served.
+#[derive(Debug, thiserror::Error)]
+pub enum ReplayServeError {
+    /// A service could not be set up (another hub or replay serves the session, a bad name).
+    #[error(transparent)]
+    Services(#[from] ServicesError),
+    /// The recorded lab or parameters no longer build a world.
+    #[error("rebuilding the recorded world: {0}")]
+    World(#[from] WorldBuildError),
+    /// The recording's tick length disagrees with the one its parameters give.
+    #[error("the recording steps {recorded} s a tick but its parameters give {rebuilt} s")]
+    CycleDiffers {
+        /// The recording's seconds per tick.
+        recorded: f64,
+        /// The rebuilt world's.
+        rebuilt: f64,
+    },
+    /// The journal cannot be applied (a robot refused, ticks out of order).
+    #[error(transparent)]
+    Journal(StageApplyError),
+    /// The playback rate is not above 0.
+    #[error("the speed must be a number above 0, not {0}")]
+    BadSpeed(f64),
+    /// iceoryx2 failed while serving.
+    #[error("iceoryx2 failed to {0}")]
+    Ipc(String),
+}
+
+fn ipc<E: std::fmt::Debug>(what: &str) -> impl FnOnce(E) -> ReplayServeError + '_ {
+    move |e| ReplayServeError::Ipc(format!("{what}: {e:?}"))
+}
+
+/// A recording played tick by tick, with the hub's run states and commands, and no I/O: the
+/// serving loop asks it what to publish.
+#[derive(Debug)]
+pub struct Player<'a> {
+    recording: &'a Recording,
+    stage: Stage,
+    /// The agent id each robot was registered by, as recorded.
+    owners: BTreeMap<u32, u32>,
+    /// The next journal event to apply.
+    next: usize,
+    state: RunState,
+    single_steps: u32,
+    check: bool,
+    until: Option<u64>,
+    looped: bool,
+    steps: u64,
+    mismatch: Option<StageApplyError>,
+}
+
+impl<'a> Player<'a> {
+    /// The recording at tick 0 (its robots added): `Waiting` when `start_on_command`,
+    /// otherwise `Running`.
+    pub fn new(recording: &'a Recording, options: &ServeOptions) -> Result<Self, ReplayServeError> {
+        let mut p = Self {
+            recording,
+            stage: Self::fresh_stage(recording)?,
+            owners: BTreeMap::new(),
+            next: 0,
+            state: if options.start_on_command { RunState::Waiting } else { RunState::Running },
+            single_steps: 0,
+            check: options.check,
+            until: options.until,
+            looped: options.looped,
+            steps: 0,
+            mismatch: None,
+        };
+        p.apply_changes()?;
+        Ok(p)
+    }
+
+    fn fresh_stage(recording: &Recording) -> Result<Stage, ReplayServeError> {
+        let start = &recording.start;
+        let stage = Stage::new(&start.lab, start.params.clone(), start.seed)?;
+        if stage.dt_s() != start.dt_s {
+            return Err(ReplayServeError::CycleDiffers { recorded: start.dt_s, rebuilt: stage.dt_s() });
+        }
+        Ok(stage)
+    }
+
+    /// Applies the changes up to the next step (robots added, removed, frozen): the hub
+    /// published each such change at once, so they show with the tick they happened in.
+    fn apply_changes(&mut self) -> Result<(), ReplayServeError> {
+        while let Some(event) = self.recording.events.get(self.next) {
+            match event {
+                Event::Step { .. } | Event::Finish { .. } => break,
+                Event::AddRobot { id, agent_id, .. } => {
+                    self.owners.insert(*id, *agent_id);
+                }
+                Event::RemoveRobot { id } => {
+                    self.owners.remove(id);
+                }
+                Event::Freeze { .. } | Event::Settle => {}
+            }
+            self.stage.apply(event, false).map_err(ReplayServeError::Journal)?;
+            self.next += 1;
+        }
+        if self.stage.world().tick() == 0 {
+            // What the hub published before its first step: every robot measured where it
+            // stands (the journal leaves this out: it changes nothing a step depends on).
+            self.stage.refresh_sensors();
+        }
+        Ok(())
+    }
+
+    /// Whether the recording has a step left to play (within `until`).
+    fn step_left(&self) -> bool {
+        match self.recording.events.get(self.next) {
+            Some(Event::Step { tick, .. }) => self.until.is_none_or(|u| *tick < u),
+            _ => false,
+        }
+    }
+
+    /// Whether the loop should step now (the caller adds the pacing).
+    pub fn may_step(&self) -> bool {
+        self.state == RunState::Running || (self.state != RunState::Finished && self.single_steps > 0)
+    }
+
+    /// Plays one tick: its step and the changes that followed it. At the end of the recording
+    /// the run finishes, or starts over from tick 0 when looping.
+    pub fn step(&mut self) -> Result<(), ReplayServeError> {
+        if self.state != RunState::Running {
+            self.single_steps = self.single_steps.saturating_sub(1);
+        }
+        let Some(event) = self.recording.events.get(self.next).filter(|_| self.step_left()) else {
+            // Only a looping replay gets here after its last tick (and one with no step at
+            // all): the last tick has been shown for a tick, now start over.
+            if self.looped && self.steps > 0 {
+                self.stage = Self::fresh_stage(self.recording)?;
+                self.owners.clear();
+                self.next = 0;
+                self.apply_changes()?;
+            } else {
+                self.state = RunState::Finished;
+            }
+            return Ok(());
+        };
+        self.next += 1;
+        match self.stage.apply(event, self.check) {
+            Ok(_) => self.steps += 1,
+            Err(e @ StageApplyError::HashDiffers { .. }) => {
+                self.steps += 1;
+                self.mismatch = Some(e);
+                self.state = RunState::Finished;
+                return Ok(());
+            }
+            Err(e) => return Err(ReplayServeError::Journal(e)),
+        }
+        self.apply_changes()?;
+        if !self.step_left() && !self.looped {
+            self.state = RunState::Finished;
+        }
+        Ok(())
+    }
+
+    /// Applies a run-control command as the hub does; returns 0 when done, 3 when the command
+    /// makes no sense now (removing a recorded robot is one).
+    pub fn command(&mut self, command: Command) -> u32 {
+        match command {
+            Command::Start if self.state != RunState::Finished => self.state = RunState::Running,
+            Command::Pause if self.state == RunState::Running => self.state = RunState::Paused,
+            Command::Step if self.state != RunState::Finished && self.state != RunState::Running => {
+                self.single_steps += 1
+            }
+            Command::Stop => self.state = RunState::Finished,
+            _ => return 3,
+        }
+        0
+    }
+
+    /// The run state.
+    pub fn state(&self) -> RunState {
+        self.state
+    }
+
+    /// The replayed world and its robots.
+    pub fn stage(&self) -> &Stage {
+        &self.stage
+    }
+
+    /// Steps played (counting every lap when looping).
+    pub fn steps(&self) -> u64 {
+        self.steps
+    }
+
+    /// The first step whose state hash differs from the recording's (when checking).
+    pub fn mismatch(&self) -> Option<&StageApplyError> {
+        self.mismatch.as_ref()
+    }
+
+    /// The world header of the current tick; `agent_count` is the agents attached to the
+    /// replay (the recorded ones are long gone).
+    pub fn world_header(&self, agent_count: usize) -> WorldHeader {
+        let w = self.stage.world();
+        WorldHeader {
+            tick: w.tick(),
+            sim_time_s: w.time_s(),
+            state_hash: w.state_hash(),
+            run_state: self.state as u32,
+            robot_count: self.stage.ids().count() as u32,
+            agent_count: agent_count as u32,
+            lockstep: self.recording.start.lockstep as u32,
+        }
+    }
+
+    /// Every robot's state as the hub published it, in id order (no robot is lagging: the
+    /// recording keeps what the agents did, not how late they were).
+    pub fn robot_states(&self) -> impl Iterator<Item = RobotState> + '_ {
+        self.stage.ids().filter_map(|id| {
+            let r = self.stage.robot(id)?;
+            Some(robot_state(r, id, self.owners.get(&id).copied().unwrap_or(0), false))
+        })
+    }
+
+    /// Every robot's proximity-sensor geometry, in id order.
+    pub fn robot_sensors(&self) -> impl Iterator<Item = RobotSensors> + '_ {
+        let range = self.stage.world().params().proximity_range_m;
+        self.stage.ids().filter_map(move |id| Some(sensor_geometry(self.stage.robot(id)?, id, range)))
+    }
+
+    /// The map for `audience` as the recorded hub published it, its start grid included.
+    pub fn map_items(&self, audience: MapAudience) -> (MapHeader, Vec<MapItem>) {
+        let s = &self.recording.start;
+        let mode = if s.lockstep { Mode::LockStep } else { Mode::RealTime };
+        let params = hub_params(&s.params, mode, s.tick_limit, s.deadline_ms);
+        pack_map_for(audience, &s.lab, &s.grid, s.obstacle_from, &s.checkpoints, s.cycle_ms, params)
+    }
+}
+
+/// How a served replay ended.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Served {
+    /// Steps played.
+    pub steps: u64,
+    /// The world shown last, as `iwsim hub --json` reports a run's end (`interrupted` when
+    /// SIGINT or SIGTERM ended it).
+    pub outcome: HubOutcome,
+    /// The first step whose hash differs (when checking).
+    pub mismatch: Option<StageApplyError>,
+    /// Agents that said hello.
+    pub agents_seen: u64,
+    /// Robot registrations refused.
+    pub robots_refused: u64,
+}
+
+/// An agent attached to the replay: its sensor service carries nothing but the end of the run.
+struct AgentPorts {
+    publisher: Publisher<Svc, [SensorBlock], TickHeader>,
+    _service: ipc_services::SensorService,
+    pidfd: Option<PidFd>,
+    /// The register client that said hello: only its requests speak for this agent.
+    client: u128,
+}
+
+/// The longest the end waits for observers and agents to read the `Finished` tick and leave:
+/// what a client reads lives in the replay's shared memory, which goes when the replay does.
+const LINGER: Duration = Duration::from_secs(2);
+
+/// The longest a tick lasts, whatever the speed (a speed near 0 would otherwise overflow the
+/// clock).
+const LONGEST_TICK: Duration = Duration::from_secs(86_400);
+
+/// Serves `recording` as session `options.session` until its end, a Stop command, or
+/// SIGINT/SIGTERM.
+pub fn serve(recording: &Recording, options: &ServeOptions) -> Result<Served, ReplayServeError> {
+    if !(options.speed > 0.0 && options.speed.is_finite()) {
+        return Err(ReplayServeError::BadSpeed(options.speed));
+    }
+    let mut player = Player::new(recording, options)?;
+    let cycle_s = recording.start.cycle_ms.max(1) as f64 / 1000.0;
+    let period = Duration::try_from_secs_f64(cycle_s / options.speed).unwrap_or(LONGEST_TICK).min(LONGEST_TICK);
+
+    let session = Session::new(&options.session)?;
+    // Dropped last, on every way out: the last process of a session leaves nothing in /dev/shm.
+    let _release = session.release_on_drop();
+    let cleaned = clean_dead_nodes(&session);
+    if cleaned > 0 {
+        tracing::info!("removed {cleaned} dead iceoryx2 nodes left by an earlier run of session {}", options.session);
+    }
+    // The hub's node name: observers find the process serving the session by it.
+    let node = session.node(HUB_NODE_NAME)?;
+    let world_svc = session.world(&node, Role::Hub)?;
+    let map_svc = session.map(&node, Role::Hub)?;
+    let observer_map_svc = session.observer_map(&node, Role::Hub)?;
+    let sensors_svc = session.robot_sensors(&node, Role::Hub)?;
+    let actions_svc = session.actions(&node, Role::Hub)?;
+    let register_svc = session.register(&node, Role::Hub)?;
+    let control_svc = session.control(&node, Role::Hub)?;
+    let tick_svc = session.tick_event(&node, Role::Hub)?;
+    let doorbell_svc = session.hub_event(&node, Role::Hub)?;
+
+    let world_pub = world_svc
+        .publisher_builder()
+        .initial_max_slice_len(64)
+        .allocation_strategy(SLICE_ALLOCATION)
+        .create()
+        .map_err(ipc("create the world publisher"))?;
+    let sensors_pub = sensors_svc
+        .publisher_builder()
+        .initial_max_slice_len(64)
+        .allocation_strategy(SLICE_ALLOCATION)
+        .create()
+        .map_err(ipc("create the robot-sensors publisher"))?;
+    // Both maps are kept for late subscribers, like the hub's.
+    let publish_map = |svc: &ipc_services::MapService, audience| -> Result<_, ReplayServeError> {
+        let (header, items) = player.map_items(audience);
+        let publisher = svc
+            .publisher_builder()
+            .initial_max_slice_len(items.len().max(1))
+            .allocation_strategy(SLICE_ALLOCATION)
+            .create()
+            .map_err(ipc("create a map publisher"))?;
+        let mut sample = publisher.loan_slice_uninit(items.len()).map_err(ipc("loan the map"))?;
+        *sample.user_header_mut() = header;
+        sample.write_from_slice(&items).send().map_err(ipc("send the map"))?;
+        Ok(publisher)
+    };
+    let map_pub = publish_map(&map_svc, MapAudience::Agents)?;
+    let observer_map_pub = publish_map(&observer_map_svc, MapAudience::Observers)?;
+    // Nobody's actions move a recorded robot, but agents wait for this subscriber to exist.
+    let actions_sub = actions_svc.subscriber_builder().create().map_err(ipc("create the actions subscriber"))?;
+    let register_server = register_svc.server_builder().create().map_err(ipc("create the register server"))?;
+    let control_server = control_svc.server_builder().create().map_err(ipc("create the control server"))?;
+    let tick_notifier = tick_svc.notifier_builder().create().map_err(ipc("create the tick notifier"))?;
+    let doorbell = doorbell_svc.listener_builder().create().map_err(ipc("create the doorbell listener"))?;
+    #[allow(unsafe_code)]
+    // SAFETY: the listener outlives every poll below; we only read the fd number.
+    let doorbell_fd = unsafe { doorbell.file_descriptor().native_handle() };
+
+    let pid = std::process::id();
+    let mut agents: BTreeMap<u32, AgentPorts> = BTreeMap::new();
+    let mut next_agent_id = 1u32;
+    let mut served =
+        Served { steps: 0, outcome: HubOutcome::default(), mismatch: None, agents_seen: 0, robots_refused: 0 };
+    let mut states: Vec<RobotState> = Vec::new();
+    let mut roster: Vec<RobotSensors> = Vec::new();
+    let mut roster_ids: Option<Vec<u32>> = None;
+    let mut fds: Vec<i32> = Vec::new();
+    let mut fd_agents: Vec<u32> = Vec::new();
+    let mut ready = Vec::new();
+    let mut next_tick_at = Instant::now() + period;
+    let mut publish = true;
+
+    tracing::info!(
+        "replaying {} ticks of lab {:?} on session {} at {}x",
+        recording.events.iter().filter(|e| matches!(e, Event::Step { .. })).count(),
+        recording.start.lab.name,
+        options.session,
+        options.speed
+    );
+    loop {
+        if node.wait(Duration::ZERO).is_err() {
+            served.outcome.interrupted = true;
+            player.command(Command::Stop);
+            publish = true;
+        }
+        if publish {
+            publish = false;
+            states.clear();
+            states.extend(player.robot_states());
+            let finished = player.state() == RunState::Finished;
+            let header = player.world_header(agents.len());
+            let mut sample = world_pub.loan_slice_uninit(states.len()).map_err(ipc("loan a world snapshot"))?;
+            *sample.user_header_mut() = header;
+            sample.write_from_slice(&states).send().map_err(ipc("send a world snapshot"))?;
+            // The sensor geometry is fixed at registration: a new set of ids is a new roster.
+            if roster_ids.as_ref().is_none_or(|ids| !ids.iter().copied().eq(states.iter().map(|r| r.id))) {
+                roster_ids = Some(states.iter().map(|r| r.id).collect());
+                roster.clear();
+                roster.extend(player.robot_sensors());
+                let sample = sensors_pub.loan_slice_uninit(roster.len()).map_err(ipc("loan robot sensors"))?;
+                sample.write_from_slice(&roster).send().map_err(ipc("send robot sensors"))?;
+            }
+            if finished {
+                // Agents have no robots here, so they get no blocks per tick, but every agent
+                // hears the end.
+                for ports in agents.values() {
+                    let sample = ports.publisher.loan_slice_uninit(0).map_err(ipc("loan sensor blocks"))?;
+                    let mut sample = sample.write_from_slice(&[]);
+                    *sample.user_header_mut() = TickHeader {
+                        tick: header.tick,
+                        sim_time_s: header.sim_time_s,
+                        run_state: header.run_state,
+                        count: 0,
+                        t_pub_ns: ipc_services::monotonic_ns(),
+                    };
+                    sample.send().map_err(ipc("send sensor blocks"))?;
+                }
+            }
+            tick_notifier.notify().map_err(ipc("ring the tick"))?;
+            if finished {
+                break;
+            }
+        }
+
+        let timeout = if !player.may_step() {
+            IDLE_POLL
+        } else if player.state() == RunState::Running {
+            next_tick_at.saturating_duration_since(Instant::now())
+        } else {
+            Duration::ZERO // a single step is due at once
+        }
+        .min(IDLE_POLL);
+        fds.clear();
+        fd_agents.clear();
+        fds.push(doorbell_fd);
+        for (&id, a) in &agents {
+            if let Some(p) = &a.pidfd {
+                fds.push(p.0.as_raw_fd());
+                fd_agents.push(id);
+            }
+        }
+        poll_readable(&fds, timeout, &mut ready);
+        let _ = doorbell.try_wait(|_| {});
+        // A new subscriber gets the kept sample only when the publisher next looks at its
+        // connections: the maps are sent once, and the world not while paused.
+        let _ = map_pub.update_connections();
+        let _ = observer_map_pub.update_connections();
+        let _ = world_pub.update_connections();
+        let _ = sensors_pub.update_connections();
+        for &i in ready.iter().filter(|&&i| i > 0) {
+            let id = fd_agents[i - 1];
+            tracing::info!("agent {id} exited");
+            agents.remove(&id);
+            let _ = node.try_cleanup_dead_nodes();
+        }
+
+        while let Some(req) = register_server.receive().map_err(ipc("receive a registration"))? {
+            let r = *req.payload();
+            let origin = req.origin().value();
+            let tick = player.stage().world().tick();
+            let mut resp = RegisterResponse { hub_pid: pid, tick: tick as u32, ..bytemuck::Zeroable::zeroed() };
+            let kind = RegisterKind::from_u32(r.kind);
+            let foreign = kind.is_some_and(|k| k != RegisterKind::Hello)
+                && agents.get(&r.agent_id).is_some_and(|a| a.client != origin);
+            match kind {
+                _ if foreign => {
+                    resp.status = Refusal::NotYours as u32;
+                    resp.set_detail("this agent id belongs to another process's port");
+                }
+                Some(RegisterKind::Hello) if named_publisher(&r) == 0 => {
+                    resp.status = Refusal::Malformed as u32;
+                    resp.set_detail("a hello must name its actions publisher");
+                }
+                Some(RegisterKind::Hello) if agents.len() >= MAX_AGENTS => {
+                    resp.status = Refusal::Capacity as u32;
+                    resp.set_detail(&format!("the replay serves at most {MAX_AGENTS} agents"));
+                }
+                Some(RegisterKind::Hello) => {
+                    let id = next_agent_id;
+                    let ports =
+                        session.agent_sensors(&node, id, Role::Hub).map_err(|e| e.to_string()).and_then(|service| {
+                            let publisher = service
+                                .publisher_builder()
+                                .initial_max_slice_len(1)
+                                .allocation_strategy(SLICE_ALLOCATION)
+                                .create()
+                                .map_err(|e| format!("{e:?}"))?;
+                            Ok((service, publisher))
+                        });
+                    match ports {
+                        Ok((service, publisher)) => {
+                            next_agent_id += 1;
+                            let pidfd = PidFd::open(r.pid);
+                            agents.insert(id, AgentPorts { publisher, _service: service, pidfd, client: origin });
+                            served.agents_seen += 1;
+                            resp.agent_id = id;
+                        }
+                        Err(e) => {
+                            tracing::warn!("agent {id}: cannot create its sensor service: {e}");
+                            resp.status = Refusal::Capacity as u32;
+                            resp.set_detail("the replay cannot create this agent's sensor service");
+                        }
+                    }
+                }
+                Some(RegisterKind::Robot) => {
+                    served.robots_refused += 1;
+                    resp.agent_id = r.agent_id;
+                    resp.status = Refusal::RunStarted as u32;
+                    resp.set_detail("a replay takes no robots");
+                }
+                Some(RegisterKind::Ready) if !agents.contains_key(&r.agent_id) => {
+                    resp.status = Refusal::UnknownAgent as u32;
+                    resp.set_detail(&format!("agent {} is unknown", r.agent_id));
+                }
+                Some(RegisterKind::Ready) => resp.agent_id = r.agent_id,
+                Some(RegisterKind::Bye) => {
+                    agents.remove(&r.agent_id);
+                }
+                None => {
+                    resp.status = Refusal::Malformed as u32;
+                    resp.set_detail("unknown request kind");
+                }
+            }
+            req.send_copy(resp).map_err(ipc("answer a registration"))?;
+        }
+
+        while let Some(req) = control_server.receive().map_err(ipc("receive a command"))? {
+            let c = *req.payload();
+            let before = player.state();
+            let status = Command::from_u32(c.command).map_or(1, |cmd| player.command(cmd));
+            if before != RunState::Running && player.state() == RunState::Running {
+                next_tick_at = Instant::now() + period;
+            }
+            let resp =
+                ControlResponse { status, run_state: player.state() as u32, tick: player.stage().world().tick() };
+            req.send_copy(resp).map_err(ipc("answer a command"))?;
+            publish = true;
+        }
+
+        // Drained so a sender's queue never fills; a recorded world takes no actions.
+        while actions_sub.receive().map_err(ipc("receive actions"))?.is_some() {}
+
+        if player.may_step() {
+            let now = Instant::now();
+            let due = player.state() != RunState::Running || now >= next_tick_at;
+            if due {
+                player.step()?;
+                publish = true;
+                if player.state() == RunState::Running {
+                    next_tick_at += period;
+                    if next_tick_at < now {
+                        next_tick_at = now + period; // fell behind: do not try to catch up
+                    }
+                }
+            }
+        }
+    }
+
+    // Observers and agents read the last tick from this process's shared memory: give them
+    // up to LINGER to read it and leave.
+    let linger_until = Instant::now() + LINGER;
+    while Instant::now() < linger_until {
+        let alive: Vec<i32> = agents.values().filter_map(|a| a.pidfd.as_ref().map(|p| p.0.as_raw_fd())).collect();
+        if alive.is_empty() && world_svc.dynamic_config().number_of_subscribers() == 0 {
+            break;
+        }
+        // Wakes when an agent exits; observers leave no fd to wait on, so look again soon.
+        poll_readable(&alive, Duration::from_millis(10), &mut ready);
+        for &i in &ready {
+            let fd = alive[i];
+            agents.retain(|_, a| a.pidfd.as_ref().is_none_or(|p| p.0.as_raw_fd() != fd));
+        }
+    }
+
+    served.steps = player.steps();
+    served.outcome = HubOutcome { interrupted: served.outcome.interrupted, ..outcome_of(player.stage()) };
+    served.mismatch = player.mismatch().cloned();
+    drop((
+        agents,
+        world_pub,
+        map_pub,
+        observer_map_pub,
+        sensors_pub,
+        actions_sub,
+        register_server,
+        control_server,
+        tick_notifier,
+        doorbell,
+    ));
+    drop((
+        world_svc,
+        map_svc,
+        observer_map_svc,
+        sensors_svc,
+        actions_svc,
+        register_svc,
+        control_svc,
+        tick_svc,
+        doorbell_svc,
+        node,
+    ));
+    Ok(served)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::core::HubCore;
+    use ipc_types::{ActionBlock, RobotRegistration};
+    use world::map::{Params, builtin};
+
+    /// A 20-tick lock-step run of two robots, recorded, and the hub that ran it.
+    fn recorded_run() -> (Recording, HubCore) {
+        let map = builtin::map("liacc").expect("built in");
+        let mut core = HubCore::new(&map.lab, map.grid, Params::default(), 7, Mode::LockStep, 20).expect("valid");
+        core.record();
+        let start = core.run_start(1000);
+        let a = core.hello(1).expect("room");
+        let r1 = core.register(a, &RobotRegistration::new("left")).expect("ok").0;
+        let r2 = core.register(a, &RobotRegistration::new("right")).expect("ok").0;
+        core.command(Command::Start, 0);
+        for t in 0..20 {
+            core.actions(a, t, &[ActionBlock::motors(r1, 0.5, 0.4), ActionBlock::motors(r2, 0.3, 0.3)]);
+            core.step();
+        }
+        let mut events = Vec::new();
+        core.take_journal(&mut events);
+        events.push(Event::Finish { tick: 20, reason: "finished".into() });
+        let recording = Recording { start, events, truncated: None, metadata: Default::default() };
+        (recording, core)
+    }
+
+    fn options() -> ServeOptions {
+        ServeOptions {
+            session: "unused".into(),
+            speed: 1.0,
+            looped: false,
+            start_on_command: false,
+            check: true,
+            until: None,
+        }
+    }
+
+    #[test]
+    fn a_played_recording_shows_the_hubs_snapshots_bit_for_bit_and_then_finishes() {
+        let (recording, hub) = recorded_run();
+        let mut p = Player::new(&recording, &options()).expect("plays");
+        assert_eq!(p.robot_states().count(), 2, "the robots are there at tick 0");
+        while p.state() != RunState::Finished {
+            p.step().expect("applies");
+        }
+        assert_eq!((p.steps(), p.mismatch()), (20, None));
+        let played: Vec<RobotState> = p.robot_states().collect();
+        let live: Vec<RobotState> = hub.robot_states().collect();
+        assert_eq!(bytemuck::cast_slice::<_, u8>(&played), bytemuck::cast_slice::<_, u8>(&live));
+        assert_eq!(p.world_header(0).state_hash, hub.world_header().state_hash);
+        let sensors: Vec<RobotSensors> = p.robot_sensors().collect();
+        assert_eq!(
+            bytemuck::cast_slice::<_, u8>(&sensors),
+            bytemuck::cast_slice::<_, u8>(&hub.robot_sensors().collect::<Vec<_>>())
+        );
+    }
+
+    #[test]
+    fn commands_pause_resume_single_step_and_stop_a_replay() {
+        let (recording, _) = recorded_run();
+        let mut p = Player::new(&recording, &ServeOptions { start_on_command: true, ..options() }).expect("plays");
+        assert_eq!(p.state(), RunState::Waiting);
+        assert!(!p.may_step());
+        assert_eq!(p.command(Command::Step), 0);
+        assert!(p.may_step());
+        p.step().expect("applies");
+        assert!(!p.may_step(), "one step only");
+        assert_eq!(p.stage().world().tick(), 1);
+        p.command(Command::Start);
+        assert_eq!(p.command(Command::Pause), 0);
+        assert_eq!(p.state(), RunState::Paused);
+        assert_eq!(p.command(Command::RemoveRobot), 3, "a recorded robot stays");
+        p.command(Command::Stop);
+        assert_eq!(p.state(), RunState::Finished);
+        assert!(!p.may_step());
+    }
+
+    #[test]
+    fn until_ends_early_and_loop_starts_over() {
+        let (recording, _) = recorded_run();
+        let mut p = Player::new(&recording, &ServeOptions { until: Some(5), ..options() }).expect("plays");
+        while p.state() != RunState::Finished {
+            p.step().expect("applies");
+        }
+        assert_eq!(p.stage().world().tick(), 5);
+
+        let mut p = Player::new(&recording, &ServeOptions { looped: true, ..options() }).expect("plays");
+        for _ in 0..20 {
+            p.step().expect("applies");
+        }
+        assert_eq!((p.stage().world().tick(), p.state()), (20, RunState::Running), "the last tick is shown");
+        p.step().expect("applies");
+        assert_eq!((p.stage().world().tick(), p.state()), (0, RunState::Running), "back at the start");
+        assert_eq!(p.robot_states().count(), 2);
+    }
+
+    #[test]
+    fn maps_keep_the_obstacles_from_agents_only() {
+        let (mut recording, _) = recorded_run();
+        recording.start.obstacle_from = 20;
+        let p = Player::new(&recording, &options()).expect("plays");
+        let (agents, _) = p.map_items(MapAudience::Agents);
+        let (observers, _) = p.map_items(MapAudience::Observers);
+        assert_eq!((agents.wall_count, observers.wall_count), (20, 23));
+        assert_eq!(observers.cycle_ms, recording.start.cycle_ms);
+    }
+}

@@ -1,0 +1,261 @@
+//! The world and its robots by id: every change the hub makes to its world goes through a
+//! [`Stage`], which journals it when the run is recorded. Replaying a recording applies the
+//! journal to a fresh `Stage` ([`Stage::apply`]), so a live run and its replay share one
+//! definition of every change, and their state hashes agree tick for tick.
+
+use std::collections::BTreeMap;
+
+use ipc_types::MAX_ROBOTS;
+use recorder::journal::{Event, RecordedAction};
+use world::map::{Lab, Params};
+use world::{Action, AddRobotError, Message, Robot, RobotHandle, RobotSpec, StepStats, World, WorldBuildError};
+
+/// Why a journal event could not be applied to a stage.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum StageApplyError {
+    /// A robot the journal adds was refused by the world (the recording does not belong to
+    /// this version of iwsim, or it was altered).
+    #[error("robot {id} cannot be added again: {reason}")]
+    AddRefused {
+        /// Robot id.
+        id: u32,
+        /// The world's refusal.
+        reason: String,
+    },
+    /// A step's state hash differs from the recorded one.
+    #[error("tick {tick}: state hash {replayed:016x} differs from the recorded {recorded:016x}")]
+    HashDiffers {
+        /// The tick the step ended on.
+        tick: u64,
+        /// The hash the recording holds.
+        recorded: u64,
+        /// The hash the replay computed.
+        replayed: u64,
+    },
+    /// A step names a tick other than the world's.
+    #[error("the journal steps from tick {recorded} but the replayed world is at tick {replayed}")]
+    TickOutOfOrder {
+        /// The tick the journal names.
+        recorded: u64,
+        /// The world's tick.
+        replayed: u64,
+    },
+}
+
+/// The world, its robots by id, and the journal of changes.
+#[derive(Debug)]
+pub struct Stage {
+    world: World,
+    seed: u64,
+    dt_s: f64,
+    handles: BTreeMap<u32, RobotHandle>,
+    /// Robot id by world slot index (0: none), for message senders.
+    id_by_slot: Vec<u32>,
+    settled: bool,
+    /// `Some` while recording: the changes since the last [`Stage::take_journal`].
+    journal: Option<Vec<Event>>,
+    /// Scratch for the world's actions of a step.
+    scratch: Vec<Action>,
+}
+
+impl Stage {
+    /// An empty world on `lab` with `params`, seeded with `seed`; a tick lasts `cycle_ms`.
+    pub fn new(lab: &Lab, params: Params, seed: u64) -> Result<Self, WorldBuildError> {
+        let dt_s = params.cycle_ms.max(1) as f64 / 1000.0;
+        let mut world = World::new(lab, params, seed)?;
+        world.set_capacity(MAX_ROBOTS);
+        Ok(Self {
+            world,
+            seed,
+            dt_s,
+            handles: BTreeMap::new(),
+            id_by_slot: Vec::new(),
+            settled: false,
+            journal: None,
+            scratch: Vec::new(),
+        })
+    }
+
+    /// The world.
+    pub fn world(&self) -> &World {
+        &self.world
+    }
+
+    /// The world's seed.
+    pub fn seed(&self) -> u64 {
+        self.seed
+    }
+
+    /// Simulated seconds per tick.
+    pub fn dt_s(&self) -> f64 {
+        self.dt_s
+    }
+
+    /// Robot `id`, if it is in the world.
+    pub fn robot(&self, id: u32) -> Option<&Robot> {
+        self.world.robot(*self.handles.get(&id)?)
+    }
+
+    /// The id of the robot in world slot `handle` (0 if none).
+    pub fn id_of(&self, handle: RobotHandle) -> u32 {
+        self.id_by_slot.get(handle.index() as usize).copied().unwrap_or(0)
+    }
+
+    /// Starts journaling every change (see [`Stage::take_journal`]).
+    pub fn record(&mut self) {
+        self.journal.get_or_insert_with(Vec::new);
+    }
+
+    /// The changes since the last call, oldest first (none unless recording).
+    pub fn take_journal(&mut self, into: &mut Vec<Event>) {
+        if let Some(j) = &mut self.journal {
+            into.append(j);
+        }
+    }
+
+    fn journal(&mut self, event: impl FnOnce() -> Event) {
+        if let Some(j) = &mut self.journal {
+            j.push(event());
+        }
+    }
+
+    fn place(&mut self, id: u32, handle: RobotHandle) {
+        let slot = handle.index() as usize;
+        if self.id_by_slot.len() <= slot {
+            self.id_by_slot.resize(slot + 1, 0);
+        }
+        self.id_by_slot[slot] = id;
+        self.handles.insert(id, handle);
+    }
+
+    /// Adds robot `id` of agent `agent_id`.
+    pub fn add(&mut self, id: u32, agent_id: u32, spec: RobotSpec) -> Result<(), AddRobotError> {
+        let recorded = self.journal.is_some().then(|| spec.clone());
+        let handle = self.world.add_robot(spec)?;
+        self.place(id, handle);
+        if let Some(spec) = recorded {
+            self.journal(|| Event::AddRobot { id, agent_id, spec });
+        }
+        Ok(())
+    }
+
+    /// Removes robot `id`; whether it was there.
+    pub fn remove(&mut self, id: u32) -> bool {
+        let Some(handle) = self.handles.remove(&id) else { return false };
+        self.world.remove_robot(handle);
+        if let Some(slot) = self.id_by_slot.get_mut(handle.index() as usize) {
+            *slot = 0;
+        }
+        self.journal(|| Event::RemoveRobot { id });
+        true
+    }
+
+    /// Freezes or thaws robot `id`; whether it is there.
+    pub fn set_frozen(&mut self, id: u32, frozen: bool) -> bool {
+        let Some(&handle) = self.handles.get(&id) else { return false };
+        self.world.set_frozen(handle, frozen);
+        self.journal(|| Event::Freeze { id, frozen });
+        true
+    }
+
+    /// Measures every robot where it stands, without noise (before the first step).
+    pub fn refresh_sensors(&mut self) {
+        self.world.refresh_sensors();
+    }
+
+    /// Rebuilds the world with its robots added in name order (id order among equal names):
+    /// registrations arrive in whatever order the agents' processes run, and the world's slot
+    /// order fixes the order of every random draw, so without this two runs with one seed
+    /// could differ. Names, not ids, because ids given out on request (id 0) also follow the
+    /// order in which agents happened to register.
+    fn settle(&mut self) {
+        self.settled = true;
+        let Ok(mut world) = World::new(self.world.lab(), self.world.params().clone(), self.seed) else {
+            return; // the same lab and parameters built once already
+        };
+        world.set_capacity(MAX_ROBOTS);
+        let mut order: Vec<(String, u32)> =
+            self.handles.iter().filter_map(|(&id, &h)| Some((self.world.robot(h)?.spec.name.clone(), id))).collect();
+        order.sort();
+        let old = std::mem::take(&mut self.handles);
+        self.id_by_slot.clear();
+        for (_, id) in order {
+            let Some(r) = old.get(&id).and_then(|&h| self.world.robot(h)) else { continue };
+            let spec = RobotSpec { pose: r.pose, ..r.spec.clone() };
+            let frozen = r.frozen;
+            let Ok(handle) = world.add_robot(spec) else { continue };
+            world.set_frozen(handle, frozen);
+            self.place(id, handle);
+        }
+        self.world = world;
+        self.journal(|| Event::Settle);
+    }
+
+    /// Steps the world once with `actions` (by robot id; unknown ids are skipped), settling
+    /// the slots first if this is the first step.
+    pub fn step(&mut self, actions: &[RecordedAction]) -> StepStats {
+        if self.world.tick() == 0 && !self.settled {
+            self.settle();
+        }
+        let tick = self.world.tick();
+        let mut scratch = std::mem::take(&mut self.scratch);
+        scratch.clear();
+        scratch.extend(actions.iter().filter_map(|a| {
+            Some(Action {
+                robot: *self.handles.get(&a.id)?,
+                motors: a.motors,
+                pose: a.pose,
+                say: a.say.as_deref().and_then(|b| Message::new(b).ok()),
+            })
+        }));
+        let stats = self.world.step(&scratch, self.dt_s);
+        self.scratch = scratch;
+        if self.journal.is_some() {
+            let hash = self.world.state_hash();
+            self.journal(|| Event::Step { tick, actions: actions.to_vec(), hash });
+        }
+        stats
+    }
+
+    /// The robots' ids, in id order.
+    pub fn ids(&self) -> impl Iterator<Item = u32> + '_ {
+        self.handles.keys().copied()
+    }
+
+    /// Applies one recorded event, checking a step's hash against the recorded one when
+    /// `check` is set. Returns the tick a step ended on.
+    pub fn apply(&mut self, event: &Event, check: bool) -> Result<Option<u64>, StageApplyError> {
+        match event {
+            Event::AddRobot { id, agent_id, spec } => self
+                .add(*id, *agent_id, spec.clone())
+                .map_err(|e| StageApplyError::AddRefused { id: *id, reason: e.to_string() })?,
+            Event::RemoveRobot { id } => {
+                self.remove(*id);
+            }
+            Event::Freeze { id, frozen } => {
+                self.set_frozen(*id, *frozen);
+            }
+            Event::Settle => {
+                if !self.settled {
+                    self.settle();
+                }
+            }
+            Event::Step { tick, actions, hash } => {
+                if *tick != self.world.tick() {
+                    return Err(StageApplyError::TickOutOfOrder { recorded: *tick, replayed: self.world.tick() });
+                }
+                self.step(actions);
+                if !check {
+                    return Ok(Some(self.world.tick()));
+                }
+                let replayed = self.world.state_hash();
+                if replayed != *hash {
+                    return Err(StageApplyError::HashDiffers { tick: self.world.tick(), recorded: *hash, replayed });
+                }
+                return Ok(Some(self.world.tick()));
+            }
+            Event::Finish { .. } => {}
+        }
+        Ok(None)
+    }
+}
