@@ -150,6 +150,14 @@ pub fn run(args: &HubArgs) -> anyhow::Result<ExitCode> {
                 r.id, r.x_m, r.y_m, r.heading_deg, r.flags
             );
         }
+        if let Some(path) = &args.record {
+            println!(
+                "recorded {} bytes to {} ({} world frames for people dropped; the replay journal is whole)",
+                out.recorded_bytes,
+                path.display(),
+                out.recording_dropped_frames
+            );
+        }
         if out.interrupted {
             println!("stopped by a termination signal");
         }
