@@ -8,17 +8,17 @@ use bytemuck::Zeroable;
 use ipc_types::{
     ACT_MOTORS, ACT_POSE, ACT_SAY, ActionBlock, COLLISION, Command, FixedName, HAS_COMPASS, HAS_GPS, HAS_GROUND,
     HubParams, InboxEntry, MAP_BEACON, MAP_CHECKPOINT, MAP_CORNER, MAP_GRID, MAP_TARGET, MAP_WALL, MAX_AGENTS,
-    MAX_INBOX_MESSAGES, MAX_PROXIMITY, MAX_ROBOTS, MapHeader, MapItem, REG_HAS_POSE, ROBOT_COLLISION, ROBOT_FROZEN,
-    ROBOT_LAGGING, Refusal, RobotKind as WireKind, RobotRegistration, RobotSensors, RobotState, RunState,
-    SENSOR_BEACON, SENSOR_COLLISION, SENSOR_COMPASS, SENSOR_GPS, SENSOR_GROUND, SENSOR_OBSTACLE, SensorBlock,
-    SensorGeometry, WorldHeader,
+    MAX_INBOX_MESSAGES, MAX_PROXIMITY, MAX_ROBOTS, MapHeader, MapItem, REG_DISC, REG_HAS_POSE, ROBOT_COLLISION,
+    ROBOT_DISC, ROBOT_FROZEN, ROBOT_LAGGING, Refusal, RobotKind as WireKind, RobotRegistration, RobotSensors,
+    RobotState, RunState, SENSOR_BEACON, SENSOR_COLLISION, SENSOR_COMPASS, SENSOR_GPS, SENSOR_GROUND, SENSOR_OBSTACLE,
+    SensorBlock, SensorGeometry, WorldHeader,
 };
 
 use recorder::journal::{Event, RecordedAction, RunStart};
 use records::places::Checkpoint;
 use world::map::{Grid, Lab, Params};
 use world::math::Pose;
-use world::{Message, ProximitySpec, RobotKind, RobotSpec, World, WorldBuildError};
+use world::{BodyShape, Message, ProximitySpec, RobotKind, RobotSpec, World, WorldBuildError};
 
 use crate::stage::Stage;
 
@@ -286,9 +286,10 @@ impl HubCore {
                 range_m: (s.range_m != 0.0).then_some(s.range_m),
             })
             .collect();
-        Ok(RobotSpec {
+        let spec = RobotSpec {
             name: if name.is_empty() { format!("robot{id}") } else { name.to_owned() },
             kind,
+            shape: BodyShape::Rectangle,
             width_m: reg.width_m,
             height_m: reg.height_m,
             com: reg.com,
@@ -296,7 +297,9 @@ impl HubCore {
             accel_curve: reg.accel_curve,
             pose,
             sensors,
-        })
+        };
+        // A disc is its diameter alone: its height and COM follow from it.
+        Ok(if reg.flags & REG_DISC != 0 { spec.disc(reg.width_m) } else { spec })
     }
 
     /// An agent has registered all its robots.
@@ -581,7 +584,8 @@ pub fn robot_state(r: &world::Robot, id: u32, agent_id: u32, lagging: bool) -> R
         } as u32,
         flags: (r.collision as u32 * ROBOT_COLLISION)
             | (r.frozen as u32 * ROBOT_FROZEN)
-            | (lagging as u32 * ROBOT_LAGGING),
+            | (lagging as u32 * ROBOT_LAGGING)
+            | ((r.spec.shape == BodyShape::Disc) as u32 * ROBOT_DISC),
         collision_count: r.collision_count.min(u32::MAX as u64) as u32,
         x_m: r.pose.x,
         y_m: r.pose.y,
@@ -814,6 +818,25 @@ mod tests {
         bad = reg;
         bad.kind = 9;
         assert_eq!(c.register(a, &bad).map_err(|e| e.reason), Err(Refusal::Malformed));
+    }
+
+    #[test]
+    fn a_disc_registration_becomes_a_disc_and_observers_are_told() {
+        let mut c = core(Mode::LockStep);
+        let a = c.hello(100).expect("room");
+        // A stale height and COM are overridden by the diameter.
+        let mut reg = RobotRegistration::new("plain").disc(1.0).motors(3.0, 0.5).at(Some([10.0, 6.1, 0.0]));
+        (reg.height_m, reg.com) = (0.3, 0.9);
+        let id = c.register(a, &reg).expect("accepted").0;
+        let spec = &c.stage.robot(id).expect("in the world").spec;
+        assert_eq!((spec.shape, spec.width_m, spec.height_m, spec.com), (BodyShape::Disc, 1.0, 1.0, 0.5));
+        assert_eq!((spec.max_speed_mps, spec.accel_curve), (3.0, 0.5));
+        let state = c.robot_states().find(|s| s.id == id).expect("published");
+        assert_ne!(state.flags & ROBOT_DISC, 0);
+        assert_eq!((state.width_m, state.height_m), (1.0, 1.0));
+        // A rectangle is not flagged.
+        let rect = c.register(a, &RobotRegistration::new("chair")).expect("accepted").0;
+        assert_eq!(c.robot_states().find(|s| s.id == rect).expect("published").flags & ROBOT_DISC, 0);
     }
 
     #[test]

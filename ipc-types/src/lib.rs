@@ -213,11 +213,14 @@ pub const ROBOT_COLLISION: u32 = 1;
 pub const ROBOT_FROZEN: u32 = 1 << 1;
 /// `RobotState::flags`: the robot's agent missed the lock-step deadline this tick.
 pub const ROBOT_LAGGING: u32 = 1 << 2;
+/// `RobotState::flags`: the body is a disc of diameter `width_m` centred on (`x_m`, `y_m`)
+/// (a plain Ciber-Rato robot); otherwise a `width_m` × `height_m` rectangle placed by `com`.
+pub const ROBOT_DISC: u32 = 1 << 3;
 
 /// One robot in a world snapshot.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable, ZeroCopySend)]
-#[type_name("iwsim::RobotState.v2")]
+#[type_name("iwsim::RobotState.v3")]
 pub struct RobotState {
     /// Robot id (1-based, unique in the run).
     pub id: u32,
@@ -233,9 +236,9 @@ pub struct RobotState {
     pub y_m: f64,
     /// Heading, degrees in (−180, 180].
     pub heading_deg: f64,
-    /// Length along the heading, metres.
+    /// Length along the heading, metres; a disc's diameter (with [`ROBOT_DISC`]).
     pub width_m: f32,
-    /// Size across the heading, metres.
+    /// Size across the heading, metres; a disc's diameter again.
     pub height_m: f32,
     /// Where the wheel axis sits along the length, (0, 1).
     pub com: f32,
@@ -483,11 +486,14 @@ const _: () = assert!(core::mem::align_of::<SensorSpec>() == 8);
 
 /// `RobotRegistration::flags`: the registration gives a start pose (else the grid slot's).
 pub const REG_HAS_POSE: u32 = 1;
+/// `RobotRegistration::flags`: the body is a disc of diameter `width_m` turning about its
+/// centre (`height_m` and `com` are then ignored): a plain Ciber-Rato robot.
+pub const REG_DISC: u32 = 1 << 1;
 
 /// A robot as an agent registers it (thesis Tables 4.3 and 4.4).
 #[repr(C)]
 #[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable, ZeroCopySend)]
-#[type_name("iwsim::RobotRegistration.v1")]
+#[type_name("iwsim::RobotRegistration.v2")]
 pub struct RobotRegistration {
     /// Requested id = 1-based grid slot; 0 takes the first free one.
     pub requested_id: u32,
@@ -536,7 +542,15 @@ impl RobotRegistration {
     /// With the rectangle `width_m` (along the heading) × `height_m` and the centre of
     /// movement `com` ∈ (0, 1) (thesis Table 4.1).
     pub fn body(mut self, width_m: f64, height_m: f64, com: f64) -> Self {
+        self.flags &= !REG_DISC;
         (self.width_m, self.height_m, self.com) = (width_m, height_m, com);
+        self
+    }
+
+    /// With a disc body of `diameter_m` centred on its centre of movement ([`REG_DISC`]).
+    pub fn disc(mut self, diameter_m: f64) -> Self {
+        self.flags |= REG_DISC;
+        (self.width_m, self.height_m, self.com) = (diameter_m, diameter_m, 0.5);
         self
     }
 
@@ -565,7 +579,7 @@ impl RobotRegistration {
 /// What an agent sends on the register service.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable, ZeroCopySend)]
-#[type_name("iwsim::RegisterRequest.v2")]
+#[type_name("iwsim::RegisterRequest.v3")]
 pub struct RegisterRequest {
     /// [`RegisterKind`] as u32.
     pub kind: u32,
@@ -916,11 +930,12 @@ mod tests {
     #[test]
     fn every_payload_has_a_versioned_type_name() {
         assert_eq!(type_name_of::<WorldHeader>(), "iwsim::WorldHeader.v1");
-        assert_eq!(type_name_of::<RobotState>(), "iwsim::RobotState.v2");
+        assert_eq!(type_name_of::<RobotState>(), "iwsim::RobotState.v3");
+        assert_eq!(type_name_of::<RobotRegistration>(), "iwsim::RobotRegistration.v2");
         assert_eq!(type_name_of::<RobotSensors>(), "iwsim::RobotSensors.v1");
         assert_eq!(type_name_of::<SensorBlock>(), "iwsim::SensorBlock.v2");
         assert_eq!(type_name_of::<ActionBlock>(), "iwsim::ActionBlock.v1");
-        assert_eq!(type_name_of::<RegisterRequest>(), "iwsim::RegisterRequest.v2");
+        assert_eq!(type_name_of::<RegisterRequest>(), "iwsim::RegisterRequest.v3");
         assert_eq!(type_name_of::<MapItem>(), "iwsim::MapItem.v1");
         assert_eq!(type_name_of::<Ping>(), "iwsim::bench::Ping.v2");
     }
@@ -961,6 +976,19 @@ mod tests {
         assert!(a.with_say(&[b'x'; 100]));
         assert!(!a.with_say(&[b'x'; 101]));
         assert_eq!(a.say_len, 100);
+    }
+
+    #[test]
+    fn a_disc_registration_carries_its_flag_and_diameter() {
+        let d = RobotRegistration::new("plain").disc(1.0).at(Some([3.0, 4.0, 90.0]));
+        assert_eq!(d.flags, REG_DISC | REG_HAS_POSE);
+        assert_eq!((d.width_m, d.height_m, d.com), (1.0, 1.0, 0.5));
+        // Giving a rectangle afterwards makes it a rectangle again.
+        let r = d.body(1.2, 0.7, 0.8);
+        assert_eq!(r.flags, REG_HAS_POSE);
+        // The flags do not collide with each other.
+        assert_eq!(REG_DISC & REG_HAS_POSE, 0);
+        assert_eq!(ROBOT_DISC & (ROBOT_COLLISION | ROBOT_FROZEN | ROBOT_LAGGING), 0);
     }
 
     #[test]

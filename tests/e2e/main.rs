@@ -2,6 +2,7 @@
 
 mod architecture;
 mod browser;
+mod ciberrato;
 mod cli;
 mod common;
 mod hardening;

@@ -239,8 +239,8 @@ fn malformed_input_is_refused_or_ignored_and_the_bridge_keeps_serving() {
         // (datagram, whether the simulator answers it with a refusal)
         (b"<Robot Name=\"a\"", false),
         (b"<Hello/>", false),
-        (b"<Robot Id=\"-1\"/>", false),
-        (b"<Robot Id=\"abc\"/>", false),
+        (b"<Robot Id=\"-1\"/>", true),
+        (b"<Robot Id=\"abc\"/>", true),
         (b"<Robot Width=\"NaN\"/>", false),
         (b"<Robot Width=\"1\" Width=\"2\"/>", false),
         (b"<Robot Type=\"Boat\"/>", false),

@@ -248,6 +248,21 @@ mod tests {
     }
 
     #[test]
+    fn a_disc_robot_keeps_its_flag_for_the_page() {
+        let disc = RobotState {
+            flags: ipc_types::ROBOT_DISC | ipc_types::ROBOT_COLLISION,
+            width_m: 1.0,
+            height_m: 1.0,
+            com: 0.5,
+            ..robot(3, 4.0)
+        };
+        let f = decode(&encode(&WorldHeader { robot_count: 1, ..WorldHeader::default() }, &[disc])).expect("a frame");
+        // The page reads bit 8 of the flags byte as "draw a circle of diameter `width`".
+        assert_eq!(f.robots[0].flags, 9);
+        assert_eq!(f.robots[0].body, [1.0, 1.0, 0.5]);
+    }
+
+    #[test]
     fn truncated_or_foreign_bytes_are_not_frames() {
         let h = WorldHeader::default();
         let mut b = encode(&h, &[robot(1, 1.0)]);

@@ -41,6 +41,11 @@ function toLab(r, x, y) {
   return [r.x + c * x - s * y, r.y + s * x + c * y];
 }
 
+// `RobotState::flags` bit ROBOT_DISC: the body is a disc of diameter `width` centred on (x, y)
+// (a plain Ciber-Rato robot); otherwise a width × height rectangle placed by `com`.
+const ROBOT_DISC = 8;
+function isDisc(r) { return (r.flags & ROBOT_DISC) !== 0; }
+
 // Body corners in the lab frame, counter-clockwise from front-right (thesis Table 4.1).
 function corners(r) {
   const f = r.com * r.width, b = -(1 - r.com) * r.width, h = r.height / 2;
@@ -56,7 +61,7 @@ function coneArc(r, sensor, reading) {
   return { apex: toLab(r, sx, sy), radius: Math.min(reading, range), a0: mid - half, a1: mid + half };
 }
 
-if (typeof module !== "undefined") module.exports = { decodeFrame, corners, coneArc };
+if (typeof module !== "undefined") module.exports = { decodeFrame, corners, coneArc, isDisc };
 
 if (typeof document !== "undefined") {
   const params = new URLSearchParams(location.search);
@@ -164,10 +169,15 @@ if (typeof document !== "undefined") {
     const heading = new Path2D();
     for (const r of visible) {
       const p = (r.flags & 1) ? bodies.collision : r.kind === 2 ? bodies.door : r.kind === 1 ? bodies.real : bodies.chair;
-      const cs = corners(r);
-      for (let i = 0; i < 4; i++) {
-        const x = view.ox + cs[i][0] * k, y = view.oy - cs[i][1] * k;
-        i ? p.lineTo(x, y) : p.moveTo(x, y);
+      if (isDisc(r)) {
+        const cx = view.ox + r.x * k, cy = view.oy - r.y * k, R = r.width / 2 * k;
+        p.moveTo(cx + R, cy); p.arc(cx, cy, R, 0, 2 * Math.PI);
+      } else {
+        const cs = corners(r);
+        for (let i = 0; i < 4; i++) {
+          const x = view.ox + cs[i][0] * k, y = view.oy - cs[i][1] * k;
+          i ? p.lineTo(x, y) : p.moveTo(x, y);
+        }
       }
       p.closePath();
       // A line from the centre of movement to the front shows the heading.
@@ -178,7 +188,14 @@ if (typeof document !== "undefined") {
     for (const [name, p] of Object.entries(bodies)) { ctx.fillStyle = COLORS[name]; ctx.fill(p); ctx.stroke(p); }
     ctx.stroke(heading);
     const chosen = visible.find((r) => r.id === (page.follow ?? page.chair));
-    if (chosen) { ctx.lineWidth = 3; ctx.strokeStyle = "#ffd000"; poly(corners(chosen)); ctx.stroke(); ctx.lineWidth = 1; }
+    if (chosen) {
+      ctx.lineWidth = 3; ctx.strokeStyle = "#ffd000";
+      if (isDisc(chosen)) {
+        const [cx, cy] = toScreen([chosen.x, chosen.y]);
+        ctx.beginPath(); ctx.arc(cx, cy, chosen.width / 2 * k, 0, 2 * Math.PI);
+      } else poly(corners(chosen));
+      ctx.stroke(); ctx.lineWidth = 1;
+    }
     if (page.labels && visible.length <= LABELS_MAX) {
       ctx.fillStyle = "#000";
       for (const r of visible) { const [sx, sy] = toScreen([r.x, r.y]); ctx.fillText(page.names.get(r.id) || `#${r.id}`, sx + 8, sy - 8); }

@@ -9,6 +9,9 @@ const DEG = Math.PI / 180;
 const CHAIR_COLOR = new THREE.Color(0x20a040), HIT_COLOR = new THREE.Color(0xe02020);
 const DOOR_COLOR = new THREE.Color(0x8a5a2b), TYRE_COLOR = new THREE.Color(0x2a2a2a);
 const DOOR_HEIGHT = 2.0, CHAIR_TOP = 1.0, EYE_HEIGHT = 1.2;
+// `ipc_types::ROBOT_DISC`: the robot is a disc of diameter `width` (a plain Ciber-Rato robot),
+// drawn as a cylinder PUCK_HEIGHT tall.
+const ROBOT_DISC = 8, PUCK_HEIGHT = 0.3;
 const DETAILED_NEAREST = 16, DETAIL_RANGE = 25;   // chairs, metres
 // Each label is its own sprite draw call (~0.2 ms each in software WebGL), hence the cap.
 const LABEL_MAX = 30, LABEL_PX = 18;
@@ -58,6 +61,7 @@ export function createView3D(canvas) {
     box: new THREE.BoxGeometry(1, 1, 1),
     wheel: new THREE.CylinderGeometry(1, 1, 1, 10),            // axis along local y = across the chair
     disc: new THREE.CircleGeometry(1, 40),
+    puck: new THREE.CylinderGeometry(0.5, 0.5, 1, 32).rotateX(Math.PI / 2),   // unit cylinder, axis z
     pole: new THREE.CylinderGeometry(0.03, 0.03, 1, 8).rotateX(Math.PI / 2).translate(0, 0, 0.5),
     ball: new THREE.SphereGeometry(0.1, 12, 8),
   };
@@ -160,6 +164,7 @@ export function createView3D(canvas) {
     parts = {
       box: instanced(geos.box, mats.body, capacity * 5),       // seat, backrest, footrest, 2 casters; doors
       wheel: instanced(geos.wheel, mats.body, capacity * 2),
+      puck: instanced(geos.puck, mats.body, capacity),          // disc robots (plain Ciber-Rato)
     };
     const nv = FAR.pos.length / 3, ni = FAR.index.length, index = new Uint32Array(capacity * ni);
     for (let k = 0; k < capacity; k++) for (let j = 0; j < ni; j++) index[k * ni + j] = FAR.index[j] + k * nv;
@@ -227,6 +232,12 @@ export function createView3D(canvas) {
       const w = r.width, h = r.height, front = r.com * w, back = front - w, mid = (front + back) / 2;
       const col = r.flags & 1 ? HIT_COLOR : r.kind === 2 ? DOOR_COLOR : CHAIR_COLOR;
       if (r.kind === 2) { put(parts.box, x, y, c, s, mid, 0, DOOR_HEIGHT / 2, w, h, DOOR_HEIGHT, col); continue; }
+      if (r.flags & ROBOT_DISC) {
+        // A disc robot: a cylinder of its diameter on its centre, a dark nose along the heading.
+        put(parts.puck, x, y, c, s, 0, 0, PUCK_HEIGHT / 2, w, w, PUCK_HEIGHT, col);
+        put(parts.box, x, y, c, s, 0.3 * w, 0, PUCK_HEIGHT + 0.02, 0.35 * w, 0.08 * w, 0.04, TYRE_COLOR);
+        continue;
+      }
       if (order[i] > near) { putFar(nFar++, x, y, c, s, mid, w, h, col); continue; }
       // Full chair. Proportions follow the footprint; the drive wheels sit on the pose point
       // (centre of movement) unless that would push them out of the footprint.

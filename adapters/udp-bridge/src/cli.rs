@@ -21,9 +21,10 @@ pub struct UdpArgs {
     /// Registration port (Ciber-Rato clients hard-code 6000).
     #[arg(long, default_value_t = 6000)]
     pub port: u16,
-    /// Seconds a robot client may stay silent before its robot is removed.
-    #[arg(long, default_value_t = 10.0, value_parser = client_timeout_s)]
-    pub client_timeout: f64,
+    /// Remove a robot whose client stays silent this many seconds. Without it (as in
+    /// Ciber-Rato) a silent robot is never removed and keeps its last powers.
+    #[arg(long, value_name = "S", value_parser = client_timeout_s)]
+    pub client_timeout: Option<f64>,
     /// Let registered viewers and panels start, pause and stop the run and remove robots
     /// (Ciber-Rato's Viewer sends Start); without it their commands are ignored and counted.
     #[arg(long)]
@@ -53,7 +54,9 @@ pub fn run(args: &UdpArgs) -> anyhow::Result<ExitCode> {
         bind: args.bind,
         port: args.port,
         // In range by its parser; the clamp keeps a hand-built UdpArgs from panicking.
-        client_timeout: Duration::from_secs_f64(args.client_timeout.clamp(MIN_CLIENT_TIMEOUT_S, MAX_CLIENT_TIMEOUT_S)),
+        client_timeout: args
+            .client_timeout
+            .map(|s| Duration::from_secs_f64(s.clamp(MIN_CLIENT_TIMEOUT_S, MAX_CLIENT_TIMEOUT_S))),
         connect_timeout: args.hub.timeout(),
         allow_control: args.allow_control,
     };
@@ -96,7 +99,13 @@ mod tests {
         }
         for good in ["0.1", "10", "86400"] {
             let args = Cli::try_parse_from(["udp", "--client-timeout", good]).expect(good);
-            assert_eq!(args.udp.client_timeout, good.parse::<f64>().expect("a number"));
+            assert_eq!(args.udp.client_timeout, Some(good.parse::<f64>().expect("a number")));
         }
+    }
+
+    #[test]
+    fn by_default_no_robot_is_removed_for_silence() {
+        let args = Cli::try_parse_from(["udp"]).expect("no options");
+        assert_eq!(args.udp.client_timeout, None);
     }
 }

@@ -32,9 +32,13 @@ pub enum DecodeError {
     /// Malformed XML.
     #[error("malformed XML: {0}")]
     Xml(String),
-    /// An attribute appears twice.
+    /// An attribute appears twice (in a registration: twice with different values).
     #[error("attribute {0} appears twice")]
     DuplicateAttribute(String),
+    /// A robot registration whose `Id` is not a grid slot number (0 or more): the simulator
+    /// answers it with a refusal rather than silence.
+    #[error("robot Id=\"{0}\" is not a grid slot number")]
+    BadRobotId(String),
     /// The root element is not one this socket takes.
     #[error("unexpected root element <{0}>")]
     UnknownRoot(String),
@@ -94,19 +98,28 @@ impl Element {
     }
 }
 
-fn start_element(e: &BytesStart<'_>) -> Result<Element, DecodeError> {
+/// Whether an attribute may repeat with the same value.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Repeats {
+    /// Registrations: the thesis's own example (Fig. 4.13) repeats `DIR="0.0"`.
+    SameValueTolerated,
+    /// Everything else (Actions, viewer commands): any repeat makes the datagram malformed.
+    Refused,
+}
+
+fn start_element(e: &BytesStart<'_>, repeats: Repeats) -> Result<Element, DecodeError> {
     let name = e.name().as_ref().to_owned();
     let mut attrs: Vec<(String, String)> = Vec::new();
-    // Duplicates are checked here, not by quick-xml: the thesis's own registration example
-    // (Fig. 4.13) repeats DIR="0.0", so a repeat with the same value is tolerated; a repeat
-    // with another value is ambiguous and refused.
+    // Duplicates are checked here, not by quick-xml: a registration may repeat an attribute
+    // with the same value (the thesis's example does); a repeat with another value is
+    // ambiguous and refused, and so is any repeat elsewhere (malformed input changes nothing).
     for a in e.attributes().with_checks(false) {
         let a = a.map_err(|err: AttrError| DecodeError::Xml(err.to_string()))?;
         let key = a.key.as_ref().to_owned();
         let value =
             a.normalized_value(XmlVersion::Implicit1_0).map_err(|e| DecodeError::Xml(e.to_string()))?.into_owned();
         match attrs.iter().find(|(k, _)| *k == key) {
-            Some((_, v)) if *v == value => {}
+            Some((_, v)) if *v == value && repeats == Repeats::SameValueTolerated => {}
             Some(_) => return Err(DecodeError::DuplicateAttribute(key)),
             None => attrs.push((key, value)),
         }
@@ -115,7 +128,7 @@ fn start_element(e: &BytesStart<'_>) -> Result<Element, DecodeError> {
 }
 
 /// Parses one datagram into a small tree (root, children, grandchildren' text ignored).
-fn parse(datagram: &[u8]) -> Result<Element, DecodeError> {
+fn parse(datagram: &[u8], repeats: Repeats) -> Result<Element, DecodeError> {
     if datagram.len() > MAX_DATAGRAM {
         return Err(DecodeError::TooLong(datagram.len()));
     }
@@ -136,10 +149,10 @@ fn parse(datagram: &[u8]) -> Result<Element, DecodeError> {
                 if stack.len() >= 8 {
                     return Err(DecodeError::Xml("elements nested too deep".into()));
                 }
-                stack.push(start_element(&e)?);
+                stack.push(start_element(&e, repeats)?);
             }
             Event::Empty(e) => {
-                let el = start_element(&e)?;
+                let el = start_element(&e, repeats)?;
                 match stack.last_mut() {
                     Some(parent) => parent.children.push(el),
                     None if root.is_none() => root = Some(el),
@@ -270,14 +283,14 @@ fn parse_id(el: &Element) -> Result<u32, DecodeError> {
 
 /// Decodes a datagram sent to the registration port.
 pub fn decode_registration(datagram: &[u8]) -> Result<Registration, DecodeError> {
-    let el = parse(datagram)?;
+    let el = parse(datagram, Repeats::SameValueTolerated)?;
     match el.name.as_str() {
         "View" => Ok(Registration::View),
         "Panel" => Ok(Registration::Panel),
         "Robot" | "RobotBeacon" => {
             let mut r = RobotRegistration {
                 name: el.attr("Name").unwrap_or("").to_owned(),
-                id: parse_id(&el)?,
+                id: parse_id(&el).map_err(|_| DecodeError::BadRobotId(el.attr("Id").unwrap_or("").to_owned()))?,
                 width: el.num(&["Width"])?,
                 com: el.num(&["COM", "COMass"])?,
                 x: el.num(&["X"])?,
@@ -342,7 +355,7 @@ pub struct Actions {
 
 /// Decodes a datagram sent to a robot's port.
 pub fn decode_actions(datagram: &[u8]) -> Result<Actions, DecodeError> {
-    let el = parse(datagram)?;
+    let el = parse(datagram, Repeats::Refused)?;
     if el.name != "Actions" {
         return Err(DecodeError::UnknownRoot(el.name));
     }
@@ -390,7 +403,7 @@ pub enum ViewerCommand {
 
 /// Decodes a datagram sent to a viewer's port.
 pub fn decode_viewer(datagram: &[u8]) -> Result<ViewerCommand, DecodeError> {
-    let el = parse(datagram)?;
+    let el = parse(datagram, Repeats::Refused)?;
     match el.name.as_str() {
         "LabReq" => Ok(ViewerCommand::LabReq),
         "GridReq" => Ok(ViewerCommand::GridReq),
@@ -625,6 +638,9 @@ pub struct ViewerRobot {
 }
 
 /// `<Robot …><Position X Y Dir/></Robot>` for viewers (thesis Fig. 6.3 adds the body).
+///
+/// iwsim keeps no Ciber-Rato score: `Score`, `ArrivalTime` and `ReturningTime` are always 0
+/// and `VisitedMask` is empty, whatever the lab's targets; `Collisions` is the hub's count.
 pub fn encode_viewer_robot(r: &ViewerRobot) -> Vec<u8> {
     let mut s = String::with_capacity(300);
     let _ = write!(
@@ -649,6 +665,10 @@ pub fn encode_viewer_robot(r: &ViewerRobot) -> Vec<u8> {
 
 /// `<Lab>` as the simulator sends it to viewers (no border wall, polygons not rows). A
 /// scenario's obstacles are sent as walls: a Ciber-Rato viewer has no other way to draw them.
+///
+/// The name is the one the hub's map carries: at most 31 bytes (the map header's fixed
+/// name), so a longer lab name reaches viewers cut at a character boundary, where the
+/// simulator serves it whole.
 pub fn encode_lab(map: &Map) -> Vec<u8> {
     let mut s = String::with_capacity(4096);
     let _ = writeln!(

@@ -73,8 +73,9 @@ fn malformed_registrations_are_refused_with_their_reason() {
     let cases: &[(&[u8], Check)] = &[
         (b"<Hello/>", |e| matches!(e, DecodeError::UnknownRoot(r) if r == "Hello")),
         (b"<Robot Name=\"a\"", |e| matches!(e, DecodeError::Xml(_))),
-        (b"<Robot Id=\"-1\"/>", |e| matches!(e, DecodeError::OutOfRange { .. })),
-        (b"<Robot Id=\"x\"/>", |e| matches!(e, DecodeError::OutOfRange { .. })),
+        (b"<Robot Id=\"-1\"/>", |e| matches!(e, DecodeError::BadRobotId(v) if v == "-1")),
+        (b"<Robot Name=\"n\" Id=\"x\"/>", |e| matches!(e, DecodeError::BadRobotId(v) if v == "x")),
+        (b"<RobotBeacon Id=\"1.5\"/>", |e| matches!(e, DecodeError::BadRobotId(v) if v == "1.5")),
         (b"<Robot Width=\"NaN\"/>", |e| matches!(e, DecodeError::BadNumber { .. })),
         (b"<Robot Width=\"1\" Width=\"2\"/>", |e| matches!(e, DecodeError::DuplicateAttribute(a) if a == "Width")),
         (b"<Robot Type=\"Boat\"/>", |e| matches!(e, DecodeError::OutOfRange { .. })),
@@ -117,6 +118,28 @@ fn actions_decode_as_the_stock_clients_send_them() {
     ] {
         assert!(decode_actions(bad).is_err(), "{}", String::from_utf8_lossy(bad));
     }
+}
+
+#[test]
+fn an_attribute_repeated_in_actions_is_malformed_even_with_the_same_value() {
+    // The equal-value tolerance is the registration's alone (the thesis's example needs it).
+    for bad in [
+        &br#"<Actions LeftMotor="0.1" LeftMotor="0.1"/>"#[..],
+        br#"<Actions LeftMotor="0.1" RightMotor="0.1" RightMotor="0.15"/>"#,
+        br#"<Actions EndLed="On" EndLed="On"/>"#,
+        b"<Actions><SensorRequests Compass=\"Yes\" Compass=\"Yes\"/></Actions>",
+    ] {
+        assert!(
+            matches!(decode_actions(bad), Err(DecodeError::DuplicateAttribute(_))),
+            "{}",
+            String::from_utf8_lossy(bad)
+        );
+    }
+    assert!(matches!(
+        decode_viewer(br#"<Robot Id="3" Id="3" Removed="Yes"/>"#),
+        Err(DecodeError::DuplicateAttribute(_))
+    ));
+    assert!(decode_registration(br#"<Robot Name="r" Id="1" Id="1"/>"#).is_ok(), "a registration may repeat a value");
 }
 
 #[test]
@@ -212,7 +235,7 @@ fn measures_with_every_sensor_on_are_byte_exact() {
     let want = "<Measures Time=\"42\">\n\t<Sensors Collision=\"Yes\" Compass=\"-90\" Ground=\"0\">\n\t\t<IRSensor Id=\"0\" Value=\"100\"/>\n\t\t<IRSensor Id=\"1\" Value=\"0.3\"/>\n\t\t<BeaconSensor Id=\"0\" Value=\"180\"/>\n\t\t<BeaconSensor Id=\"1\" Value=\"NotVisible\"/>\n\t\t<GPS X=\"12.3457\" Y=\"6.1\" />\n\t\t<Message From=\"2\"><![CDATA[hello world]]></Message>\n\t</Sensors>\n\t<Leds EndLed=\"Off\" ReturningLed=\"On\" VisitingLed=\"On\"/>\n\t<Buttons Start=\"Off\" Stop=\"On\"/>\n</Measures>\n\0";
     assert_eq!(text(&encode_measures(&m)), want);
     // And it comes back through our own decoder as well-formed XML.
-    assert!(parse(&encode_measures(&m)).is_ok());
+    assert!(parse(&encode_measures(&m), Repeats::Refused).is_ok());
 }
 
 #[test]

@@ -6,6 +6,15 @@
 //! and port that registered. Each hub tick becomes one `<Measures>` per robot and one
 //! `<Robot>` per robot per viewer. With a lock-step hub the bridge answers the tick once every
 //! UDP robot has sent its `<Actions>` (or `<Sync/>`), or when the hub's deadline is near.
+//!
+//! As in Ciber-Rato, while the run waits for its Start (or is paused) every robot still gets
+//! its Measures (`Time` frozen, `Buttons Stop="On"`) and every viewer its `<Robot>` datagrams,
+//! once a cycle; a robot client that falls silent keeps its robot and its last powers
+//! (removal for silence is opt-in: [`BridgeConfig::client_timeout`]).
+//!
+//! Scores: iwsim keeps no Ciber-Rato score. Viewers get `Score="0"`, `ArrivalTime="0"`,
+//! `ReturningTime="0"` and an empty `VisitedMask`, and the registration reply says
+//! `ScoreSensor="Off"`, so Measures carry no `<Score>`; `Collisions` is the hub's count.
 
 use std::collections::BTreeMap;
 use std::io::ErrorKind;
@@ -37,8 +46,9 @@ pub struct BridgeConfig {
     pub bind: IpAddr,
     /// Registration port.
     pub port: u16,
-    /// A robot client silent this long is unregistered (its robot removed).
-    pub client_timeout: Duration,
+    /// A robot client silent this long is unregistered (its robot removed); `None` (the
+    /// default, as in Ciber-Rato): never, and a silent robot keeps its last powers.
+    pub client_timeout: Option<Duration>,
     /// How long to wait for the hub to come up.
     pub connect_timeout: Duration,
     /// Whether registered viewers and panels may start, pause and stop the run and remove
@@ -96,6 +106,13 @@ struct RobotClient {
     actions_received: u64,
     /// The last Measures sent, re-sent every cycle while the run waits or is paused.
     last_measures: Option<Vec<u8>>,
+    /// The tick of the last Measures sent: the hub re-publishes a tick when a robot joins,
+    /// and only the robots that have not had it yet get it then.
+    measured_tick: Option<u64>,
+    /// In lock-step, the bridge answered a tick at the deadline without this robot: it is not
+    /// waited for again until it sends Actions (a client that speaks only when it changes its
+    /// mind, as Ciber-Rato allows, would otherwise cost every tick the whole deadline).
+    waited_out: bool,
 }
 
 #[derive(Debug)]
@@ -172,9 +189,24 @@ fn reply_params(map: &Map) -> ReplyParams {
 /// Ciber-Rato's default IR sensor angles (`irSensorDefaultAngles`), on the rim.
 const CIBER_RATO_IR_ANGLES: [f64; 4] = [0.0, 60.0, -60.0, 180.0];
 
-/// The hub registration for a Ciber-Rato / Intellwheels robot, and the client's IR sensor
-/// ids in order; or why it cannot be registered.
-pub fn hub_registration(r: &codec::RobotRegistration) -> Result<(ipc_types::RobotRegistration, Vec<u32>), String> {
+/// A plain Ciber-Rato robot's diameter, metres: Ciber-Rato measures its labs in robot
+/// diameters, and iwsim reads one unit as one metre.
+pub const CIBER_RATO_DIAMETER_M: f64 = 1.0;
+
+/// Ciber-Rato's motor filter `out = (in + out_prev)/2` as iwsim's acceleration curve.
+const CIBER_RATO_ACCEL_CURVE: f64 = 0.5;
+
+/// The hub registration for a Ciber-Rato / Intellwheels robot on a hub stepping every
+/// `cycle_ms`, and the client's IR sensor ids in order; or why it cannot be registered.
+///
+/// A plain Ciber-Rato robot (no `Width`, `Height`, `COM` or `Type`) gets Ciber-Rato's body
+/// and motion: a disc of [`CIBER_RATO_DIAMETER_M`] turning about its centre, whose wheels
+/// move [`MAX_POWER`] diameters per cycle at full power (top speed 0.15 m / cycle, 3 m/s at
+/// 50 ms), through the filter `(in + out)/2`. An Intellwheels robot keeps its rectangle.
+pub fn hub_registration(
+    r: &codec::RobotRegistration,
+    cycle_ms: u32,
+) -> Result<(ipc_types::RobotRegistration, Vec<u32>), String> {
     let mut reg = ipc_types::RobotRegistration::new(&r.name);
     reg.requested_id = r.id;
     reg.kind = match r.kind {
@@ -183,6 +215,13 @@ pub fn hub_registration(r: &codec::RobotRegistration) -> Result<(ipc_types::Robo
         _ => RobotKind::Simulated,
     } as u32;
     let intellwheels = r.width.is_some() || r.height.is_some() || r.com.is_some() || r.kind.is_some();
+    if !intellwheels {
+        // A hub cycle of 0 ms would mean an infinite speed: the hub never runs one; read it as
+        // 1 ms, whose speed the hub refuses with its reason.
+        let cycle_s = f64::from(cycle_ms.max(1)) / 1000.0;
+        reg =
+            reg.disc(CIBER_RATO_DIAMETER_M).motors(MAX_POWER * CIBER_RATO_DIAMETER_M / cycle_s, CIBER_RATO_ACCEL_CURVE);
+    }
     if let Some(v) = r.width {
         reg.width_m = v;
     }
@@ -339,6 +378,12 @@ pub struct Bridge {
     pub counters: Counters,
     /// When an ignored run command was last reported (at most once a second).
     ignored_reported: Option<Instant>,
+    /// The last world snapshot and whether its run was going: while it is not, viewers get
+    /// its robots every cycle, as the simulator sends them.
+    last_world: Option<(ipc_types::WorldHeader, Vec<ipc_types::RobotState>)>,
+    world_running: bool,
+    /// When viewers were last sent their `<Robot>` datagrams.
+    last_viewed: Instant,
 }
 
 impl Bridge {
@@ -377,6 +422,9 @@ impl Bridge {
             last_sent: Instant::now(),
             counters: Counters::default(),
             ignored_reported: None,
+            last_world: None,
+            world_running: false,
+            last_viewed: Instant::now(),
         })
     }
 
@@ -441,6 +489,17 @@ impl Bridge {
             };
             let registration = match codec::decode_registration(&buf[..n]) {
                 Ok(r) => r,
+                Err(e @ codec::DecodeError::BadRobotId(_)) => {
+                    // Ciber-Rato answers a robot it cannot place with a refusal, from a fresh
+                    // port like every answer; the client hears no at once instead of timing out.
+                    self.counters.malformed += 1;
+                    noisy(&mut self.noise, peer, || format!("registration from {peer} refused: {e}"));
+                    match UdpSocket::bind((self.cfg.bind, 0)) {
+                        Ok(socket) => send(&socket, peer, &codec::encode_refused()),
+                        Err(e) => tracing::debug!("cannot open a socket to refuse {peer}: {e}"),
+                    }
+                    continue;
+                }
                 Err(e) => {
                     // Ciber-Rato sends no reply to what it cannot parse.
                     self.counters.malformed += 1;
@@ -477,7 +536,7 @@ impl Bridge {
                 Registration::View => Kind::Viewer,
                 Registration::Panel => Kind::Panel,
                 Registration::Robot(r) | Registration::RobotBeacon(r) => {
-                    match hub_registration(&r) {
+                    match hub_registration(&r, self.map.header.cycle_ms) {
                         Ok((hub_reg, ir_ids)) => self.joining.push(Joining {
                             socket,
                             peer,
@@ -578,6 +637,8 @@ impl Bridge {
                 measures_sent: 0,
                 actions_received: 0,
                 last_measures: None,
+                measured_tick: None,
+                waited_out: false,
             }));
             send(&socket, peer, &codec::encode_reply_ok(&reply_params(&self.map)));
             tracing::info!("{peer} registered as {kind:?}");
@@ -694,18 +755,38 @@ impl Bridge {
             self.blocks.insert(b.robot_id, *b);
         }
         for c in &mut self.clients {
+            // A tick re-published (a robot joined) goes only to the robots that lack it, so
+            // no client gets the same Time twice.
+            if let Kind::Robot(r) = &c.kind
+                && r.measured_tick == Some(tick)
+            {
+                continue;
+            }
             send_measures(c, &self.blocks, tick, state, &self.map);
         }
         self.last_sent = Instant::now();
     }
 
-    /// Viewers get one `<Robot>` per robot for every world snapshot, whoever drives the robots.
+    /// Viewers get one `<Robot>` per robot for every world snapshot, whoever drives the robots,
+    /// and while the run waits or is paused (no snapshot comes) the last ones every cycle, as
+    /// the simulator sends them every cycle whatever its state.
     fn serve_viewers(&mut self) -> Result<(), BridgeError> {
-        let viewers = self.clients.iter().any(|c| matches!(c.kind, Kind::Viewer));
-        let Some((h, robots)) = self.observer.try_world()? else { return Ok(()) };
-        if !viewers {
+        let due = match self.observer.try_world()? {
+            Some(world) => {
+                self.world_running = RunState::from_u32(world.0.run_state) == Some(RunState::Running);
+                self.last_world = Some(world);
+                true
+            }
+            None => {
+                let cycle = Duration::from_millis(self.map.header.cycle_ms.max(10) as u64);
+                !self.world_running && self.last_viewed.elapsed() >= cycle
+            }
+        };
+        // Encoded only for viewers that are there to read it.
+        if !due || !self.clients.iter().any(|c| matches!(c.kind, Kind::Viewer)) {
             return Ok(());
         }
+        let Some((h, robots)) = &self.last_world else { return Ok(()) };
         let state_name = match RunState::from_u32(h.run_state) {
             Some(RunState::Running) => "Running",
             Some(RunState::Finished) => "Finished",
@@ -733,6 +814,7 @@ impl Bridge {
                 })
             })
             .collect();
+        self.last_viewed = Instant::now();
         for c in self.clients.iter().filter(|c| matches!(c.kind, Kind::Viewer)) {
             for d in &datagrams {
                 send(&c.socket, c.peer, d);
@@ -768,14 +850,16 @@ impl Bridge {
         let Some((tick, since)) = self.tick else { return Ok(()) };
         let p = &self.map.header.params;
         let robots = || self.clients.iter().filter_map(|c| if let Kind::Robot(r) = &c.kind { Some(r) } else { None });
+        let mut late = false;
         let due = if p.lockstep != 0 {
             // A robot the hub may have taken but the bridge has not admitted yet is owed this
             // tick's Measures on admission: wait for its answer too (the deadline still holds).
             let all = self.joining.is_empty()
                 && self.ready.is_none()
-                && robots().all(|r| r.actions_received >= r.measures_sent);
+                && robots().all(|r| r.waited_out || r.actions_received >= r.measures_sent);
             // Answer a little before the hub's deadline, so the robots that did act still count.
             let near_deadline = since.elapsed() >= Duration::from_millis(p.deadline_ms as u64 * 9 / 10);
+            late = !all;
             !self.answered && (all || near_deadline)
         } else {
             changed
@@ -807,6 +891,10 @@ impl Bridge {
         for c in &mut self.clients {
             if let Kind::Robot(r) = &mut c.kind {
                 r.say = None;
+                // Answered at the deadline without it: not waited for until it speaks again.
+                if late && r.actions_received < r.measures_sent {
+                    r.waited_out = true;
+                }
             }
         }
         Ok(())
@@ -821,7 +909,8 @@ impl Bridge {
             }
             return;
         }
-        let timeout = self.cfg.client_timeout;
+        // Ciber-Rato never removes a robot for silence: only when the user asked for it.
+        let Some(timeout) = self.cfg.client_timeout else { return };
         let mut gone = Vec::new();
         self.clients.retain(|c| {
             let Kind::Robot(r) = &c.kind else { return true };
@@ -860,6 +949,7 @@ fn send_measures(c: &mut Client, blocks: &BTreeMap<u32, SensorBlock>, tick: u64,
         let datagram = codec::encode_measures(&m);
         send(&c.socket, c.peer, &datagram);
         r.last_measures = Some(datagram);
+        r.measured_tick = Some(tick);
         r.measures_sent += 1;
         // A client that is behind never owes more than the tick in hand.
         r.actions_received = r.actions_received.max(r.measures_sent.saturating_sub(1));
@@ -899,4 +989,62 @@ fn apply_actions(r: &mut RobotClient, a: &Actions) {
     // Stock clients send exactly one <Actions> per <Measures> (<Sync/> says so explicitly):
     // count them, never beyond the Measures sent.
     r.actions_received = (r.actions_received + 1).min(r.measures_sent);
+    r.waited_out = false;
+}
+
+#[cfg(test)]
+mod registration_tests {
+    use super::*;
+    use ipc_types::REG_DISC;
+
+    fn decode(xml: &str) -> codec::RobotRegistration {
+        match codec::decode_registration(xml.as_bytes()) {
+            Ok(Registration::Robot(r)) => r,
+            other => panic!("not a robot registration: {other:?}"),
+        }
+    }
+
+    #[test]
+    fn a_plain_robot_becomes_a_ciber_rato_disc_at_the_hubs_cycle() {
+        let plain = decode(r#"<Robot Name="pClient" Id="2"/>"#);
+        let (reg, ids) = hub_registration(&plain, 50).expect("valid");
+        assert_ne!(reg.flags & REG_DISC, 0);
+        assert_eq!((reg.width_m, reg.height_m, reg.com), (1.0, 1.0, 0.5));
+        // 0.15 m per 50 ms cycle at full power, filtered by (in + out)/2.
+        assert!((reg.max_speed_mps - 3.0).abs() < 1e-12, "{}", reg.max_speed_mps);
+        assert_eq!(reg.accel_curve, 0.5);
+        assert_eq!((reg.requested_id, reg.kind), (2, RobotKind::Simulated as u32));
+        // Four IR sensors on the rim (radius 0.5) at 0, 60, −60 and 180°, ±30° cones.
+        assert_eq!(ids, [0, 1, 2, 3]);
+        assert_eq!(reg.sensor_count, 4);
+        for (s, a) in reg.sensors.iter().zip([0.0f64, 60.0, -60.0, 180.0]) {
+            assert!((s.x_m.hypot(s.y_m) - 0.5).abs() < 1e-12);
+            assert!((s.x_m - 0.5 * a.to_radians().cos()).abs() < 1e-12);
+            assert_eq!((s.angle_deg, s.cone_deg), (a, 60.0));
+        }
+        // The top speed follows the hub's cycle: 0.15 m per 100 ms cycle.
+        let (slow, _) = hub_registration(&plain, 100).expect("valid");
+        assert!((slow.max_speed_mps - 1.5).abs() < 1e-12);
+        // Sensors registered at other angles sit on the rim too.
+        let two = decode(r#"<Robot Name="r"><IRSensor Id="0" Angle="90"/><IRSensor Id="1" Angle="-90"/></Robot>"#);
+        let (reg, ids) = hub_registration(&two, 50).expect("valid");
+        assert_eq!((ids, reg.sensor_count, reg.flags & REG_DISC), (vec![0, 1], 2, REG_DISC));
+        assert!(reg.sensors[0].x_m.abs() < 1e-12 && (reg.sensors[0].y_m - 0.5).abs() < 1e-12);
+    }
+
+    #[test]
+    fn an_intellwheels_robot_keeps_its_rectangle_and_motors() {
+        let chair = decode(
+            r#"<Robot Name="chair" Width="1.2" Height="0.7" COM="0.8" MaxSpeed="0.6" AccelerationCurve="0.83"/>"#,
+        );
+        let (reg, _) = hub_registration(&chair, 50).expect("valid");
+        assert_eq!(reg.flags & REG_DISC, 0);
+        assert_eq!((reg.width_m, reg.height_m, reg.com), (1.2, 0.7, 0.8));
+        assert_eq!((reg.max_speed_mps, reg.accel_curve), (0.6, 0.83));
+        // A Type alone marks an Intellwheels robot too: thesis defaults, not a disc.
+        let door = decode(r#"<Robot Name="door" Type="door"/>"#);
+        let (reg, _) = hub_registration(&door, 50).expect("valid");
+        assert_eq!(reg.flags & REG_DISC, 0);
+        assert_eq!((reg.max_speed_mps, reg.kind), (0.5, RobotKind::Door as u32));
+    }
 }

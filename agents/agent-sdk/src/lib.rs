@@ -173,6 +173,11 @@ pub fn control(
     }
 }
 
+/// Whether two sensor samples carry the same robots, in the same order.
+fn same_robots(a: &[SensorBlock], b: &[SensorBlock]) -> bool {
+    a.len() == b.len() && a.iter().zip(b).all(|(x, y)| x.robot_id == y.robot_id)
+}
+
 /// A read-only view of a session: world snapshots and the map, with no hello and no robots,
 /// so the hub does not count it as an agent (viewers, loggers).
 pub struct Observer {
@@ -580,7 +585,9 @@ impl Agent {
     }
 
     /// Waits for the next tick and returns this agent's sensor blocks; `None` once the run
-    /// has finished. Fails when the hub exits or a termination signal arrives.
+    /// has finished. The tick in hand comes again when this agent's robots changed within it
+    /// (one registered or removed): its sensor blocks then include the newcomer. Fails when the
+    /// hub exits or a termination signal arrives.
     pub fn wait_tick(&mut self, wait: Wait) -> Result<Option<Tick>, AgentError> {
         if self.finished {
             return Ok(None);
@@ -697,16 +704,23 @@ impl Agent {
         }))
     }
 
-    /// Reads the newest sensor sample if it is for a tick not seen yet.
+    /// Reads the newest sensor sample if it is for a tick not seen yet, or for the tick in
+    /// hand with another set of robots: the hub re-publishes the tick when this agent's robot
+    /// joins (or leaves), and while a run waits for its Start that is the only way a robot
+    /// registered after the first gets its readings.
     fn take_sensors(&mut self) -> Result<bool, AgentError> {
         let Some(sub) = &self.sensors else { return Ok(false) };
         let mut fresh = false;
         while let Some(sample) = sub.receive().map_err(ipc("receive sensor blocks"))? {
             let received_ns = ipc_services::monotonic_ns();
             let h = *sample.user_header();
-            if self.last_tick.is_some_and(|t| h.tick <= t)
-                && RunState::from_u32(h.run_state) != Some(RunState::Finished)
-            {
+            let finished = RunState::from_u32(h.run_state) == Some(RunState::Finished);
+            let seen = match self.last_tick {
+                Some(t) if h.tick < t => true,
+                Some(t) if h.tick == t => same_robots(&self.blocks, sample.payload()),
+                _ => false,
+            };
+            if seen && !finished {
                 continue;
             }
             self.blocks.clear();
@@ -768,5 +782,24 @@ impl Agent {
     pub fn map(&self) -> Result<map::Map, AgentError> {
         let svc = self.session.map(&self.node, Role::Client)?;
         receive_map(&svc, &self.session, || self.check())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn block(robot_id: u32) -> SensorBlock {
+        SensorBlock { robot_id, ..bytemuck::Zeroable::zeroed() }
+    }
+
+    #[test]
+    fn a_republished_tick_is_fresh_only_when_its_robots_changed() {
+        let one = [block(1)];
+        let two = [block(1), block(2)];
+        assert!(same_robots(&one, &[block(1)]), "the same tick again: nothing new");
+        assert!(!same_robots(&one, &two), "a robot joined: its readings are new");
+        assert!(!same_robots(&two, &[block(2)]), "a robot left");
+        assert!(!same_robots(&[block(1), block(2)], &[block(2), block(1)]));
     }
 }

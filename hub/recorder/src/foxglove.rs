@@ -9,7 +9,7 @@
 //! The lab frame is iwsim's world frame, named `world`: x right, y up, z out of the floor,
 //! metres.
 
-use ipc_types::{MAX_PROXIMITY, ROBOT_COLLISION, ROBOT_FROZEN, RobotSensors, RobotState};
+use ipc_types::{MAX_PROXIMITY, ROBOT_COLLISION, ROBOT_DISC, ROBOT_FROZEN, RobotSensors, RobotState};
 
 use crate::journal::RunStart;
 use crate::proto::Pb;
@@ -252,8 +252,9 @@ pub(crate) fn robot_name(s: &RobotState, scratch: &mut String) {
     }
 }
 
-/// `/robots`: each chair a box of its length × width at its body centre, coloured by its
-/// state, with its name above it.
+/// `/robots`: each chair a box of its length × width at its body centre (a disc robot a
+/// cylinder of its diameter, with a line from its centre to the rim along its heading),
+/// coloured by its state, with its name above it.
 pub(crate) fn robots_scene(states: &[RobotState], t_ns: u64, out: &mut Vec<u8>, id: &mut String, name: &mut String) {
     use std::fmt::Write;
     let mut m = Pb::new(out);
@@ -275,11 +276,19 @@ pub(crate) fn robots_scene(states: &[RobotState], t_ns: u64, out: &mut Vec<u8>, 
             CHAIR
         };
         entity(&mut m, t_ns, id, |e| {
-            e.message(f::ENTITY_CUBES, |c| {
-                pose(c, f::CUBE_POSE, centre, yaw);
-                xyz(c, f::CUBE_SIZE, [f64::from(s.width_m), f64::from(s.height_m), CHAIR_HEIGHT_M]);
-                color(c, f::CUBE_COLOR, rgba);
-            });
+            if s.flags & ROBOT_DISC != 0 {
+                // A disc is centred on its centre of movement whatever its COM field says.
+                let d = f64::from(s.width_m);
+                cylinder(e, [s.x_m, s.y_m, CHAIR_HEIGHT_M / 2.0], d, CHAIR_HEIGHT_M, rgba);
+                let rim = [s.x_m + cos * d / 2.0, s.y_m + sin * d / 2.0, CHAIR_HEIGHT_M];
+                line_loop(e, [[s.x_m, s.y_m, CHAIR_HEIGHT_M], rim].into_iter(), BORDER);
+            } else {
+                e.message(f::ENTITY_CUBES, |c| {
+                    pose(c, f::CUBE_POSE, centre, yaw);
+                    xyz(c, f::CUBE_SIZE, [f64::from(s.width_m), f64::from(s.height_m), CHAIR_HEIGHT_M]);
+                    color(c, f::CUBE_COLOR, rgba);
+                });
+            }
             text(e, [s.x_m, s.y_m, LABEL_Z_M], name);
         });
     }
@@ -353,5 +362,36 @@ pub(crate) fn proximity_scene(
                 color(t, f::TRIANGLES_COLOR, CONE);
             });
         });
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::proto::{Fields, Value};
+    use bytemuck::Zeroable;
+
+    /// The shape fields (cubes, cylinders) of each entity in a SceneUpdate, in order.
+    fn shapes(update: &[u8]) -> Vec<Vec<u32>> {
+        let mut out = Vec::new();
+        for field in Fields::new(update) {
+            let Ok((f::UPDATE_ENTITIES, Value::Bytes(entity))) = field else { continue };
+            let kinds = Fields::new(entity)
+                .filter_map(|x| x.ok())
+                .map(|(n, _)| n)
+                .filter(|&n| n == f::ENTITY_CUBES || n == f::ENTITY_CYLINDERS)
+                .collect();
+            out.push(kinds);
+        }
+        out
+    }
+
+    #[test]
+    fn a_disc_robot_is_drawn_as_a_cylinder_and_a_chair_as_a_box() {
+        let chair = RobotState { id: 1, width_m: 1.2, height_m: 0.7, com: 0.8, ..RobotState::zeroed() };
+        let disc = RobotState { id: 2, flags: ROBOT_DISC, width_m: 1.0, height_m: 1.0, com: 0.5, ..chair };
+        let mut out = Vec::new();
+        robots_scene(&[chair, disc], 5, &mut out, &mut String::new(), &mut String::new());
+        assert_eq!(shapes(&out), [vec![f::ENTITY_CUBES], vec![f::ENTITY_CYLINDERS]]);
     }
 }

@@ -33,11 +33,11 @@ use world::map::{
     Beacon, Grid, Lab, LatencyParams, NoiseParams, Params, RequestParams, SensorSwitches, StartPose, Target, Wall,
 };
 use world::math::Pose;
-use world::{ProximitySpec, RobotKind, RobotSpec};
+use world::{BodyShape, ProximitySpec, RobotKind, RobotSpec};
 
 /// The first byte of every journal message. Bump it when the layout changes; readers refuse
 /// versions they do not know rather than misread them.
-pub const CODEC_VERSION: u8 = 1;
+pub const CODEC_VERSION: u8 = 2;
 
 /// What a run starts from: enough to rebuild its world exactly.
 #[derive(Debug, Clone, PartialEq)]
@@ -338,10 +338,18 @@ fn kind_byte(kind: RobotKind) -> u8 {
     }
 }
 
+fn shape_byte(shape: BodyShape) -> u8 {
+    match shape {
+        BodyShape::Rectangle => 0,
+        BodyShape::Disc => 1,
+    }
+}
+
 fn put_spec(o: &mut Out, spec: &RobotSpec) {
-    let RobotSpec { name, kind, width_m, height_m, com, max_speed_mps, accel_curve, pose, sensors } = spec;
+    let RobotSpec { name, kind, shape, width_m, height_m, com, max_speed_mps, accel_curve, pose, sensors } = spec;
     o.str(name);
     o.u8(kind_byte(*kind));
+    o.u8(shape_byte(*shape));
     for v in [width_m, height_m, com, max_speed_mps, accel_curve] {
         o.f64(*v);
     }
@@ -651,6 +659,12 @@ fn get_spec(i: &mut In) -> R<RobotSpec> {
         2 => RobotKind::Door,
         value => return Err(JournalDecodeError::BadByte { offset, what: "robot kind", value }),
     };
+    let offset = i.pos;
+    let shape = match i.u8("robot shape")? {
+        0 => BodyShape::Rectangle,
+        1 => BodyShape::Disc,
+        value => return Err(JournalDecodeError::BadByte { offset, what: "robot shape", value }),
+    };
     let width_m = i.f64("robot width")?;
     let height_m = i.f64("robot height")?;
     let com = i.f64("robot com")?;
@@ -667,7 +681,7 @@ fn get_spec(i: &mut In) -> R<RobotSpec> {
         let range_m = if i.bool("sensor range flag")? { Some(i.f64("sensor range")?) } else { None };
         sensors.push(ProximitySpec { x_m, y_m, angle_rad, cone_rad, range_m });
     }
-    Ok(RobotSpec { name, kind, width_m, height_m, com, max_speed_mps, accel_curve, pose, sensors })
+    Ok(RobotSpec { name, kind, shape, width_m, height_m, com, max_speed_mps, accel_curve, pose, sensors })
 }
 
 fn get_action(i: &mut In) -> R<RecordedAction> {

@@ -169,7 +169,7 @@ mod journal {
     use recorder::journal::{JournalDecodeError, decode_event, decode_run_start, encode_event, encode_run_start};
     use world::map::{Beacon, Lab, LatencyParams, NoiseParams, RequestParams, SensorSwitches, Target};
     use world::math::Pose;
-    use world::{ProximitySpec, RobotKind};
+    use world::{BodyShape, ProximitySpec, RobotKind};
 
     fn any_pose() -> impl Strategy<Value = Pose> {
         (any::<f64>(), any::<f64>(), any::<f64>()).prop_map(|(x, y, theta)| Pose { x, y, theta })
@@ -191,13 +191,25 @@ mod journal {
         (
             ".{0,20}",
             prop_oneof![Just(RobotKind::Simulated), Just(RobotKind::Real), Just(RobotKind::Door)],
+            prop_oneof![Just(BodyShape::Rectangle), Just(BodyShape::Disc)],
             proptest::array::uniform5(any::<f64>()),
             any_pose(),
             proptest::collection::vec(sensor, 0..9),
         )
-            .prop_map(|(name, kind, [width_m, height_m, com, max_speed_mps, accel_curve], pose, sensors)| {
-                RobotSpec { name, kind, width_m, height_m, com, max_speed_mps, accel_curve, pose, sensors }
-            })
+            .prop_map(
+                |(name, kind, shape, [width_m, height_m, com, max_speed_mps, accel_curve], pose, sensors)| RobotSpec {
+                    name,
+                    kind,
+                    shape,
+                    width_m,
+                    height_m,
+                    com,
+                    max_speed_mps,
+                    accel_curve,
+                    pose,
+                    sensors,
+                },
+            )
     }
 
     fn any_action() -> impl Strategy<Value = RecordedAction> {
@@ -396,7 +408,7 @@ mod journal {
         assert_eq!(decode_event(&[]), Err(JournalDecodeError::Empty));
         assert_eq!(decode_event(&[9, 4]), Err(JournalDecodeError::Version { found: 9 }));
         assert_eq!(
-            decode_event(&[1, 77]),
+            decode_event(&[recorder::journal::CODEC_VERSION, 77]),
             Err(JournalDecodeError::BadByte { offset: 1, what: "event tag", value: 77 })
         );
         assert_eq!(decode_event(&bytes[..5]), Err(JournalDecodeError::Truncated { offset: 2, len: 5, what: "tick" }));
@@ -404,7 +416,7 @@ mod journal {
         long.push(0);
         assert_eq!(decode_event(&long), Err(JournalDecodeError::Trailing { offset: bytes.len(), extra: 1 }));
         // A count far beyond the message is refused before anything is allocated.
-        let mut step = vec![1, 5];
+        let mut step = vec![recorder::journal::CODEC_VERSION, 5];
         step.extend_from_slice(&3u64.to_le_bytes());
         step.extend_from_slice(&u32::MAX.to_le_bytes());
         assert_eq!(
@@ -413,6 +425,22 @@ mod journal {
         );
         let message = decode_event(&bytes[..5]).expect_err("cut").to_string();
         assert_eq!(message, "the message ends at byte 5 inside tick starting at byte 2");
+    }
+
+    #[test]
+    fn a_disc_robot_keeps_its_shape_through_the_journal() {
+        let spec = RobotSpec::at(3.0, 4.0, 90.0).disc(1.0).motors(3.0, 0.5).named("p");
+        let event = Event::AddRobot { id: 2, agent_id: 1, spec };
+        let mut bytes = Vec::new();
+        encode_event(&event, &mut bytes);
+        assert_eq!(decode_event(&bytes), Ok(event));
+        // Version, tag, id, agent id, the name's length and byte, the kind: then the shape.
+        assert_eq!(bytes[16], 1);
+        bytes[16] = 7;
+        assert_eq!(
+            decode_event(&bytes),
+            Err(JournalDecodeError::BadByte { offset: 16, what: "robot shape", value: 7 })
+        );
     }
 }
 

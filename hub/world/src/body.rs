@@ -3,7 +3,7 @@
 use nalgebra::{Isometry2, Point2, Vector2};
 use thiserror::Error;
 
-use crate::geom::PlacedBox;
+use crate::geom::PlacedBody;
 use crate::math::{Pose, Real};
 
 /// At most this many proximity sensors per robot (thesis §4.3.5).
@@ -29,6 +29,18 @@ pub const MAX_BODY_M: Real = 5.0;
 /// collision phase assumes when it looks only at neighbouring cells.
 pub const MAX_SPEED_MPS: Real = 5.0;
 
+/// The longest travel in one tick at top speed, metres, for ticks shorter than 100 ms: there
+/// the top speed may exceed [`MAX_SPEED_MPS`] as long as one tick's travel stays within this
+/// (what the robot index needs). A plain Ciber-Rato robot moves 0.15 m per cycle whatever the
+/// cycle, so at a 20 ms cycle its top speed is 7.5 m/s.
+pub const MAX_STEP_M: Real = 0.5;
+
+/// The top speed allowed in a world whose tick lasts `dt_s` seconds: [`MAX_SPEED_MPS`], or
+/// more on ticks shorter than 100 ms, up to [`MAX_STEP_M`] per tick.
+pub fn max_speed_mps(dt_s: Real) -> Real {
+    if dt_s > 0.0 { MAX_SPEED_MPS.max(MAX_STEP_M / dt_s) } else { MAX_SPEED_MPS }
+}
+
 /// The longest proximity-sensor range, metres.
 ///
 /// Infrared sensors read up to about 1.5 m and ultrasonic ones up to about 10 m; 20 m covers
@@ -46,6 +58,19 @@ pub enum RobotKind {
     Real,
     /// A door: a rectangle driven by a door agent like any robot; no special rules.
     Door,
+}
+
+/// The outline of a robot's body.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
+pub enum BodyShape {
+    /// A rectangle `width_m` × `height_m` whose wheel axis sits at `com` of its length (the
+    /// Intellwheels body, thesis Table 4.1). Its footprint turns with the heading.
+    #[default]
+    Rectangle,
+    /// A disc of diameter `width_m` (= `height_m`, the wheel track) centred on its centre of
+    /// movement (`com` = 0.5): a Ciber-Rato robot. Its footprint does not change with the
+    /// heading, so it can always turn in place.
+    Disc,
 }
 
 /// One proximity sensor, in the body frame of the robot (origin at the centre of movement).
@@ -77,7 +102,9 @@ pub struct RobotSpec {
     pub name: String,
     /// How it moves.
     pub kind: RobotKind,
-    /// Length along the heading, metres (`Width`).
+    /// Rectangle or disc.
+    pub shape: BodyShape,
+    /// Length along the heading, metres (`Width`); a disc's diameter.
     pub width_m: Real,
     /// Size across the heading, metres (`Height`); also the wheel track.
     pub height_m: Real,
@@ -100,6 +127,7 @@ impl RobotSpec {
         Self {
             name: String::from("robot"),
             kind: RobotKind::Simulated,
+            shape: BodyShape::Rectangle,
             width_m: 1.0,
             height_m: 1.0,
             com: 0.5,
@@ -110,11 +138,20 @@ impl RobotSpec {
         }
     }
 
-    /// Sets the body size and centre of movement.
+    /// Sets a rectangular body's size and centre of movement.
     pub fn body(mut self, width_m: Real, height_m: Real, com: Real) -> Self {
+        self.shape = BodyShape::Rectangle;
         self.width_m = width_m;
         self.height_m = height_m;
         self.com = com;
+        self
+    }
+
+    /// Makes the body a disc of `diameter_m` centred on the centre of movement; the wheel track
+    /// is the diameter (Ciber-Rato: `rot = (outR − outL) / diameter`).
+    pub fn disc(mut self, diameter_m: Real) -> Self {
+        self.shape = BodyShape::Disc;
+        (self.width_m, self.height_m, self.com) = (diameter_m, diameter_m, 0.5);
         self
     }
 
@@ -156,7 +193,7 @@ impl RobotSpec {
     }
 
     /// The body's corners in the body frame, thesis Table 4.1 order: front-left, front-right,
-    /// rear-left, rear-right.
+    /// rear-left, rear-right (for a disc, those of the square around it).
     pub fn corners_body(&self) -> [Point2<Real>; 4] {
         let (w, h, c) = (self.width_m, self.height_m, self.com);
         [
@@ -167,8 +204,15 @@ impl RobotSpec {
         ]
     }
 
-    /// Checks every parameter; the world refuses a robot for the first one that fails.
+    /// Checks every parameter at the default 100 ms tick; the world refuses a robot for the
+    /// first one that fails.
     pub fn validate(&self) -> Result<(), AddRobotError> {
+        self.validate_at(0.1)
+    }
+
+    /// Checks every parameter for a world whose tick lasts `dt_s` seconds (the top speed's
+    /// bound depends on it, see [`max_speed_mps`]).
+    pub fn validate_at(&self, dt_s: Real) -> Result<(), AddRobotError> {
         let finite = |field: &'static str, v: Real| {
             if v.is_finite() { Ok(()) } else { Err(AddRobotError::NotFinite { field }) }
         };
@@ -194,11 +238,25 @@ impl RobotSpec {
         if !(self.com > 0.0 && self.com < 1.0) {
             return Err(AddRobotError::OutOfRange { field: "com", value: self.com, expected: "in (0, 1)" });
         }
-        if !(self.max_speed_mps > 0.0 && self.max_speed_mps <= MAX_SPEED_MPS) {
+        // A disc has one size and turns about its centre: the other two fields must agree, so
+        // that every user of width, height (the track) and COM reads the same body.
+        if self.shape == BodyShape::Disc {
+            if self.height_m != self.width_m {
+                return Err(AddRobotError::OutOfRange {
+                    field: "height",
+                    value: self.height_m,
+                    expected: "equal to the width (the diameter) for a disc",
+                });
+            }
+            if self.com != 0.5 {
+                return Err(AddRobotError::OutOfRange { field: "com", value: self.com, expected: "0.5 for a disc" });
+            }
+        }
+        if !(self.max_speed_mps > 0.0 && self.max_speed_mps <= max_speed_mps(dt_s)) {
             return Err(AddRobotError::OutOfRange {
                 field: "max_speed",
                 value: self.max_speed_mps,
-                expected: "in (0, 5] m/s",
+                expected: if dt_s >= 0.1 { "in (0, 5] m/s" } else { "in (0, 5] m/s, or up to 0.5 m per tick" },
             });
         }
         if !(0.0..1.0).contains(&self.accel_curve) {
@@ -347,35 +405,48 @@ impl PreparedSensor {
 
 /// The body geometry a tick needs, derived once from the spec.
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub(crate) struct BodyShape {
-    /// Centre of the rectangle relative to the centre of movement, along the heading.
+pub(crate) struct BodyGeom {
+    /// Centre of the rectangle relative to the centre of movement, along the heading (0 for a
+    /// disc).
     pub centre_offset: Real,
+    /// Half extents; a disc's are its radius twice.
     pub half: Vector2<Real>,
     /// Radius of the circle around the centre of movement that holds the whole body.
     pub bound_radius: Real,
+    /// The body is a disc of radius `half.x`.
+    pub disc: bool,
 }
 
-impl BodyShape {
+impl BodyGeom {
     pub(crate) fn new(spec: &RobotSpec) -> Self {
         let half = Vector2::new(spec.width_m / 2.0, spec.height_m / 2.0);
+        if spec.shape == BodyShape::Disc {
+            return Self { centre_offset: 0.0, half, bound_radius: half.x, disc: true };
+        }
         let front = spec.com * spec.width_m;
         let rear = (1.0 - spec.com) * spec.width_m;
-        Self { centre_offset: (spec.com - 0.5) * spec.width_m, half, bound_radius: front.max(rear).hypot(half.y) }
+        Self {
+            centre_offset: (spec.com - 0.5) * spec.width_m,
+            half,
+            bound_radius: front.max(rear).hypot(half.y),
+            disc: false,
+        }
     }
 
-    /// The rectangle placed at a pose.
-    pub(crate) fn placed(&self, pose: &Pose) -> PlacedBox {
+    /// The body placed at a pose.
+    pub(crate) fn placed(&self, pose: &Pose) -> PlacedBody {
         let (s, c) = pose.theta.sin_cos();
         self.placed_cs(pose, c, s)
     }
 
-    /// The rectangle placed at a pose whose heading's cosine and sine are known.
-    pub(crate) fn placed_cs(&self, pose: &Pose, c: Real, s: Real) -> PlacedBox {
+    /// The body placed at a pose whose heading's cosine and sine are known.
+    pub(crate) fn placed_cs(&self, pose: &Pose, c: Real, s: Real) -> PlacedBody {
         let centre = Vector2::new(pose.x + c * self.centre_offset, pose.y + s * self.centre_offset);
-        PlacedBox { iso: Isometry2::new(centre, pose.theta), half: self.half }
+        PlacedBody { iso: Isometry2::new(centre, pose.theta), half: self.half, disc: self.disc }
     }
 
-    /// The four corners in world coordinates, counter-clockwise starting front-right.
+    /// The four corners in world coordinates, counter-clockwise starting front-right (for a
+    /// disc, those of the square around it, turned with the heading).
     pub(crate) fn corners_ccw(&self, pose: &Pose, c: Real, s: Real) -> [Point2<Real>; 4] {
         let fx = self.centre_offset + self.half.x;
         let rx = self.centre_offset - self.half.x;
@@ -407,7 +478,7 @@ mod tests {
     #[test]
     fn world_corners_are_the_table_corners_rotated_about_the_centre_of_movement() {
         let spec = RobotSpec::at(3.0, 4.0, 90.0).body(1.2, 0.7, 0.8);
-        let shape = BodyShape::new(&spec);
+        let shape = BodyGeom::new(&spec);
         let (s, c) = spec.pose.theta.sin_cos();
         let world = shape.corners_ccw(&spec.pose, c, s);
         // Heading +y: front-right (0.96, −0.35) goes to (3 + 0.35, 4 + 0.96).
@@ -502,6 +573,33 @@ mod tests {
         );
         // The refusals' texts name the constants' values.
         assert_eq!((MAX_BODY_M, MAX_SPEED_MPS, MAX_SENSOR_RANGE_M), (5.0, 5.0, 20.0));
+        // On ticks shorter than 100 ms the bound is travel per tick: a plain Ciber-Rato robot
+        // (0.15 m per cycle) at a 20 ms cycle goes 7.5 m/s; at 100 ms that is refused.
+        let fast = RobotSpec::at(1.0, 1.0, 0.0).motors(7.5, 0.5);
+        assert_eq!(fast.validate_at(0.02), Ok(()));
+        assert!(matches!(fast.validate_at(0.1), Err(AddRobotError::OutOfRange { field: "max_speed", .. })));
+        assert_eq!((max_speed_mps(0.02), max_speed_mps(0.1), max_speed_mps(1.0)), (25.0, 5.0, 5.0));
+    }
+
+    #[test]
+    fn a_disc_is_bounded_by_its_diameter_and_keeps_its_sizes_in_step() {
+        let ok = RobotSpec::at(1.0, 1.0, 0.0).disc(1.0);
+        assert_eq!((ok.shape, ok.width_m, ok.height_m, ok.com), (BodyShape::Disc, 1.0, 1.0, 0.5));
+        assert_eq!(ok.validate(), Ok(()));
+        assert_eq!(RobotSpec::at(1.0, 1.0, 0.0).disc(MAX_BODY_M).validate(), Ok(()));
+        assert!(matches!(
+            RobotSpec::at(1.0, 1.0, 0.0).disc(5.5).validate(),
+            Err(AddRobotError::OutOfRange { field: "width", .. })
+        ));
+        let squashed = RobotSpec { height_m: 0.6, ..ok.clone() };
+        assert!(matches!(squashed.validate(), Err(AddRobotError::OutOfRange { field: "height", value: 0.6, .. })));
+        let off_centre = RobotSpec { com: 0.8, ..ok.clone() };
+        assert!(matches!(off_centre.validate(), Err(AddRobotError::OutOfRange { field: "com", value: 0.8, .. })));
+        // A disc's geometry: centred, bounded by its radius.
+        let g = BodyGeom::new(&ok.clone().disc(0.8));
+        assert_eq!((g.centre_offset, g.bound_radius, g.disc), (0.0, 0.4, true));
+        // `body` makes it a rectangle again.
+        assert_eq!(ok.body(1.0, 0.6, 0.5).shape, BodyShape::Rectangle);
     }
 
     #[test]

@@ -1,7 +1,7 @@
 //! The collision phase: every moving robot's next pose against the walls and the other bodies.
 
 use super::{Motion, World, overlaps};
-use crate::geom::{PlacedBox, box_hits_triangle, boxes_intersect};
+use crate::geom::{PlacedBody, bodies_intersect, body_hits_triangle};
 
 impl World {
     /// Fills `scratch.blocked[i]` with (hit, enforce) for every slot.
@@ -38,10 +38,10 @@ impl World {
                 for &t in s.triangles_in(iy * s.spec.nx + ix) {
                     let tri = &s.triangles[t as usize];
                     if overlaps(m.next_min, m.next_max, tri.min, tri.max)
-                        && box_hits_triangle(&m.next, &tri.p)
+                        && body_hits_triangle(&m.next, &tri.p)
                         && !(escape
                             && overlaps(m.cur_min, m.cur_max, tri.min, tri.max)
-                            && box_hits_triangle(&m.cur, &tri.p))
+                            && body_hits_triangle(&m.cur, &tri.p))
                     {
                         return true;
                     }
@@ -55,29 +55,30 @@ impl World {
                 return;
             }
             let o = &self.motion[j];
-            let meets =
-                |b: &PlacedBox, bmin, bmax| overlaps(m.next_min, m.next_max, bmin, bmax) && boxes_intersect(&m.next, b);
+            let meets = |b: &PlacedBody, bmin, bmax| {
+                overlaps(m.next_min, m.next_max, bmin, bmax) && bodies_intersect(&m.next, b)
+            };
             let meets_other =
                 meets(&o.cur, o.cur_min, o.cur_max) || (o.moving && meets(&o.next, o.next_min, o.next_max));
             if meets_other {
                 let already =
-                    escape && overlaps(m.cur_min, m.cur_max, o.cur_min, o.cur_max) && boxes_intersect(&m.cur, &o.cur);
+                    escape && overlaps(m.cur_min, m.cur_max, o.cur_min, o.cur_max) && bodies_intersect(&m.cur, &o.cur);
                 hit = !already;
             }
         });
         hit
     }
 
-    /// Whether a placed rectangle touches any wall (the lab border included).
-    pub(super) fn box_hits_wall(&self, b: &PlacedBox) -> bool {
-        let (min, max) = super::aabb(b);
+    /// Whether a placed body touches any wall (the lab border included).
+    pub(super) fn body_hits_wall(&self, b: &PlacedBody) -> bool {
+        let (min, max) = b.aabb();
         let s = &self.statics;
         let (x0, y0, x1, y1) = s.spec.cell_range(min, max);
         (y0..=y1).any(|iy| {
             (x0..=x1).any(|ix| {
                 s.triangles_in(iy * s.spec.nx + ix).iter().any(|&t| {
                     let tri = &s.triangles[t as usize];
-                    overlaps(min, max, tri.min, tri.max) && box_hits_triangle(b, &tri.p)
+                    overlaps(min, max, tri.min, tri.max) && body_hits_triangle(b, &tri.p)
                 })
             })
         })

@@ -1,4 +1,4 @@
-//! The iwsim world model: maps, rectangular differential-drive bodies with motors, collisions,
+//! The iwsim world model: maps, differential-drive bodies (rectangles or discs) with motors, collisions,
 //! sensors, noise and robot-to-robot messages, stepped deterministically.
 //!
 //! The world is pure: it does no I/O, reads no clock and owns its only random generator, which
@@ -48,19 +48,19 @@ use nalgebra::{Point2, Vector2};
 use thiserror::Error;
 
 pub use body::{
-    AddRobotError, MAX_BODY_M, MAX_NAME_LEN, MAX_PROXIMITY, MAX_SENSOR_RANGE_M, MAX_SPEED_MPS, ProximitySpec,
-    RobotKind, RobotSpec,
+    AddRobotError, BodyShape, MAX_BODY_M, MAX_NAME_LEN, MAX_PROXIMITY, MAX_SENSOR_RANGE_M, MAX_SPEED_MPS, MAX_STEP_M,
+    ProximitySpec, RobotKind, RobotSpec, max_speed_mps,
 };
 pub use grid::StaticBuildError;
 pub use readings::{
     GpsReading, Heard, MAX_BEACONS, MAX_INBOX_BYTES, MAX_MESSAGE_BYTES, Message, MessageTooLong, SensorReadings,
 };
 
-use crate::geom::PlacedBox;
+use crate::geom::PlacedBody;
 use crate::map::{Lab, Params};
 use crate::math::{Pose, Real};
 use crate::rng::Rng;
-use body::{BodyShape, PreparedSensor};
+use body::{BodyGeom, PreparedSensor};
 use grid::{DynGrid, GridSpec, StaticIndex};
 
 /// How many robots a world holds unless told otherwise (the hub's capacity).
@@ -192,7 +192,7 @@ pub struct Robot {
     /// A frozen robot does not move and its motors read zero (its controller is gone); it
     /// is still an obstacle and still senses.
     pub frozen: bool,
-    shape: BodyShape,
+    shape: BodyGeom,
     sensors: [PreparedSensor; MAX_PROXIMITY],
     sensor_count: usize,
     /// Radius around the centre of movement that every sensor's cone stays within.
@@ -206,7 +206,8 @@ pub struct Robot {
 }
 
 impl Robot {
-    /// The robot's rectangle corners in world coordinates, counter-clockwise from front-right.
+    /// The robot's rectangle corners in world coordinates, counter-clockwise from front-right
+    /// (a disc's: those of the square around it, turned with the heading).
     pub fn corners(&self) -> [Point2<Real>; 4] {
         let (s, c) = self.pose.theta.sin_cos();
         self.shape.corners_ccw(&self.pose, c, s)
@@ -232,8 +233,8 @@ struct Motion {
     alive: bool,
     moving: bool,
     real: bool,
-    cur: PlacedBox,
-    next: PlacedBox,
+    cur: PlacedBody,
+    next: PlacedBody,
     cur_min: Point2<Real>,
     cur_max: Point2<Real>,
     next_min: Point2<Real>,
@@ -249,6 +250,8 @@ struct Geo {
     alive: bool,
     centre: Point2<Real>,
     bound_radius: Real,
+    /// A disc's radius (its centre is `centre`); 0 for a rectangle, whose edges follow.
+    disc_radius: Real,
     corners: [Point2<Real>; 4],
     /// Outward normals of the edges front, left, rear, right; `normals[0]` is the heading's
     /// (cos θ, sin θ).
@@ -257,12 +260,13 @@ struct Geo {
     inv_len2: [Real; 2],
 }
 
-const DEAD_BOX: PlacedBox = PlacedBox {
+const DEAD_BOX: PlacedBody = PlacedBody {
     iso: nalgebra::Isometry2 {
         rotation: nalgebra::UnitComplex::new_unchecked(nalgebra::Complex { re: 1.0, im: 0.0 }),
         translation: nalgebra::Translation2 { vector: Vector2::new(0.0, 0.0) },
     },
     half: Vector2::new(0.0, 0.0),
+    disc: false,
 };
 
 impl Motion {
@@ -286,6 +290,7 @@ impl Geo {
         alive: false,
         centre: Point2::new(0.0, 0.0),
         bound_radius: 0.0,
+        disc_radius: 0.0,
         corners: [Point2::new(0.0, 0.0); 4],
         normals: [Vector2::new(0.0, 0.0); 4],
         inv_len2: [0.0; 2],
@@ -304,6 +309,7 @@ impl Geo {
             alive: true,
             centre: robot.pose.position(),
             bound_radius: robot.shape.bound_radius,
+            disc_radius: if robot.shape.disc { robot.shape.half.x } else { 0.0 },
             corners: robot.shape.corners_ccw(&robot.pose, c, s),
             // Outward normals of the edges front, left, rear, right (corner i → i+1).
             normals: [heading, left, -heading, -left],
@@ -320,19 +326,17 @@ impl Geo {
 struct Scratch {
     segments: Vec<grid::Segment>,
     local: Vec<sensors::LocalSegment>,
+    /// Discs some sensor may see: centre and radius.
+    discs: Vec<(Point2<Real>, Real)>,
     blocked: Vec<(bool, bool)>,
     deliveries: Vec<(u32, Heard)>,
     speakers: Vec<u32>,
     listeners: Vec<u32>,
 }
 
-/// Box corners (min, max) of a placed rectangle.
-fn aabb(b: &PlacedBox) -> (Point2<Real>, Point2<Real>) {
-    let c = b.iso.rotation.re.abs();
-    let s = b.iso.rotation.im.abs();
-    let e = Vector2::new(c * b.half.x + s * b.half.y, s * b.half.x + c * b.half.y);
-    let t = Point2::from(b.iso.translation.vector);
-    (t - e, t + e)
+/// Box corners (min, max) of a placed body.
+fn aabb(b: &PlacedBody) -> (Point2<Real>, Point2<Real>) {
+    b.aabb()
 }
 
 #[inline]
@@ -465,7 +469,7 @@ impl World {
     /// Adds a robot at its spec's pose. The pose is not checked for room: see
     /// [`World::is_free`].
     pub fn add_robot(&mut self, spec: RobotSpec) -> Result<RobotHandle, AddRobotError> {
-        spec.validate()?;
+        spec.validate_at(self.params.cycle_ms.max(1) as Real / 1000.0)?;
         // A robot placed off the lab would drive outside its border wall for good.
         let (x, y, width, height) = (spec.pose.x, spec.pose.y, self.lab.width_m, self.lab.height_m);
         if !((0.0..=width).contains(&x) && (0.0..=height).contains(&y)) {
@@ -474,7 +478,7 @@ impl World {
         if self.live >= self.capacity {
             return Err(AddRobotError::Full { max: self.capacity });
         }
-        let shape = BodyShape::new(&spec);
+        let shape = BodyGeom::new(&spec);
         let specs = if spec.sensors.is_empty() { spec.default_sensors() } else { spec.sensors.clone() };
         let mut sensors = [PreparedSensor::new(&specs[0], 1.0); MAX_PROXIMITY];
         let (mut reach, mut sensor_radius): (Real, Real) = (0.0, 0.0);
@@ -569,8 +573,8 @@ impl World {
 
     /// Whether a robot of this spec, at the spec's pose, would touch no wall and no robot.
     pub fn is_free(&self, spec: &RobotSpec) -> bool {
-        let placed = BodyShape::new(spec).placed(&spec.pose);
-        if self.box_hits_wall(&placed) {
+        let placed = BodyGeom::new(spec).placed(&spec.pose);
+        if self.body_hits_wall(&placed) {
             return false;
         }
         let (min, max) = aabb(&placed);
@@ -581,13 +585,13 @@ impl World {
             let r = g.bound_radius;
             let far =
                 g.centre.x + r < min.x || g.centre.x - r > max.x || g.centre.y + r < min.y || g.centre.y - r > max.y;
-            far || !crate::geom::boxes_intersect(&placed, &other.shape.placed(&other.pose))
+            far || !crate::geom::bodies_intersect(&placed, &other.shape.placed(&other.pose))
         })
     }
 
     /// Whether a robot of this spec, at the spec's pose, would touch no wall.
     pub fn is_clear_of_walls(&self, spec: &RobotSpec) -> bool {
-        !self.box_hits_wall(&BodyShape::new(spec).placed(&spec.pose))
+        !self.body_hits_wall(&BodyGeom::new(spec).placed(&spec.pose))
     }
 
     /// Measures every robot where it stands, exactly (no noise, no latency, no random draw), so
@@ -847,6 +851,11 @@ impl World {
             let Some(r) = &slot.robot else { continue };
             h.u64(i as u64);
             h.u64(slot.generation as u64);
+            // Only discs add a word, so every rectangle-only world keeps the hash it had.
+            if r.spec.shape == BodyShape::Disc {
+                h.u64(1);
+                h.f64(r.spec.width_m);
+            }
             for v in [r.pose.x, r.pose.y, r.pose.theta, r.motor_in[0], r.motor_in[1], r.motor_out[0], r.motor_out[1]] {
                 h.f64(v);
             }

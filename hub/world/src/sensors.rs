@@ -25,6 +25,8 @@ struct Candidates<'a> {
     segments: &'a mut Vec<Segment>,
     /// The same, relative to the robot and in f32.
     local: &'a mut Vec<LocalSegment>,
+    /// Other robots' discs (centre, radius) some sensor may see.
+    discs: &'a mut Vec<(Point2<Real>, Real)>,
 }
 
 /// Whether any sensor of a robot at `centre`, whose sensors sit within `inner` of it and see
@@ -56,7 +58,8 @@ impl World {
         let quiet = crate::map::Params { noise: crate::map::NoiseParams::NONE, ..params.clone() };
         let params: &crate::map::Params = if exact { &quiet } else { params };
         let scene = Scene { statics, dyn_grid, geo, lab, params };
-        let mut cands = Candidates { segments: &mut scratch.segments, local: &mut scratch.local };
+        let mut cands =
+            Candidates { segments: &mut scratch.segments, local: &mut scratch.local, discs: &mut scratch.discs };
         let lat = params.latency;
         let depth = lat.max() as usize;
         for (i, slot) in slots.iter_mut().enumerate() {
@@ -104,8 +107,15 @@ impl Scene<'_> {
         self.gather(i, r, cands);
         // The heading's cosine and sine, computed when the pose was committed.
         let heading = self.geo[i].normals[0];
-        let distances =
+        let mut distances =
             proximity_all(&r.sensors[..r.sensor_count], pos, heading.x, heading.y, cands.local, cands.segments);
+        // Discs are few next to wall edges: a scalar pass after the segment kernel.
+        for &(centre, radius) in cands.discs.iter() {
+            for (k, sensor) in r.sensors[..r.sensor_count].iter().enumerate() {
+                let d = disc_proximity(sensor, pos, heading.x, heading.y, centre, radius);
+                distances[k] = distances[k].min(d);
+            }
+        }
         for (k, &d) in distances.iter().enumerate().take(r.sensor_count) {
             out.proximity_m[k] = if noise.proximity_m > 0.0 { rng.noisy(d, noise.proximity_m).max(0.0) } else { d };
         }
@@ -142,6 +152,7 @@ impl Scene<'_> {
     fn gather(&self, i: usize, r: &Robot, cands: &mut Candidates<'_>) {
         cands.segments.clear();
         cands.local.clear();
+        cands.discs.clear();
         let pos = r.pose.position();
         let (inner, reach) = (r.sensor_radius, r.reach);
         let e = Vector2::new(reach, reach);
@@ -165,6 +176,11 @@ impl Scene<'_> {
             let g = &self.geo[j as usize];
             let near = reach + g.bound_radius;
             if j as usize != i && g.alive && (g.centre - pos).norm_squared() <= near * near {
+                if g.disc_radius > 0.0 {
+                    // A disc is read as its circle, not as the square around it.
+                    cands.discs.push((g.centre, g.disc_radius));
+                    return;
+                }
                 for k in 0..4 {
                     let seg =
                         Segment::with_normal(g.corners[k], g.corners[(k + 1) % 4], g.normals[k], g.inv_len2[k & 1]);
@@ -406,6 +422,63 @@ fn proximity(sensor: &PreparedSensor, pos: Point2<Real>, c: Real, s: Real, segme
     best
 }
 
+/// The distance from a sensor to the nearest point of a disc inside its cone, capped at its
+/// range (the disc's circle, as Ciber-Rato's sensors see another robot).
+fn disc_proximity(
+    sensor: &PreparedSensor,
+    pos: Point2<Real>,
+    c: Real,
+    s: Real,
+    centre: Point2<Real>,
+    radius: Real,
+) -> Real {
+    let p = pos + rotate(sensor.origin, c, s);
+    let right = rotate(sensor.edge_right, c, s);
+    let left = rotate(sensor.edge_left, c, s);
+    let d = if sensor.wide {
+        // Not convex: split at the axis, as for segments.
+        let axis = rotate(sensor.axis, c, s);
+        cone_disc_distance(p, right, axis, centre, radius).min(cone_disc_distance(p, axis, left, centre, radius))
+    } else {
+        cone_disc_distance(p, right, left, centre, radius)
+    };
+    d.min(sensor.range)
+}
+
+/// The distance from `p` to the part of the disc (`centre`, `radius`) inside the convex cone
+/// spanned counter-clockwise from `u1` to `u2` (at most 180°), or ∞ when the cone misses it.
+///
+/// When the disc's nearest point to `p` lies in the cone, that is the answer. Otherwise the
+/// nearest point of the (convex) part of the disc inside the cone lies on one of the cone's
+/// edges: where that ray enters the disc.
+pub(crate) fn cone_disc_distance(
+    p: Point2<Real>,
+    u1: Vector2<Real>,
+    u2: Vector2<Real>,
+    centre: Point2<Real>,
+    radius: Real,
+) -> Real {
+    let w = centre - p;
+    let dist_sq = w.norm_squared();
+    let excess = dist_sq - radius * radius;
+    if excess <= 0.0 {
+        // The sensor is inside the disc.
+        return 0.0;
+    }
+    if cross(u1, w) >= 0.0 && cross(w, u2) >= 0.0 {
+        return dist_sq.sqrt() - radius;
+    }
+    let mut best = Real::INFINITY;
+    for u in [u1, u2] {
+        let b = u.dot(&w);
+        let disc = b * b - excess;
+        if b > 0.0 && disc >= 0.0 {
+            best = best.min(b - disc.sqrt());
+        }
+    }
+    best
+}
+
 fn noisy_deg(rng: &mut Rng, angle_rad: Real, sigma_deg: Real) -> Real {
     if sigma_deg > 0.0 { wire_deg(angle_rad + (sigma_deg * rng.gaussian()).to_radians()) } else { wire_deg(angle_rad) }
 }
@@ -579,6 +652,23 @@ mod tests {
                 proptest::prop_assert!((fast[k] - slow).abs() < 1e-4, "sensor {k}: {} vs {}", fast[k], slow);
             }
         }
+    }
+
+    #[test]
+    fn a_disc_reads_as_its_circle_inside_the_cone() {
+        let o = Point2::origin();
+        // Straight ahead: the distance to the circle.
+        let d = cone_disc_distance(o, unit(-30.0), unit(30.0), Point2::new(3.0, 0.0), 0.5);
+        assert!((d - 2.5).abs() < 1e-12, "{d}");
+        // A disc off to the side, clipped by the cone's left edge: where that ray enters it.
+        // Centre (2, 2), edge at 30°: b = u·w = 2cos30 + 2sin30, the entry is b − √(b² − (8 − r²)).
+        let (b, r) = (2.0 * 30f64.to_radians().cos() + 2.0 * 30f64.to_radians().sin(), 0.8);
+        let want = b - (b * b - (8.0 - r * r)).sqrt();
+        let d = cone_disc_distance(o, unit(-30.0), unit(30.0), Point2::new(2.0, 2.0), r);
+        assert!((d - want).abs() < 1e-12, "{d} vs {want}");
+        // The cone misses a disc behind it, and a sensor inside a disc reads 0.
+        assert_eq!(cone_disc_distance(o, unit(-30.0), unit(30.0), Point2::new(-3.0, 0.0), 0.5), f64::INFINITY);
+        assert_eq!(cone_disc_distance(o, unit(-30.0), unit(30.0), Point2::new(0.2, 0.1), 0.5), 0.0);
     }
 
     #[test]

@@ -694,3 +694,139 @@ fn a_robot_cannot_start_outside_the_lab() {
     assert!(w.add_robot(RobotSpec::at(5.0, -0.5, 0.0)).is_err(), "below the lab");
     assert!(w.add_robot(RobotSpec::at(5.0, 7.0, 0.0)).is_ok(), "inside");
 }
+
+/// A plain Ciber-Rato robot at a 50 ms cycle: a 1 m disc moving 0.15 m per cycle at full
+/// power (3 m/s), with Ciber-Rato's filter `out = (in + out)/2`.
+fn ciber_rato(x: Real, y: Real, heading_deg: Real) -> RobotSpec {
+    RobotSpec::at(x, y, heading_deg).disc(1.0).motors(0.15 / 0.05, 0.5)
+}
+
+/// Heading change from `a` to `b`, radians, taking the short way round.
+fn turned(a: Real, b: Real) -> Real {
+    crate::math::wrap_rad(b - a)
+}
+
+#[test]
+fn a_plain_robot_moves_by_ciber_ratos_formula_each_cycle() {
+    let mut w = world(empty_lab(20.0, 20.0), quiet());
+    let r = w.add_robot(ciber_rato(2.0, 5.0, 0.0)).expect("valid");
+    // Full power from rest: out = 0.5, 0.75, 0.875, 0.9375 of 0.15 m per cycle.
+    let want = [0.075, 0.1125, 0.13125, 0.140625];
+    let mut x = w.robot(r).expect("alive").pose.x;
+    for (k, step) in want.iter().enumerate() {
+        w.step(&[Action::motors(r, 1.0, 1.0)], 0.05);
+        let p = w.robot(r).expect("alive").pose;
+        assert!(close(p.x - x, *step, 1e-12), "tick {k}: moved {} instead of {step}", p.x - x);
+        assert_eq!((p.y, p.theta), (5.0, 0.0));
+        x = p.x;
+    }
+    // Ciber-Rato's observed spin at −0.05/+0.05 (a third of full power): 0.05, 0.075, 0.0875
+    // rad per cycle, rot = outR − outL over a diameter of 1.
+    let mut w = world(empty_lab(20.0, 20.0), quiet());
+    let r = w.add_robot(ciber_rato(5.0, 5.0, 0.0)).expect("valid");
+    let mut theta = 0.0;
+    for want in [0.05, 0.075, 0.0875, 0.09375] {
+        w.step(&[Action::motors(r, -1.0 / 3.0, 1.0 / 3.0)], 0.05);
+        let p = w.robot(r).expect("alive").pose;
+        assert!(close(p.theta - theta, want, 1e-12), "turned {} instead of {want}", p.theta - theta);
+        assert_eq!((p.x, p.y), (5.0, 5.0));
+        theta = p.theta;
+    }
+}
+
+#[test]
+fn a_disc_against_a_wall_turns_in_place_where_a_square_cannot() {
+    let lab = Lab { walls: vec![rect_wall(6.0, 0.0, 7.0, 10.0, 1.0)], ..empty_lab(20.0, 10.0) };
+    let mut w = world(lab.clone(), quiet());
+    let r = w.add_robot(ciber_rato(5.0, 5.0, 0.0)).expect("valid");
+    // Drive into the wall until it holds the disc.
+    for _ in 0..20 {
+        w.step(&[Action::motors(r, 1.0, 1.0)], 0.05);
+    }
+    let pinned = w.robot(r).expect("alive").pose;
+    assert!(w.robot(r).expect("alive").collision);
+    assert!(pinned.x > 5.4 && pinned.x < 5.5, "{pinned:?}");
+    // Spin: the residual forward speed is refused at first, then the disc turns freely.
+    let (mut total, mut theta) = (0.0, pinned.theta);
+    for tick in 0..60 {
+        w.step(&[Action::motors(r, -1.0, 1.0)], 0.05);
+        let robot = w.robot(r).expect("alive");
+        total += turned(theta, robot.pose.theta);
+        theta = robot.pose.theta;
+        let at = RobotSpec { pose: robot.pose, ..robot.spec.clone() };
+        assert!(w.is_clear_of_walls(&at), "tick {tick}: the disc overlaps the wall at {:?}", robot.pose);
+        assert!(robot.pose.x <= 5.5 && (robot.pose.x - pinned.x).abs() < 0.2, "tick {tick}: {:?}", robot.pose);
+    }
+    assert!(total > 4.0 * PI, "turned only {total} rad in 60 ticks");
+
+    // A 1 m square 1 cm from the same wall cannot turn at all: its corners would enter it.
+    let mut w = world(lab, quiet());
+    let sq = w.add_robot(RobotSpec::at(5.49, 5.0, 0.0).motors(3.0, 0.5)).expect("valid");
+    for _ in 0..60 {
+        w.step(&[Action::motors(sq, -1.0, 1.0)], 0.05);
+    }
+    let s = w.robot(sq).expect("alive");
+    assert_eq!((s.pose.x, s.pose.theta), (5.49, 0.0));
+    assert!(s.collision);
+}
+
+#[test]
+fn two_discs_driving_head_on_stop_with_their_circles_apart() {
+    let mut w = world(empty_lab(20.0, 8.0), quiet());
+    // Offset by 0.6 m across, so they meet off-centre; their centres never come closer than one
+    // diameter.
+    let a = w.add_robot(ciber_rato(3.0, 4.0, 0.0)).expect("valid");
+    let b = w.add_robot(ciber_rato(8.0, 4.6, 180.0)).expect("valid");
+    for _ in 0..60 {
+        w.step(&[Action::motors(a, 1.0, 1.0), Action::motors(b, 1.0, 1.0)], 0.05);
+        let (pa, pb) = (w.robot(a).expect("alive").pose, w.robot(b).expect("alive").pose);
+        let gap = (pb.position() - pa.position()).norm();
+        assert!(gap >= 1.0 - 1e-6, "overlap: centres {gap} m apart");
+    }
+    let (ra, rb) = (w.robot(a).expect("alive"), w.robot(b).expect("alive"));
+    assert!(ra.collision && rb.collision);
+    // Held within one cycle's travel each (0.15 m) of touching.
+    let gap = (rb.pose.position() - ra.pose.position()).norm();
+    assert!(gap < 1.3, "stopped {gap} m apart");
+}
+
+#[test]
+fn a_disc_is_seen_as_a_circle_and_its_sensors_sit_on_its_rim() {
+    let mut w = world(empty_lab(20.0, 8.0), quiet());
+    let sensors = [0.0, 60.0, -60.0, 180.0].map(|a: Real| {
+        let r = a.to_radians();
+        ProximitySpec::deg(0.5 * r.cos(), 0.5 * r.sin(), a, 60.0)
+    });
+    let a = w.add_robot(ciber_rato(2.0, 4.0, 0.0).sensors(sensors.to_vec())).expect("valid");
+    // B's centre is 0.4 m off A's axis: its circle is √(2.5² + 0.4²) − 0.5 from A's front
+    // sensor at (2.5, 4); the square around it would read 2.0.
+    w.add_robot(ciber_rato(5.0, 4.4, 0.0)).expect("valid");
+    w.step(&[], 0.05);
+    let d = w.robot(a).expect("alive").readings.proximity()[0];
+    let want = (2.5f64 * 2.5 + 0.4 * 0.4).sqrt() - 0.5;
+    assert!(close(d, want, 1e-4), "{d} vs {want}");
+    // The back sensor, on the rim at (1.5, 4), reads the lab border at x = 0.
+    let back = w.robot(a).expect("alive").readings.proximity()[3];
+    assert!(close(back, 1.5, 1e-4), "{back}");
+}
+
+#[test]
+fn worlds_of_discs_are_deterministic_and_hash_their_shape() {
+    let run = |disc: bool| {
+        let lab = Lab { walls: vec![rect_wall(6.0, 0.0, 7.0, 10.0, 1.0)], ..empty_lab(20.0, 10.0) };
+        let mut w = World::new(&lab, Params::default(), 42).expect("valid");
+        let mut handles = vec![];
+        for k in 0..6 {
+            let spec = RobotSpec::at(1.5 + 0.8 * k as Real, 2.0 + 1.1 * k as Real, 30.0 * k as Real).motors(3.0, 0.5);
+            handles.push(w.add_robot(if disc { spec.disc(0.6) } else { spec.body(0.6, 0.6, 0.5) }).expect("valid"));
+        }
+        for t in 0..100 {
+            let acts: Vec<Action> =
+                handles.iter().enumerate().map(|(k, &h)| Action::motors(h, 1.0, ((k + t) % 3) as Real - 1.0)).collect();
+            w.step(&acts, 0.05);
+        }
+        w.state_hash()
+    };
+    assert_eq!(run(true), run(true));
+    assert_ne!(run(true), run(false));
+}

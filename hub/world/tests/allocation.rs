@@ -64,7 +64,10 @@ fn a_warm_tick_allocates_nothing() {
     let mut actions = Vec::new();
     for k in 0..12 {
         let x = 6.0 + 2.5 * k as f64;
-        let chair = world.add_robot(RobotSpec::at(x, 6.1, 0.0).body(1.1, 0.65, 0.8)).expect("a free start");
+        // Every third robot a disc, so the sensors' disc pass runs too.
+        let spec = RobotSpec::at(x, 6.1, 0.0);
+        let spec = if k % 3 == 2 { spec.disc(0.9) } else { spec.body(1.1, 0.65, 0.8) };
+        let chair = world.add_robot(spec).expect("a free start");
         // Different powers per chair: some drive, some turn, some meet walls and each other.
         let (l, r) = [(1.0, 1.0), (0.6, 1.0), (-0.5, 0.5), (1.0, 0.2)][k % 4];
         actions.push(Action::motors(chair, l, r));
@@ -80,5 +83,5 @@ fn a_warm_tick_allocates_nothing() {
         }
     });
     assert_ne!(world.state_hash(), before, "the chairs kept moving while counted");
-    assert_eq!(calls, 0, "allocator calls in 300 warm ticks of 12 chairs");
+    assert_eq!(calls, 0, "allocator calls in 300 warm ticks of 12 robots");
 }
