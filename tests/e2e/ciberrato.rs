@@ -286,3 +286,69 @@ fn a_lab_name_of_32_bytes_or_more_reaches_viewers_cut_to_31() {
     stop(&s, hub, bridge, &lines);
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+#[test]
+fn a_plain_robot_against_a_wall_escapes_by_spinning_as_robsample_does() {
+    // A lab with one wall ahead of the start, and a client that drives as robsample does:
+    // straight on until the wall, then spin until the front IR sensor reads clear, then on.
+    let dir = std::env::temp_dir().join(format!("iwsim-e2e-cr-spin-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("dir");
+    let (lab, grid) = (dir.join("lab.xml"), dir.join("grid.xml"));
+    std::fs::write(
+        &lab,
+        "<Lab Name=\"spin\" Width=\"14\" Height=\"7\">\n<Wall Height=\"1\"><Corner X=\"8\" Y=\"0\"/><Corner X=\"9\" Y=\"0\"/>\
+         <Corner X=\"9\" Y=\"7\"/><Corner X=\"8\" Y=\"7\"/></Wall>\n</Lab>\n",
+    )
+    .expect("lab");
+    std::fs::write(&grid, "<Grid><Position X=\"5\" Y=\"3.5\" Dir=\"0\"/></Grid>\n").expect("grid");
+    let s = session("cr-spin");
+    let (lab_s, grid_s) = (lab.to_str().expect("utf-8"), grid.to_str().expect("utf-8"));
+    let (hub, bridge, reg, lines) = hub_and_bridge(
+        &s,
+        &["--lab", lab_s, "--grid", grid_s, "--lockstep", "--wait-agents", "1", "--cycle-ms", "50", "--no-noise"],
+        &[],
+    );
+    let mut robot = StandIn::new();
+    assert!(robot.register(reg, r#"<Robot Name="spinner" Id="1"/>"#).starts_with("<Reply Status=\"Ok\">"));
+    let (mut hit_wall, mut spun, mut escaped) = (None, 0, false);
+    for _ in 0..400 {
+        let m = robot.next("Measures");
+        let collision = m.contains("Collision=\"Yes\"");
+        let front = m
+            .split("<IRSensor ")
+            .find(|e| e.starts_with("Id=\"0\""))
+            .and_then(|e| num(&format!("<IRSensor {e}"), "IRSensor", "Value"))
+            .expect("IR sensor 0");
+        let powers = match hit_wall {
+            None if collision => {
+                hit_wall = Some(front);
+                (-0.15, 0.15)
+            }
+            None => (0.15, 0.15),
+            // Spin until the front sensor sees more than 2 m of free space (IR < 0.5), then go.
+            Some(_) if front > 0.5 && !escaped => {
+                spun += 1;
+                (-0.15, 0.15)
+            }
+            Some(_) => {
+                escaped = true;
+                (0.15, 0.15)
+            }
+        };
+        robot.send(&format!("<Actions LeftMotor=\"{}\" RightMotor=\"{}\"/>", powers.0, powers.1));
+        if escaped && !collision && m.contains("Time=\"") && spun > 0 {
+            break;
+        }
+    }
+    assert!(hit_wall.is_some(), "the robot never reached the wall");
+    assert!(spun > 0 && escaped, "it spun {spun} ticks against the wall and escaped: {escaped}");
+    // Driving away: twenty more ticks take it well clear of the wall.
+    for _ in 0..20 {
+        let m = robot.next("Measures");
+        assert!(!m.contains("Collision=\"Yes\""), "{m}");
+        robot.send(r#"<Actions LeftMotor="0.15" RightMotor="0.15"/>"#);
+    }
+    let out = stop(&s, hub, bridge, &lines);
+    assert!(out.contains("run over"), "{out}");
+    let _ = std::fs::remove_dir_all(dir);
+}

@@ -782,6 +782,12 @@ impl World {
             if moved {
                 r.pose = m.next_pose;
                 self.geo[i] = Geo::of_cs(r, m.next_cs.0, m.next_cs.1);
+            } else if m.moving && r.spec.shape == BodyShape::Disc {
+                // Ciber-Rato's rule: a refused move still turns the robot. A disc's footprint is
+                // the same at every heading, so turning where it stands meets nothing new; without
+                // this a disc held by a wall and steered on an arc (one wheel still) never turns away.
+                r.pose = Pose::new(r.pose.x, r.pose.y, m.next_pose.theta);
+                self.geo[i] = Geo::of_cs(r, m.next_cs.0, m.next_cs.1);
             }
             if hit && !r.collision {
                 r.collision_count += 1;

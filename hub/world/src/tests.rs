@@ -771,6 +771,34 @@ fn a_disc_against_a_wall_turns_in_place_where_a_square_cannot() {
 }
 
 #[test]
+fn a_disc_held_by_a_wall_still_turns_when_its_move_is_refused() {
+    // Ciber-Rato's rule, which stock clients rely on: pClient escapes a wall by pivoting on one
+    // wheel (0, 0.1). The arc would take the disc into the wall, so the move is refused, but
+    // the turn is kept: the disc turns where it stands until the arc leads away.
+    let lab = Lab { walls: vec![rect_wall(6.0, 0.0, 7.0, 10.0, 1.0)], ..empty_lab(20.0, 10.0) };
+    let mut w = world(lab, quiet());
+    let r = w.add_robot(ciber_rato(5.0, 5.0, 0.0)).expect("valid");
+    for _ in 0..20 {
+        w.step(&[Action::motors(r, 1.0, 1.0)], 0.05);
+    }
+    let pinned = w.robot(r).expect("alive").pose;
+    let mut refused_but_turned = 0;
+    for _ in 0..40 {
+        let before = w.robot(r).expect("alive").pose;
+        w.step(&[Action::motors(r, 0.0, 1.0)], 0.05);
+        let robot = w.robot(r).expect("alive");
+        if robot.collision && (robot.pose.x, robot.pose.y) == (before.x, before.y) && robot.pose.theta != before.theta {
+            refused_but_turned += 1;
+        }
+        let at = RobotSpec { pose: robot.pose, ..robot.spec.clone() };
+        assert!(w.is_clear_of_walls(&at), "the disc overlaps the wall at {:?}", robot.pose);
+    }
+    assert!(refused_but_turned > 0, "no tick turned the held disc");
+    let end = w.robot(r).expect("alive").pose;
+    assert!(end.x < pinned.x - 0.1 || (end.y - pinned.y).abs() > 0.1, "it never got away: {end:?} from {pinned:?}");
+}
+
+#[test]
 fn two_discs_driving_head_on_stop_with_their_circles_apart() {
     let mut w = world(empty_lab(20.0, 8.0), quiet());
     // Offset by 0.6 m across, so they meet off-centre; their centres never come closer than one
