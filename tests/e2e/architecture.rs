@@ -152,6 +152,7 @@ fn agents_adapters_and_the_viewer_never_link_the_hub_or_the_world() {
             "recorder",
             "plot",
             "bench-harness",
+            "serial-protocol",
         ]
         .contains(&m.as_str());
         assert!(is_client || known_other, "new workspace package {m:?}: add it to ARCHITECTURE.md and to this test");
@@ -171,6 +172,19 @@ fn ipc_types_depends_on_nothing_in_the_workspace() {
         .map(|s| s.to_string())
         .collect();
     assert!(direct.is_subset(&allowed), "ipc-types depends on {direct:?}; allowed: {allowed:?}");
+}
+
+#[test]
+fn the_serial_protocol_depends_on_nothing_and_builds_without_std() {
+    // Architecture invariant: serial-protocol has no dependencies at all and is `#![no_std]`
+    // without bringing std back outside its tests, so a board's firmware can use it as it is.
+    let g = graph();
+    let direct = g.direct("serial-protocol", &g.normal);
+    assert!(direct.is_empty(), "serial-protocol must depend on nothing, but depends on {direct:?}");
+    let lib = std::fs::read_to_string(root().join("adapters/serial-protocol/src/lib.rs")).expect("serial-protocol");
+    assert!(lib.lines().any(|l| l.trim() == "#![no_std]"), "serial-protocol's lib.rs lacks #![no_std]");
+    let uses_std = offending(&["extern crate std", "std::"], |r| !r.starts_with("adapters/serial-protocol/"));
+    assert!(uses_std.is_empty(), "serial-protocol uses std outside its tests:\n  {}", uses_std.join("\n  "));
 }
 
 #[test]

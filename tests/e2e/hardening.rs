@@ -7,14 +7,10 @@ use std::time::Duration;
 
 use super::common::{Proc, assert_no_shared_memory_left, session, text, wait_for_tick};
 
-/// Runs `iwsim ARGS` to its end and returns its exit code and stderr.
+/// Runs `iwsim ARGS` to its end (failing the test if it runs 10 s, as a value that was not
+/// refused would) and returns its exit code and stderr.
 fn iwsim(args: &[&str]) -> (Option<i32>, String) {
-    let out = Command::new(env!("CARGO_BIN_EXE_iwsim"))
-        .args(args)
-        .env("RUST_LOG", "warn")
-        .stdin(Stdio::null())
-        .output()
-        .expect("iwsim runs");
+    let out = Proc::spawn(args).wait(Duration::from_secs(10));
     (out.status.code(), text(&out.stderr))
 }
 
@@ -29,7 +25,10 @@ fn values_that_cannot_be_honoured_are_refused_with_the_option_and_its_range() {
         (&["agent", "wheelchair", "--robots", "0"][..], "--robots", "1..=10000"),
         (&["udp", "--client-timeout", "1e30"][..], "--client-timeout", "0.1..=86400"),
     ] {
-        let (code, stderr) = iwsim(args);
+        // A session of its own, so a value that is not refused starts nothing a user runs.
+        let s = session("refused");
+        let args: Vec<&str> = args.iter().copied().chain(["--session", &s]).collect();
+        let (code, stderr) = iwsim(&args);
         assert_eq!(code, Some(2), "{args:?} must be refused before anything starts: {stderr}");
         let first = stderr.lines().next().unwrap_or_default();
         assert!(first.contains(option) && first.contains(range), "{args:?}: {stderr}");

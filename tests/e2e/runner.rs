@@ -152,7 +152,9 @@ fn a_faulty_lab_is_reported_before_any_agent_starts() {
     assert!(stderr.contains("the hub exited with exit status: 1"), "{stderr}");
     assert!(stderr.contains("bad.xml"), "the hub's message names the lab: {stderr}");
     // No agent was started, so none was waited for (it would wait 30 s for the hub) or
-    // killed: no agent said anything and no log was written.
+    // killed: the runner never said it started agents, no agent said anything and no log was
+    // written.
+    assert!(!stderr.contains("starting 1 agent(s)"), "{stderr}");
     assert!(!stderr.contains("wheelchair"), "{stderr}");
     assert!(!out.join("chair1.csv").exists());
     assert_nothing_of_run_left(pid);
@@ -168,7 +170,8 @@ fn a_run_with_a_session_name_can_be_watched_from_another_process() {
     let mut run =
         Proc::spawn(&["run", &scenario, "--headless", "--session", &name, "--out", out.to_str().expect("utf-8")]);
     let lines = run.stderr_lines();
-    wait_for_lines(&lines, &["wheelchair: agent"], Duration::from_secs(60));
+    // The runner says when it starts the agents (what a_faulty_lab… looks for in vain).
+    wait_for_lines(&lines, &["starting 1 agent(s)", "wheelchair: agent"], Duration::from_secs(60));
     let mut observer = agent_sdk::Observer::connect_within(&name, "e2e-runner-watch", Duration::from_secs(10))
         .expect("an observer joins the run's session");
     let start = Instant::now();

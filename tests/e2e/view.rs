@@ -452,3 +452,91 @@ fn udp_viewers_control_the_run_only_with_allow_control() {
         super::common::assert_no_shared_memory_left(&s);
     }
 }
+
+#[test]
+fn a_page_that_never_reads_is_dropped_after_the_write_timeout() {
+    // Enough robots that the world frames fill the socket's buffers within seconds (500: the
+    // hub's closing report of every robot still fits the test's stdout pipe); then
+    // the viewer's writes block, and after IO_TIMEOUT it must drop the page, not hold its thread
+    // and buffers for ever.
+    let s = session("view-stall");
+    let dir = std::env::temp_dir().join(format!("iwsim-e2e-view-stall-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("dir");
+    let lab = dir.join("open.xml");
+    std::fs::write(&lab, "<Lab Name=\"open\" Width=\"400\" Height=\"400\"></Lab>\n").expect("lab");
+    let hub =
+        Proc::spawn(&["hub", "--session", &s, "--lab", lab.to_str().expect("utf-8"), "--cycle-ms", "10", "--no-noise"]);
+    let agent = Proc::spawn(&[
+        "agent",
+        "wheelchair",
+        "--session",
+        &s,
+        "--robots",
+        "500",
+        "--pose",
+        "5,5,0",
+        "--spacing",
+        "1.5",
+        "--powers",
+        "0.1,0.1",
+    ]);
+    let mut view = Proc::spawn(&["view", "--session", &s, "--http", "127.0.0.1:0"]);
+    let lines = view.stderr_lines();
+    let addr: SocketAddr = said(&lines, "open http://").trim_end_matches('/').parse().expect("address");
+    // A small receive buffer (which also stops the kernel growing it) keeps what the kernel can
+    // hold for a page that does not read to what a real browser tab would, so the viewer's
+    // writes block within a second rather than after tens of megabytes.
+    let tcp = TcpStream::connect(addr).expect("connect");
+    let small: libc::c_int = 64 * 1024;
+    #[allow(unsafe_code)]
+    // SAFETY: a valid socket fd and a c_int option value of the size passed.
+    let set = unsafe {
+        libc::setsockopt(
+            std::os::fd::AsRawFd::as_raw_fd(&tcp),
+            libc::SOL_SOCKET,
+            libc::SO_RCVBUF,
+            (&small as *const libc::c_int).cast(),
+            std::mem::size_of::<libc::c_int>() as libc::socklen_t,
+        )
+    };
+    assert_eq!(set, 0, "SO_RCVBUF");
+    let (mut stalled, _) =
+        tungstenite::client(format!("ws://{addr}/ws"), tungstenite::stream::MaybeTlsStream::Plain(tcp))
+            .expect("websocket");
+    // Read until the frames carry every robot, then stop reading: a page whose tab froze.
+    frame_with_robots(&mut stalled, 500);
+    let tungstenite::stream::MaybeTlsStream::Plain(tcp) = stalled.get_ref() else { panic!("a plain TCP stream") };
+    let page_port = tcp.local_addr().expect("local address").port();
+    // Watch the viewer's end of this connection in the kernel's table, without reading (which
+    // would let the viewer's writes go on): once its buffers are full, it blocks, and after
+    // IO_TIMEOUT it must close its end (FIN_WAIT or gone) rather than hold the page for ever.
+    let viewer_end_open = || {
+        let table = std::fs::read_to_string("/proc/net/tcp").expect("/proc/net/tcp");
+        table.lines().skip(1).any(|l| {
+            let f: Vec<&str> = l.split_whitespace().collect();
+            let port = |a: &str| a.rsplit(':').next().and_then(|p| u16::from_str_radix(p, 16).ok());
+            f.len() > 3 && port(f[1]) == Some(addr.port()) && port(f[2]) == Some(page_port) && f[3] == "01"
+        })
+    };
+    assert!(viewer_end_open(), "the viewer's end of the page's connection is established");
+    let stalled_since = Instant::now();
+    while viewer_end_open() {
+        assert!(stalled_since.elapsed() < Duration::from_secs(90), "the viewer kept a page that reads nothing");
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    assert!(
+        stalled_since.elapsed() >= viewer::server::IO_TIMEOUT,
+        "closed after {:?}, before its write timeout",
+        stalled_since.elapsed()
+    );
+    drop(stalled);
+    // The viewer itself is fine and serves a new page.
+    let mut fresh = ws(addr);
+    assert_eq!(next_frame(&mut fresh).robots.len(), 500);
+    drop(fresh);
+    assert_eq!(agent_sdk::control(&s, ipc_types::Command::Stop, 0).expect("hub answers").status, 0);
+    assert!(hub.wait(Duration::from_secs(20)).status.success());
+    let _ = agent.wait(Duration::from_secs(20));
+    assert!(view.wait(Duration::from_secs(20)).status.success());
+    let _ = std::fs::remove_dir_all(dir);
+}

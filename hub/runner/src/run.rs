@@ -549,6 +549,12 @@ pub fn run_once(
     let stop = match hub_started(&mut procs, &banner, signals) {
         Some(stop) => stop,
         None => {
+            if opts.verbose {
+                ipc_services::report!(
+                    "iwsim run: the hub serves session {session}; starting {} agent(s)",
+                    scenario.agents.len()
+                );
+            }
             for (k, a) in scenario.agents.iter().enumerate() {
                 let mut args = vec![
                     s("agent"),
