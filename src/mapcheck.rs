@@ -79,7 +79,7 @@ pub fn summary(spec: &str, file: &MapFile) -> String {
             s
         }
         MapFile::Params(p) => format!(
-            "{spec}: parameters\n  cycle {} ms, run length {} ticks{}\n  sensors: compass {}, gps {}, beacon {}\n  noise: proximity {} m, compass {} deg, beacon {} deg, gps {} m / {} deg, motors {} %\n  latency (ticks): proximity {}, compass {}, beacon {}, ground {}, collision {}, gps {}\n",
+            "{spec}: parameters\n  cycle {} ms, run length {} ticks{}\n  sensors: compass {}, gps {}, beacon {}\n  noise: proximity {} m, compass {} deg, beacon {} deg, gps {} m / {} deg, motors {} %, encoder slip {} % a tick\n  latency (ticks): proximity {}, compass {}, beacon {}, ground {}, collision {}, gps {}\n",
             p.cycle_ms,
             p.sim_time_ticks,
             if p.sim_time_ticks == 0 { " (no limit)" } else { "" },
@@ -92,6 +92,7 @@ pub fn summary(spec: &str, file: &MapFile) -> String {
             p.noise.gps_pos_m,
             p.noise.gps_heading_deg,
             p.noise.motor_frac * 100.0,
+            p.noise.encoder_slip_frac * 100.0,
             p.latency.proximity,
             p.latency.compass,
             p.latency.beacon,
