@@ -10,6 +10,7 @@
 
 pub mod cli;
 pub mod core;
+mod ports;
 pub mod replay;
 pub mod serve;
 pub mod stage;
@@ -19,15 +20,14 @@ use std::os::fd::{AsRawFd, FromRawFd, OwnedFd};
 use std::time::{Duration, Instant};
 
 use ipc_services::iceoryx2::port::publisher::Publisher;
-use ipc_services::iceoryx2::port::update_connections::UpdateConnections as _;
-use ipc_services::iceoryx2::prelude::FileDescriptorBased;
-use ipc_services::{HUB_NODE_NAME, Role, SLICE_ALLOCATION, ServicesError, Session, Svc, clean_dead_nodes};
+use ipc_services::{HUB_NODE_NAME, ServicesError, Session, Svc, clean_dead_nodes};
 use ipc_types::{
-    Command, ControlResponse, Refusal, RegisterKind, RegisterRequest, RegisterResponse, RobotSensors, RobotState,
-    RunState, SensorBlock, TickHeader,
+    Command, ControlResponse, Refusal, RegisterKind, RegisterRequest, RegisterResponse, RobotState, RunState,
+    SensorBlock, TickHeader,
 };
 
 use self::core::{HubCore, MapAudience, Mode};
+use self::ports::{HubPorts, agent_sensor_port};
 use recorder::{Recorder, RecorderOptions};
 use world::WorldBuildError;
 use world::map::{Grid, Lab, Params};
@@ -186,55 +186,13 @@ pub fn run(cfg: HubConfig) -> Result<HubOutcome, HubError> {
     };
     let mut journal: Vec<recorder::journal::Event> = Vec::new();
 
-    let world_svc = session.world(&node, Role::Hub)?;
-    let map_svc = session.map(&node, Role::Hub)?;
-    let observer_map_svc = session.observer_map(&node, Role::Hub)?;
-    let sensors_svc = session.robot_sensors(&node, Role::Hub)?;
-    let actions_svc = session.actions(&node, Role::Hub)?;
-    let register_svc = session.register(&node, Role::Hub)?;
-    let control_svc = session.control(&node, Role::Hub)?;
-    let tick_svc = session.tick_event(&node, Role::Hub)?;
-    let doorbell_svc = session.hub_event(&node, Role::Hub)?;
-
-    let world_pub = world_svc
-        .publisher_builder()
-        .initial_max_slice_len(64)
-        .allocation_strategy(SLICE_ALLOCATION)
-        .create()
-        .map_err(ipc("create the world publisher"))?;
-    let sensors_pub = sensors_svc
-        .publisher_builder()
-        .initial_max_slice_len(64)
-        .allocation_strategy(SLICE_ALLOCATION)
-        .create()
-        .map_err(ipc("create the robot-sensors publisher"))?;
-    let mut roster = Roster { publisher: sensors_pub, ids: None, scratch: Vec::new() };
-    // Two maps, kept for late subscribers: the agents' (no scenario obstacles: their sensors
-    // must find those) and the observers' (the truth).
-    let publish_map = |svc: &ipc_services::MapService, audience| -> Result<_, HubError> {
-        let (header, items) = core.map_items(cfg.params.cycle_ms, deadline_ms, audience);
-        let publisher = svc
-            .publisher_builder()
-            .initial_max_slice_len(items.len().max(1))
-            .allocation_strategy(SLICE_ALLOCATION)
-            .create()
-            .map_err(ipc("create a map publisher"))?;
-        let mut sample = publisher.loan_slice_uninit(items.len()).map_err(ipc("loan the map"))?;
-        *sample.user_header_mut() = header;
-        sample.write_from_slice(&items).send().map_err(ipc("send the map"))?;
-        Ok(publisher)
-    };
-    let map_pub = publish_map(&map_svc, MapAudience::Agents)?;
-    let observer_map_pub = publish_map(&observer_map_svc, MapAudience::Observers)?;
-
-    let actions_sub = actions_svc.subscriber_builder().create().map_err(ipc("create the actions subscriber"))?;
-    let register_server = register_svc.server_builder().create().map_err(ipc("create the register server"))?;
-    let control_server = control_svc.server_builder().create().map_err(ipc("create the control server"))?;
-    let tick_notifier = tick_svc.notifier_builder().create().map_err(ipc("create the tick notifier"))?;
-    let doorbell = doorbell_svc.listener_builder().create().map_err(ipc("create the doorbell listener"))?;
-    #[allow(unsafe_code)]
-    // SAFETY: the listener outlives every poll below; we only read the fd number.
-    let doorbell_fd = unsafe { doorbell.file_descriptor().native_handle() };
+    let mut ports = HubPorts::open(
+        &session,
+        &node,
+        core.map_items(cfg.params.cycle_ms, deadline_ms, MapAudience::Agents),
+        core.map_items(cfg.params.cycle_ms, deadline_ms, MapAudience::Observers),
+    )?;
+    let doorbell_fd = ports.doorbell_fd();
 
     let hub_pid = std::process::id();
     let mut agents: BTreeMap<u32, AgentPorts> = BTreeMap::new();
@@ -268,9 +226,9 @@ pub fn run(cfg: HubConfig) -> Result<HubOutcome, HubError> {
             if core.world().tick() == 0 {
                 core.prime_sensors();
             }
-            publish_tick(&core, &world_pub, &agents, &mut states, &mut blocks)?;
-            roster.publish_if_changed(&core, &states)?;
-            tick_notifier.notify().map_err(ipc("ring the tick"))?;
+            publish_tick(&core, &ports.world_pub, &agents, &mut states, &mut blocks)?;
+            ports.roster.publish_if_changed(&states, || core.robot_sensors())?;
+            ports.tick_notifier.notify().map_err(ipc("ring the tick"))?;
             publish = false;
             if let Some(rec) = &mut recording {
                 record_changes(&mut core, rec, &mut journal);
@@ -281,7 +239,7 @@ pub fn run(cfg: HubConfig) -> Result<HubOutcome, HubError> {
                 last_published = Some(core.world().tick());
                 deadline_at = Instant::now() + cfg.deadline;
                 if let Some(rec) = &mut recording {
-                    rec.world(core.world().tick(), &states, &roster.scratch);
+                    rec.world(core.world().tick(), &states, &ports.roster.scratch);
                 }
             }
             if core.state() == RunState::Finished {
@@ -313,13 +271,10 @@ pub fn run(cfg: HubConfig) -> Result<HubOutcome, HubError> {
             }
         }
         poll_readable(&fds, timeout, &mut ready);
-        let _ = doorbell.try_wait(|_| {});
+        let _ = ports.doorbell.try_wait(|_| {});
         // A new subscriber gets the kept (history) sample only when the publisher next looks
         // at its connections: the map is sent once, and the world not while paused.
-        let _ = map_pub.update_connections();
-        let _ = observer_map_pub.update_connections();
-        let _ = world_pub.update_connections();
-        let _ = roster.publisher.update_connections();
+        ports.update_connections();
         dead_agents.clear();
         dead_agents.extend(ready.iter().filter(|&&i| i > 0).map(|&i| fd_agents[i - 1]));
 
@@ -337,7 +292,7 @@ pub fn run(cfg: HubConfig) -> Result<HubOutcome, HubError> {
         }
 
         // Registrations.
-        while let Some(req) = register_server.receive().map_err(ipc("receive a registration"))? {
+        while let Some(req) = ports.register_server.receive().map_err(ipc("receive a registration"))? {
             let r = *req.payload();
             let origin = req.origin().value();
             tracing::debug!("registration request kind {} from pid {} agent {}", r.kind, r.pid, r.agent_id);
@@ -363,18 +318,7 @@ pub fn run(cfg: HubConfig) -> Result<HubOutcome, HubError> {
                 }
                 Some(RegisterKind::Hello) => match core.hello(r.pid) {
                     Ok(id) => {
-                        let ports = session.agent_sensors(&node, id, Role::Hub).map_err(|e| e.to_string()).and_then(
-                            |service| {
-                                let publisher = service
-                                    .publisher_builder()
-                                    .initial_max_slice_len(4)
-                                    .allocation_strategy(SLICE_ALLOCATION)
-                                    .create()
-                                    .map_err(|e| format!("{e:?}"))?;
-                                Ok((service, publisher))
-                            },
-                        );
-                        match ports {
+                        match agent_sensor_port(&session, &node, id) {
                             Ok((service, publisher)) => {
                                 let pidfd = PidFd::open(r.pid);
                                 if pidfd.is_none() {
@@ -465,7 +409,7 @@ pub fn run(cfg: HubConfig) -> Result<HubOutcome, HubError> {
         }
 
         // Run control.
-        while let Some(req) = control_server.receive().map_err(ipc("receive a command"))? {
+        while let Some(req) = ports.control_server.receive().map_err(ipc("receive a command"))? {
             let c = *req.payload();
             let status = match Command::from_u32(c.command) {
                 Some(cmd) => core.command(cmd, c.robot_id),
@@ -477,7 +421,7 @@ pub fn run(cfg: HubConfig) -> Result<HubOutcome, HubError> {
         }
 
         // Actions.
-        while let Some(sample) = actions_sub.receive().map_err(ipc("receive actions"))? {
+        while let Some(sample) = ports.actions_sub.receive().map_err(ipc("receive actions"))? {
             let h = *sample.user_header();
             if agents.get(&h.agent_id).is_none_or(|a| a.actions != sample.origin().value()) {
                 // Not from the publisher this agent's hello named: another process acting in
@@ -539,8 +483,8 @@ pub fn run(cfg: HubConfig) -> Result<HubOutcome, HubError> {
     // Interrupted: tell everyone the run is over before the services go away.
     if outcome.interrupted {
         core.command(Command::Stop, 0);
-        let _ = publish_tick(&core, &world_pub, &agents, &mut states, &mut blocks);
-        let _ = tick_notifier.notify();
+        let _ = publish_tick(&core, &ports.world_pub, &agents, &mut states, &mut blocks);
+        let _ = ports.tick_notifier.notify();
     }
     // An agent reads the final tick from the hub's shared memory, which goes when the hub does:
     // give every agent process up to 2 s to read it and leave.
@@ -577,30 +521,7 @@ pub fn run(cfg: HubConfig) -> Result<HubOutcome, HubError> {
         .robot_states()
         .map(|s| RobotAtEnd { id: s.id, x_m: s.x_m, y_m: s.y_m, heading_deg: s.heading_deg, flags: s.flags })
         .collect();
-    drop((
-        agents,
-        world_pub,
-        map_pub,
-        observer_map_pub,
-        roster,
-        actions_sub,
-        register_server,
-        control_server,
-        tick_notifier,
-        doorbell,
-    ));
-    drop((
-        world_svc,
-        map_svc,
-        observer_map_svc,
-        sensors_svc,
-        actions_svc,
-        register_svc,
-        control_svc,
-        tick_svc,
-        doorbell_svc,
-        node,
-    ));
+    drop((agents, ports, node));
     Ok(outcome)
 }
 
@@ -609,29 +530,6 @@ fn record_changes(core: &mut HubCore, rec: &mut Recorder, journal: &mut Vec<reco
     core.take_journal(journal);
     for e in journal.drain(..) {
         rec.event(&e);
-    }
-}
-
-/// The robot-sensors publisher and the robot ids it last published for.
-struct Roster {
-    publisher: Publisher<Svc, [RobotSensors], ()>,
-    ids: Option<Vec<u32>>,
-    scratch: Vec<RobotSensors>,
-}
-
-impl Roster {
-    /// Republishes every robot's sensor geometry when the set of robots has changed since the
-    /// last time (a robot's sensors are fixed at registration, so ids are enough).
-    fn publish_if_changed(&mut self, core: &HubCore, states: &[RobotState]) -> Result<(), HubError> {
-        if self.ids.as_ref().is_some_and(|ids| ids.iter().copied().eq(states.iter().map(|r| r.id))) {
-            return Ok(());
-        }
-        self.ids = Some(states.iter().map(|r| r.id).collect());
-        self.scratch.clear();
-        self.scratch.extend(core.robot_sensors());
-        let sample = self.publisher.loan_slice_uninit(self.scratch.len()).map_err(ipc("loan robot sensors"))?;
-        sample.write_from_slice(&self.scratch).send().map_err(ipc("send robot sensors"))?;
-        Ok(())
     }
 }
 

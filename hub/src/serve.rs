@@ -22,9 +22,8 @@ use std::os::fd::AsRawFd as _;
 use std::time::{Duration, Instant};
 
 use ipc_services::iceoryx2::port::publisher::Publisher;
-use ipc_services::iceoryx2::port::update_connections::UpdateConnections as _;
-use ipc_services::iceoryx2::prelude::{FileDescriptorBased, PortFactory as _};
-use ipc_services::{HUB_NODE_NAME, Role, SLICE_ALLOCATION, ServicesError, Session, Svc, clean_dead_nodes};
+use ipc_services::iceoryx2::prelude::PortFactory as _;
+use ipc_services::{HUB_NODE_NAME, ServicesError, Session, Svc, clean_dead_nodes};
 use ipc_types::{
     Command, ControlResponse, MAX_AGENTS, MapHeader, MapItem, Refusal, RegisterKind, RegisterResponse, RobotSensors,
     RobotState, RunState, SensorBlock, TickHeader, WorldHeader,
@@ -34,9 +33,10 @@ use recorder::journal::Event;
 use world::WorldBuildError;
 
 use crate::core::{MapAudience, Mode, hub_params, pack_map_for, robot_state, sensor_geometry};
+use crate::ports::{HubPorts, agent_sensor_port};
 use crate::replay::outcome_of;
 use crate::stage::{Stage, StageApplyError};
-use crate::{HubOutcome, IDLE_POLL, PidFd, named_publisher, poll_readable};
+use crate::{HubError, HubOutcome, IDLE_POLL, PidFd, named_publisher, poll_readable};
 
 /// How to serve a recording.
 #[derive(Debug, Clone, PartialEq)]
@@ -337,53 +337,19 @@ pub fn serve(recording: &Recording, options: &ServeOptions) -> Result<Served, Re
     }
     // The hub's node name: observers find the process serving the session by it.
     let node = session.node(HUB_NODE_NAME)?;
-    let world_svc = session.world(&node, Role::Hub)?;
-    let map_svc = session.map(&node, Role::Hub)?;
-    let observer_map_svc = session.observer_map(&node, Role::Hub)?;
-    let sensors_svc = session.robot_sensors(&node, Role::Hub)?;
-    let actions_svc = session.actions(&node, Role::Hub)?;
-    let register_svc = session.register(&node, Role::Hub)?;
-    let control_svc = session.control(&node, Role::Hub)?;
-    let tick_svc = session.tick_event(&node, Role::Hub)?;
-    let doorbell_svc = session.hub_event(&node, Role::Hub)?;
-
-    let world_pub = world_svc
-        .publisher_builder()
-        .initial_max_slice_len(64)
-        .allocation_strategy(SLICE_ALLOCATION)
-        .create()
-        .map_err(ipc("create the world publisher"))?;
-    let sensors_pub = sensors_svc
-        .publisher_builder()
-        .initial_max_slice_len(64)
-        .allocation_strategy(SLICE_ALLOCATION)
-        .create()
-        .map_err(ipc("create the robot-sensors publisher"))?;
-    // Both maps are kept for late subscribers, like the hub's.
-    let publish_map = |svc: &ipc_services::MapService, audience| -> Result<_, ReplayServeError> {
-        let (header, items) = player.map_items(audience);
-        let publisher = svc
-            .publisher_builder()
-            .initial_max_slice_len(items.len().max(1))
-            .allocation_strategy(SLICE_ALLOCATION)
-            .create()
-            .map_err(ipc("create a map publisher"))?;
-        let mut sample = publisher.loan_slice_uninit(items.len()).map_err(ipc("loan the map"))?;
-        *sample.user_header_mut() = header;
-        sample.write_from_slice(&items).send().map_err(ipc("send the map"))?;
-        Ok(publisher)
-    };
-    let map_pub = publish_map(&map_svc, MapAudience::Agents)?;
-    let observer_map_pub = publish_map(&observer_map_svc, MapAudience::Observers)?;
-    // Nobody's actions move a recorded robot, but agents wait for this subscriber to exist.
-    let actions_sub = actions_svc.subscriber_builder().create().map_err(ipc("create the actions subscriber"))?;
-    let register_server = register_svc.server_builder().create().map_err(ipc("create the register server"))?;
-    let control_server = control_svc.server_builder().create().map_err(ipc("create the control server"))?;
-    let tick_notifier = tick_svc.notifier_builder().create().map_err(ipc("create the tick notifier"))?;
-    let doorbell = doorbell_svc.listener_builder().create().map_err(ipc("create the doorbell listener"))?;
-    #[allow(unsafe_code)]
-    // SAFETY: the listener outlives every poll below; we only read the fd number.
-    let doorbell_fd = unsafe { doorbell.file_descriptor().native_handle() };
+    // Both maps are kept for late subscribers, like the hub's; nobody's actions move a recorded
+    // robot, but agents wait for the actions subscriber to exist.
+    let mut io = HubPorts::open(
+        &session,
+        &node,
+        player.map_items(MapAudience::Agents),
+        player.map_items(MapAudience::Observers),
+    )
+    .map_err(|e| match e {
+        HubError::Services(e) => ReplayServeError::Services(e),
+        e => ReplayServeError::Ipc(e.to_string()),
+    })?;
+    let doorbell_fd = io.doorbell_fd();
 
     let pid = std::process::id();
     let mut agents: BTreeMap<u32, AgentPorts> = BTreeMap::new();
@@ -391,8 +357,6 @@ pub fn serve(recording: &Recording, options: &ServeOptions) -> Result<Served, Re
     let mut served =
         Served { steps: 0, outcome: HubOutcome::default(), mismatch: None, agents_seen: 0, robots_refused: 0 };
     let mut states: Vec<RobotState> = Vec::new();
-    let mut roster: Vec<RobotSensors> = Vec::new();
-    let mut roster_ids: Option<Vec<u32>> = None;
     let mut fds: Vec<i32> = Vec::new();
     let mut fd_agents: Vec<u32> = Vec::new();
     let mut ready = Vec::new();
@@ -418,17 +382,12 @@ pub fn serve(recording: &Recording, options: &ServeOptions) -> Result<Served, Re
             states.extend(player.robot_states());
             let finished = player.state() == RunState::Finished;
             let header = player.world_header(agents.len());
-            let mut sample = world_pub.loan_slice_uninit(states.len()).map_err(ipc("loan a world snapshot"))?;
+            let mut sample = io.world_pub.loan_slice_uninit(states.len()).map_err(ipc("loan a world snapshot"))?;
             *sample.user_header_mut() = header;
             sample.write_from_slice(&states).send().map_err(ipc("send a world snapshot"))?;
-            // The sensor geometry is fixed at registration: a new set of ids is a new roster.
-            if roster_ids.as_ref().is_none_or(|ids| !ids.iter().copied().eq(states.iter().map(|r| r.id))) {
-                roster_ids = Some(states.iter().map(|r| r.id).collect());
-                roster.clear();
-                roster.extend(player.robot_sensors());
-                let sample = sensors_pub.loan_slice_uninit(roster.len()).map_err(ipc("loan robot sensors"))?;
-                sample.write_from_slice(&roster).send().map_err(ipc("send robot sensors"))?;
-            }
+            io.roster
+                .publish_if_changed(&states, || player.robot_sensors())
+                .map_err(|e| ReplayServeError::Ipc(e.to_string()))?;
             if finished {
                 // Agents have no robots here, so they get no blocks per tick, but every agent
                 // hears the end.
@@ -445,7 +404,7 @@ pub fn serve(recording: &Recording, options: &ServeOptions) -> Result<Served, Re
                     sample.send().map_err(ipc("send sensor blocks"))?;
                 }
             }
-            tick_notifier.notify().map_err(ipc("ring the tick"))?;
+            io.tick_notifier.notify().map_err(ipc("ring the tick"))?;
             if finished {
                 break;
             }
@@ -469,13 +428,10 @@ pub fn serve(recording: &Recording, options: &ServeOptions) -> Result<Served, Re
             }
         }
         poll_readable(&fds, timeout, &mut ready);
-        let _ = doorbell.try_wait(|_| {});
+        let _ = io.doorbell.try_wait(|_| {});
         // A new subscriber gets the kept sample only when the publisher next looks at its
         // connections: the maps are sent once, and the world not while paused.
-        let _ = map_pub.update_connections();
-        let _ = observer_map_pub.update_connections();
-        let _ = world_pub.update_connections();
-        let _ = sensors_pub.update_connections();
+        io.update_connections();
         for &i in ready.iter().filter(|&&i| i > 0) {
             let id = fd_agents[i - 1];
             tracing::info!("agent {id} exited");
@@ -483,7 +439,7 @@ pub fn serve(recording: &Recording, options: &ServeOptions) -> Result<Served, Re
             let _ = node.try_cleanup_dead_nodes();
         }
 
-        while let Some(req) = register_server.receive().map_err(ipc("receive a registration"))? {
+        while let Some(req) = io.register_server.receive().map_err(ipc("receive a registration"))? {
             let r = *req.payload();
             let origin = req.origin().value();
             let tick = player.stage().world().tick();
@@ -506,17 +462,7 @@ pub fn serve(recording: &Recording, options: &ServeOptions) -> Result<Served, Re
                 }
                 Some(RegisterKind::Hello) => {
                     let id = next_agent_id;
-                    let ports =
-                        session.agent_sensors(&node, id, Role::Hub).map_err(|e| e.to_string()).and_then(|service| {
-                            let publisher = service
-                                .publisher_builder()
-                                .initial_max_slice_len(1)
-                                .allocation_strategy(SLICE_ALLOCATION)
-                                .create()
-                                .map_err(|e| format!("{e:?}"))?;
-                            Ok((service, publisher))
-                        });
-                    match ports {
+                    match agent_sensor_port(&session, &node, id) {
                         Ok((service, publisher)) => {
                             next_agent_id += 1;
                             let pidfd = PidFd::open(r.pid);
@@ -553,7 +499,7 @@ pub fn serve(recording: &Recording, options: &ServeOptions) -> Result<Served, Re
             req.send_copy(resp).map_err(ipc("answer a registration"))?;
         }
 
-        while let Some(req) = control_server.receive().map_err(ipc("receive a command"))? {
+        while let Some(req) = io.control_server.receive().map_err(ipc("receive a command"))? {
             let c = *req.payload();
             let before = player.state();
             let status = Command::from_u32(c.command).map_or(1, |cmd| player.command(cmd));
@@ -567,7 +513,7 @@ pub fn serve(recording: &Recording, options: &ServeOptions) -> Result<Served, Re
         }
 
         // Drained so a sender's queue never fills; a recorded world takes no actions.
-        while actions_sub.receive().map_err(ipc("receive actions"))?.is_some() {}
+        while io.actions_sub.receive().map_err(ipc("receive actions"))?.is_some() {}
 
         if player.may_step() {
             let now = Instant::now();
@@ -590,7 +536,7 @@ pub fn serve(recording: &Recording, options: &ServeOptions) -> Result<Served, Re
     let linger_until = Instant::now() + LINGER;
     while Instant::now() < linger_until {
         let alive: Vec<i32> = agents.values().filter_map(|a| a.pidfd.as_ref().map(|p| p.0.as_raw_fd())).collect();
-        if alive.is_empty() && world_svc.dynamic_config().number_of_subscribers() == 0 {
+        if alive.is_empty() && io.world_svc.dynamic_config().number_of_subscribers() == 0 {
             break;
         }
         // Wakes when an agent exits; observers leave no fd to wait on, so look again soon.
@@ -604,30 +550,7 @@ pub fn serve(recording: &Recording, options: &ServeOptions) -> Result<Served, Re
     served.steps = player.steps();
     served.outcome = HubOutcome { interrupted: served.outcome.interrupted, ..outcome_of(player.stage()) };
     served.mismatch = player.mismatch().cloned();
-    drop((
-        agents,
-        world_pub,
-        map_pub,
-        observer_map_pub,
-        sensors_pub,
-        actions_sub,
-        register_server,
-        control_server,
-        tick_notifier,
-        doorbell,
-    ));
-    drop((
-        world_svc,
-        map_svc,
-        observer_map_svc,
-        sensors_svc,
-        actions_svc,
-        register_svc,
-        control_svc,
-        tick_svc,
-        doorbell_svc,
-        node,
-    ));
+    drop((agents, io, node));
     Ok(served)
 }
 
