@@ -6,12 +6,13 @@ use std::collections::BTreeMap;
 
 use bytemuck::Zeroable;
 use ipc_types::{
-    ACT_MOTORS, ACT_POSE, ACT_SAY, ActionBlock, COLLISION, Command, FixedName, HAS_COMPASS, HAS_GPS, HAS_GROUND,
-    HubParams, InboxEntry, MAP_BEACON, MAP_CHECKPOINT, MAP_CORNER, MAP_GRID, MAP_TARGET, MAP_WALL, MAX_AGENTS,
-    MAX_INBOX_MESSAGES, MAX_PROXIMITY, MAX_ROBOTS, MapHeader, MapItem, REG_DISC, REG_HAS_POSE, ROBOT_COLLISION,
-    ROBOT_DISC, ROBOT_FROZEN, ROBOT_LAGGING, Refusal, RobotKind as WireKind, RobotRegistration, RobotSensors,
-    RobotState, RunState, SENSOR_BEACON, SENSOR_COLLISION, SENSOR_COMPASS, SENSOR_GPS, SENSOR_GROUND, SENSOR_OBSTACLE,
-    SensorBlock, SensorGeometry, WorldHeader,
+    ACT_GHOST, ACT_LINK_DOWN, ACT_MOTORS, ACT_POSE, ACT_REAL, ACT_SAY, ActionBlock, CHAIR_CONTROLLED, CHAIR_GHOST,
+    CHAIR_LINK_UP, COLLISION, ChairState, Command, DRIVE_CONTROLLED, DRIVE_FRESH, FixedName, HAS_COMPASS, HAS_GPS,
+    HAS_GROUND, HubParams, InboxEntry, MAP_BEACON, MAP_CHECKPOINT, MAP_CORNER, MAP_GRID, MAP_TARGET, MAP_WALL,
+    MAX_AGENTS, MAX_INBOX_MESSAGES, MAX_PROXIMITY, MAX_ROBOTS, MapHeader, MapItem, REG_CHAIR, REG_DISC, REG_HAS_POSE,
+    ROBOT_COLLISION, ROBOT_DISC, ROBOT_FROZEN, ROBOT_LAGGING, Refusal, RobotKind as WireKind, RobotRegistration,
+    RobotSensors, RobotState, RunState, SENSOR_BEACON, SENSOR_COLLISION, SENSOR_COMPASS, SENSOR_GPS, SENSOR_GROUND,
+    SENSOR_OBSTACLE, SensorBlock, SensorGeometry, SensorMode, WorldHeader,
 };
 
 use recorder::journal::{Event, RecordedAction, RunStart};
@@ -53,9 +54,37 @@ struct AgentEntry {
     pid: u32,
     ready: bool,
     robots: Vec<u32>,
+    /// Physical chairs this agent controls (registered by their adapters, not by it).
+    controls: Vec<u32>,
     /// The last tick this agent answered.
     answered: Option<u64>,
     lagging: bool,
+}
+
+impl AgentEntry {
+    /// Whether the agent has robots or chairs to answer for each tick.
+    fn drives_something(&self) -> bool {
+        !self.robots.is_empty() || !self.controls.is_empty()
+    }
+}
+
+impl ChairLink {
+    /// Takes what the chair's adapter reports for a tick.
+    fn take_report(&mut self, b: &ActionBlock) {
+        if b.flags & ACT_REAL != 0 {
+            for (held, &v) in self.real_m.iter_mut().zip(&b.real_m) {
+                // NaN: no fresh reading this tick; keep the last. Negative is nonsense.
+                if !v.is_nan() && v >= 0.0 {
+                    *held = v;
+                }
+            }
+            self.real_encoders = Some(b.real_encoders);
+        }
+        if b.flags & ACT_GHOST != 0 && b.ghost.iter().all(|v| v.is_finite()) {
+            self.ghost = Some(b.ghost);
+        }
+        self.link_up = b.flags & ACT_LINK_DOWN == 0;
+    }
 }
 
 /// A robot and the agent that drives it. When that agent dies the robot stays, frozen, with
@@ -65,6 +94,47 @@ struct AgentEntry {
 struct RobotEntry {
     agent_id: u32,
     leds: u32,
+    /// A physical chair's link, when the robot was registered by a chair adapter.
+    chair: Option<Box<ChairLink>>,
+}
+
+/// A physical chair in the world (thesis §5.4): its adapter (the robot's owner) pushes the
+/// pose its odometry measures and the chair's real readings; the agent that attached to it by
+/// name (its controller) drives it and gets the readings its sensor mode selects.
+#[derive(Debug, Clone)]
+struct ChairLink {
+    controller: Option<u32>,
+    mode: SensorMode,
+    /// The controller's last motor powers, sanitised, and the tick it sent them for.
+    drive: [f64; 2],
+    drive_tick: Option<u64>,
+    /// The last real reading of each sensor, metres (NaN: none yet; +∞: no echo).
+    real_m: [f32; MAX_PROXIMITY],
+    real_encoders: Option<[i64; 2]>,
+    ghost: Option<[f64; 3]>,
+    link_up: bool,
+}
+
+impl ChairLink {
+    fn new(mode: SensorMode) -> Self {
+        Self {
+            controller: None,
+            mode,
+            drive: [0.0; 2],
+            drive_tick: None,
+            real_m: [f32::NAN; MAX_PROXIMITY],
+            real_encoders: None,
+            ghost: None,
+            link_up: false,
+        }
+    }
+
+    /// Lets go of the controller: the chair's powers go to zero, which its adapter forwards.
+    fn detach(&mut self) {
+        self.controller = None;
+        self.drive = [0.0; 2];
+        self.drive_tick = None;
+    }
 }
 
 /// The hub's state apart from its ports.
@@ -156,7 +226,10 @@ impl HubCore {
         }
         let id = self.next_agent_id;
         self.next_agent_id += 1;
-        self.agents.insert(id, AgentEntry { pid, ready: false, robots: Vec::new(), answered: None, lagging: false });
+        self.agents.insert(
+            id,
+            AgentEntry { pid, ready: false, robots: Vec::new(), controls: Vec::new(), answered: None, lagging: false },
+        );
         Ok(id)
     }
 
@@ -185,9 +258,20 @@ impl HubCore {
         if !self.agents.contains_key(&agent_id) {
             return Err(Refused::new(Refusal::UnknownAgent, format!("agent {agent_id} has not said hello")));
         }
+        if let Some(attached) = self.attach(agent_id, reg)? {
+            return Ok(attached);
+        }
         if let Some(taken_back) = self.take_back(agent_id, reg)? {
             return Ok(taken_back);
         }
+        let chair = if reg.flags & REG_CHAIR != 0 {
+            if WireKind::from_u32(reg.kind) != Some(WireKind::Real) {
+                return Err(Refused::new(Refusal::BadParameters, "a chair adapter registers a Real robot"));
+            }
+            Some(Box::new(ChairLink::new(Self::mode_of(reg)?.unwrap_or_default())))
+        } else {
+            None
+        };
         if self.robots.len() >= self.max_robots {
             return Err(Refused::new(Refusal::Capacity, format!("the hub serves at most {} robots", self.max_robots)));
         }
@@ -219,11 +303,70 @@ impl HubCore {
             world::AddRobotError::Full { .. } => Refused::new(Refusal::Capacity, e.to_string()),
             _ => Refused::new(Refusal::BadParameters, e.to_string()),
         })?;
-        self.robots.insert(id, RobotEntry { agent_id, leds: 0 });
+        self.robots.insert(id, RobotEntry { agent_id, leds: 0, chair });
         if let Some(a) = self.agents.get_mut(&agent_id) {
             a.robots.push(id);
         }
         Ok((id, sensors))
+    }
+
+    /// The sensor mode registration flags ask for, if any.
+    fn mode_of(reg: &RobotRegistration) -> Result<Option<SensorMode>, Refused> {
+        let both = ipc_types::REG_SENSORS_REAL | ipc_types::REG_SENSORS_AUGMENTED;
+        if reg.flags & both == both {
+            return Err(Refused::new(Refusal::Malformed, "a sensor mode cannot be both real and augmented"));
+        }
+        Ok(SensorMode::from_reg_flags(reg.flags))
+    }
+
+    /// Attaches `agent_id` as the controller of the physical chair `reg` names (same name, and
+    /// the chair's id or id 0) when no live agent controls it: its id and sensor count, or
+    /// `None` when `reg` names no chair. The chair keeps its adapter's body and sensors; a
+    /// sensor mode in `reg` replaces the adapter's.
+    fn attach(&mut self, agent_id: u32, reg: &RobotRegistration) -> Result<Option<(u32, u32)>, Refused> {
+        if reg.flags & REG_CHAIR != 0 {
+            return Ok(None);
+        }
+        let name = reg.name.as_str().ok_or_else(|| Refused::new(Refusal::Malformed, "the name is not UTF-8"))?;
+        if name.is_empty() {
+            return Ok(None);
+        }
+        let found = self.robots.iter().find_map(|(&id, e)| {
+            let chair = e.chair.as_ref()?;
+            let named = self.stage.robot(id).is_some_and(|r| r.spec.name == name);
+            (named && (reg.requested_id == 0 || reg.requested_id == id) && e.agent_id != agent_id)
+                .then_some((id, chair.controller))
+        });
+        let Some((id, controller)) = found else { return Ok(None) };
+        if controller.is_some_and(|c| self.agents.contains_key(&c)) {
+            return Err(Refused::new(
+                Refusal::DuplicateId,
+                format!("the chair {name} (robot {id}) is already controlled by another agent"),
+            ));
+        }
+        let mode = Self::mode_of(reg)?;
+        let Some(chair) = self.robots.get_mut(&id).and_then(|e| e.chair.as_mut()) else { return Ok(None) };
+        chair.detach();
+        chair.controller = Some(agent_id);
+        if let Some(m) = mode {
+            chair.mode = m;
+        }
+        if let Some(a) = self.agents.get_mut(&agent_id) {
+            a.controls.push(id);
+        }
+        let sensors = self.stage.robot(id).map_or(0, |r| r.readings.proximity_count as u32);
+        Ok(Some((id, sensors)))
+    }
+
+    /// Lets `agent_id` go of the chairs it controls.
+    fn release_controls(&mut self, controls: &[u32], agent_id: u32) {
+        for id in controls {
+            if let Some(c) = self.robots.get_mut(id).and_then(|e| e.chair.as_mut())
+                && c.controller == Some(agent_id)
+            {
+                c.detach();
+            }
+        }
     }
 
     /// Hands an orphan robot that `reg` names to `agent_id`; its id and sensor count, or
@@ -316,12 +459,21 @@ impl HubCore {
     /// An agent leaves: its robots are removed from the world and it from the table.
     pub fn bye(&mut self, agent_id: u32) {
         if let Some(a) = self.agents.remove(&agent_id) {
+            self.release_controls(&a.controls, agent_id);
             for id in a.robots {
-                if self.robots.remove(&id).is_some() {
-                    self.stage.remove(id);
-                }
+                self.remove_robot(id);
             }
         }
+    }
+
+    /// Removes a robot from the world and from its controller's list.
+    fn remove_robot(&mut self, id: u32) -> Option<RobotEntry> {
+        let entry = self.robots.remove(&id)?;
+        self.stage.remove(id);
+        if let Some(a) = entry.chair.as_ref().and_then(|c| c.controller).and_then(|c| self.agents.get_mut(&c)) {
+            a.controls.retain(|&x| x != id);
+        }
+        Some(entry)
     }
 
     /// An agent's process died: it leaves the table, its robots stay frozen and flagged (until
@@ -330,6 +482,9 @@ impl HubCore {
     /// agent was alive.
     pub fn agent_died(&mut self, agent_id: u32) -> bool {
         let Some(a) = self.agents.remove(&agent_id) else { return false };
+        // A chair whose controller died stops (its adapter sees no controller), but stays the
+        // adapter's, ready for the next controller.
+        self.release_controls(&a.controls, agent_id);
         for &id in &a.robots {
             if self.robots.contains_key(&id) {
                 self.stage.set_frozen(id, true);
@@ -362,10 +517,38 @@ impl HubCore {
         }
         let mut ignored = 0;
         for b in blocks {
-            let Some(r) = self.robots.get_mut(&b.robot_id).filter(|r| r.agent_id == agent_id) else {
+            let Some(r) = self.robots.get_mut(&b.robot_id) else {
                 ignored += 1;
                 continue;
             };
+            if let Some(chair) = r.chair.as_mut() {
+                if r.agent_id == agent_id {
+                    // The adapter: where the chair is, what it reads. Its motor powers are not
+                    // the chair's (the controller's are), and it says nothing.
+                    chair.take_report(b);
+                    self.pending.push(RecordedAction {
+                        id: b.robot_id,
+                        motors: None,
+                        pose: (b.flags & ACT_POSE != 0).then(|| Pose::from_deg(b.pose[0], b.pose[1], b.pose[2])),
+                        say: None,
+                        leds: r.leds,
+                    });
+                    continue;
+                }
+                if chair.controller != Some(agent_id) {
+                    ignored += 1;
+                    continue;
+                }
+                // The controller: the powers its adapter forwards to the chair. Only finite
+                // powers count as an answer; a chair is never sent NaN.
+                if b.flags & ACT_MOTORS != 0 && b.motors.iter().all(|m| m.is_finite()) {
+                    chair.drive = b.motors.map(|m| m.clamp(-1.0, 1.0));
+                    chair.drive_tick = Some(tick.min(now));
+                }
+            } else if r.agent_id != agent_id {
+                ignored += 1;
+                continue;
+            }
             r.leds = b.flags & 0xff00;
             let say = (b.flags & ACT_SAY != 0).then(|| {
                 let len = (b.say_len as usize).min(b.say_bytes.len());
@@ -374,7 +557,9 @@ impl HubCore {
             self.pending.push(RecordedAction {
                 id: b.robot_id,
                 motors: (b.flags & ACT_MOTORS != 0).then_some(b.motors),
-                pose: (b.flags & ACT_POSE != 0).then(|| Pose::from_deg(b.pose[0], b.pose[1], b.pose[2])),
+                // A chair's pose is its adapter's to push, never its controller's.
+                pose: (b.flags & ACT_POSE != 0 && r.chair.is_none())
+                    .then(|| Pose::from_deg(b.pose[0], b.pose[1], b.pose[2])),
                 // A message too long for the world is not said (the world's rule).
                 say: say.filter(|m| Message::new(m).is_ok()),
                 leds: r.leds,
@@ -388,7 +573,7 @@ impl HubCore {
     /// racing ahead on its own.
     pub fn all_answered(&self) -> bool {
         let t = self.stage.world().tick();
-        let mut waiting_on = self.agents.values().filter(|a| a.ready && !a.robots.is_empty()).peekable();
+        let mut waiting_on = self.agents.values().filter(|a| a.ready && a.drives_something()).peekable();
         waiting_on.peek().is_some() && waiting_on.all(|a| a.answered.is_some_and(|x| x >= t))
     }
 
@@ -399,7 +584,7 @@ impl HubCore {
 
     /// Agents the lock-step barrier waits for: live, ready, with robots.
     pub fn barrier_size(&self) -> usize {
-        self.agents.values().filter(|a| a.ready && !a.robots.is_empty()).count()
+        self.agents.values().filter(|a| a.ready && a.drives_something()).count()
     }
 
     /// Marks the agents that have not answered the current tick as lagging (called when the
@@ -407,7 +592,7 @@ impl HubCore {
     pub fn mark_laggards(&mut self) -> usize {
         let t = self.stage.world().tick();
         let mut n = 0;
-        for a in self.agents.values_mut().filter(|a| a.ready && !a.robots.is_empty()) {
+        for a in self.agents.values_mut().filter(|a| a.ready && a.drives_something()) {
             a.lagging = a.answered.is_none_or(|x| x < t);
             n += a.lagging as usize;
         }
@@ -436,9 +621,8 @@ impl HubCore {
                 self.single_steps += 1
             }
             Command::Stop => self.state = RunState::Finished,
-            Command::RemoveRobot => match self.robots.remove(&robot_id) {
+            Command::RemoveRobot => match self.remove_robot(robot_id) {
                 Some(r) => {
-                    self.stage.remove(robot_id);
                     if let Some(a) = self.agents.get_mut(&r.agent_id) {
                         a.robots.retain(|&id| id != robot_id);
                     }
@@ -532,13 +716,66 @@ impl HubCore {
         self.agents.get(&agent_id).map_or(&[], |a| a.robots.as_slice())
     }
 
+    /// The robots an agent gets sensor blocks for: its own, then the chairs it controls.
+    pub fn agent_blocks(&self, agent_id: u32) -> impl Iterator<Item = u32> + '_ {
+        self.agents.get(&agent_id).into_iter().flat_map(|a| a.robots.iter().chain(&a.controls).copied())
+    }
+
+    /// Every physical chair as observers see it, in id order.
+    pub fn chair_states(&self) -> impl Iterator<Item = ChairState> + '_ {
+        self.robots.iter().filter_map(|(&id, e)| {
+            let c = e.chair.as_ref()?;
+            let r = self.stage.robot(id)?;
+            let controlled = c.controller.is_some_and(|a| self.agents.contains_key(&a));
+            let mut virtual_m = [f32::NAN; MAX_PROXIMITY];
+            for (o, v) in virtual_m.iter_mut().zip(r.readings.proximity()) {
+                *o = *v as f32;
+            }
+            Some(ChairState {
+                robot_id: id,
+                sensor_mode: c.mode as u32,
+                flags: (controlled as u32 * CHAIR_CONTROLLED)
+                    | (c.link_up as u32 * CHAIR_LINK_UP)
+                    | (c.ghost.is_some() as u32 * CHAIR_GHOST),
+                controller: if controlled { c.controller.unwrap_or(0) } else { 0 },
+                ghost: c.ghost.unwrap_or([f64::NAN; 3]),
+                real_m: c.real_m,
+                virtual_m,
+            })
+        })
+    }
+
+    /// Whether the run has physical chairs.
+    pub fn has_chairs(&self) -> bool {
+        self.robots.values().any(|e| e.chair.is_some())
+    }
+
     /// The sensor block of a robot for the current tick.
     pub fn sensor_block(&self, robot_id: u32) -> SensorBlock {
         let tick = self.stage.world().tick();
-        match self.robots.get(&robot_id).and_then(|_| self.stage.robot(robot_id)) {
-            Some(r) => pack_sensor_block(r, robot_id, tick, |h| self.stage.id_of(h)),
-            None => SensorBlock { robot_id, tick, ..SensorBlock::zeroed() },
+        let Some((entry, r)) = self.robots.get(&robot_id).and_then(|e| Some((e, self.stage.robot(robot_id)?))) else {
+            return SensorBlock { robot_id, tick, ..SensorBlock::zeroed() };
+        };
+        let mut b = pack_sensor_block(r, robot_id, tick, |h| self.stage.id_of(h));
+        if let Some(c) = &entry.chair {
+            let default_range = self.stage.world().params().proximity_range_m;
+            let specs = if r.spec.sensors.is_empty() { r.spec.default_sensors() } else { r.spec.sensors.clone() };
+            let controlled = c.controller.is_some_and(|a| self.agents.contains_key(&a));
+            merge_chair_readings(&mut b, c.mode, &c.real_m, |i| {
+                specs.get(i).map_or(default_range, |s| s.range_m.unwrap_or(default_range))
+            });
+            // A chair's encoders are its own wheels', whatever the range sensors' mode: its twin
+            // in the world only follows the pose the adapter pushes.
+            if let Some(e) = c.real_encoders {
+                b.encoder_ticks = e;
+            }
+            b.sensor_mode = c.mode as u32;
+            if controlled {
+                b.drive = c.drive.map(|v| v as f32);
+                b.drive_flags = DRIVE_CONTROLLED | (c.drive_tick.is_some_and(|t| t + 1 >= tick) as u32 * DRIVE_FRESH);
+            }
         }
+        b
     }
 
     /// The map as a header and items, for agents and viewers; `deadline_ms` is the lock-step
@@ -683,6 +920,28 @@ pub fn pack_sensor_block(
         b.inbox_count += 1;
     }
     b
+}
+
+/// Puts a chair's readings of `mode` into `b` (which holds the virtual ones): *real* takes the
+/// chair's own, *augmented* the nearer of the two per sensor (thesis §5.4.3: virtual 0.3 m and
+/// real 0.6 m read 0.3 m). A real sensor that has not read yet, or read no echo, reads the
+/// sensor's `range(i)`, as a virtual one with nothing in reach does.
+pub fn merge_chair_readings(
+    b: &mut SensorBlock,
+    mode: SensorMode,
+    real_m: &[f32; MAX_PROXIMITY],
+    range: impl Fn(usize) -> f64,
+) {
+    let n = (b.proximity_count as usize).min(MAX_PROXIMITY);
+    for (i, out) in b.proximity_m[..n].iter_mut().enumerate() {
+        let reach = range(i);
+        let real = if real_m[i].is_finite() { (real_m[i] as f64).min(reach) } else { reach };
+        match mode {
+            SensorMode::Virtual => {}
+            SensorMode::Real => *out = real,
+            SensorMode::Augmented => *out = out.min(real),
+        }
+    }
 }
 
 /// The run parameters agents learn from the map header.
@@ -969,6 +1228,137 @@ mod tests {
             0,
             "answering clears the flag"
         );
+    }
+
+    /// A chair adapter's registration: a Real robot in the liacc corridor, in `mode`.
+    fn chair_reg(name: &str, mode: SensorMode) -> RobotRegistration {
+        let mut reg = RobotRegistration::new(name);
+        reg.kind = WireKind::Real as u32;
+        reg.flags |= REG_CHAIR | REG_HAS_POSE | mode.reg_flags();
+        reg.pose = [10.0, 6.1, 0.0];
+        reg
+    }
+
+    fn report(id: u32, x: f64, real: [f32; MAX_PROXIMITY]) -> ActionBlock {
+        let mut b = ActionBlock::pose(id, x, 6.1, 0.0);
+        b.flags |= ACT_REAL | ACT_GHOST;
+        b.real_m = real;
+        b.real_encoders = [100, 120];
+        b.ghost = [x + 0.1, 6.0, 2.0];
+        b
+    }
+
+    #[test]
+    fn a_controller_attaches_to_a_chair_by_name_and_drives_it_through_its_adapter() {
+        let mut c = core(Mode::LockStep);
+        let adapter = c.hello(1).expect("room");
+        let agent = c.hello(2).expect("room");
+        let (id, sensors) = c.register(adapter, &chair_reg("chair1", SensorMode::Virtual)).expect("a chair");
+        assert_eq!(sensors, 4);
+        // The controller's own body and sensors do not matter: the chair is the adapter's.
+        let (attached, _) = c.register(agent, &RobotRegistration::new("chair1").disc(1.0)).expect("attached");
+        assert_eq!(attached, id);
+        assert_eq!(c.robot_count(), 1, "attaching adds no robot");
+        assert_eq!(c.agent_blocks(agent).collect::<Vec<_>>(), vec![id]);
+        assert_eq!(c.agent_blocks(adapter).collect::<Vec<_>>(), vec![id]);
+        // A second agent cannot take a chair that is driven.
+        let third = c.hello(3).expect("room");
+        let refused = c.register(third, &RobotRegistration::new("chair1")).expect_err("already controlled");
+        assert_eq!(refused.reason, Refusal::DuplicateId);
+        for a in [adapter, agent] {
+            c.ready(a).expect("ready");
+        }
+        c.command(Command::Start, 0);
+        assert_eq!(c.barrier_size(), 2, "the lock-step waits for the adapter and the controller");
+        // The controller's powers reach the adapter's block; its pushed pose is ignored.
+        let mut drive = ActionBlock::motors(id, 0.5, f64::NAN);
+        assert_eq!(c.actions(agent, 0, &[drive]), 0);
+        drive.motors = [0.5, -2.0];
+        drive.flags |= ACT_POSE;
+        drive.pose = [30.0, 2.0, 0.0];
+        c.actions(agent, 0, &[drive]);
+        // The adapter's motors are not the chair's.
+        let mut own = report(id, 10.5, [f32::NAN; MAX_PROXIMITY]);
+        own.flags |= ACT_MOTORS;
+        own.motors = [1.0, 1.0];
+        c.actions(adapter, 0, &[own]);
+        c.step();
+        let b = c.sensor_block(id);
+        assert_eq!(b.drive, [0.5, -1.0], "clamped to [-1, 1]");
+        assert_eq!(b.drive_flags, DRIVE_CONTROLLED | DRIVE_FRESH);
+        assert_eq!(b.encoder_ticks, [100, 120], "a chair's encoders are its wheels'");
+        let state = c.robot_states().next().expect("one");
+        assert_eq!((state.x_m, state.y_m), (10.5, 6.1), "the adapter's pose, not the controller's");
+        // A tick without an answer makes the powers stale.
+        c.actions(adapter, 1, &[report(id, 10.5, [f32::NAN; MAX_PROXIMITY])]);
+        c.step();
+        c.step();
+        assert_eq!(c.sensor_block(id).drive_flags, DRIVE_CONTROLLED, "stale: not fresh");
+        // The controller dies: the chair stays, uncontrolled, with zero powers.
+        assert!(c.agent_died(agent));
+        let b = c.sensor_block(id);
+        assert_eq!((b.drive, b.drive_flags), ([0.0, 0.0], 0));
+        assert_eq!(c.robot_count(), 1);
+        let chair = c.chair_states().next().expect("one chair");
+        assert_eq!((chair.controller, chair.flags & CHAIR_CONTROLLED), (0, 0));
+        assert_eq!(chair.ghost, [10.6, 6.0, 2.0]);
+        // And a new controller may attach.
+        let next = c.hello(4).expect("room");
+        assert_eq!(c.register(next, &RobotRegistration::new("chair1")).expect("attached").0, id);
+    }
+
+    #[test]
+    fn a_chairs_sensor_mode_picks_real_virtual_or_the_nearer_of_both() {
+        let mut c = core(Mode::LockStep);
+        let adapter = c.hello(1).expect("room");
+        let agent = c.hello(2).expect("room");
+        let id = c.register(adapter, &chair_reg("chair1", SensorMode::Augmented)).expect("a chair").0;
+        c.register(agent, &RobotRegistration::new("chair1")).expect("attached");
+        c.prime_sensors();
+        let virtual_m = c.sensor_block(id).proximity_m;
+        let v0 = virtual_m[0];
+        assert!(v0 > 0.3 && v0 <= 3.0, "the corridor is in reach: {v0}");
+        // Thesis §5.4.3's example, both ways round: the nearer reading wins.
+        let mut real = [f32::NAN; MAX_PROXIMITY];
+        real[0] = 0.3;
+        real[1] = f32::INFINITY;
+        c.actions(adapter, 0, &[report(id, 10.0, real)]);
+        let b = c.sensor_block(id);
+        assert_eq!(b.sensor_mode, SensorMode::Augmented as u32);
+        assert_eq!(b.proximity_m[0], 0.3_f32 as f64, "real nearer than virtual");
+        assert_eq!(b.proximity_m[1], virtual_m[1], "no echo: the virtual reading stands");
+        assert_eq!(b.proximity_m[2], virtual_m[2], "no real reading yet: the virtual one");
+        // A controller asking for real mode gets the chair's own readings only.
+        let other = c.hello(3).expect("room");
+        c.bye(agent);
+        let mut reg = RobotRegistration::new("chair1");
+        reg.flags |= ipc_types::REG_SENSORS_REAL;
+        c.register(other, &reg).expect("attached");
+        let b = c.sensor_block(id);
+        assert_eq!(b.sensor_mode, SensorMode::Real as u32);
+        assert_eq!(b.proximity_m[0], 0.3_f32 as f64);
+        let range = c.world().params().proximity_range_m;
+        assert_eq!(b.proximity_m[1], range, "no echo reads the sensor's range");
+        assert_eq!(c.robot_count(), 1, "the controller leaving removed nothing");
+        // A NaN report keeps the last real reading.
+        c.actions(adapter, 0, &[report(id, 10.0, [f32::NAN; MAX_PROXIMITY])]);
+        assert_eq!(c.sensor_block(id).proximity_m[0], 0.3_f32 as f64);
+        // The adapter leaving takes the chair away, and its controller's block with it.
+        c.bye(adapter);
+        assert_eq!(c.robot_count(), 0);
+        assert_eq!(c.agent_blocks(other).count(), 0);
+    }
+
+    #[test]
+    fn a_chair_registration_must_be_a_real_robot_with_one_mode() {
+        let mut c = core(Mode::LockStep);
+        let adapter = c.hello(1).expect("room");
+        let mut reg = chair_reg("chair1", SensorMode::Real);
+        reg.kind = WireKind::Simulated as u32;
+        assert_eq!(c.register(adapter, &reg).expect_err("not Real").reason, Refusal::BadParameters);
+        let mut reg = chair_reg("chair1", SensorMode::Real);
+        reg.flags |= ipc_types::REG_SENSORS_AUGMENTED;
+        assert_eq!(c.register(adapter, &reg).expect_err("two modes").reason, Refusal::Malformed);
     }
 
     #[test]

@@ -217,6 +217,7 @@ pub fn run(cfg: HubConfig) -> Result<HubOutcome, HubError> {
         cfg.lab.name,
         cfg.grid.poses.len()
     );
+    let mut chairs = Vec::new();
     loop {
         if node.wait(Duration::ZERO).is_err() {
             outcome.interrupted = true;
@@ -228,6 +229,9 @@ pub fn run(cfg: HubConfig) -> Result<HubOutcome, HubError> {
             }
             publish_tick(&core, &ports.world_pub, &agents, &mut states, &mut blocks)?;
             ports.roster.publish_if_changed(&states, || core.robot_sensors())?;
+            if core.has_chairs() {
+                ports::publish_chairs(&ports.chairs_pub, core.world().tick(), &mut chairs, core.chair_states())?;
+            }
             ports.tick_notifier.notify().map_err(ipc("ring the tick"))?;
             publish = false;
             if let Some(rec) = &mut recording {
@@ -548,13 +552,13 @@ fn publish_tick(
     sample.write_from_slice(states).send().map_err(ipc("send a world snapshot"))?;
     let finished = header.run_state == RunState::Finished as u32;
     for (&id, ports) in agents {
-        let robots = core.agent_robots(id);
+        let mut robots = core.agent_blocks(id).peekable();
         // Agents without robots get nothing per tick, but every agent hears the end.
-        if robots.is_empty() && !finished {
+        if robots.peek().is_none() && !finished {
             continue;
         }
         blocks.clear();
-        blocks.extend(robots.iter().map(|&r| core.sensor_block(r)));
+        blocks.extend(robots.map(|r| core.sensor_block(r)));
         let mut sample = ports.publisher.loan_slice_uninit(blocks.len()).map_err(ipc("loan sensor blocks"))?;
         *sample.user_header_mut() = TickHeader {
             tick: header.tick,

@@ -11,8 +11,8 @@ use ipc_services::iceoryx2::port::update_connections::UpdateConnections as _;
 use ipc_services::iceoryx2::prelude::FileDescriptorBased;
 use ipc_services::{Role, SLICE_ALLOCATION, Session, Svc};
 use ipc_types::{
-    ActionBlock, ActionHeader, ControlRequest, ControlResponse, MapHeader, MapItem, RegisterRequest, RegisterResponse,
-    RobotSensors, RobotState, SensorBlock, TickHeader, WorldHeader,
+    ActionBlock, ActionHeader, ChairState, ControlRequest, ControlResponse, MapHeader, MapItem, RegisterRequest,
+    RegisterResponse, RobotSensors, RobotState, SensorBlock, TickHeader, WorldHeader,
 };
 
 use crate::{HubError, ipc};
@@ -52,6 +52,8 @@ pub(crate) struct HubPorts {
     pub(crate) map_pub: Publisher<Svc, [MapItem], MapHeader>,
     pub(crate) observer_map_pub: Publisher<Svc, [MapItem], MapHeader>,
     pub(crate) roster: Roster,
+    /// Physical chairs for observers (only sent while the run has chairs).
+    pub(crate) chairs_pub: Publisher<Svc, [ChairState], u64>,
     pub(crate) actions_sub: Subscriber<Svc, [ActionBlock], ActionHeader>,
     pub(crate) register_server: Server<Svc, RegisterRequest, (), RegisterResponse, ()>,
     pub(crate) control_server: Server<Svc, ControlRequest, (), ControlResponse, ()>,
@@ -61,6 +63,7 @@ pub(crate) struct HubPorts {
     _map_svc: ipc_services::MapService,
     _observer_map_svc: ipc_services::MapService,
     _sensors_svc: ipc_services::RobotSensorsService,
+    _chairs_svc: ipc_services::ChairService,
     _actions_svc: ipc_services::ActionService,
     _register_svc: ipc_services::RegisterService,
     _control_svc: ipc_services::ControlService,
@@ -83,6 +86,7 @@ impl HubPorts {
         let observer_map_svc = session.observer_map(node, Role::Hub)?;
         let sensors_svc = session.robot_sensors(node, Role::Hub)?;
         let actions_svc = session.actions(node, Role::Hub)?;
+        let chairs_svc = session.observer_chairs(node, Role::Hub)?;
         let register_svc = session.register(node, Role::Hub)?;
         let control_svc = session.control(node, Role::Hub)?;
         let tick_svc = session.tick_event(node, Role::Hub)?;
@@ -99,6 +103,12 @@ impl HubPorts {
             .allocation_strategy(SLICE_ALLOCATION)
             .create()
             .map_err(ipc("create the robot-sensors publisher"))?;
+        let chairs_pub = chairs_svc
+            .publisher_builder()
+            .initial_max_slice_len(4)
+            .allocation_strategy(SLICE_ALLOCATION)
+            .create()
+            .map_err(ipc("create the chairs publisher"))?;
         let publish_map = |svc: &ipc_services::MapService, (header, items): (MapHeader, Vec<MapItem>)| {
             let publisher = svc
                 .publisher_builder()
@@ -118,6 +128,7 @@ impl HubPorts {
             map_pub,
             observer_map_pub,
             roster: Roster { publisher: sensors_pub, ids: None, scratch: Vec::new() },
+            chairs_pub,
             actions_sub: actions_svc.subscriber_builder().create().map_err(ipc("create the actions subscriber"))?,
             register_server: register_svc.server_builder().create().map_err(ipc("create the register server"))?,
             control_server: control_svc.server_builder().create().map_err(ipc("create the control server"))?,
@@ -127,6 +138,7 @@ impl HubPorts {
             _map_svc: map_svc,
             _observer_map_svc: observer_map_svc,
             _sensors_svc: sensors_svc,
+            _chairs_svc: chairs_svc,
             _actions_svc: actions_svc,
             _register_svc: register_svc,
             _control_svc: control_svc,
@@ -150,7 +162,26 @@ impl HubPorts {
         let _ = self.observer_map_pub.update_connections();
         let _ = self.world_pub.update_connections();
         let _ = self.roster.publisher.update_connections();
+        let _ = self.chairs_pub.update_connections();
     }
+}
+
+/// Publishes the chairs' states for observers, when the run has chairs.
+pub(crate) fn publish_chairs(
+    publisher: &Publisher<Svc, [ChairState], u64>,
+    tick: u64,
+    chairs: &mut Vec<ChairState>,
+    states: impl Iterator<Item = ChairState>,
+) -> Result<(), HubError> {
+    chairs.clear();
+    chairs.extend(states);
+    if chairs.is_empty() {
+        return Ok(());
+    }
+    let mut sample = publisher.loan_slice_uninit(chairs.len()).map_err(ipc("loan chair states"))?;
+    *sample.user_header_mut() = tick;
+    sample.write_from_slice(chairs).send().map_err(ipc("send chair states"))?;
+    Ok(())
 }
 
 /// The publisher of an agent's sensor blocks.

@@ -23,8 +23,8 @@ use iceoryx2::prelude::{AllocationStrategy, NodeName, SemanticString, ServiceNam
 use iceoryx2::service::ipc;
 use iceoryx2::service::port_factory::{event, publish_subscribe, request_response};
 use ipc_types::{
-    ActionBlock, ActionHeader, ControlRequest, ControlResponse, MAX_AGENTS, MapHeader, MapItem, Ping, RegisterRequest,
-    RegisterResponse, RobotSensors, RobotState, SensorBlock, TickHeader, WorldHeader, service,
+    ActionBlock, ActionHeader, ChairState, ControlRequest, ControlResponse, MAX_AGENTS, MapHeader, MapItem, Ping,
+    RegisterRequest, RegisterResponse, RobotSensors, RobotState, SensorBlock, TickHeader, WorldHeader, service,
 };
 
 pub use iceoryx2;
@@ -37,6 +37,8 @@ pub type WorldService = publish_subscribe::PortFactory<Svc, [RobotState], WorldH
 pub type MapService = publish_subscribe::PortFactory<Svc, [MapItem], MapHeader>;
 /// Every robot's sensor geometry.
 pub type RobotSensorsService = publish_subscribe::PortFactory<Svc, [RobotSensors], ()>;
+/// Physical chairs, for observers.
+pub type ChairService = publish_subscribe::PortFactory<Svc, [ChairState], u64>;
 /// Actions from the agents.
 pub type ActionService = publish_subscribe::PortFactory<Svc, [ActionBlock], ActionHeader>;
 /// One agent's sensor blocks.
@@ -298,6 +300,24 @@ impl Session {
             .subscriber_max_borrowed_samples(1)
             .enable_safe_overflow(true);
         finish!(self, b, role, service::ROBOT_SENSORS)
+    }
+
+    /// Physical chairs for observers: the hub publishes every tick while there are chairs
+    /// (the tick in the header), the viewer subscribes; the last sample is kept for late
+    /// subscribers.
+    pub fn observer_chairs(&self, node: &Node<Svc>, role: Role) -> Result<ChairService, ServicesError> {
+        let b = node
+            .service_builder(&self.iox_name(service::OBSERVER_CHAIRS)?)
+            .publish_subscribe::<[ChairState]>()
+            .user_header::<u64>()
+            .max_publishers(1)
+            .max_subscribers(MAX_OBSERVERS)
+            .max_nodes(MAX_NODES)
+            .history_size(1)
+            .subscriber_max_buffer_size(1)
+            .subscriber_max_borrowed_samples(1)
+            .enable_safe_overflow(true);
+        finish!(self, b, role, service::OBSERVER_CHAIRS)
     }
 
     /// Actions: a publisher per agent (and bridge), one subscriber (the hub). Agents send one

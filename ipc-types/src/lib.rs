@@ -56,6 +56,9 @@ pub mod service {
     /// The map observers get (viewer, recorder, runner, the UDP bridge's viewers): the same
     /// layout as [`MAP`], with the scenario's obstacles as walls flagged `c = 1`.
     pub const OBSERVER_MAP: &str = "observer/map";
+    /// Physical chairs as observers see them (pub/sub, slice of [`crate::ChairState`] with the
+    /// tick as header), every tick while the run has chairs.
+    pub const OBSERVER_CHAIRS: &str = "observer/chairs";
     /// Actions from every agent (pub/sub, slice of [`crate::ActionBlock`] with an
     /// [`crate::ActionHeader`]), and the agents' doorbell to the hub (event).
     pub const ACTIONS: &str = "actions";
@@ -290,6 +293,39 @@ pub struct RobotSensors {
 const _: () = assert!(core::mem::size_of::<RobotSensors>() == 168);
 const _: () = assert!(core::mem::align_of::<RobotSensors>() == 4);
 
+/// `ChairState::flags`: a live agent controls the chair.
+pub const CHAIR_CONTROLLED: u32 = 1;
+/// `ChairState::flags`: the adapter says its serial link to the chair is up.
+pub const CHAIR_LINK_UP: u32 = 1 << 1;
+/// `ChairState::flags`: `ghost` holds the chair's true pose (a test bench's).
+pub const CHAIR_GHOST: u32 = 1 << 2;
+
+/// A physical chair as observers see it (`observer/chairs`, every tick while there are
+/// chairs): its sensor mode, both sets of readings, and where a test bench says it truly is,
+/// so a viewer can show mixed reality and odometry drift. Never sent to agents.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable, ZeroCopySend)]
+#[type_name("iwsim::ChairState.v1")]
+pub struct ChairState {
+    /// Robot id.
+    pub robot_id: u32,
+    /// [`SensorMode`] as u32.
+    pub sensor_mode: u32,
+    /// `CHAIR_*` bits.
+    pub flags: u32,
+    /// The controlling agent's id (0 = none).
+    pub controller: u32,
+    /// True pose (x, y metres, heading degrees), with [`CHAIR_GHOST`].
+    pub ghost: [f64; 3],
+    /// The chair's real readings, metres, in the robot's sensor order: the last ones the
+    /// adapter sent; NaN = none yet, +∞ = no echo.
+    pub real_m: [f32; MAX_PROXIMITY],
+    /// The virtual readings the hub measured on the chair's twin this tick, metres.
+    pub virtual_m: [f32; MAX_PROXIMITY],
+}
+const _: () = assert!(core::mem::size_of::<ChairState>() == 104);
+const _: () = assert!(core::mem::align_of::<ChairState>() == 8);
+
 /// `SensorBlock::present`: compass reading present.
 pub const HAS_COMPASS: u32 = 1;
 /// `SensorBlock::present`: GPS reading present.
@@ -298,6 +334,13 @@ pub const HAS_GPS: u32 = 1 << 1;
 pub const HAS_GROUND: u32 = 1 << 2;
 /// `SensorBlock::present`: the robot collided.
 pub const COLLISION: u32 = 1 << 3;
+
+/// `SensorBlock::drive_flags`: a live agent controls this chair.
+pub const DRIVE_CONTROLLED: u32 = 1;
+/// `SensorBlock::drive_flags`: the controlling agent answered the previous tick (or this one),
+/// so `drive` is current; without it the powers are stale and the adapter must stop the chair
+/// once they have been for 200 ms.
+pub const DRIVE_FRESH: u32 = 1 << 1;
 
 /// One message heard: who said it and where its bytes are in `SensorBlock::inbox_bytes`.
 #[repr(C)]
@@ -318,7 +361,7 @@ const _: () = assert!(core::mem::align_of::<InboxEntry>() == 4);
 /// never where it truly is. True poses are for observers (the world service).
 #[repr(C)]
 #[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable, ZeroCopySend)]
-#[type_name("iwsim::SensorBlock.v2")]
+#[type_name("iwsim::SensorBlock.v3")]
 pub struct SensorBlock {
     /// Tick these readings belong to.
     pub tick: u64,
@@ -356,8 +399,15 @@ pub struct SensorBlock {
     pub inbox: [InboxEntry; MAX_INBOX_MESSAGES],
     /// The bytes of the messages heard.
     pub inbox_bytes: [u8; INBOX_BYTES],
+    /// For a physical chair: the motor powers its controlling agent asks for, left and right,
+    /// which the chair's adapter forwards to the chair (zero without a controller).
+    pub drive: [f32; 2],
+    /// `DRIVE_*` bits.
+    pub drive_flags: u32,
+    /// [`SensorMode`] as u32: where this block's proximity readings and encoders come from.
+    pub sensor_mode: u32,
 }
-const _: () = assert!(core::mem::size_of::<SensorBlock>() == 808);
+const _: () = assert!(core::mem::size_of::<SensorBlock>() == 824);
 const _: () = assert!(core::mem::align_of::<SensorBlock>() == 8);
 
 impl SensorBlock {
@@ -395,6 +445,14 @@ pub const ACT_MOTORS: u32 = 1;
 pub const ACT_POSE: u32 = 1 << 1;
 /// `ActionBlock::flags`: say `say_bytes[..say_len]`.
 pub const ACT_SAY: u32 = 1 << 2;
+/// `ActionBlock::flags` (a chair adapter's): `real_m` and `real_encoders` hold the chair's real
+/// readings for this tick.
+pub const ACT_REAL: u32 = 1 << 3;
+/// `ActionBlock::flags` (a chair adapter's): `ghost` holds the chair's true pose as a test
+/// bench knows it (the chair emulator's); observers only.
+pub const ACT_GHOST: u32 = 1 << 4;
+/// `ActionBlock::flags` (a chair adapter's): the serial link to the chair's board is down.
+pub const ACT_LINK_DOWN: u32 = 1 << 5;
 /// `ActionBlock::flags`: the end LED (Ciber-Rato `EndLed`).
 pub const LED_END: u32 = 1 << 8;
 /// `ActionBlock::flags`: the returning LED.
@@ -405,7 +463,7 @@ pub const LED_VISITING: u32 = 1 << 10;
 /// What an agent asks for one robot in one tick.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable, ZeroCopySend)]
-#[type_name("iwsim::ActionBlock.v1")]
+#[type_name("iwsim::ActionBlock.v2")]
 pub struct ActionBlock {
     /// Robot id.
     pub robot_id: u32,
@@ -423,8 +481,18 @@ pub struct ActionBlock {
     pub say_bytes: [u8; MESSAGE_BYTES],
     /// Padding.
     pub _reserved: [u8; 4],
+    /// A chair adapter's real range readings in the robot's sensor order, metres (with
+    /// [`ACT_REAL`]): NaN = no fresh reading this tick (the hub keeps the last one), +∞ = no
+    /// echo within the sensor's range.
+    pub real_m: [f32; MAX_PROXIMITY],
+    /// A chair adapter's real encoder counts, left and right, in the hub's encoder units
+    /// (`HubParams::encoder_ticks_per_m`), with [`ACT_REAL`].
+    pub real_encoders: [i64; 2],
+    /// The chair's true pose (x, y metres, heading degrees) as a test bench knows it, with
+    /// [`ACT_GHOST`].
+    pub ghost: [f64; 3],
 }
-const _: () = assert!(core::mem::size_of::<ActionBlock>() == 160);
+const _: () = assert!(core::mem::size_of::<ActionBlock>() == 232);
 const _: () = assert!(core::mem::align_of::<ActionBlock>() == 8);
 
 impl ActionBlock {
@@ -489,6 +557,62 @@ pub const REG_HAS_POSE: u32 = 1;
 /// `RobotRegistration::flags`: the body is a disc of diameter `width_m` turning about its
 /// centre (`height_m` and `com` are then ignored): a plain Ciber-Rato robot.
 pub const REG_DISC: u32 = 1 << 1;
+
+/// `RobotRegistration::flags`: the registrant is a chair adapter (`iwsim serial`): the robot is
+/// a physical chair (kind Real) whose pose and real readings the adapter pushes, and whose
+/// motor powers come from the agent that registers a robot of the same name after it (the
+/// controlling agent, which attaches to it instead of adding a robot).
+pub const REG_CHAIR: u32 = 1 << 2;
+/// `RobotRegistration::flags`: the chair's sensor mode is *real*: its controlling agent gets the
+/// chair's real proximity readings and encoders, not the virtual ones. Given by the adapter, or
+/// by the controlling agent when it attaches (which then overrides the adapter's).
+pub const REG_SENSORS_REAL: u32 = 1 << 3;
+/// `RobotRegistration::flags`: the chair's sensor mode is *augmented*: per sensor, the nearer of
+/// the real and the virtual reading (thesis §5.4.3), and the chair's real encoders.
+pub const REG_SENSORS_AUGMENTED: u32 = 1 << 4;
+
+/// Where a physical chair's controlling agent gets its readings from (thesis §5.4.3).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[repr(u32)]
+pub enum SensorMode {
+    /// The hub's virtual sensors on the chair's twin (the pose the adapter pushes).
+    #[default]
+    Virtual = 0,
+    /// The chair's own sensors and encoders.
+    Real = 1,
+    /// Per sensor the nearer of real and virtual; the chair's encoders.
+    Augmented = 2,
+}
+
+impl SensorMode {
+    /// The mode a wire value names.
+    pub fn from_u32(v: u32) -> Option<Self> {
+        match v {
+            0 => Some(Self::Virtual),
+            1 => Some(Self::Real),
+            2 => Some(Self::Augmented),
+            _ => None,
+        }
+    }
+
+    /// The mode registration `flags` ask for, or `None` when they ask for none (or for both).
+    pub fn from_reg_flags(flags: u32) -> Option<Self> {
+        match (flags & REG_SENSORS_REAL != 0, flags & REG_SENSORS_AUGMENTED != 0) {
+            (true, false) => Some(Self::Real),
+            (false, true) => Some(Self::Augmented),
+            _ => None,
+        }
+    }
+
+    /// The registration flag bits that ask for this mode.
+    pub fn reg_flags(self) -> u32 {
+        match self {
+            Self::Virtual => 0,
+            Self::Real => REG_SENSORS_REAL,
+            Self::Augmented => REG_SENSORS_AUGMENTED,
+        }
+    }
+}
 
 /// A robot as an agent registers it (thesis Tables 4.3 and 4.4).
 #[repr(C)]
@@ -892,14 +1016,14 @@ const _: () = assert!(core::mem::size_of::<MapItem>() == 32);
 const _: () = assert!(core::mem::align_of::<MapItem>() == 8);
 
 /// Bytes of a [`Ping`] after its header, so a ping is as large as a [`SensorBlock`].
-pub const PING_PAYLOAD_BYTES: usize = 792;
+pub const PING_PAYLOAD_BYTES: usize = 808;
 
 /// The sample of `iwsim bench latency`'s raw iceoryx2 ping-pong, the baseline the hub's
 /// latency is compared with. Only the benchmark sends it; it is as large as a sensor block so
 /// both measurements move the same bytes.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Pod, Zeroable, ZeroCopySend)]
-#[type_name("iwsim::bench::Ping.v2")]
+#[type_name("iwsim::bench::Ping.v3")]
 pub struct Ping {
     /// Sequence number; the peer answers with it.
     pub seq: u64,
@@ -908,7 +1032,7 @@ pub struct Ping {
     /// Filler.
     pub payload: [u8; PING_PAYLOAD_BYTES],
 }
-const _: () = assert!(core::mem::size_of::<Ping>() == 808);
+const _: () = assert!(core::mem::size_of::<Ping>() == 824);
 const _: () = assert!(core::mem::align_of::<Ping>() == 8);
 const _: () = assert!(core::mem::size_of::<Ping>() == core::mem::size_of::<SensorBlock>());
 
@@ -933,11 +1057,12 @@ mod tests {
         assert_eq!(type_name_of::<RobotState>(), "iwsim::RobotState.v3");
         assert_eq!(type_name_of::<RobotRegistration>(), "iwsim::RobotRegistration.v2");
         assert_eq!(type_name_of::<RobotSensors>(), "iwsim::RobotSensors.v1");
-        assert_eq!(type_name_of::<SensorBlock>(), "iwsim::SensorBlock.v2");
-        assert_eq!(type_name_of::<ActionBlock>(), "iwsim::ActionBlock.v1");
+        assert_eq!(type_name_of::<SensorBlock>(), "iwsim::SensorBlock.v3");
+        assert_eq!(type_name_of::<ActionBlock>(), "iwsim::ActionBlock.v2");
+        assert_eq!(type_name_of::<ChairState>(), "iwsim::ChairState.v1");
         assert_eq!(type_name_of::<RegisterRequest>(), "iwsim::RegisterRequest.v3");
         assert_eq!(type_name_of::<MapItem>(), "iwsim::MapItem.v1");
-        assert_eq!(type_name_of::<Ping>(), "iwsim::bench::Ping.v2");
+        assert_eq!(type_name_of::<Ping>(), "iwsim::bench::Ping.v3");
     }
 
     #[test]

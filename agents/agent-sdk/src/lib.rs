@@ -178,6 +178,9 @@ fn same_robots(a: &[SensorBlock], b: &[SensorBlock]) -> bool {
     a.len() == b.len() && a.iter().zip(b).all(|(x, y)| x.robot_id == y.robot_id)
 }
 
+/// The physical chairs' states, with the tick as header.
+type ChairSubscriber = Subscriber<Svc, [ipc_types::ChairState], u64>;
+
 /// A read-only view of a session: world snapshots and the map, with no hello and no robots,
 /// so the hub does not count it as an agent (viewers, loggers).
 pub struct Observer {
@@ -188,6 +191,8 @@ pub struct Observer {
     sensors: Subscriber<Svc, [RobotSensors], ()>,
     map_svc: ipc_services::MapService,
     last_world: Option<(WorldHeader, Vec<RobotState>)>,
+    /// The physical chairs' port, opened at the first look (a served replay has none).
+    chairs: Option<(ChairSubscriber, ipc_services::ChairService)>,
     /// Last, so it runs after every port and the node are gone.
     _release: ipc_services::SessionRelease,
 }
@@ -227,7 +232,17 @@ impl Observer {
         // The hub creates its node before its services, so a hub whose services opened is
         // listed; one that died in between is found dead at the first check.
         let hub_pid = session.hub_pid();
-        Ok(Self { session, hub_pid, _node: node, world, sensors, map_svc, last_world: None, _release: release })
+        Ok(Self {
+            session,
+            hub_pid,
+            _node: node,
+            world,
+            sensors,
+            map_svc,
+            last_world: None,
+            chairs: None,
+            _release: release,
+        })
     }
 
     /// Fails with [`AgentError::HubGone`] once the hub's process has exited (however it ended:
@@ -285,6 +300,28 @@ impl Observer {
         let mut newest = None;
         while let Some(s) = self.sensors.receive().map_err(ipc("receive robot sensors"))? {
             newest = Some(s.payload().to_vec());
+        }
+        Ok(newest)
+    }
+
+    /// The physical chairs' states (sensor mode, real and virtual readings, the test bench's
+    /// true pose) with their tick, if the hub published them since the last call. `None` too
+    /// when the session has no chair service (a served replay).
+    pub fn try_chairs(&mut self) -> Result<Option<(u64, Vec<ipc_types::ChairState>)>, AgentError> {
+        if self.chairs.is_none() {
+            match self.session.observer_chairs(&self._node, Role::Client) {
+                Ok(svc) => {
+                    let sub = svc.subscriber_builder().create().map_err(ipc("create a chairs subscriber"))?;
+                    self.chairs = Some((sub, svc));
+                }
+                Err(ServicesError::NotRunning { .. }) => return Ok(None),
+                Err(e) => return Err(e.into()),
+            }
+        }
+        let Some((sub, _)) = &self.chairs else { return Ok(None) };
+        let mut newest = None;
+        while let Some(s) = sub.receive().map_err(ipc("receive chair states"))? {
+            newest = Some((*s.user_header(), s.payload().to_vec()));
         }
         Ok(newest)
     }

@@ -14,19 +14,18 @@ use crate::map::NavMap;
 use crate::navigator::{Body, Checkpoint, NavConfig, NavEvent, Navigator};
 use crate::pilot::Pilot;
 use crate::pose::PoseSourceKind;
-use crate::sensors::{default_layout, sensor_source};
+use crate::sensors::{Input, check_mode, default_layout};
 
 /// Runs the navigator agent until the hub's run ends. Exits with success when the last
 /// checkpoint was reached.
 pub fn run(args: &NavigatorArgs) -> anyhow::Result<ExitCode> {
     // Refuse what cannot run before touching the hub.
-    let source = sensor_source(args.mode)?;
     anyhow::ensure!(args.cruise > 0.0 && args.cruise <= 1.0, "--cruise {} is not in (0, 1]", args.cruise);
     anyhow::ensure!(args.arrive > 0.0, "--arrive {} must be positive", args.arrive);
     let session = &args.common.hub.session;
     let mut agent = args.common.connect("navigator").with_context(|| format!("joining session {session:?}"))?;
     // Close on every path, errors included: the last process of a session removes its files.
-    let result = drive(&mut agent, args, source);
+    let result = drive(&mut agent, args);
     agent.close();
     result
 }
@@ -75,11 +74,7 @@ fn config(args: &NavigatorArgs, header: &ipc_types::MapHeader) -> anyhow::Result
     })
 }
 
-fn drive(
-    agent: &mut Agent,
-    args: &NavigatorArgs,
-    mut source: Box<dyn crate::sensors::SensorSource>,
-) -> anyhow::Result<ExitCode> {
+fn drive(agent: &mut Agent, args: &NavigatorArgs) -> anyhow::Result<ExitCode> {
     let map_data = agent.map()?;
     let map = NavMap::new(&map_data);
     let cfg = config(args, &map_data.header)?;
@@ -96,6 +91,9 @@ fn drive(
     }
     reg.sensors = sensors;
     reg.sensor_count = cfg.sensors.len().min(MAX_PROXIMITY) as u32;
+    // Real and augmented modes attach to a physical chair of this name (its adapter registered
+    // it), and ask the hub for the mode.
+    reg.flags |= args.mode.wire().reg_flags();
     let id = agent.register(&reg).with_context(|| format!("registering {name}"))?;
     agent.ready()?;
     let checkpoints = cfg.checkpoints.clone();
@@ -114,6 +112,7 @@ fn drive(
     let mut pilot = Pilot::new(name, Navigator::new(map, cfg));
     let mut contacts = 0u32;
     let mut last_time = 0.0;
+    let mut mode_checked = false;
     while let Some(tick) = agent.wait_tick(Wait::Blocking)? {
         let time_s = tick.tick as f64 * cycle_s;
         last_time = time_s;
@@ -121,8 +120,12 @@ fn drive(
             agent.send(tick.tick, &[ActionBlock::motors(id, 0.0, 0.0)])?;
             continue;
         };
+        if !mode_checked {
+            check_mode(args.mode, name, &block)?;
+            mode_checked = true;
+        }
         contacts = block.collision_count;
-        let input = source.read(&block, time_s);
+        let input = Input::from_block(&block, time_s);
         let out = pilot.tick(&input, block.messages().map(|(_, m)| m));
         for e in &out.events {
             report(name, &checkpoints, e);

@@ -138,10 +138,11 @@ pub struct NavigatorArgs {
     /// be on; 0.5 m noise by default), or odometry pulled slowly towards GPS.
     #[arg(long, value_enum, default_value_t = PoseSourceKind::Odometry)]
     pub pose_source: PoseSourceKind,
-    /// Where the sensor readings come from: virtual (the hub's). Real (a physical chair) and
-    /// augmented (the nearer of real and virtual, per sensor) need the serial bridge, which is
-    /// not built yet.
-    #[arg(long, value_enum, default_value_t = Mode::Virtual)]
+    /// Where the sensor readings come from: virtual (the hub's), real (a physical chair's own
+    /// sensors and encoders) or augmented (the nearer of real and virtual, per sensor). Real and
+    /// augmented attach to the physical chair of this name, whose adapter (`iwsim serial`) must
+    /// be registered first.
+    #[arg(long = "sensors", visible_alias = "mode", value_enum, default_value_t = Mode::Virtual)]
     pub mode: Mode,
 }
 
@@ -192,6 +193,6 @@ mod tests {
         assert!(Cli::try_parse_from(["nav"]).is_err(), "a checkpoint is required");
         assert!(Cli::try_parse_from(["nav", "--checkpoint", "1"]).is_err());
         assert!(Cli::try_parse_from(["nav", "--checkpoint", "1,2", "--body", "1,1,1"]).is_err());
-        assert!(Cli::try_parse_from(["nav", "--checkpoint", "1,2", "--mode", "augmented"]).is_ok());
+        assert!(Cli::try_parse_from(["nav", "--checkpoint", "1,2", "--sensors", "augmented"]).is_ok());
     }
 }

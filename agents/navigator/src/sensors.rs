@@ -2,12 +2,11 @@
 //! between the hub's virtual sensors and a physical chair's (thesis §5.4.3: Virtual, Real and
 //! Augmented modes).
 //!
-//! Only [`Mode::Virtual`] runs today. Real and Augmented need the serial bridge to the chair
-//! (`iwsim serial`, not built yet); their types are here so that it plugs in without changing
-//! the navigator: a [`RealChair`] gives the physical readings, and [`AugmentedSensors`]
-//! merges them with the hub's by [`augment`].
+//! The hub merges a physical chair's real readings with the virtual ones (its adapter, `iwsim
+//! serial`, sends them), so every mode arrives in the same sensor block; [`check_mode`] makes
+//! sure the block is in the mode asked for.
 
-use ipc_types::{HAS_COMPASS, HAS_GPS, MAX_PROXIMITY, SensorBlock, SensorSpec};
+use ipc_types::{HAS_COMPASS, HAS_GPS, MAX_PROXIMITY, SensorBlock, SensorMode, SensorSpec};
 
 use crate::geom::{Cone, Footprint, Pose, V2};
 
@@ -147,93 +146,55 @@ impl Input {
     }
 }
 
-/// Where the chair's sensors are read (thesis §5.4.3).
+/// Where the chair's sensors are read (thesis §5.4.3). The hub does the merging: a physical
+/// chair's adapter (`iwsim serial`) sends it the chair's real readings, and the chair's block
+/// carries what the mode selects, so the navigator reads every mode the same way.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
 pub enum Mode {
-    /// A simulated chair: every reading comes from the hub.
+    /// The hub's readings: of a simulated chair, or the virtual twin of a physical one.
     Virtual,
-    /// A physical chair: its own sensors and encoders, its pose pushed to the hub.
+    /// A physical chair's own sensors and encoders (its adapter must be registered first).
     Real,
     /// A physical chair that also sees the virtual world: per sensor, the nearer of the real
     /// and the virtual reading.
     Augmented,
 }
 
-/// Why a sensor source could not be set up.
+impl Mode {
+    /// The hub's name for the mode.
+    pub fn wire(self) -> SensorMode {
+        match self {
+            Self::Virtual => SensorMode::Virtual,
+            Self::Real => SensorMode::Real,
+            Self::Augmented => SensorMode::Augmented,
+        }
+    }
+}
+
+/// Why the readings do not come from where they were asked to.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
 pub enum SensorSourceOpenError {
-    /// Real and Augmented need a physical chair behind the serial bridge.
+    /// Real and Augmented need a physical chair behind its adapter, which the hub did not
+    /// attach this agent to.
     #[error(
-        "--mode {0}: a physical chair is reached through the serial bridge (`iwsim serial`), which is not built \
-         yet; only --mode virtual runs today"
+        "--sensors {0}: robot {1:?} is not a physical chair; start its adapter first (`iwsim serial --robot {1} ...`) \
+         so that this agent attaches to it"
     )]
-    NeedsSerialBridge(&'static str),
+    NotAChair(&'static str, String),
 }
 
-/// The readings of one tick, from wherever they come.
-pub trait SensorSource: std::fmt::Debug {
-    /// The readings for the hub's tick whose block is `block`.
-    fn read(&mut self, block: &SensorBlock, time_s: f64) -> Input;
-}
-
-/// The hub's virtual sensors.
-#[derive(Debug, Clone, Copy, Default)]
-pub struct VirtualSensors;
-
-impl SensorSource for VirtualSensors {
-    fn read(&mut self, block: &SensorBlock, time_s: f64) -> Input {
-        Input::from_block(block, time_s)
-    }
-}
-
-/// A physical chair's own readings (implemented by the serial bridge, later).
-pub trait RealChair: std::fmt::Debug {
-    /// The newest proximity distances, metres, in the navigator's sensor order.
-    fn proximity(&mut self) -> [f64; MAX_PROXIMITY];
-    /// The newest cumulative encoder ticks, left and right.
-    fn encoder_ticks(&mut self) -> [i64; 2];
-}
-
-/// Augmented reality (thesis §5.4.3): the real chair's sensors and encoders, with each
-/// proximity reading lowered to the virtual one where a virtual obstacle is nearer.
-#[derive(Debug)]
-pub struct AugmentedSensors<C: RealChair> {
-    /// The physical chair.
-    pub chair: C,
-}
-
-impl<C: RealChair> SensorSource for AugmentedSensors<C> {
-    fn read(&mut self, block: &SensorBlock, time_s: f64) -> Input {
-        let virtual_input = Input::from_block(block, time_s);
-        let real = self.chair.proximity();
-        let mut input = virtual_input;
-        let n = virtual_input.proximity_count;
-        input.proximity_m[..n].copy_from_slice(&augment(&real[..n], virtual_input.proximity()));
-        input.encoder_ticks = self.chair.encoder_ticks();
-        input
-    }
-}
-
-/// Merges real and virtual readings sensor by sensor: the smaller distance wins, so the chair
-/// avoids both real and virtual obstacles. A reading that is not a number is ignored in
-/// favour of the other.
-pub fn augment(real: &[f64], virtual_: &[f64]) -> Vec<f64> {
-    real.iter()
-        .zip(virtual_)
-        .map(|(&r, &v)| match (r.is_nan(), v.is_nan()) {
-            (false, false) => r.min(v),
-            (true, _) => v,
-            (false, true) => r,
-        })
-        .collect()
-}
-
-/// The source of readings for a mode.
-pub fn sensor_source(mode: Mode) -> Result<Box<dyn SensorSource>, SensorSourceOpenError> {
-    match mode {
-        Mode::Virtual => Ok(Box::new(VirtualSensors)),
-        Mode::Real => Err(SensorSourceOpenError::NeedsSerialBridge("real")),
-        Mode::Augmented => Err(SensorSourceOpenError::NeedsSerialBridge("augmented")),
+/// Checks that the first block of `name` is in the mode asked for: a navigator in real or
+/// augmented mode that got a simulated chair would drive blind to what it was told to see.
+pub fn check_mode(mode: Mode, name: &str, block: &SensorBlock) -> Result<(), SensorSourceOpenError> {
+    let label = match mode {
+        Mode::Virtual => return Ok(()),
+        Mode::Real => "real",
+        Mode::Augmented => "augmented",
+    };
+    if block.sensor_mode == mode.wire() as u32 && block.drive_flags & ipc_types::DRIVE_CONTROLLED != 0 {
+        Ok(())
+    } else {
+        Err(SensorSourceOpenError::NotAChair(label, name.to_owned()))
     }
 }
 
@@ -242,40 +203,35 @@ mod tests {
     use super::*;
     use bytemuck::Zeroable as _;
 
-    #[derive(Debug)]
-    struct Bench {
-        prox: [f64; MAX_PROXIMITY],
-    }
-
-    impl RealChair for Bench {
-        fn proximity(&mut self) -> [f64; MAX_PROXIMITY] {
-            self.prox
-        }
-        fn encoder_ticks(&mut self) -> [i64; 2] {
-            [7, 9]
-        }
+    #[test]
+    fn real_and_augmented_modes_need_the_block_of_an_attached_chair() {
+        let mut b = SensorBlock::zeroed();
+        assert_eq!(check_mode(Mode::Virtual, "c", &b), Ok(()));
+        let e = check_mode(Mode::Real, "c", &b).expect_err("a simulated chair's block");
+        assert!(e.to_string().contains("iwsim serial --robot c"), "{e}");
+        b.sensor_mode = SensorMode::Augmented as u32;
+        b.drive_flags = ipc_types::DRIVE_CONTROLLED;
+        assert_eq!(check_mode(Mode::Augmented, "c", &b), Ok(()));
+        assert!(check_mode(Mode::Real, "c", &b).is_err(), "the hub's mode differs");
     }
 
     #[test]
-    fn augmented_merge_takes_the_smaller_reading_per_sensor() {
-        assert_eq!(augment(&[1.0, 0.5, 3.0], &[2.0, 0.7, 0.4]), vec![1.0, 0.5, 0.4]);
-        assert_eq!(augment(&[f64::NAN, 0.5], &[2.0, f64::NAN]), vec![2.0, 0.5]);
-        // Through the seam: the virtual box at 0.4 m shows on the real chair's sensor 2.
-        let mut block = SensorBlock::zeroed();
-        block.proximity_count = 3;
-        block.proximity_m[..3].copy_from_slice(&[2.0, 0.7, 0.4]);
-        let mut src = AugmentedSensors { chair: Bench { prox: [1.0, 0.5, 3.0, 0.0, 0.0, 0.0, 0.0, 0.0] } };
-        let input = src.read(&block, 0.0);
-        assert_eq!(input.proximity(), &[1.0, 0.5, 0.4]);
-        assert_eq!(input.encoder_ticks, [7, 9]);
-    }
-
-    #[test]
-    fn real_and_augmented_modes_ask_for_the_serial_bridge() {
-        assert!(sensor_source(Mode::Virtual).is_ok());
-        assert_eq!(sensor_source(Mode::Real).err(), Some(SensorSourceOpenError::NeedsSerialBridge("real")));
-        let e = sensor_source(Mode::Augmented).expect_err("not yet");
-        assert!(e.to_string().contains("iwsim serial"), "{e}");
+    fn the_default_layout_is_the_physical_chairs() {
+        let [w, h, com] = sim_model::chair::BODY;
+        let layout = default_layout(&Footprint::of_body(w, h, com));
+        assert_eq!(layout.len(), sim_model::chair::SENSORS.len());
+        for (m, c) in layout.iter().zip(&sim_model::chair::SENSORS) {
+            let spec = m.spec();
+            for (a, b) in [
+                (spec.x_m, c.x_m),
+                (spec.y_m, c.y_m),
+                (spec.angle_deg, c.angle_deg),
+                (spec.cone_deg, c.cone_deg),
+                (spec.range_m, c.range_m),
+            ] {
+                assert!((a - b).abs() < 1e-9, "{m:?} vs {c:?}");
+            }
+        }
     }
 
     #[test]

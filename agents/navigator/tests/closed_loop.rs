@@ -12,7 +12,7 @@
 use ipc_types::{MapHeader, MapItem, SensorBlock};
 use navigator::geom::{Footprint, Pose, V2};
 use navigator::map::NavMap;
-use navigator::sensors::{SensorSource, VirtualSensors};
+use navigator::sensors::Input;
 use navigator::{Body, Checkpoint, NavConfig, NavEvent, Navigator, PoseSourceKind};
 use world::map::{Grid, Lab, NoiseParams, Params, Wall, builtin};
 use world::{Action, ProximitySpec, Robot, RobotSpec, World};
@@ -189,7 +189,6 @@ fn simulate(s: &Scenario, seed: u64) -> Outcome {
     let nav_map = NavMap::from_items(&header, &items).expect("the published map reads back");
     let fp = s.body.footprint();
     let mut nav = Navigator::new(nav_map, cfg);
-    let mut source = VirtualSensors;
     let mut min_clearance = f64::INFINITY;
     let mut finished_at = None;
     let limit = (s.time_limit_s / 0.1).round() as u64;
@@ -200,7 +199,7 @@ fn simulate(s: &Scenario, seed: u64) -> Outcome {
         min_clearance = min_clearance.min(clearance(&lab, &fp, robot));
         let time_s = tick as f64 * 0.1;
         let block = sensor_block(robot, tick);
-        let input = source.read(&block, time_s);
+        let input = Input::from_block(&block, time_s);
         let out = nav.step(&input);
         // The estimate the navigator steered by this tick, against where the chair was.
         let est = nav.pose();
@@ -551,7 +550,7 @@ mod corridor_swap {
                 let robot = world.robot(*handle).expect("a chair");
                 min_clearance = min_clearance.min(clearance(&lab, &fp, robot));
                 let block = sensor_block(robot, tick);
-                let input = VirtualSensors.read(&block, time_s);
+                let input = Input::from_block(&block, time_s);
                 let heard: Vec<&[u8]> = robot.inbox.iter().map(|h| h.message.as_bytes()).collect();
                 let out = pilot.tick(&input, heard);
                 if trace {

@@ -218,6 +218,9 @@ mod tests {
             inbox_dropped: 0,
             inbox: [InboxEntry { from_id: 0, offset: 0, len: 0 }; MAX_INBOX_MESSAGES],
             inbox_bytes: [0; ipc_types::INBOX_BYTES],
+            drive: [0.0; 2],
+            drive_flags: 0,
+            sensor_mode: 0,
         }
     }
 

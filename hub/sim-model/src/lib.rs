@@ -78,6 +78,80 @@ pub fn encoder_ticks_per_m(ticks_per_rev: f64, wheel_radius_m: f64) -> f64 {
     ticks_per_rev / (TAU * wheel_radius_m)
 }
 
+/// The Intellwheels chair as the physical-chair pieces know it: the chair emulator simulates
+/// this body and these sensors, the serial adapter registers them with the hub for the chair's
+/// virtual twin, and the navigator's default body and sensor layout are the same (a test there
+/// checks it), so that real and virtual readings of one index come from one place on the body.
+pub mod chair {
+    /// The body: length along the heading, width, and the wheel axle's place along the length
+    /// (the navigator's `--body` default).
+    pub const BODY: [f64; 3] = [1.1, 0.65, 0.8];
+    /// Top speed, m/s (thesis §7.2).
+    pub const MAX_SPEED_MPS: f64 = 0.49;
+    /// The motor filter's coefficient (thesis §7.2).
+    pub const ACCEL_CURVE: f64 = 0.83;
+    /// Encoder counts per wheel revolution on the chair's board.
+    pub const COUNTS_PER_REV: u32 = 2048;
+    /// Drive wheel radius, metres. The wheel track is the body's width, `BODY[1]`.
+    pub const WHEEL_RADIUS_M: f64 = 0.17;
+
+    /// Which of the board's sensors a mount is.
+    #[derive(Debug, Clone, Copy, PartialEq, Eq)]
+    pub enum Kind {
+        /// An infrared ranger: a narrow beam, blind to dark surfaces.
+        Ir,
+        /// A sonar: a wide cone, fired in groups, with occasional spurious echoes.
+        Sonar,
+    }
+
+    /// One proximity sensor on the chair, in the body frame (origin at the axle, x ahead,
+    /// y left), and its id on the board.
+    #[derive(Debug, Clone, Copy, PartialEq)]
+    pub struct Mount {
+        /// Along the heading, metres.
+        pub x_m: f64,
+        /// Across the heading (left positive), metres.
+        pub y_m: f64,
+        /// Direction relative to the heading, degrees.
+        pub angle_deg: f64,
+        /// Full opening, degrees.
+        pub cone_deg: f64,
+        /// Range, metres.
+        pub range_m: f64,
+        /// IR or sonar.
+        pub kind: Kind,
+        /// Its id among its kind on the board (0..=7).
+        pub board_id: u8,
+    }
+
+    /// The chair's eight sensors in the hub's order (index i of a sensor block is `SENSORS[i]`):
+    /// three narrow IR beams ahead, five sonars around. Positions follow [`BODY`]: the front
+    /// edge is 0.88 m ahead of the axle, the rear 0.22 m behind, the sides 0.325 m out.
+    pub const SENSORS: [Mount; 8] = {
+        let (front, rear, half) = (BODY[2] * BODY[0], (1.0 - BODY[2]) * BODY[0], BODY[1] / 2.0);
+        let mid = (front - rear) / 2.0;
+        [
+            m(front, 0.0, 0.0, 2.0, Kind::Ir, 0),
+            m(front, 0.6 * half, 25.0, 3.0, Kind::Ir, 1),
+            m(front, -0.6 * half, -25.0, 3.0, Kind::Ir, 2),
+            m(front, half, 60.0, 10.0, Kind::Sonar, 0),
+            m(front, -half, -60.0, 10.0, Kind::Sonar, 1),
+            m(mid, half, 90.0, 20.0, Kind::Sonar, 2),
+            m(mid, -half, -90.0, 20.0, Kind::Sonar, 3),
+            m(-rear, 0.0, 180.0, 30.0, Kind::Sonar, 4),
+        ]
+    };
+
+    const fn m(x_m: f64, y_m: f64, angle_deg: f64, cone_deg: f64, kind: Kind, board_id: u8) -> Mount {
+        Mount { x_m, y_m, angle_deg, cone_deg, range_m: 3.0, kind, board_id }
+    }
+
+    /// The hub index of the board's sensor `board_id` of `kind`.
+    pub fn index_of(kind: Kind, board_id: u8) -> Option<usize> {
+        SENSORS.iter().position(|s| s.kind == kind && s.board_id == board_id)
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
