@@ -30,6 +30,12 @@ pub enum Command {
     Replay(hub::replay::ReplayArgs),
     /// Serves the Ciber-Rato / Intellwheels UDP/XML protocol to remote agents and viewers.
     Udp(udp_bridge::cli::UdpArgs),
+    /// Joins a physical wheelchair to a hub over its board's serial port (RS232): the chair
+    /// becomes a Real robot that the agent registering the same name drives.
+    Serial(serial_bridge::SerialArgs),
+    /// A stand-in for a physical wheelchair and its acquisition board on a pseudo-terminal:
+    /// a simulated chair in its own room, with a real chair's imperfections.
+    ChairEmulator(chair_emulator::EmulatorArgs),
     /// Serves a live view of a session to browsers (2D top view and 3D).
     View(viewer::cli::ViewArgs),
     /// Draws a run's trajectories over the map and speeds over time as SVG, from its recording

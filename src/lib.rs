@@ -4,8 +4,10 @@
 
 pub mod cli;
 pub mod mapcheck;
+mod stop_on_signals;
 
 use std::process::ExitCode;
+use std::sync::atomic::AtomicBool;
 
 use cli::{AgentCommand, Cli, Command, MapCommand};
 
@@ -46,5 +48,17 @@ pub fn run(cli: Cli) -> anyhow::Result<ExitCode> {
         Command::Agent { agent: AgentCommand::Door(args) } => door::run(&args),
         Command::Plot(args) => plot::run(&args),
         Command::Run(args) => runner::run::run(&args),
+        Command::Serial(args) => {
+            // The agent SDK's iceoryx2 node turns SIGINT/SIGTERM into a clean stop of the
+            // adapter (the chair is stopped first), so no flag of ours is needed.
+            let never = AtomicBool::new(false);
+            serial_bridge::run(args, &never)?;
+            Ok(ExitCode::SUCCESS)
+        }
+        Command::ChairEmulator(args) => {
+            let stop = stop_on_signals::install()?;
+            chair_emulator::run(args, stop)?;
+            Ok(ExitCode::SUCCESS)
+        }
     }
 }

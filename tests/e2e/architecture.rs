@@ -119,7 +119,7 @@ fn agents_adapters_and_the_viewer_never_link_the_hub_or_the_world() {
     // Architecture invariant: agents, adapters and the viewer know the world only through the
     // hub's services; only the closed-loop tests listed here may use the model in-process.
     let g = graph();
-    let clients = ["agent-sdk", "navigator", "door", "teleop", "wheelchair", "udp-bridge", "viewer"];
+    let clients = ["agent-sdk", "navigator", "door", "teleop", "wheelchair", "udp-bridge", "serial-bridge", "viewer"];
     let allowed_dev: BTreeMap<&str, &[&str]> = BTreeMap::from([("navigator", &["world", "hub"][..])]);
     for c in clients {
         assert_links_none(&g, c, |d| d == "hub" || d == "world", &format!("{c} must not link hub or world"));
@@ -139,7 +139,8 @@ fn agents_adapters_and_the_viewer_never_link_the_hub_or_the_world() {
     // checked from its first commit.
     for m in g.member_names() {
         let is_client =
-            ["navigator", "door", "teleop", "wheelchair", "udp-bridge", "viewer", "agent-sdk"].contains(&m.as_str());
+            ["navigator", "door", "teleop", "wheelchair", "udp-bridge", "serial-bridge", "viewer", "agent-sdk"]
+                .contains(&m.as_str());
         let known_other = [
             "iwsim",
             "ipc-types",
@@ -153,6 +154,7 @@ fn agents_adapters_and_the_viewer_never_link_the_hub_or_the_world() {
             "plot",
             "bench-harness",
             "serial-protocol",
+            "chair-emulator",
         ]
         .contains(&m.as_str());
         assert!(is_client || known_other, "new workspace package {m:?}: add it to ARCHITECTURE.md and to this test");
@@ -185,6 +187,25 @@ fn the_serial_protocol_depends_on_nothing_and_builds_without_std() {
     assert!(lib.lines().any(|l| l.trim() == "#![no_std]"), "serial-protocol's lib.rs lacks #![no_std]");
     let uses_std = offending(&["extern crate std", "std::"], |r| !r.starts_with("adapters/serial-protocol/"));
     assert!(uses_std.is_empty(), "serial-protocol uses std outside its tests:\n  {}", uses_std.join("\n  "));
+}
+
+#[test]
+fn the_chair_emulator_reaches_the_rest_only_through_its_serial_port() {
+    // Architecture invariant: the chair emulator stands in for a physical chair, so it knows
+    // nothing a physical chair does not: no hub services, no IPC, no agent SDK, no adapter. It
+    // simulates its own room with the world model and speaks the serial protocol, nothing else.
+    let g = graph();
+    assert_links_none(
+        &g,
+        "chair-emulator",
+        |d| {
+            d.starts_with("iceoryx2")
+                || ["ipc-types", "ipc-services", "agent-sdk", "hub", "serial-bridge", "udp-bridge"].contains(&d)
+        },
+        "the chair emulator reaches the rest only through its serial port",
+    );
+    let direct = g.direct("chair-emulator", &g.normal);
+    assert!(direct.contains(&"serial-protocol".to_owned()), "the emulator speaks the one protocol crate: {direct:?}");
 }
 
 #[test]

@@ -2,16 +2,19 @@
 
 mod architecture;
 mod browser;
+mod chairs;
 mod ciberrato;
 mod cli;
 mod common;
 mod hardening;
 mod hub;
 mod maps;
+mod mixed_view;
 mod replay;
 mod robots;
 mod runner;
 mod scenarios;
+mod serial;
 mod serve;
 mod teleop;
 mod udp;

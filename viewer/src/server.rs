@@ -3,7 +3,12 @@
 //!
 //! The iceoryx2 ports are not `Send`, so the main thread reads the hub and publishes the newest
 //! frame in a shared slot; each browser connection runs on a thread of its own and sends the
-//! newest frame at most ~30 times a second, whatever the tick rate.
+//! newest frame at most [`MAX_FPS`] times a second, whatever the tick rate.
+//!
+//! Physical chairs (mixed reality) come on the observers' `observer/chairs` service: their
+//! sensor modes, real and virtual readings and a test bench's true pose travel in the frame of
+//! the world they belong to, so a page draws both from one message. A session without chairs
+//! (or a served replay, which has no such service) sends frames with none.
 //!
 //! What one browser (or a hostile page) can cost everyone is bounded: at most
 //! [`MAX_CONNECTIONS`] connections at once, [`IO_TIMEOUT`] on every read and write (a client
@@ -20,7 +25,7 @@ use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
 use agent_sdk::{AgentError, ControlClient, Observer};
-use ipc_types::{Command, ControlResponse, RunState};
+use ipc_types::{ChairState, Command, ControlResponse, RobotState, RunState, WorldHeader};
 use tungstenite::Message;
 use tungstenite::handshake::server::{ErrorResponse, Request, Response};
 use tungstenite::protocol::WebSocketConfig;
@@ -266,6 +271,9 @@ impl Viewer {
         let mut ids: Vec<u32> = Vec::new();
         let mut sensors: Vec<ipc_types::RobotSensors> = Vec::new();
         let mut roster_dirty = false;
+        let mut world: Option<(WorldHeader, Vec<RobotState>)> = None;
+        let mut chairs: Option<(u64, Vec<ChairState>)> = None;
+        let mut chair_poll = ChairPoll::default();
         loop {
             // The hub republishes sensor geometry when robots come or go; it may land apart
             // from the snapshot that shows them, so either change re-sends the roster.
@@ -273,42 +281,90 @@ impl Viewer {
                 sensors = s;
                 roster_dirty = true;
             }
-            match self.observer.try_world()? {
-                Some((h, robots)) => {
-                    let now_ids: Vec<u32> = robots.iter().map(|r| r.id).collect();
-                    let roster = (now_ids != ids || roster_dirty).then(|| frame::roster_json(&robots, &sensors));
-                    roster_dirty = false;
-                    ids = now_ids;
-                    let bytes = frame::encode(&h, &robots);
-                    let (lock, cv) = &*shared;
-                    let mut l = lock.lock().unwrap_or_else(|p| p.into_inner());
-                    l.frame = Arc::new(bytes);
-                    l.frame_seq += 1;
-                    if let Some(r) = roster {
-                        l.roster = Arc::new(r);
-                        l.roster_seq += 1;
-                    }
-                    let finished = h.run_state == RunState::Finished as u32;
-                    l.finished = finished;
-                    cv.notify_all();
-                    drop(l);
-                    if finished {
-                        // Let the pages draw the last frame, then leave no file behind.
-                        std::thread::sleep(Duration::from_millis(200));
-                        drop(control);
-                        self.observer.close();
-                        return Ok(());
-                    }
-                }
+            let new_world = self.observer.try_world()?;
+            let new_chairs = chair_poll.poll(&mut self.observer, Instant::now())?;
+            if new_world.is_none() && new_chairs.is_none() {
                 // The world arrives once per tick; checking 100 times a second is plenty
-                // for a display that shows at most 30. A silent hub may be a paused one or a
+                // for a display that shows at most 60. A silent hub may be a paused one or a
                 // dead one: only its process can tell.
-                None => match self.observer.check_alive() {
+                match self.observer.check_alive() {
                     Ok(()) => std::thread::sleep(Duration::from_millis(10)),
                     Err(AgentError::Interrupted) => return Ok(()),
                     Err(e) => return Err(e.into()),
-                },
+                }
+                continue;
             }
+            if new_chairs.is_some() {
+                chairs = new_chairs;
+            }
+            let mut roster = None;
+            if let Some((h, robots)) = new_world {
+                let now_ids: Vec<u32> = robots.iter().map(|r| r.id).collect();
+                roster = (now_ids != ids || roster_dirty).then(|| frame::roster_json(&robots, &sensors));
+                roster_dirty = false;
+                ids = now_ids;
+                world = Some((h, robots));
+            }
+            // Chair states alone (they land just after their tick's world) re-send the
+            // newest world with them, so a page never waits a tick to see them.
+            let Some((h, robots)) = &world else { continue };
+            let bytes = frame::encode_with_chairs(h, robots, &frame::chairs_for(h.tick, robots, chairs.as_ref()));
+            let (lock, cv) = &*shared;
+            let mut l = lock.lock().unwrap_or_else(|p| p.into_inner());
+            l.frame = Arc::new(bytes);
+            l.frame_seq += 1;
+            if let Some(r) = roster {
+                l.roster = Arc::new(r);
+                l.roster_seq += 1;
+            }
+            let finished = h.run_state == RunState::Finished as u32;
+            l.finished = finished;
+            cv.notify_all();
+            drop(l);
+            if finished {
+                // Let the pages draw the last frame, then leave no file behind.
+                std::thread::sleep(Duration::from_millis(200));
+                drop(control);
+                self.observer.close();
+                return Ok(());
+            }
+        }
+    }
+}
+
+/// Reads the physical chairs' states. Until the first sample arrives it looks at most once a
+/// second: a served replay has no chair service, and each look for one costs the observer an
+/// attempt to open it; a live hub without chairs costs a look a second. Once chairs have been
+/// seen, it reads at every turn of the loop, as the world is read.
+#[derive(Debug, Default)]
+struct ChairPoll {
+    seen: bool,
+    next_look: Option<Instant>,
+}
+
+impl ChairPoll {
+    /// How long to wait between looks while no chair has been seen.
+    const IDLE_LOOK: Duration = Duration::from_secs(1);
+
+    fn poll(&mut self, observer: &mut Observer, now: Instant) -> Result<Option<(u64, Vec<ChairState>)>, AgentError> {
+        if !self.due(now) {
+            return Ok(None);
+        }
+        let got = observer.try_chairs()?;
+        self.saw(got.is_some(), now);
+        Ok(got)
+    }
+
+    /// Whether to look now.
+    fn due(&self, now: Instant) -> bool {
+        self.seen || self.next_look.is_none_or(|t| now >= t)
+    }
+
+    /// Notes what a look found.
+    fn saw(&mut self, found: bool, now: Instant) {
+        self.seen |= found;
+        if !self.seen {
+            self.next_look = Some(now + Self::IDLE_LOOK);
         }
     }
 }
@@ -563,6 +619,21 @@ mod tests {
         assert_eq!(t.note(t0 + Duration::from_millis(999)), None);
         assert_eq!(t.note(t0 + Duration::from_millis(1000)), Some(4));
         assert_eq!(t.note(t0 + Duration::from_millis(1001)), None);
+    }
+
+    #[test]
+    fn chairs_are_looked_for_once_a_second_until_seen_then_at_every_turn() {
+        let mut p = ChairPoll::default();
+        let t0 = Instant::now();
+        assert!(p.due(t0), "the first look is at once");
+        p.saw(false, t0);
+        assert!(!p.due(t0 + Duration::from_millis(999)));
+        assert!(p.due(t0 + Duration::from_millis(1000)));
+        p.saw(true, t0 + Duration::from_millis(1000));
+        assert!(p.due(t0 + Duration::from_millis(1001)));
+        // A turn with no new sample (between ticks) does not slow the looks again.
+        p.saw(false, t0 + Duration::from_millis(1001));
+        assert!(p.due(t0 + Duration::from_millis(1002)));
     }
 
     #[test]

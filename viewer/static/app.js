@@ -5,26 +5,42 @@
 // 2D: wheel zooms, drag pans, a click on a chair follows it. The URL can preset the page:
 // ?view=3d&camera=first|third|free&chair=ID|NAME&grid=0&labels=0&cones=0; in 2D, chair= also
 // follows that chair and zoom=K magnifies the fitted view K times.
+//
+// Mixed reality: a physical chair's frame entry brings its real and virtual readings, drawn
+// as two sets of cones in two colours, and the true pose a test bench reports (the chair
+// emulator's), drawn as a dashed "ghost" of the body joined to the odometry pose, with the
+// drift in the chair's label and in the chairs panel beside the sensor mode.
 "use strict";
 
-const HEADER_BYTES = 28, ROBOT_BYTES = 52, MAX_PROXIMITY = 8, NO_READING = 0xffff;
+const HEADER_BYTES = 28, ROBOT_BYTES = 52, CHAIR_BYTES = 52, MAX_PROXIMITY = 8, NO_READING = 0xffff, VERSION = 3;
+// `ipc_types::SensorMode` by value, and the `ipc_types::CHAIR_*` bits.
+const SENSOR_MODES = ["virtual", "real", "augmented"];
+const CHAIR_CONTROLLED = 1, CHAIR_LINK_UP = 2, CHAIR_GHOST = 4;
+
+// Eight u16 millimetre readings at byte `o`, as metres or null (none, no echo, no sensor).
+function readingsAt(v, o) {
+  const out = [];
+  for (let s = 0; s < MAX_PROXIMITY; s++) {
+    const mm = v.getUint16(o + 2 * s, true);
+    out.push(mm === NO_READING ? null : mm / 1000);
+  }
+  return out;
+}
 
 // Decodes one binary frame; null when it is not one. Kept free of the DOM so tests can run it.
 function decodeFrame(buf) {
   const v = new DataView(buf);
   if (buf.byteLength < HEADER_BYTES) return null;
   if (String.fromCharCode(v.getUint8(0), v.getUint8(1), v.getUint8(2), v.getUint8(3)) !== "IWVF") return null;
-  if (v.getUint16(4, true) !== 2) return null;
-  const n = v.getUint32(24, true);
-  if (buf.byteLength !== HEADER_BYTES + n * ROBOT_BYTES) return null;
+  if (v.getUint16(4, true) !== VERSION) return null;
+  const n = v.getUint32(24, true), chairsAt = HEADER_BYTES + n * ROBOT_BYTES;
+  if (buf.byteLength < chairsAt + 4) return null;
+  const nc = v.getUint32(chairsAt, true);
+  if (buf.byteLength !== chairsAt + 4 + nc * CHAIR_BYTES) return null;
   const robots = new Array(n);
   for (let k = 0; k < n; k++) {
     const o = HEADER_BYTES + k * ROBOT_BYTES;
-    const proximity = [];
-    for (let s = 0; s < MAX_PROXIMITY; s++) {
-      const mm = v.getUint16(o + 36 + 2 * s, true);
-      proximity.push(mm === NO_READING ? null : mm / 1000);
-    }
+    const proximity = readingsAt(v, o + 36);
     robots[k] = {
       id: v.getUint32(o, true), kind: v.getUint8(o + 4), flags: v.getUint8(o + 5),
       x: v.getFloat32(o + 8, true), y: v.getFloat32(o + 12, true), heading: v.getFloat32(o + 16, true),
@@ -32,7 +48,27 @@ function decodeFrame(buf) {
       collisions: v.getUint32(o + 32, true), proximity,
     };
   }
-  return { runState: v.getUint8(6), tick: Number(v.getBigUint64(8, true)), simTime: v.getFloat64(16, true), robots };
+  const chairs = new Array(nc);
+  for (let k = 0; k < nc; k++) {
+    const o = chairsAt + 4 + k * CHAIR_BYTES, flags = v.getUint8(o + 5), mode = v.getUint8(o + 4);
+    chairs[k] = {
+      id: v.getUint32(o, true), mode: SENSOR_MODES[mode] || `mode ${mode}`, flags,
+      ghost: flags & CHAIR_GHOST ? [v.getFloat32(o + 8, true), v.getFloat32(o + 12, true), v.getFloat32(o + 16, true)] : null,
+      real: readingsAt(v, o + 20), virtual: readingsAt(v, o + 36),
+    };
+  }
+  return { runState: v.getUint8(6), tick: Number(v.getBigUint64(8, true)), simTime: v.getFloat64(16, true), robots, chairs };
+}
+
+// A chair's odometry drift: metres from the pose it reports (its robot entry) to the true
+// pose of its ghost; null without a ghost.
+function drift(r, c) {
+  return c && c.ghost ? Math.hypot(c.ghost[0] - r.x, c.ghost[1] - r.y) : null;
+}
+
+// The robot `r` moved to its chair's ghost pose, for drawing the ghost with the same body.
+function ghostOf(r, c) {
+  return { ...r, x: c.ghost[0], y: c.ghost[1], heading: c.ghost[2] };
 }
 
 // A body-frame point (along, across the heading from the centre of movement) in the lab frame.
@@ -61,7 +97,7 @@ function coneArc(r, sensor, reading) {
   return { apex: toLab(r, sx, sy), radius: Math.min(reading, range), a0: mid - half, a1: mid + half };
 }
 
-if (typeof module !== "undefined") module.exports = { decodeFrame, corners, coneArc, isDisc };
+if (typeof module !== "undefined") module.exports = { decodeFrame, corners, coneArc, isDisc, drift, ghostOf };
 
 if (typeof document !== "undefined") {
   const params = new URLSearchParams(location.search);
@@ -76,9 +112,13 @@ if (typeof document !== "undefined") {
     chair: "#20a040", real: "#2070d0", door: "#8a5a2b", collision: "#e02020",
     target: "rgba(40,160,60,0.25)", checkpoint: "rgba(200,0,200,0.35)", beacon: "#e0a000",
     cone: "rgba(255,150,0,0.22)", coneNear: "rgba(230,30,30,0.3)",
+    // Mixed reality: a chair's real and virtual readings and its true pose (the ghost).
+    realReading: "#ff6000", realCone: "rgba(255,96,0,0.16)",
+    virtualReading: "#0040ff", virtualCone: "rgba(0,64,255,0.12)",
+    ghost: "#d000d0", ghostFill: "rgba(208,0,208,0.25)",
   };
   const page = {
-    map: null, frame: null, roster: new Map(), names: new Map(),
+    map: null, frame: null, roster: new Map(), names: new Map(), chairs: new Map(),
     // ?chair= takes a robot id or a name; a name is resolved when the roster arrives.
     chair: /^\d+$/.test(params.get("chair") || "") ? Number(params.get("chair")) : null,
     chairName: params.has("chair") && !/^\d+$/.test(params.get("chair")) ? params.get("chair") : null,
@@ -107,6 +147,71 @@ if (typeof document !== "undefined") {
     ctx.closePath();
   }
   function disc(x, y, radiusPx) { const [sx, sy] = toScreen([x, y]); ctx.beginPath(); ctx.arc(sx, sy, radiusPx, 0, 2 * Math.PI); }
+
+  // A physical chair's cones: each sensor's virtual reading (the hub's, on the chair's twin)
+  // and real reading (the chair's own) as a tinted wedge with a solid arc at the reading, each
+  // only where it is a finite distance. The arcs make the two comparable when they overlap.
+  function mixedCones(r, sensors, chair) {
+    const k = view.scale;
+    const sets = [[chair.virtual, COLORS.virtualCone, COLORS.virtualReading], [chair.real, COLORS.realCone, COLORS.realReading]];
+    for (let i = 0; i < sensors.length; i++) {
+      for (const [readings, fill, stroke] of sets) {
+        const d = readings[i];
+        if (d === null || d === undefined) continue;
+        const c = coneArc(r, sensors[i], d), ax = view.ox + c.apex[0] * k, ay = view.oy - c.apex[1] * k;
+        ctx.fillStyle = fill;
+        ctx.beginPath(); ctx.moveTo(ax, ay); ctx.arc(ax, ay, c.radius * k, -c.a1, -c.a0); ctx.closePath(); ctx.fill();
+        ctx.strokeStyle = stroke; ctx.lineWidth = 3;
+        ctx.beginPath(); ctx.arc(ax, ay, c.radius * k, -c.a1, -c.a0); ctx.stroke();
+      }
+    }
+    ctx.lineWidth = 1;
+  }
+
+  // Each chair's ghost: its body at the true pose, translucent with a dashed outline and a
+  // heading line, and a thin line from the odometry pose's centre to the ghost's.
+  function drawGhosts(f) {
+    if (!f.chairs.length) return;
+    ctx.save();
+    ctx.strokeStyle = COLORS.ghost; ctx.fillStyle = COLORS.ghostFill;
+    for (const c of f.chairs) {
+      const r = c.ghost && f.robots.find((r) => r.id === c.id);
+      if (!r) continue;
+      const g = ghostOf(r, c);
+      if (isDisc(g)) disc(g.x, g.y, g.width / 2 * view.scale); else poly(corners(g));
+      ctx.fill();
+      ctx.lineWidth = 2; ctx.setLineDash([6, 4]); ctx.stroke();
+      ctx.setLineDash([]); ctx.lineWidth = 1;
+      ctx.beginPath();
+      ctx.moveTo(...toScreen([g.x, g.y])); ctx.lineTo(...toScreen(toLab(g, g.com * g.width, 0)));
+      ctx.moveTo(...toScreen([r.x, r.y])); ctx.lineTo(...toScreen([g.x, g.y]));
+      ctx.stroke();
+    }
+    ctx.restore();
+  }
+
+  // The chairs panel: the legend of the mixed-reality colours and, per chair, its sensor
+  // mode, drift and link. Hidden while the run has no physical chair; rewritten only when its
+  // text changes, not at every frame.
+  let chairsHtml = null;
+  function updateChairsPanel(f) {
+    const panel = $("chairs");
+    const rows = f.chairs.map((c) => {
+      const r = f.robots.find((r) => r.id === c.id), d = r ? drift(r, c) : null;
+      const name = page.names.get(c.id) || `#${c.id}`;
+      const link = c.flags & CHAIR_LINK_UP ? "" : " · <b>link down</b>";
+      const driven = c.flags & CHAIR_CONTROLLED ? "driven" : "not driven";
+      return `<div class="chair">${escapeHtml(name)} · <b>${c.mode}</b> · ${d === null ? "no true pose" : `drift ${d.toFixed(2)} m`} · ${driven}${link}</div>`;
+    });
+    const html = rows.length ? `<div class="legend"><span class="swatch" style="background:${COLORS.realReading}"></span>real` +
+      `<span class="swatch" style="background:${COLORS.virtualReading}"></span>virtual` +
+      `<span class="swatch ghost" style="border-color:${COLORS.ghost}"></span>true pose</div>${rows.join("")}` : "";
+    if (html === chairsHtml) return;
+    chairsHtml = html;
+    panel.innerHTML = html;
+    panel.style.display = html ? "block" : "none";
+  }
+  function escapeHtml(t) { return t.replace(/[&<>"]/g, (ch) => ({ "&": "&amp;", "<": "&lt;", ">": "&gt;", '"': "&quot;" })[ch]); }
 
   function draw2d() {
     const m = page.map, f = page.frame, W = canvas.width, H = canvas.height;
@@ -154,6 +259,8 @@ if (typeof document !== "undefined") {
       for (const r of withCones) {
         const sensors = page.roster.get(r.id)?.sensors;
         if (!sensors) continue;
+        const chair = page.chairs.get(r.id);
+        if (chair) { mixedCones(r, sensors, chair); continue; }
         for (let i = 0; i < sensors.length; i++) {
           const d = r.proximity[i];
           if (d === null || d === undefined) continue;
@@ -187,6 +294,7 @@ if (typeof document !== "undefined") {
     ctx.lineWidth = 1; ctx.strokeStyle = "#000";
     for (const [name, p] of Object.entries(bodies)) { ctx.fillStyle = COLORS[name]; ctx.fill(p); ctx.stroke(p); }
     ctx.stroke(heading);
+    drawGhosts(f);
     const chosen = visible.find((r) => r.id === (page.follow ?? page.chair));
     if (chosen) {
       ctx.lineWidth = 3; ctx.strokeStyle = "#ffd000";
@@ -198,7 +306,11 @@ if (typeof document !== "undefined") {
     }
     if (page.labels && visible.length <= LABELS_MAX) {
       ctx.fillStyle = "#000";
-      for (const r of visible) { const [sx, sy] = toScreen([r.x, r.y]); ctx.fillText(page.names.get(r.id) || `#${r.id}`, sx + 8, sy - 8); }
+      for (const r of visible) {
+        const [sx, sy] = toScreen([r.x, r.y]), name = page.names.get(r.id) || `#${r.id}`, c = page.chairs.get(r.id);
+        const d = drift(r, c);
+        ctx.fillText(c ? `${name} · ${c.mode}${d === null ? "" : ` · drift ${d.toFixed(2)} m`}` : name, sx + 8, sy - 8);
+      }
     }
   }
 
@@ -285,6 +397,8 @@ if (typeof document !== "undefined") {
     const f = decodeFrame(e.data);
     if (!f) return;
     page.frame = f; page.frames++;
+    page.chairs = new Map(f.chairs.map((c) => [c.id, c]));
+    updateChairsPanel(f);
     const now = performance.now();
     ticks.push([now, f.tick]);
     while (ticks.length > 2 && now - ticks[0][0] > 1000) ticks.shift();

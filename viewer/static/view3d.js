@@ -8,6 +8,9 @@ import * as THREE from "./three.module.min.js";
 const DEG = Math.PI / 180;
 const CHAIR_COLOR = new THREE.Color(0x20a040), HIT_COLOR = new THREE.Color(0xe02020);
 const DOOR_COLOR = new THREE.Color(0x8a5a2b), TYRE_COLOR = new THREE.Color(0x2a2a2a);
+// A physical chair's true pose (a test bench's), drawn as a translucent block beside the
+// odometry pose its robot shows, as the 2D view's ghost.
+const GHOST_COLOR = new THREE.Color(0xd000d0);
 const DOOR_HEIGHT = 2.0, CHAIR_TOP = 1.0, EYE_HEIGHT = 1.2;
 // `ipc_types::ROBOT_DISC`: the robot is a disc of diameter `width` (a plain Ciber-Rato robot),
 // drawn as a cylinder PUCK_HEIGHT tall.
@@ -56,6 +59,7 @@ export function createView3D(canvas) {
     checkpoint: new THREE.MeshBasicMaterial({ color: 0xd020d0, transparent: true, opacity: 0.45, depthWrite: false }),
     beacon: new THREE.MeshLambertMaterial({ color: 0xe0a000 }),
     body: new THREE.MeshLambertMaterial({ color: 0xffffff }),   // tinted per instance
+    ghost: new THREE.MeshBasicMaterial({ color: 0xffffff, transparent: true, opacity: 0.35, depthWrite: false }),
   };
   const geos = {
     box: new THREE.BoxGeometry(1, 1, 1),
@@ -165,6 +169,7 @@ export function createView3D(canvas) {
       box: instanced(geos.box, mats.body, capacity * 5),       // seat, backrest, footrest, 2 casters; doors
       wheel: instanced(geos.wheel, mats.body, capacity * 2),
       puck: instanced(geos.puck, mats.body, capacity),          // disc robots (plain Ciber-Rato)
+      ghost: instanced(geos.box, mats.ghost, capacity),         // physical chairs' true poses
     };
     const nv = FAR.pos.length / 3, ni = FAR.index.length, index = new Uint32Array(capacity * ni);
     for (let k = 0; k < capacity; k++) for (let j = 0; j < ni; j++) index[k * ni + j] = FAR.index[j] + k * nv;
@@ -251,6 +256,14 @@ export function createView3D(canvas) {
       const rc = Math.min(0.08, 0.1 * w), cx = front - 0.25 * w;   // casters: small dark blocks
       put(parts.box, x, y, c, s, cx, 0.3 * h, rc, 2 * rc, 0.04, 2 * rc, TYRE_COLOR);
       put(parts.box, x, y, c, s, cx, -0.3 * h, rc, 2 * rc, 0.04, 2 * rc, TYRE_COLOR);
+    }
+    // Ghosts: few (one per physical chair with a test bench), so neither culled nor simplified.
+    for (const g of (frame && frame.chairs) || []) {
+      const r = g.ghost && robots.find((r) => r.id === g.id);
+      if (!r || !(r.width > 0 && r.height > 0)) continue;
+      const a = g.ghost[2] * DEG, w = r.width, h = r.flags & ROBOT_DISC ? r.width : r.height;
+      const mid = r.flags & ROBOT_DISC ? 0 : (r.com - 0.5) * w;
+      put(parts.ghost, g.ghost[0], g.ghost[1], Math.cos(a), Math.sin(a), mid, 0, CHAIR_TOP / 2, w, h, CHAIR_TOP, GHOST_COLOR);
     }
     // Upload only the used part of each buffer: they are sized for the peak robot count.
     const dirty = (attr, n) => { if (n > 0) { attr.clearUpdateRanges(); attr.addUpdateRange(0, n); attr.needsUpdate = true; } };

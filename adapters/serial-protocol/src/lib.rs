@@ -1,6 +1,7 @@
 //! The serial protocol between iwsim and a wheelchair's acquisition board (RS232), as
 //! `docs/serial-protocol.md` defines it: messages (motor powers, heartbeats, emergency stop;
-//! encoder counts, sonar/IR readings, status, stop acknowledgement), each framed with a
+//! encoder counts, sonar/IR readings, status, stop acknowledgement; and two test-bench
+//! extensions, SimStep and SimTruth, between iwsim and its chair emulator), each framed with a
 //! version, a type, a sequence number and a CRC-16/CCITT-FALSE, COBS-encoded between 0x00
 //! delimiters.
 //!
@@ -38,8 +39,8 @@ pub use frame::{
     MAX_ENCODED_LEN, MAX_FRAME_LEN, VERSION, decode, encode,
 };
 pub use message::{
-    BoardInfo, BoardStatus, EmergencyStop, FULL_POWER, Hello, MAX_PAYLOAD_LEN, MAX_SENSORS, Message, MessageType,
-    MotorPowers, NO_ECHO, Reading, Readings, Sample, StatusFlags, StopAck, StopReason,
+    BoardInfo, BoardStatus, EmergencyStop, FULL_POWER, HEADING_MDEG_MAX, Hello, MAX_PAYLOAD_LEN, MAX_SENSORS, Message,
+    MessageType, MotorPowers, NO_ECHO, Reading, Readings, Sample, SimStep, SimTruth, StatusFlags, StopAck, StopReason,
 };
 
 #[cfg(test)]

@@ -31,6 +31,8 @@ pub enum MessageType {
     Heartbeat = 0x03,
     /// Host → board: stop now and latch.
     EmergencyStop = 0x04,
+    /// Host → board, test benches only: advance a stepped emulator's clock.
+    SimStep = 0x10,
     /// Board → host: the answer to a Hello.
     BoardInfo = 0x81,
     /// Board → host: encoder counts and range readings of one tick.
@@ -39,19 +41,23 @@ pub enum MessageType {
     Status = 0x83,
     /// Board → host: an emergency stop was carried out.
     StopAck = 0x84,
+    /// Board → host, emulators only: the chair's true pose in its room.
+    SimTruth = 0x90,
 }
 
 impl MessageType {
     /// Every message type, in code order.
-    pub const ALL: [MessageType; 8] = [
+    pub const ALL: [MessageType; 10] = [
         MessageType::Hello,
         MessageType::MotorPowers,
         MessageType::Heartbeat,
         MessageType::EmergencyStop,
+        MessageType::SimStep,
         MessageType::BoardInfo,
         MessageType::Sample,
         MessageType::Status,
         MessageType::StopAck,
+        MessageType::SimTruth,
     ];
 
     /// The type with code `code`, if there is one.
@@ -193,6 +199,37 @@ pub struct StopAck {
     pub reason: StopReason,
 }
 
+/// Host → board, a test-bench extension: a board in stepped mode (an emulator run for
+/// deterministic tests) advances its clock by `dt_ms` and then sends what fell due in that
+/// time. A real board, or an emulator running in real time, never acts on it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct SimStep {
+    /// How far to advance the board's clock, ms (0 advances nothing).
+    pub dt_ms: u16,
+}
+
+/// The largest heading a [`SimTruth`] carries, milli-degrees; headings lie in
+/// (−`HEADING_MDEG_MAX`, `HEADING_MDEG_MAX`], the project's one angle convention.
+pub const HEADING_MDEG_MAX: i32 = 180_000;
+
+/// Board → host, a test-bench extension: an emulator's ground truth, sent right after each
+/// [`Sample`]. The host may show it to observers as the chair's true pose (a "ghost" beside
+/// the odometry pose); it must never reach the agent controlling the chair. A real board never
+/// sends it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct SimTruth {
+    /// The board's clock at the Sample this truth belongs to, ms (wraps).
+    pub board_time_ms: u32,
+    /// True x of the chair's centre of movement in the emulator's room, mm.
+    pub x_mm: i32,
+    /// True y, mm.
+    pub y_mm: i32,
+    /// True heading, milli-degrees in (−180000, 180000].
+    pub heading_mdeg: i32,
+    /// Contacts with the room so far (moves the room refused, counted on their first tick).
+    pub contacts: u32,
+}
+
 /// One range reading of a sonar or IR sensor.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
 pub struct Reading {
@@ -315,6 +352,8 @@ pub enum Message {
     Heartbeat,
     /// Host → board, 0x04.
     EmergencyStop(EmergencyStop),
+    /// Host → board, 0x10 (test benches only).
+    SimStep(SimStep),
     /// Board → host, 0x81.
     BoardInfo(BoardInfo),
     /// Board → host, 0x82.
@@ -323,6 +362,8 @@ pub enum Message {
     Status(BoardStatus),
     /// Board → host, 0x84.
     StopAck(StopAck),
+    /// Board → host, 0x90 (emulators only).
+    SimTruth(SimTruth),
 }
 
 impl Message {
@@ -337,6 +378,8 @@ impl Message {
             Message::Sample(_) => MessageType::Sample,
             Message::Status(_) => MessageType::Status,
             Message::StopAck(_) => MessageType::StopAck,
+            Message::SimStep(_) => MessageType::SimStep,
+            Message::SimTruth(_) => MessageType::SimTruth,
         }
     }
 
@@ -350,6 +393,9 @@ impl Message {
             Message::BoardInfo(b) if usize::from(b.sonar_count) > MAX_SENSORS => Err("more than 8 sonars"),
             Message::BoardInfo(b) if usize::from(b.ir_count) > MAX_SENSORS => Err("more than 8 IR sensors"),
             Message::Sample(s) => s.sonar.check().and(s.ir.check()),
+            Message::SimTruth(t) if !(-HEADING_MDEG_MAX < t.heading_mdeg && t.heading_mdeg <= HEADING_MDEG_MAX) => {
+                Err("heading beyond (-180000, 180000] milli-degrees")
+            }
             _ => Ok(()),
         }
     }
@@ -392,6 +438,14 @@ impl Message {
             Message::StopAck(a) => {
                 w.u8(a.stop_seq);
                 w.u8(a.reason.0);
+            }
+            Message::SimStep(s) => w.u16(s.dt_ms),
+            Message::SimTruth(t) => {
+                w.u32(t.board_time_ms);
+                w.i32(t.x_mm);
+                w.i32(t.y_mm);
+                w.i32(t.heading_mdeg);
+                w.u32(t.contacts);
             }
         }
         w.at
@@ -438,6 +492,14 @@ impl Message {
             }
             MessageType::Status => Message::Status(BoardStatus { uptime_ms: r.u32()?, flags: StatusFlags(r.u16()?) }),
             MessageType::StopAck => Message::StopAck(StopAck { stop_seq: r.u8()?, reason: StopReason(r.u8()?) }),
+            MessageType::SimStep => Message::SimStep(SimStep { dt_ms: r.u16()? }),
+            MessageType::SimTruth => Message::SimTruth(SimTruth {
+                board_time_ms: r.u32()?,
+                x_mm: r.i32()?,
+                y_mm: r.i32()?,
+                heading_mdeg: r.i32()?,
+                contacts: r.u32()?,
+            }),
         };
         if r.at != payload.len() {
             return Err(None);

@@ -96,6 +96,18 @@ fn vectors() -> Vec<(Message, u8, &'static str)> {
             3,
             "00 08 01 84 03 03 02 d5 80 00",
         ),
+        (Message::SimStep(SimStep { dt_ms: 20 }), 4, "00 05 01 10 04 14 03 8d b3 00"),
+        (
+            Message::SimTruth(SimTruth {
+                board_time_ms: 1000,
+                x_mm: 10_000,
+                y_mm: 6_100,
+                heading_mdeg: -90_000,
+                contacts: 2,
+            }),
+            5,
+            "00 06 01 90 05 e8 03 01 03 10 27 01 03 d4 17 01 06 70 a0 fe ff 02 01 01 03 fd fc 00",
+        ),
         (
             Message::Sample(largest),
             255,
@@ -156,8 +168,14 @@ fn the_crc_is_the_ccitt_false_check_value() {
 fn type_codes_tell_the_direction() {
     for t in MessageType::ALL {
         assert_eq!(MessageType::from_code(t.code()), Some(t));
-        let board =
-            matches!(t, MessageType::BoardInfo | MessageType::Sample | MessageType::Status | MessageType::StopAck);
+        let board = matches!(
+            t,
+            MessageType::BoardInfo
+                | MessageType::Sample
+                | MessageType::Status
+                | MessageType::StopAck
+                | MessageType::SimTruth
+        );
         assert_eq!(t.from_board(), board, "{t:?}");
     }
     assert_eq!(MessageType::from_code(0x05), None);
@@ -192,6 +210,37 @@ fn the_encoder_refuses_what_the_decoder_would_refuse() {
     );
     let many = BoardInfo { sonar_count: 9, ..BoardInfo::default() };
     assert!(matches!(encode(&Message::BoardInfo(many), 0, &mut out), Err(FrameEncodeError::InvalidField { .. })));
+}
+
+#[test]
+fn a_truth_heading_outside_the_half_open_interval_is_refused_both_ways() {
+    let mut out = [0u8; MAX_ENCODED_LEN];
+    for heading_mdeg in [-HEADING_MDEG_MAX, HEADING_MDEG_MAX + 1, i32::MIN] {
+        let t = Message::SimTruth(SimTruth { heading_mdeg, ..SimTruth::default() });
+        assert!(matches!(encode(&t, 0, &mut out), Err(FrameEncodeError::InvalidField { .. })), "{heading_mdeg}");
+        let mut body = vec![1, 0x90, 0];
+        body.extend_from_slice(&[0; 12]);
+        body.extend_from_slice(&heading_mdeg.to_le_bytes());
+        body.extend_from_slice(&[0; 4]);
+        assert!(matches!(
+            decode(&raw_frame(&body)),
+            Err(FrameDecodeError::InvalidField { message_type: MessageType::SimTruth, .. })
+        ));
+    }
+    let edge = Message::SimTruth(SimTruth { heading_mdeg: HEADING_MDEG_MAX, ..SimTruth::default() });
+    assert!(encode(&edge, 0, &mut out).is_ok(), "180000 (= 180 degrees) is in the interval");
+}
+
+#[test]
+fn extension_frames_of_the_wrong_length_are_refused() {
+    assert_eq!(
+        decode(&raw_frame(&[1, 0x10, 0, 20])),
+        Err(FrameDecodeError::BadLength { message_type: MessageType::SimStep, len: 1 })
+    );
+    assert_eq!(
+        decode(&raw_frame(&[1, 0x90, 0, 1, 2, 3])),
+        Err(FrameDecodeError::BadLength { message_type: MessageType::SimTruth, len: 3 })
+    );
 }
 
 #[test]
@@ -341,6 +390,16 @@ fn arb_message() -> impl Strategy<Value = Message> {
         (any::<u32>(), any::<u16>())
             .prop_map(|(u, f)| Message::Status(BoardStatus { uptime_ms: u, flags: StatusFlags(f) })),
         (any::<u8>(), any::<u8>()).prop_map(|(s, r)| Message::StopAck(StopAck { stop_seq: s, reason: StopReason(r) })),
+        any::<u16>().prop_map(|d| Message::SimStep(SimStep { dt_ms: d })),
+        (any::<u32>(), any::<i32>(), any::<i32>(), -HEADING_MDEG_MAX + 1..=HEADING_MDEG_MAX, any::<u32>()).prop_map(
+            |(t, x, y, h, c)| Message::SimTruth(SimTruth {
+                board_time_ms: t,
+                x_mm: x,
+                y_mm: y,
+                heading_mdeg: h,
+                contacts: c
+            })
+        ),
     ]
 }
 

@@ -15,6 +15,9 @@ pub enum BenchCommand {
     /// The viewer page's frame rates with many chairs in a real headless Chromium, and the
     /// hub's lock-step rate with and without a viewer attached.
     Viewer(BenchViewerArgs),
+    /// The RS232 link to a chair's board, against the chair emulator on a pseudo-terminal:
+    /// command → board → reading round trip, and the highest control rate the line carries.
+    Serial(BenchSerialArgs),
     /// The peer process of the raw iceoryx2 ping-pong (started by `bench latency`).
     #[command(hide = true)]
     RawPeer(RawPeerArgs),
@@ -32,6 +35,33 @@ pub struct BenchLatencyArgs {
     /// Print one JSON object instead of text.
     #[arg(long)]
     pub json: bool,
+}
+
+/// Options of `iwsim bench serial`.
+#[derive(Debug, Args, Clone)]
+pub struct BenchSerialArgs {
+    /// The line's baud rate (8N1: 10 bits a byte).
+    #[arg(long, default_value_t = 115_200, value_parser = clap::value_parser!(u32).range(1200..=4_000_000))]
+    pub baud: u32,
+    /// Runs; each figure is the median of its runs with min and max.
+    #[arg(long, default_value_t = 5, value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..=MAX_RUNS))]
+    pub runs: usize,
+    /// Commands timed in each round-trip run.
+    #[arg(long, default_value_t = 50, value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..=100_000))]
+    pub commands: usize,
+    /// Seconds of each run at the fastest sample period.
+    #[arg(long, default_value_t = 3.0, value_parser = positive_seconds)]
+    pub seconds: f64,
+    /// Print one JSON object instead of text.
+    #[arg(long)]
+    pub json: bool,
+}
+
+fn positive_seconds(s: &str) -> Result<f64, String> {
+    match s.parse::<f64>() {
+        Ok(v) if v.is_finite() && v > 0.0 && v <= 3600.0 => Ok(v),
+        _ => Err(format!("{s:?} is not a number of seconds in (0, 3600]")),
+    }
 }
 
 /// Options of `iwsim bench viewer`.

@@ -9,6 +9,7 @@
 pub mod args;
 mod crew;
 pub mod repeat;
+pub mod serial;
 pub mod tiled;
 pub mod viewer;
 
@@ -21,6 +22,7 @@ pub fn run(command: &BenchCommand) -> anyhow::Result<std::process::ExitCode> {
         BenchCommand::Latency(a) => latency(a),
         BenchCommand::Lockstep(a) => lockstep(a),
         BenchCommand::Viewer(a) => viewer::run(a),
+        BenchCommand::Serial(a) => serial::run(a),
         BenchCommand::RawPeer(a) => raw_peer(a),
         BenchCommand::UdpClient(a) => udp_client(a),
     }

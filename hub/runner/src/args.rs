@@ -8,7 +8,7 @@ use clap::Args;
 #[derive(Debug, Args, Clone)]
 pub struct RunArgs {
     /// The scenario: a TOML file, or builtin:dynamics, builtin:slalom, builtin:door,
-    /// builtin:corridor-swap, builtin:demo.
+    /// builtin:corridor-swap, builtin:demo, builtin:slalom-real, builtin:slalom-augmented.
     pub scenario: String,
     /// Step as fast as the agents allow (deterministic) instead of in real time.
     #[arg(long)]
@@ -38,6 +38,10 @@ pub struct RunArgs {
     /// to the run (default: a unique name, run-<pid>-<seed>-<n>).
     #[arg(long)]
     pub session: Option<String>,
+    /// Run the scenario's physical chair in this sensor mode instead of its own: the adapter's
+    /// mode and the chair's agent's `sensors` (e.g. virtual, to see what the merge is worth).
+    #[arg(long, value_enum, value_name = "MODE")]
+    pub chair_mode: Option<crate::scenario::ChairMode>,
 }
 
 /// Options of `iwsim demo`.

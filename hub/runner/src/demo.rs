@@ -63,7 +63,7 @@ pub fn run(args: &DemoArgs) -> anyhow::Result<ExitCode> {
         session: args.session.clone(),
     };
     let end = crate::run::run_once(&scenario, args.seed, &args.out, &opts, &signals)?;
-    crate::run::print_summary(&end.summary, &args.out);
+    crate::run::print_summary(&end.summary, end.chair.as_ref(), &args.out);
     if end.interrupted.is_some() {
         return Ok(crate::run::exit_code(&end));
     }

@@ -2,7 +2,9 @@
 //! becomes a run of real processes — the hub, every agent and (unless headless) the viewer —
 //! whose outcome is a summary ([`run`]) written as `summary.json` and judged against the
 //! scenario's expectations. A signal to the runner ([`signals`]) stops every process of the
-//! run, and a process that fails before the run's end stops the rest.
+//! run, and a process that fails before the run's end stops the rest. A scenario with a
+//! `[chair]` adds a physical chair — the chair emulator behind the serial adapter ([`chair`])
+//! — and its contacts in the emulator's room to the summary.
 //!
 //! ```
 //! let slalom = runner::scenario::Scenario::load("builtin:slalom").expect("built in");
@@ -11,6 +13,7 @@
 #![warn(missing_docs)]
 
 pub mod args;
+pub mod chair;
 pub mod demo;
 pub mod run;
 pub mod scenario;

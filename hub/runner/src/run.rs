@@ -25,7 +25,8 @@ use records::outcome::HubOutcome;
 pub use records::summary::{RobotSummary, RunSummary};
 
 use crate::args::RunArgs;
-use crate::scenario::{Scenario, option_flags};
+use crate::chair::{self, ChairSummary};
+use crate::scenario::{ChairSpec, Scenario, option_flags};
 use crate::signals::{Signal, Signals};
 
 /// One robot's truth over a run, measured as the summary reports it.
@@ -200,6 +201,14 @@ const HUB_START_BOUND: Duration = Duration::from_secs(30);
 /// The hub's first line on stderr, printed once its lab and options are accepted: the agents
 /// start after it, so a faulty lab is reported at once with no agent to stop.
 const HUB_BANNER: &str = "iwsim hub: session";
+/// How long the chair emulator gets to open its port and say where it is.
+const EMULATOR_START_BOUND: Duration = Duration::from_secs(15);
+/// How long the chair's adapter gets to reach the hub, the chair's board, and register the
+/// chair's robot.
+const CHAIR_REGISTER_BOUND: Duration = Duration::from_secs(30);
+/// How long a stopping run waits for the chair's adapter to leave (it stops the chair within
+/// a second) before it tells the emulator to stop too.
+const ADAPTER_STOP_BOUND: Duration = Duration::from_secs(3);
 /// How often the runner looks at its children and its signals.
 const POLL: Duration = Duration::from_millis(5);
 
@@ -208,20 +217,22 @@ struct Kid {
     child: Child,
     what: String,
     status: Option<ExitStatus>,
-    stderr: Option<JoinHandle<()>>,
+    /// The threads copying its stderr (and the chair emulator's stdout).
+    readers: Vec<JoinHandle<()>>,
 }
 
 impl Kid {
     /// Starts `iwsim ARGS`; only the hub's stdout (its JSON summary) is kept.
     fn spawn(args: &[String], what: &str, keep_stdout: bool) -> anyhow::Result<Self> {
-        let child = Command::new(iwsim()?)
-            .args(args)
-            .stdin(Stdio::null())
-            .stderr(Stdio::piped())
-            .stdout(if keep_stdout { Stdio::piped() } else { Stdio::null() })
-            .spawn()
-            .with_context(|| format!("starting the {what}"))?;
-        Ok(Self { child, what: what.to_owned(), status: None, stderr: None })
+        let mut command = Command::new(iwsim()?);
+        command.args(args).stdin(Stdio::null()).stderr(Stdio::piped()).stdout(if keep_stdout {
+            Stdio::piped()
+        } else {
+            Stdio::null()
+        });
+        crate::signals::unblock_in_child(&mut command);
+        let child = command.spawn().with_context(|| format!("starting the {what}"))?;
+        Ok(Self { child, what: what.to_owned(), status: None, readers: Vec::new() })
     }
 
     /// Copies the child's stderr, line by line, to `sink` (prefixed, unless the line already
@@ -232,25 +243,25 @@ impl Kid {
         prefix: String,
         echo: bool,
         sink: Sender<String>,
-        mut marker: Option<(&'static str, Sender<String>)>,
+        marker: Option<(&'static str, Sender<String>)>,
     ) {
-        let Some(err) = self.child.stderr.take() else { return };
-        self.stderr = Some(std::thread::spawn(move || {
-            let word = prefix.trim_end_matches(": ").to_owned();
-            for line in std::io::BufReader::new(err).lines().map_while(Result::ok) {
-                if let Some((text, tx)) = &marker
-                    && line.contains(text)
-                {
-                    let _ = tx.send(line.clone());
-                    marker = None;
-                }
-                let line = if !word.is_empty() && line.starts_with(&word) { line } else { format!("{prefix}{line}") };
-                if echo {
-                    ipc_services::report!("{line}");
-                }
-                let _ = sink.send(line);
-            }
-        }));
+        if let Some(err) = self.child.stderr.take() {
+            self.readers.push(forward(err, prefix, echo, sink, marker));
+        }
+    }
+
+    /// Copies the child's stdout as [`Kid::forward_stderr`] copies its stderr (the chair
+    /// emulator says on stdout where its port is, and how its run went).
+    fn forward_stdout(
+        &mut self,
+        prefix: String,
+        echo: bool,
+        sink: Sender<String>,
+        marker: Option<(&'static str, Sender<String>)>,
+    ) {
+        if let Some(out) = self.child.stdout.take() {
+            self.readers.push(forward(out, prefix, echo, sink, marker));
+        }
     }
 
     /// How the child exited, if it has.
@@ -301,12 +312,49 @@ impl Kid {
         self.status.filter(|s| !s.success()).map(|s| format!("the {} exited with {s}", self.what))
     }
 
-    /// Waits for the stderr thread, which ends once the child has exited and its pipe closed.
+    /// Waits for the threads reading its pipes, which end once the child has exited and its
+    /// pipes closed.
     fn join_stderr(&mut self) {
-        if let Some(t) = self.stderr.take() {
+        for t in self.readers.drain(..) {
             let _ = t.join();
         }
     }
+
+    /// Its failure before the run's end: any exit, since it was to run until the end (an
+    /// agent that exits with success before then is only done).
+    fn early_exit(&self) -> String {
+        match (self.failure(), self.status) {
+            (Some(f), _) => f,
+            (None, Some(s)) => format!("the {} exited ({s})", self.what),
+            (None, None) => format!("the {} is still running", self.what),
+        }
+    }
+}
+
+/// Copies `pipe`, line by line, to `sink` on a thread (see [`Kid::forward_stderr`]).
+fn forward(
+    pipe: impl std::io::Read + Send + 'static,
+    prefix: String,
+    echo: bool,
+    sink: Sender<String>,
+    mut marker: Option<(&'static str, Sender<String>)>,
+) -> JoinHandle<()> {
+    std::thread::spawn(move || {
+        let word = prefix.trim_end_matches(": ").to_owned();
+        for line in std::io::BufReader::new(pipe).lines().map_while(Result::ok) {
+            if let Some((text, tx)) = &marker
+                && line.contains(text)
+            {
+                let _ = tx.send(line.clone());
+                marker = None;
+            }
+            let line = if !word.is_empty() && line.starts_with(&word) { line } else { format!("{prefix}{line}") };
+            if echo {
+                ipc_services::report!("{line}");
+            }
+            let _ = sink.send(line);
+        }
+    })
 }
 
 impl Drop for Kid {
@@ -318,19 +366,69 @@ impl Drop for Kid {
 /// Every process of a run.
 struct Procs {
     hub: Kid,
+    /// The physical chair's adapter (`iwsim serial`), a hub client like an agent.
+    adapter: Option<Kid>,
+    /// The chair emulator, which plays the physical chair.
+    emulator: Option<Kid>,
     agents: Vec<Kid>,
     viewer: Option<Kid>,
 }
 
+/// One of the run's processes that the run needs until its end.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Who {
+    /// The agent with this index.
+    Agent(usize),
+    /// The chair's adapter.
+    Adapter,
+    /// The chair emulator.
+    Emulator,
+}
+
 impl Procs {
     fn all(&mut self) -> impl Iterator<Item = &mut Kid> {
-        std::iter::once(&mut self.hub).chain(self.agents.iter_mut()).chain(self.viewer.iter_mut())
+        std::iter::once(&mut self.hub)
+            .chain(self.adapter.iter_mut())
+            .chain(self.emulator.iter_mut())
+            .chain(self.agents.iter_mut())
+            .chain(self.viewer.iter_mut())
+    }
+
+    fn kid(&mut self, who: Who) -> Option<&mut Kid> {
+        match who {
+            Who::Agent(k) => self.agents.get_mut(k),
+            Who::Adapter => self.adapter.as_mut(),
+            Who::Emulator => self.emulator.as_mut(),
+        }
+    }
+
+    /// The first process the run still needed that has gone: an agent or the adapter that
+    /// failed, or the emulator however it exited.
+    fn first_failed(&mut self) -> Option<Who> {
+        if self.emulator.as_mut().is_some_and(|e| e.exited().is_some()) {
+            return Some(Who::Emulator);
+        }
+        if self.adapter.as_mut().is_some_and(|a| a.exited().is_some_and(|s| !s.success())) {
+            return Some(Who::Adapter);
+        }
+        self.agents.iter_mut().position(|a| a.exited().is_some_and(|s| !s.success())).map(Who::Agent)
     }
 
     /// Sends `signal` to every process still running, waits up to [`STOP_BOUND`] for them to
-    /// exit, then kills the rest; returns what had to be killed.
+    /// exit, then kills the rest; returns what had to be killed. The chair emulator is told
+    /// last, once the adapter has gone (or [`ADAPTER_STOP_BOUND`] has passed): the adapter
+    /// stops the chair on its way out, and the chair must be there to hear it.
     fn stop(&mut self, signal: i32) -> Vec<String> {
+        let mut emulator = self.emulator.take();
         self.all().for_each(|k| k.signal(signal));
+        let until = Instant::now() + ADAPTER_STOP_BOUND;
+        while self.adapter.as_mut().is_some_and(|a| a.exited().is_none()) && Instant::now() < until {
+            std::thread::sleep(POLL);
+        }
+        if let Some(e) = &mut emulator {
+            e.signal(signal);
+        }
+        self.emulator = emulator;
         let until = Instant::now() + STOP_BOUND;
         while self.all().any(|k| k.exited().is_none()) && Instant::now() < until {
             std::thread::sleep(POLL);
@@ -349,6 +447,8 @@ impl Procs {
 struct Watch {
     /// The hub published its run's last tick.
     finished: AtomicBool,
+    /// The physical chair's robot (registered by its adapter) is in the hub's world.
+    chair_seen: AtomicBool,
     /// Looks at the world begun, and the last one completed (looks are numbered from 1).
     begun: AtomicU64,
     completed: AtomicU64,
@@ -375,8 +475,10 @@ enum Stop {
     HubExited,
     /// The runner was told to stop.
     Signal(Signal),
-    /// An agent failed before the run ended (its index).
-    AgentFailed(usize),
+    /// A process the run needed failed before the run ended.
+    Failed(Who),
+    /// The physical chair did not come up (what went wrong).
+    ChairFailed(String),
 }
 
 /// The viewer, from its start until it has printed its address.
@@ -406,8 +508,8 @@ fn hub_started(procs: &mut Procs, banner: &Receiver<String>, signals: &Signals) 
 /// Watches the run until the hub exits, an agent fails before the run's end, or a signal
 /// comes. Starts the viewer's page on the way (or drops the viewer if it does not start).
 fn supervise(procs: &mut Procs, viewer: &mut Option<ViewerStart>, watch: &Watch, signals: &Signals) -> Stop {
-    // The first failed agent, the looks begun when it was seen, and when.
-    let mut failed: Option<(usize, u64, Instant)> = None;
+    // The first failed process, the looks begun when it was seen, and when.
+    let mut failed: Option<(Who, u64, Instant)> = None;
     loop {
         if let Some(signal) = signals.wait(POLL) {
             return Stop::Signal(signal);
@@ -440,18 +542,18 @@ fn supervise(procs: &mut Procs, viewer: &mut Option<ViewerStart>, watch: &Watch,
             }
         }
         if failed.is_none()
-            && let Some(k) = procs.agents.iter_mut().position(|a| a.exited().is_some_and(|s| !s.success()))
+            && let Some(who) = procs.first_failed()
         {
-            failed = Some((k, watch.begun.load(Ordering::SeqCst), Instant::now()));
+            failed = Some((who, watch.begun.load(Ordering::SeqCst), Instant::now()));
         }
         // An agent that fails after the run's last tick (a navigator that did not arrive)
         // fails the run's outcome, and the hub ends on its own; one that fails before it
         // (a bad option, a start pose off the map) would leave the hub waiting for it.
-        if let Some((k, after, at)) = failed {
+        if let Some((who, after, at)) = failed {
             match watch.run_ended(after) {
                 Some(true) => {}
-                Some(false) => return Stop::AgentFailed(k),
-                None if at.elapsed() > LOOK_BOUND => return Stop::AgentFailed(k),
+                Some(false) => return Stop::Failed(who),
+                None if at.elapsed() > LOOK_BOUND => return Stop::Failed(who),
                 None => {}
             }
         }
@@ -463,6 +565,8 @@ fn supervise(procs: &mut Procs, viewer: &mut Option<ViewerStart>, watch: &Watch,
 pub struct RunEnd {
     /// What happened (partial if interrupted), as written to `summary.json`.
     pub summary: RunSummary,
+    /// What happened to the physical chair, in a run with one (`"chair"` in `summary.json`).
+    pub chair: Option<ChairSummary>,
     /// The signal that stopped the run before its end.
     pub interrupted: Option<Signal>,
 }
@@ -484,6 +588,91 @@ pub struct RunOptions {
     pub session: Option<String>,
 }
 
+/// The physical chair of one run: the scenario's `[chair]` and where its files go.
+struct ChairRun<'a> {
+    spec: &'a ChairSpec,
+    stepped: bool,
+    lab: String,
+    link: PathBuf,
+    truth: PathBuf,
+}
+
+/// Starts the physical chair — the emulator, then (once its port is open) the adapter — and
+/// waits until the adapter has registered the chair's robot in the hub's world, so that the
+/// agent of that name attaches to it as its controller instead of adding a robot of its own.
+/// `None` once it is there; otherwise why the run stops.
+fn chair_started(
+    procs: &mut Procs,
+    chair: &ChairRun<'_>,
+    session: &str,
+    seed: u64,
+    (tx, verbose): (&Sender<String>, bool),
+    watch: &Watch,
+    signals: &Signals,
+) -> anyhow::Result<Option<Stop>> {
+    let args = chair::emulator_args(chair.spec, &chair.lab, seed, chair.stepped, &chair.link, &chair.truth);
+    let mut emulator = Kid::spawn(&args, "chair emulator", true)?;
+    let prefix = chair::EMULATOR_BANNER.to_owned();
+    let (port_tx, port) = std::sync::mpsc::channel();
+    emulator.forward_stderr(prefix.clone(), verbose, tx.clone(), None);
+    emulator.forward_stdout(prefix, verbose, tx.clone(), Some((chair::EMULATOR_BANNER, port_tx)));
+    procs.emulator = Some(emulator);
+    // Common to both waits: what ends the run before the chair is up.
+    let gone = |procs: &mut Procs| -> Option<Stop> {
+        if let Some(signal) = signals.wait(POLL) {
+            Some(Stop::Signal(signal))
+        } else if procs.hub.exited().is_some() {
+            Some(Stop::HubExited)
+        } else if procs.emulator.as_mut().is_some_and(|e| e.exited().is_some()) {
+            Some(Stop::Failed(Who::Emulator))
+        } else if procs.adapter.as_mut().is_some_and(|a| a.exited().is_some()) {
+            Some(Stop::Failed(Who::Adapter))
+        } else {
+            None
+        }
+    };
+    let since = Instant::now();
+    let mut announced = false;
+    // The banner comes once the port is open; the link is made beside it, in either order.
+    while !(announced && chair.link.symlink_metadata().is_ok()) {
+        if let Some(stop) = gone(procs) {
+            return Ok(Some(stop));
+        }
+        announced |= port.try_recv().is_ok();
+        if since.elapsed() > EMULATOR_START_BOUND {
+            return Ok(Some(Stop::ChairFailed(format!(
+                "the chair emulator did not {} within {EMULATOR_START_BOUND:?}",
+                if announced {
+                    format!("link its port at {}", chair.link.display())
+                } else {
+                    "say where its port is".into()
+                }
+            ))));
+        }
+    }
+    let mode = chair.spec.mode;
+    let mut adapter = Kid::spawn(
+        &chair::adapter_args(chair.spec, mode, session, chair.stepped, &chair.link),
+        "chair adapter",
+        false,
+    )?;
+    adapter.forward_stderr("serial: ".into(), verbose, tx.clone(), None);
+    procs.adapter = Some(adapter);
+    let since = Instant::now();
+    while !watch.chair_seen.load(Ordering::SeqCst) {
+        if let Some(stop) = gone(procs) {
+            return Ok(Some(stop));
+        }
+        if since.elapsed() > CHAIR_REGISTER_BOUND {
+            return Ok(Some(Stop::ChairFailed(format!(
+                "the chair adapter did not register robot {} in the hub within {CHAIR_REGISTER_BOUND:?}",
+                chair.spec.robot
+            ))));
+        }
+    }
+    Ok(None)
+}
+
 /// Runs `scenario` once with `seed`, writing logs and `summary.json` into `out`. A signal
 /// stops every process of the run and gives a partial summary; a process that fails before
 /// the run's end stops the rest and gives an error.
@@ -498,6 +687,22 @@ pub fn run_once(
     for e in std::fs::read_dir(out)?.flatten() {
         if e.path().extension().is_some_and(|x| x == "csv" || x == "mcap") {
             std::fs::remove_file(e.path())?;
+        }
+    }
+    let chair = scenario.chair.as_ref().map(|spec| ChairRun {
+        spec,
+        stepped: chair::stepped(spec, opts.lockstep),
+        lab: scenario.chair_lab_spec().unwrap_or_else(|| scenario.lab_spec()),
+        link: out.join(chair::LINK),
+        truth: out.join(chair::TRUTH),
+    });
+    if let Some(c) = &chair {
+        // A previous run's: this run's emulator writes its own, and a stale link would lead
+        // the adapter to a port that is gone.
+        for f in [&c.link, &c.truth] {
+            if f.symlink_metadata().is_ok() {
+                std::fs::remove_file(f).with_context(|| format!("removing {}", f.display()))?;
+            }
         }
     }
     let recording = out.join(RECORDING);
@@ -518,7 +723,8 @@ pub fn run_once(
         s("--ticks"),
         ticks.to_string(),
         s("--wait-agents"),
-        scenario.agents.len().to_string(),
+        // The chair's adapter is a hub client too.
+        (scenario.agents.len() + chair.is_some() as usize).to_string(),
         s("--json"),
         s("--record"),
         recording.display().to_string(),
@@ -541,7 +747,13 @@ pub fn run_once(
     let started = Instant::now();
     let (tx, rx) = std::sync::mpsc::channel::<String>();
     let (banner_tx, banner) = std::sync::mpsc::channel();
-    let mut procs = Procs { hub: Kid::spawn(&hub_args, "hub", true)?, agents: Vec::new(), viewer: None };
+    let mut procs = Procs {
+        hub: Kid::spawn(&hub_args, "hub", true)?,
+        adapter: None,
+        emulator: None,
+        agents: Vec::new(),
+        viewer: None,
+    };
     procs.hub.forward_stderr(s("hub: "), false, tx.clone(), Some((HUB_BANNER, banner_tx)));
     let watch = std::sync::Arc::new(Watch::default());
     let (stop_watch, stopped) = std::sync::mpsc::channel::<()>();
@@ -549,54 +761,75 @@ pub fn run_once(
     let stop = match hub_started(&mut procs, &banner, signals) {
         Some(stop) => stop,
         None => {
-            if opts.verbose {
-                ipc_services::report!(
-                    "iwsim run: the hub serves session {session}; starting {} agent(s)",
-                    scenario.agents.len()
-                );
-            }
-            for (k, a) in scenario.agents.iter().enumerate() {
-                let mut args = vec![
-                    s("agent"),
-                    a.kind.clone(),
-                    s("--session"),
-                    session.clone(),
-                    s("--connect-timeout"),
-                    s("30"),
-                    s("--log"),
-                    out.display().to_string(),
-                ];
-                if let Some(cfg) = &a.config {
-                    let path = out.join(format!("agent{}-{}.toml", k + 1, a.kind));
-                    std::fs::write(&path, toml::to_string(cfg).context("writing an agent's config")?)?;
-                    args.extend([s("--config"), path.display().to_string()]);
-                }
-                args.extend(
-                    option_flags(&a.options).map_err(|e| anyhow::anyhow!("agent {} ({}): {e}", k + 1, a.kind))?,
-                );
-                let mut kid = Kid::spawn(&args, &format!("agent {} ({})", k + 1, a.kind), false)?;
-                kid.forward_stderr(format!("{}: ", a.kind), opts.verbose, tx.clone(), None);
-                procs.agents.push(kid);
-            }
-            let mut viewer_start = None;
-            if !opts.headless {
-                let mut args = vec![s("view"), s("--session"), session.clone(), s("--http"), opts.http.to_string()];
-                if opts.allow_control {
-                    args.push(s("--allow-control"));
-                }
-                let mut v = Kid::spawn(&args, "viewer", false)?;
-                let (vtx, lines) = std::sync::mpsc::channel();
-                v.forward_stderr(String::new(), false, vtx, None);
-                procs.viewer = Some(v);
-                viewer_start = Some(ViewerStart { lines, since: Instant::now() });
-            }
-            // The observer: progress every few seconds on long runs, and whether the run had
-            // ended when an agent fails.
+            // The observer: progress every few seconds on long runs, whether the chair's
+            // robot is in, and whether the run had ended when an agent fails.
             watcher = Some({
                 let (session, watch, verbose) = (session.clone(), watch.clone(), opts.verbose);
-                std::thread::spawn(move || watch_loop(&session, ticks, verbose, &watch, &stopped))
+                let robot = chair.as_ref().map(|c| c.spec.robot.clone());
+                std::thread::spawn(move || watch_loop(&session, ticks, verbose, robot.as_deref(), &watch, &stopped))
             });
-            supervise(&mut procs, &mut viewer_start, &watch, signals)
+            let chair_stop = match &chair {
+                Some(c) => {
+                    if opts.verbose {
+                        ipc_services::report!(
+                            "iwsim run: starting the chair emulator and its adapter ({} sensors{})",
+                            c.spec.mode.as_str(),
+                            if c.stepped { ", stepped clock" } else { "" }
+                        );
+                    }
+                    chair_started(&mut procs, c, &session, seed, (&tx, opts.verbose), &watch, signals)?
+                }
+                None => None,
+            };
+            match chair_stop {
+                Some(stop) => stop,
+                None => {
+                    if opts.verbose {
+                        ipc_services::report!(
+                            "iwsim run: the hub serves session {session}; starting {} agent(s)",
+                            scenario.agents.len()
+                        );
+                    }
+                    for (k, a) in scenario.agents.iter().enumerate() {
+                        let mut args = vec![
+                            s("agent"),
+                            a.kind.clone(),
+                            s("--session"),
+                            session.clone(),
+                            s("--connect-timeout"),
+                            s("30"),
+                            s("--log"),
+                            out.display().to_string(),
+                        ];
+                        if let Some(cfg) = &a.config {
+                            let path = out.join(format!("agent{}-{}.toml", k + 1, a.kind));
+                            std::fs::write(&path, toml::to_string(cfg).context("writing an agent's config")?)?;
+                            args.extend([s("--config"), path.display().to_string()]);
+                        }
+                        args.extend(
+                            option_flags(&a.options)
+                                .map_err(|e| anyhow::anyhow!("agent {} ({}): {e}", k + 1, a.kind))?,
+                        );
+                        let mut kid = Kid::spawn(&args, &format!("agent {} ({})", k + 1, a.kind), false)?;
+                        kid.forward_stderr(format!("{}: ", a.kind), opts.verbose, tx.clone(), None);
+                        procs.agents.push(kid);
+                    }
+                    let mut viewer_start = None;
+                    if !opts.headless {
+                        let mut args =
+                            vec![s("view"), s("--session"), session.clone(), s("--http"), opts.http.to_string()];
+                        if opts.allow_control {
+                            args.push(s("--allow-control"));
+                        }
+                        let mut v = Kid::spawn(&args, "viewer", false)?;
+                        let (vtx, lines) = std::sync::mpsc::channel();
+                        v.forward_stderr(String::new(), false, vtx, None);
+                        procs.viewer = Some(v);
+                        viewer_start = Some(ViewerStart { lines, since: Instant::now() });
+                    }
+                    supervise(&mut procs, &mut viewer_start, &watch, signals)
+                }
+            }
         }
     };
     drop(tx);
@@ -605,9 +838,10 @@ pub fn run_once(
     let failure = match stop {
         Stop::Signal(signal) => {
             ipc_services::report!(
-                "iwsim run: {} received; stopping the hub, {} agent(s){}",
+                "iwsim run: {} received; stopping the hub, {} agent(s){}{}",
                 signal.name(),
                 procs.agents.len(),
+                if procs.emulator.is_some() { ", the chair emulator and its adapter" } else { "" },
                 if procs.viewer.is_some() { " and the viewer" } else { "" }
             );
             interrupted = Some(signal);
@@ -616,10 +850,14 @@ pub fn run_once(
             }
             None
         }
-        Stop::AgentFailed(k) => {
-            let failure = procs.agents[k].failure().unwrap_or_default();
+        Stop::Failed(who) => {
+            let failure = procs.kid(who).map(|k| k.early_exit()).unwrap_or_default();
             procs.stop(libc::SIGTERM);
             Some(format!("{failure} before the run ended; stopped the hub and the other processes"))
+        }
+        Stop::ChairFailed(why) => {
+            procs.stop(libc::SIGTERM);
+            Some(format!("{why}; stopped the hub and the other processes"))
         }
         Stop::HubExited => match procs.hub.failure() {
             Some(failure) => {
@@ -627,16 +865,19 @@ pub fn run_once(
                 Some(failure)
             }
             None => {
-                // The run's end: the agents write their last rows and leave, then the viewer.
+                // The run's end: the agents (and the chair's adapter, which stops the chair)
+                // write their last rows and leave, then the chair emulator, then the viewer.
                 let until = Instant::now() + AGENTS_LEAVE_BOUND;
                 let mut signal = None;
-                while signal.is_none() && procs.agents.iter_mut().any(|a| a.exited().is_none()) {
+                while signal.is_none()
+                    && procs.agents.iter_mut().chain(procs.adapter.iter_mut()).any(|a| a.exited().is_none())
+                {
                     if Instant::now() > until {
                         break;
                     }
                     signal = signals.wait(POLL);
                 }
-                for a in &mut procs.agents {
+                for a in procs.agents.iter_mut().chain(procs.adapter.iter_mut()) {
                     if a.exited().is_none() && signal.is_none() {
                         a.kill();
                         agent_failures.push(format!(
@@ -644,6 +885,22 @@ pub fn run_once(
                             a.what
                         ));
                     } else if let Some(f) = a.failure() {
+                        agent_failures.push(f);
+                    }
+                }
+                if signal.is_none()
+                    && let Some(e) = &mut procs.emulator
+                {
+                    // It runs until told: the run has no more use for it.
+                    e.signal(libc::SIGTERM);
+                    let until = Instant::now() + STOP_BOUND;
+                    while signal.is_none() && e.exited().is_none() && Instant::now() < until {
+                        signal = signals.wait(POLL);
+                    }
+                    if e.exited().is_none() && signal.is_none() {
+                        e.kill();
+                        agent_failures.push(format!("the {} did not stop within {STOP_BOUND:?}; killed it", e.what));
+                    } else if let Some(f) = e.failure() {
                         agent_failures.push(f);
                     }
                 }
@@ -707,10 +964,21 @@ pub fn run_once(
         }
         Err(e) => return Err(e),
     };
+    // The physical chair is judged in both worlds: the hub's record above (its odometry
+    // pose), and the emulator's ground truth of the room.
+    let chair_summary = chair.as_ref().map(|c| {
+        let truth = chair::read_truth(&c.truth).unwrap_or_else(|e| {
+            failures.push(format!("the chair's ground truth: {e}"));
+            chair::RoomTruth::default()
+        });
+        let sim = robots.iter().find(|r| r.name == c.spec.robot).map_or(0, |r| r.collisions);
+        ChairSummary::new(scenario, c.spec, c.spec.mode, c.stepped, sim, &truth)
+    });
     if let Some(signal) = interrupted {
         failures.push(format!("interrupted by {} at tick {}", signal.name(), hub_outcome.ticks));
     } else {
         failures.extend(check(scenario, &robots));
+        failures.extend(chair_summary.as_ref().and_then(|c| c.room_failure(scenario.expect.max_collisions)));
     }
     // An agent that fails (a navigator that did not arrive exits 1) fails the run's outcome,
     // not the runner: the summary still says what happened.
@@ -728,8 +996,9 @@ pub fn run_once(
         checkpoints: scenario.checkpoints.clone(),
         robots,
     };
-    std::fs::write(out.join("summary.json"), summary.to_json())?;
-    Ok(RunEnd { summary, interrupted })
+    let text = chair::summary_json(&summary, chair_summary.as_ref()).context("writing summary.json")?;
+    std::fs::write(out.join("summary.json"), text)?;
+    Ok(RunEnd { summary, chair: chair_summary, interrupted })
 }
 
 /// A number unique within this process, for session names.
@@ -740,8 +1009,9 @@ pub fn unique() -> u32 {
 }
 
 /// Observes the session until the hub ends the run or `stop` is dropped: records in `watch`
-/// what it sees, and (if `verbose`) prints how far the run is every two seconds.
-fn watch_loop(session: &str, ticks: u64, verbose: bool, watch: &Watch, stop: &Receiver<()>) {
+/// what it sees (and whether the physical chair's robot `chair` is in), and (if `verbose`)
+/// prints how far the run is every two seconds.
+fn watch_loop(session: &str, ticks: u64, verbose: bool, chair: Option<&str>, watch: &Watch, stop: &Receiver<()>) {
     let stopped = || matches!(stop.recv_timeout(Duration::from_millis(20)), Err(RecvTimeoutError::Disconnected));
     // Short attempts, so that a run that ends before its hub serves does not wait for this.
     let mut obs = loop {
@@ -757,8 +1027,13 @@ fn watch_loop(session: &str, ticks: u64, verbose: bool, watch: &Watch, stop: &Re
     loop {
         let look = watch.begun.fetch_add(1, Ordering::SeqCst) + 1;
         let seen = obs.try_world();
-        if let Ok(Some((h, _))) = &seen {
+        if let Ok(Some((h, robots))) = &seen {
             last_tick = h.tick;
+            if let Some(name) = chair
+                && robots.iter().any(|r| r.name.as_str() == Some(name))
+            {
+                watch.chair_seen.store(true, Ordering::SeqCst);
+            }
             if h.run_state == ipc_types::RunState::Finished as u32 {
                 watch.finished.store(true, Ordering::SeqCst);
             }
@@ -787,19 +1062,29 @@ fn watch_loop(session: &str, ticks: u64, verbose: bool, watch: &Watch, stop: &Re
     obs.close();
 }
 
-/// Prints a run's summary table.
-pub fn print_summary(s: &RunSummary, out: &Path) {
+/// Prints a run's summary table; with a physical chair, its contacts in both worlds (the
+/// simulator's and the emulator's room) and its true final pose.
+pub fn print_summary(s: &RunSummary, chair: Option<&ChairSummary>, out: &Path) {
     println!(
         "scenario {} seed {}: {} ticks, state hash {}, {:.1} s wall clock",
         s.scenario, s.seed, s.ticks, s.state_hash, s.wall_s
     );
+    let (contacts, w, room) = match chair {
+        Some(_) => ("contacts (sim)", 14, " contacts (room)"),
+        None => ("contacts", 10, ""),
+    };
     println!(
-        "  {:<10} {:>11} {:>9} {:>10} {:>9} {:>10} {:>9}",
-        "robot", "checkpoints", "time s", "contacts", "driven m", "top m/s", "rise s"
+        "  {:<10} {:>11} {:>9} {:>w$} {:>9} {:>10} {:>9}{room}",
+        "robot", "checkpoints", "time s", contacts, "driven m", "top m/s", "rise s"
     );
     for r in &s.robots {
+        let room = match chair {
+            Some(c) if c.robot == r.name => format!(" {:>15}", c.contacts_room),
+            Some(_) => format!(" {:>15}", "-"),
+            None => String::new(),
+        };
         println!(
-            "  {:<10} {:>11} {:>9} {:>10} {:>9.2} {:>10.3} {:>9.1}",
+            "  {:<10} {:>11} {:>9} {:>w$} {:>9.2} {:>10.3} {:>9.1}{room}",
             r.name,
             format!("{}/{}", r.checkpoints_reached, r.checkpoints_total),
             r.reached_at_s.last().map_or("-".to_owned(), |t| format!("{t:.1}")),
@@ -808,6 +1093,9 @@ pub fn print_summary(s: &RunSummary, out: &Path) {
             r.top_speed_mps,
             r.rise_time_s
         );
+    }
+    if let Some(c) = chair {
+        println!("  {}", c.line());
     }
     if s.passed {
         println!("  expected outcome: PASS");
@@ -845,7 +1133,10 @@ pub fn parse_seeds(text: &str) -> Result<std::ops::RangeInclusive<u64>, String> 
 pub fn run(args: &RunArgs) -> anyhow::Result<ExitCode> {
     // First, before any thread starts (see `signals`).
     let signals = Signals::install()?;
-    let scenario = Scenario::load(&args.scenario)?;
+    let mut scenario = Scenario::load(&args.scenario)?;
+    if let Some(mode) = args.chair_mode {
+        scenario.set_chair_mode(mode).map_err(|e| anyhow::anyhow!("--chair-mode {}: {e}", mode.as_str()))?;
+    }
     if let Some(session) = &args.session {
         ipc_services::Session::new(session)?;
     }
@@ -868,38 +1159,50 @@ pub fn run(args: &RunArgs) -> anyhow::Result<ExitCode> {
             if opts.lockstep { "lock-step" } else { "real time" }
         );
         let end = run_once(&scenario, seed, &out, &opts, &signals)?;
-        print_summary(&end.summary, &out);
+        print_summary(&end.summary, end.chair.as_ref(), &out);
         return Ok(exit_code(&end));
     };
     let seeds = parse_seeds(seeds).map_err(anyhow::Error::msg)?;
     let mut table = String::new();
     let mut all = Vec::new();
+    // With a physical chair, contacts are counted in both worlds.
+    let with_chair = scenario.chair.is_some();
+    let w = if with_chair { 14 } else { 10 };
     let _ = writeln!(
         table,
-        "  {:>6} {:>6} {:>11} {:>10} {:>9}  state hash",
-        "seed", "pass", "checkpoints", "contacts", "time s"
+        "  {:>6} {:>6} {:>11} {:>w$} {}{:>9}  state hash",
+        "seed",
+        "pass",
+        "checkpoints",
+        if with_chair { "contacts (sim)" } else { "contacts" },
+        if with_chair { "contacts (room) " } else { "" },
+        "time s"
     );
+    let mut room_contacts = 0;
     for seed in seeds {
         let dir = out.join(format!("seed-{seed}"));
         let end = run_once(&scenario, seed, &dir, &RunOptions { verbose: false, ..opts.clone() }, &signals)?;
         if end.interrupted.is_some() {
             // The batch stops with the run it was in: that run's partial summary, and where
             // the finished ones are.
-            print_summary(&end.summary, &dir);
+            print_summary(&end.summary, end.chair.as_ref(), &dir);
             println!("  {} earlier run(s) in {}/seed-*/", all.len(), out.display());
             return Ok(exit_code(&end));
         }
+        let room = end.chair.as_ref().map(|c| c.contacts_room);
+        room_contacts += room.unwrap_or(0);
         let s = end.summary;
         let reached: usize = s.robots.iter().map(|r| r.checkpoints_reached).sum();
         let total: usize = s.robots.iter().map(|r| r.checkpoints_total).sum();
         let contacts: u64 = s.robots.iter().map(|r| r.collisions).sum();
         let time = s.robots.iter().filter_map(|r| r.reached_at_s.last().copied()).fold(f64::NAN, f64::max);
         let line = format!(
-            "  {:>6} {:>6} {:>11} {:>10} {:>9}  {}",
+            "  {:>6} {:>6} {:>11} {:>w$} {}{:>9}  {}",
             seed,
             if s.passed { "yes" } else { "NO" },
             format!("{reached}/{total}"),
             contacts,
+            room.map_or(String::new(), |n| format!("{n:>15} ")),
             if time.is_nan() { "-".into() } else { format!("{time:.1}") },
             s.state_hash
         );
@@ -926,14 +1229,15 @@ pub fn run(args: &RunArgs) -> anyhow::Result<ExitCode> {
     );
     print!("{table}");
     println!(
-        "  success rate {passed}/{} ({:.0} %), mean time {}, collisions {contacts} in all",
+        "  success rate {passed}/{} ({:.0} %), mean time {}, collisions {contacts} in all{}",
         all.len(),
         100.0 * passed as f64 / all.len().max(1) as f64,
         if times.is_empty() {
             "-".to_owned()
         } else {
             format!("{:.1} s", times.iter().sum::<f64>() / times.len() as f64)
-        }
+        },
+        if with_chair { format!(" in the simulator, {room_contacts} in the chair's room") } else { String::new() }
     );
     for s in all.iter().filter(|s| !s.passed) {
         for f in &s.failures {

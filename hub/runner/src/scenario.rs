@@ -35,6 +35,20 @@
 //! [expect.robots.chair1]
 //! route = true                   # reaches every checkpoint of its route
 //! top_speed_mps = [0.4851, 0.4949]
+//!
+//! [chair]                        # optional: a physical chair (the emulator) in mixed reality
+//! robot = "chair1"               # the robot an agent drives (its agent has name = "chair1")
+//! mode = "augmented"             # the adapter's sensor mode: virtual, real or augmented
+//! pose = [10.0, 6.1, 0.0]        # where it starts, in both worlds
+//! # lab = "builtin:liacc"        # the emulator's room (default: the scenario's lab)
+//! # stepped = true               # the adapter steps the emulator's clock (default: with --lockstep)
+//! [[chair.room]]                 # furniture only the emulator's room has
+//! name = "C"
+//! x0 = 14.0
+//! y0 = 6.1
+//! x1 = 14.6
+//! y1 = 6.4
+//! dark = false                   # a dark surface the IR beams do not see (default false)
 //! ```
 //!
 //! Options become command-line flags: `key = value` gives `--key value`, `true` gives `--key`,
@@ -53,6 +67,8 @@ pub const BUILTINS: &[(&str, &str)] = &[
     ("door", include_str!("../scenarios/door.toml")),
     ("corridor-swap", include_str!("../scenarios/corridor-swap.toml")),
     ("demo", include_str!("../scenarios/demo.toml")),
+    ("slalom-real", include_str!("../scenarios/slalom-real.toml")),
+    ("slalom-augmented", include_str!("../scenarios/slalom-augmented.toml")),
 ];
 
 /// A scenario file.
@@ -93,9 +109,12 @@ pub struct Scenario {
     /// Checkpoint numbers each robot must reach, in order.
     #[serde(default)]
     pub routes: BTreeMap<String, Vec<usize>>,
-    /// What must hold at the end.
+    /// What must hold at the end (`max_collisions` holds in the chair's room too).
     #[serde(default)]
     pub expect: Expect,
+    /// A physical chair (the chair emulator, through the serial adapter) in the run.
+    #[serde(default)]
+    pub chair: Option<ChairSpec>,
     /// The directory relative paths are read from (not in the file).
     #[serde(skip)]
     pub base: PathBuf,
@@ -125,6 +144,99 @@ pub struct AgentSpec {
     /// A configuration passed as `--config FILE`.
     #[serde(default)]
     pub config: Option<toml::Table>,
+}
+
+/// Where a chair's agent gets its proximity readings: the adapter's `--mode` and the
+/// navigator's `--sensors`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, clap::ValueEnum)]
+#[serde(rename_all = "lowercase")]
+pub enum ChairMode {
+    /// The simulator's readings on the chair's virtual twin.
+    Virtual,
+    /// The chair's own sensors only.
+    Real,
+    /// Per sensor, the nearer of real and virtual (thesis 5.4.3).
+    Augmented,
+}
+
+impl ChairMode {
+    /// The word the command lines and scenario files use.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Self::Virtual => "virtual",
+            Self::Real => "real",
+            Self::Augmented => "augmented",
+        }
+    }
+}
+
+/// The physical chair of a mixed-reality run: the chair emulator plays it in a room of its
+/// own, and the serial adapter registers it in the hub as the Real robot `robot`, which the
+/// agent of that name then drives.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ChairSpec {
+    /// The robot's name, in the hub and for the agent that drives it.
+    pub robot: String,
+    /// The adapter's sensor mode.
+    pub mode: ChairMode,
+    /// The start pose in both worlds: x, y metres, heading degrees.
+    pub pose: [f64; 3],
+    /// The emulator's room: `builtin:NAME` or a lab file (relative to the scenario file);
+    /// default the scenario's lab.
+    #[serde(default)]
+    pub lab: Option<String>,
+    /// Whether the adapter steps the emulator's clock once per tick (default: when the run is
+    /// lock-step).
+    #[serde(default)]
+    pub stepped: Option<bool>,
+    /// Furniture only the emulator's room has.
+    #[serde(default)]
+    pub room: Vec<RoomBox>,
+}
+
+/// A box in the chair emulator's room (checked as it is read, as obstacles are).
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(try_from = "RoomBoxTable")]
+pub struct RoomBox {
+    /// Its name (no commas: the emulator's `--box` is comma-separated).
+    pub name: String,
+    /// Lower-left x, metres.
+    pub x0: f64,
+    /// Lower-left y, metres.
+    pub y0: f64,
+    /// Upper-right x, metres.
+    pub x1: f64,
+    /// Upper-right y, metres.
+    pub y1: f64,
+    /// A dark surface, which the chair's IR beams do not see.
+    pub dark: bool,
+}
+
+/// A room box's table in a scenario file.
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RoomBoxTable {
+    name: String,
+    x0: f64,
+    y0: f64,
+    x1: f64,
+    y1: f64,
+    #[serde(default)]
+    dark: bool,
+}
+
+impl TryFrom<RoomBoxTable> for RoomBox {
+    type Error = String;
+    fn try_from(t: RoomBoxTable) -> Result<Self, String> {
+        if t.name.is_empty() || t.name.contains(',') {
+            return Err(format!("room box {:?}: a name is needed, without commas", t.name));
+        }
+        // The same rule as the hub's obstacles, with their message.
+        let b = Obstacle { name: t.name, ..Obstacle::new(t.x0, t.y0, t.x1, t.y1, 1.0) };
+        let b = b.checked().map_err(|e| e.to_string())?;
+        Ok(Self { name: b.name, x0: b.x0, y0: b.y0, x1: b.x1, y1: b.y1, dark: t.dark })
+    }
 }
 
 /// What must hold at the end of a run.
@@ -269,7 +381,50 @@ impl Scenario {
                 return Err(bad(format!("agent kind {:?}: expected navigator, wheelchair, door or teleop", a.kind)));
             }
         }
+        if let Some(chair) = &s.chair {
+            if chair.robot.is_empty() {
+                return Err(bad("chair.robot: a robot name is needed".into()));
+            }
+            if !chair.pose.iter().all(|v| v.is_finite()) {
+                return Err(bad(format!("chair.pose = {:?}: want three finite numbers [x, y, degrees]", chair.pose)));
+            }
+            if s.agent_of(&chair.robot).is_none() {
+                return Err(bad(format!(
+                    "chair.robot = {:?}: no [[agents]] has name = {:?} to drive it",
+                    chair.robot, chair.robot
+                )));
+            }
+        }
         Ok(s)
+    }
+
+    /// The index of the agent whose robot is `name` (its `name` option).
+    pub fn agent_of(&self, name: &str) -> Option<usize> {
+        self.agents.iter().position(|a| a.options.get("name").and_then(toml::Value::as_str) == Some(name))
+    }
+
+    /// Runs the chair in `mode` instead of the scenario's: the adapter's mode and, if the
+    /// chair's agent chooses its sensors (`sensors` or its alias `mode`), that choice too.
+    pub fn set_chair_mode(&mut self, mode: ChairMode) -> Result<(), String> {
+        let Some(chair) = &mut self.chair else {
+            return Err(format!("scenario {} has no [chair] whose mode could be set", self.name));
+        };
+        chair.mode = mode;
+        let robot = chair.robot.clone();
+        if let Some(k) = self.agent_of(&robot) {
+            for key in ["sensors", "mode"] {
+                if let Some(v) = self.agents[k].options.get_mut(key) {
+                    *v = toml::Value::String(mode.as_str().into());
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// The chair emulator's room as it takes it (`builtin:NAME`, or a path made relative to
+    /// the file); `None` without a chair.
+    pub fn chair_lab_spec(&self) -> Option<String> {
+        self.chair.as_ref().map(|c| self.resolve(c.lab.as_deref().unwrap_or(&self.lab)))
     }
 
     /// The lab as the hub takes it (`builtin:NAME`, or a path made relative to the file).

@@ -6,7 +6,9 @@
 //! own observer is an iceoryx2 node, and iceoryx2 installs its SIGINT/SIGTERM handlers when
 //! its first node is created, replacing whatever handler was there. A blocked signal reaches
 //! no handler at all; it waits in the signalfd until the loop reads it. The children do not
-//! inherit the block: `std::process::Command` clears the signal mask of every child it spawns.
+//! inherit the block: a child inherits its parent's signal mask through fork and exec, and
+//! `std::process::Command` leaves it as it is, so [`unblock_in_child`] clears it in every
+//! child the runner starts (without it, a child's own SIGINT/SIGTERM handlers never run).
 
 use std::io;
 use std::os::fd::{AsRawFd as _, FromRawFd as _, OwnedFd};
@@ -151,6 +153,24 @@ impl Drop for Signals {
         unsafe {
             libc::pthread_sigmask(libc::SIG_SETMASK, &self.previous, std::ptr::null_mut());
         }
+    }
+}
+
+/// Makes `command`'s child start with no signal blocked, whatever the runner blocks.
+pub fn unblock_in_child(command: &mut std::process::Command) {
+    use std::os::unix::process::CommandExt as _;
+    #[allow(unsafe_code)]
+    // SAFETY: the closure runs in the forked child before exec and only calls sigemptyset and
+    // pthread_sigmask, both async-signal-safe; it allocates nothing and takes no lock.
+    unsafe {
+        command.pre_exec(|| {
+            let mut set: libc::sigset_t = std::mem::zeroed();
+            libc::sigemptyset(&mut set);
+            if libc::pthread_sigmask(libc::SIG_SETMASK, &set, std::ptr::null_mut()) != 0 {
+                return Err(io::Error::last_os_error());
+            }
+            Ok(())
+        });
     }
 }
 

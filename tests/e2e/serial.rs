@@ -1,0 +1,378 @@
+//! A physical chair over RS232, with the chair emulator standing in for the chair and its
+//! board on a real pseudo-terminal: a real-time hub, `iwsim chair-emulator`, `iwsim serial`
+//! and a controlling agent, all real processes. Every stop is measured on the emulator's side,
+//! from its ground-truth log (CLOCK_MONOTONIC stamps, comparable with this process's clock):
+//! the time from the cause to the board's motors reaching zero because the adapter said so.
+
+use std::io::{BufRead as _, BufReader, Seek as _, SeekFrom};
+use std::path::{Path, PathBuf};
+use std::sync::mpsc::Receiver;
+use std::time::{Duration, Instant};
+
+use serde_json::Value;
+
+use crate::common::{Proc, assert_no_shared_memory_left, session, wait_for_tick};
+
+/// The board must be stopped within this much of the cause (issue 13).
+const STOP_WITHIN_NS: u64 = 300_000_000;
+const START: &str = "10,6.1,0";
+
+/// The emulator's ground-truth log, read as it grows.
+struct Truth {
+    path: PathBuf,
+    pos: u64,
+    partial: String,
+    lines: Vec<Value>,
+}
+
+impl Truth {
+    fn new(path: PathBuf) -> Self {
+        Self { path, pos: 0, partial: String::new(), lines: Vec::new() }
+    }
+
+    /// Reads what was appended since the last call; keeps every complete line.
+    fn poll(&mut self) {
+        let Ok(mut f) = std::fs::File::open(&self.path) else { return };
+        f.seek(SeekFrom::Start(self.pos)).expect("seek");
+        let mut r = BufReader::new(f);
+        loop {
+            let mut line = String::new();
+            let n = r.read_line(&mut line).expect("read the truth log");
+            if n == 0 {
+                break;
+            }
+            self.pos += n as u64;
+            self.partial.push_str(&line);
+            if self.partial.ends_with('\n') {
+                let v: Value = serde_json::from_str(self.partial.trim())
+                    .unwrap_or_else(|e| panic!("truth line {:?}: {e}", self.partial));
+                self.lines.push(v);
+                self.partial.clear();
+            }
+        }
+    }
+
+    /// Waits (polling the file) until a line satisfies `f`, among those logged at or after
+    /// `since_ns`; returns it.
+    fn wait_for(&mut self, since_ns: u64, timeout: Duration, what: &str, f: impl Fn(&Value) -> bool) -> Value {
+        let deadline = Instant::now() + timeout;
+        let mut seen = 0;
+        loop {
+            self.poll();
+            for v in &self.lines[seen..] {
+                if v["t_ns"].as_u64().is_some_and(|t| t >= since_ns) && f(v) {
+                    return v.clone();
+                }
+            }
+            seen = self.lines.len();
+            assert!(Instant::now() < deadline, "{what}: not in {} within {timeout:?}", self.path.display());
+            std::thread::sleep(Duration::from_millis(5));
+        }
+    }
+
+    /// The latest physics step's line.
+    fn last_step(&mut self) -> Option<Value> {
+        self.poll();
+        self.lines.iter().rev().find(|v| v.get("x").is_some()).cloned()
+    }
+}
+
+fn driving(v: &Value) -> bool {
+    v.get("x").is_some() && v["cmd"].as_array().is_some_and(|c| c.iter().any(|p| p.as_f64().is_some_and(|p| p != 0.0)))
+}
+
+fn now_ns() -> u64 {
+    chair_emulator::monotonic_ns()
+}
+
+/// A hub, an emulated chair, its adapter and (optionally) a controller, in a fresh session.
+struct Rig {
+    s: String,
+    dir: PathBuf,
+    hub: Option<Proc>,
+    emulator: Option<Proc>,
+    emulator_out: Receiver<String>,
+    adapter: Option<Proc>,
+    adapter_log: Receiver<String>,
+    controller: Option<Proc>,
+    truth: Truth,
+    robot: u32,
+}
+
+impl Rig {
+    fn link(&self) -> PathBuf {
+        self.dir.join("chair.pty")
+    }
+
+    fn start(tag: &str) -> Self {
+        let s = session(tag);
+        let dir = std::env::temp_dir().join(format!("iwsim-{s}"));
+        std::fs::create_dir_all(&dir).expect("temp dir");
+        let hub = Proc::spawn(&["hub", "--session", &s]);
+        wait_for_tick(&s, 1, Duration::from_secs(30)).close();
+        let truth_path = dir.join("truth.jsonl");
+        let (emulator, emulator_out) = start_emulator(&dir.join("chair.pty"), &truth_path);
+        let link = dir.join("chair.pty");
+        let mut adapter = Proc::spawn(&[
+            "serial",
+            "--session",
+            &s,
+            "--device",
+            link.to_str().expect("utf-8"),
+            "--robot",
+            "chair1",
+            "--mode",
+            "real",
+            "--pose",
+            START,
+        ]);
+        let adapter_log = adapter.stderr_lines();
+        let robot = said(&adapter_log, "is robot ", Duration::from_secs(30));
+        let robot: u32 = robot.split_whitespace().next().and_then(|w| w.parse().ok()).expect("robot id");
+        said(&adapter_log, "the link is up", Duration::from_secs(30));
+        let mut rig = Self {
+            s,
+            dir,
+            hub: Some(hub),
+            emulator: Some(emulator),
+            emulator_out,
+            adapter: Some(adapter),
+            adapter_log,
+            controller: None,
+            truth: Truth::new(truth_path),
+            robot,
+        };
+        rig.control();
+        rig
+    }
+
+    /// Starts a controller (the wheelchair agent registering `chair1`, which attaches to the
+    /// chair) and waits until the board applies its powers.
+    fn control(&mut self) {
+        let since = now_ns();
+        self.controller =
+            Some(Proc::spawn(&["agent", "wheelchair", "--session", &self.s, "--name", "chair", "--powers", "0.4,0.4"]));
+        self.truth.wait_for(since, Duration::from_secs(30), "the controller's powers at the board", driving);
+    }
+
+    /// Runs `cause` while the chair drives, and returns how long after it the board's motors
+    /// went to zero, and why (the board's reason).
+    fn stop_after(&mut self, what: &str, cause: impl FnOnce(&mut Self)) -> (u64, String) {
+        let last = self.truth.last_step().expect("the chair has been stepped");
+        assert!(driving(&last), "{what}: the chair should drive before the cause: {last}");
+        let t0 = now_ns();
+        cause(self);
+        let ev = self.truth.wait_for(t0, Duration::from_secs(10), what, |v| v["event"] == "motors_zero");
+        let dt = ev["t_ns"].as_u64().expect("t_ns") - t0;
+        let reason = ev["reason"].as_str().unwrap_or("?").to_owned();
+        assert!(dt <= STOP_WITHIN_NS, "{what}: the board stopped {} ms after the cause ({reason})", dt / 1_000_000);
+        // The adapter stopped it, not the board's own watchdog (the last line of defence).
+        assert_ne!(reason, "watchdog", "{what}: the adapter did not stop the chair, the board's watchdog did");
+        // README's safety table quotes these (`cargo test --test e2e serial -- --nocapture`).
+        eprintln!("stopped {:5.1} ms after: {what} (board reason: {reason})", dt as f64 / 1e6);
+        (dt, reason)
+    }
+
+    /// The chair's pose in the hub (its odometry).
+    fn hub_pose(&self) -> [f64; 3] {
+        let mut obs =
+            agent_sdk::Observer::connect_within(&self.s, "serial-test", Duration::from_secs(10)).expect("observer");
+        let (_, robots) = obs.world().expect("world");
+        obs.close();
+        let r = robots.iter().find(|r| r.id == self.robot).expect("the chair is in the world");
+        [r.x_m, r.y_m, r.heading_deg]
+    }
+
+    fn signal_emulator(&self, sig: &str) {
+        self.emulator.as_ref().expect("emulator").signal(sig);
+    }
+}
+
+impl Drop for Rig {
+    fn drop(&mut self) {
+        // Controller, adapter (it stops the chair), emulator, hub: the order a user stops them.
+        for p in [&mut self.controller, &mut self.adapter, &mut self.emulator, &mut self.hub] {
+            if let Some(p) = p.as_mut() {
+                p.kill9();
+            }
+        }
+        let _ = std::fs::remove_dir_all(&self.dir);
+    }
+}
+
+/// Starts an emulator on `link`, logging its truth to `truth`; returns it and its stdout's
+/// lines (read on a thread, so its last line can be written whenever it exits).
+fn start_emulator(link: &Path, truth: &Path) -> (Proc, Receiver<String>) {
+    let _ = std::fs::remove_file(truth);
+    let mut emulator = Proc::spawn(&[
+        "chair-emulator",
+        "--link",
+        link.to_str().expect("utf-8"),
+        "--truth",
+        truth.to_str().expect("utf-8"),
+        "--pose",
+        START,
+        "--seed",
+        "3",
+    ]);
+    let stdout = emulator.0.as_mut().and_then(|c| c.stdout.take()).expect("stdout");
+    let (tx, rx) = std::sync::mpsc::channel();
+    std::thread::spawn(move || {
+        for line in BufReader::new(stdout).lines().map_while(Result::ok) {
+            let _ = tx.send(line);
+        }
+    });
+    let first = rx.recv_timeout(Duration::from_secs(30)).expect("the emulator's first line");
+    let pty =
+        first.strip_prefix("chair-emulator: ").unwrap_or_else(|| panic!("the emulator names its pty first: {first:?}"));
+    assert!(pty.starts_with("/dev/pts/"), "a pseudo-terminal: {first:?}");
+    let target = std::fs::read_link(link).expect("the link points at the pty");
+    assert_eq!(target.to_str(), Some(pty), "--link points at the printed pty");
+    (emulator, rx)
+}
+
+/// Waits for a stderr line containing `marker`; returns what follows it.
+fn said(lines: &Receiver<String>, marker: &str, timeout: Duration) -> String {
+    let deadline = Instant::now() + timeout;
+    loop {
+        let line = lines
+            .recv_timeout(deadline.saturating_duration_since(Instant::now()))
+            .unwrap_or_else(|_| panic!("no line with {marker:?} within {timeout:?}"));
+        if let Some(rest) = line.split(marker).nth(1) {
+            return rest.trim().to_owned();
+        }
+    }
+}
+
+fn dist(a: [f64; 3], x: f64, y: f64) -> f64 {
+    ((a[0] - x).powi(2) + (a[1] - y).powi(2)).sqrt()
+}
+
+#[test]
+fn the_bridge_drives_the_emulated_chair_and_its_pose_in_the_hub_follows() {
+    let mut rig = Rig::start("serial-follow");
+    // Let the chair cover half a metre in its room, then compare the hub's odometry pose with
+    // the emulator's ground truth: the same place up to the drift a real chair's wheel slip
+    // and motor asymmetry give over that distance.
+    let moved = rig
+        .truth
+        .wait_for(0, Duration::from_secs(30), "half a metre driven", |v| v["x"].as_f64().is_some_and(|x| x > 10.5));
+    let hub = rig.hub_pose();
+    let truth = rig.truth.last_step().expect("steps");
+    let (tx, ty) = (truth["x"].as_f64().expect("x"), truth["y"].as_f64().expect("y"));
+    assert!(hub[0] > 10.4, "the hub's pose followed the chair forward: {hub:?} (truth at {moved})");
+    // The hub's pose is one tick (100 ms, ≤ 5 cm at this speed) behind, plus drift.
+    assert!(dist(hub, tx, ty) < 0.15, "odometry {hub:?} vs truth ({tx}, {ty})");
+    // The adapter pushes the chair's true pose as its ghost for observers.
+    let mut obs = agent_sdk::Observer::connect_within(&rig.s, "serial-ghost", Duration::from_secs(10)).expect("obs");
+    let deadline = Instant::now() + Duration::from_secs(10);
+    let ghost = loop {
+        if let Some((_, chairs)) = obs.try_chairs().expect("chairs")
+            && let Some(c) = chairs.iter().find(|c| c.robot_id == rig.robot && c.flags & ipc_types::CHAIR_GHOST != 0)
+        {
+            break c.ghost;
+        }
+        assert!(Instant::now() < deadline, "no ghost for the chair on observer/chairs");
+        std::thread::sleep(Duration::from_millis(10));
+    };
+    obs.close();
+    let truth = rig.truth.last_step().expect("steps");
+    assert!(
+        dist(ghost, truth["x"].as_f64().expect("x"), truth["y"].as_f64().expect("y")) < 0.1,
+        "the ghost {ghost:?} is the emulator's true pose {truth}"
+    );
+    // Ctrl-C on the adapter: it stops the chair, leaves the hub and exits 0.
+    let adapter = rig.adapter.take().expect("adapter");
+    rig.stop_after("the adapter interrupted (SIGINT)", |_| adapter.signal("INT"));
+    let out = adapter.wait(Duration::from_secs(10));
+    assert!(out.status.success(), "the adapter after SIGINT: {:?}", out.status);
+    rig.truth.wait_for(0, Duration::from_secs(5), "the board's latched stop", |v| v["event"] == "estop");
+    // The run's end: the hub stops, the controller leaves with it, the emulator on SIGTERM;
+    // nothing of the session is left.
+    assert_eq!(agent_sdk::control(&rig.s, ipc_types::Command::Stop, 0).expect("the hub answers").status, 0);
+    for p in [rig.hub.take(), rig.controller.take()] {
+        let out = p.expect("running").wait(Duration::from_secs(20));
+        assert!(out.status.success(), "{:?}", out.status);
+    }
+    let emulator = rig.emulator.take().expect("emulator");
+    emulator.signal("TERM");
+    assert!(emulator.wait(Duration::from_secs(10)).status.success(), "the emulator stops on SIGTERM");
+    assert_no_shared_memory_left(&rig.s);
+}
+
+#[test]
+fn every_way_the_chair_can_lose_its_driver_stops_it_within_300_ms() {
+    let mut rig = Rig::start("serial-safety");
+
+    // The controller stops answering (SIGSTOP), then comes back: the chair drives again.
+    rig.stop_after("the controller stopped (SIGSTOP)", |r| r.controller.as_ref().expect("controller").signal("STOP"));
+    let since = now_ns();
+    rig.controller.as_ref().expect("controller").signal("CONT");
+    rig.truth.wait_for(since, Duration::from_secs(10), "driving again after SIGCONT", driving);
+
+    // The controller dies.
+    rig.stop_after("the controller killed (SIGKILL)", |r| r.controller.as_mut().expect("controller").kill9());
+    // The hub watches agents' pids, so the dead controller lets go at once; a new one attaches.
+    rig.control();
+
+    // The board's transmit line breaks: the adapter hears nothing for 200 ms and stops the
+    // chair (the board still receives). When the line mends, the chair drives again.
+    rig.stop_after("the board went silent (TX muted)", |r| r.signal_emulator("USR1"));
+    let since = now_ns();
+    rig.signal_emulator("USR1");
+    rig.truth.wait_for(since, Duration::from_secs(10), "driving again after the line mends", driving);
+
+    // A burst of garbage, corrupt and truncated frames from the board changes nothing: the
+    // chair keeps its powers for the next second of board time.
+    let since = now_ns();
+    rig.signal_emulator("USR2");
+    let burst =
+        rig.truth.wait_for(since, Duration::from_secs(10), "the garbage burst", |v| v["event"] == "garbage_burst");
+    let burst_ms = burst["board_ms"].as_f64().expect("board_ms");
+    rig.truth.wait_for(since, Duration::from_secs(10), "a second after the burst", |v| {
+        v["board_ms"].as_f64().is_some_and(|ms| ms > burst_ms + 1000.0) && v.get("x").is_some()
+    });
+    let after: Vec<&Value> =
+        rig.truth.lines.iter().filter(|v| v["t_ns"].as_u64().is_some_and(|t| t >= since)).collect();
+    assert!(
+        after.iter().all(|v| v["event"] != "motors_zero" && (v.get("x").is_none() || driving(v))),
+        "the garbage burst changed what the chair does: {after:?}\nthe adapter said: {:?}",
+        rig.adapter_log.try_iter().collect::<Vec<_>>()
+    );
+
+    // The cable is pulled (the emulator dies) and plugged back (a new emulator on the same
+    // link path): the adapter says so, reconnects, and the controller drives the chair again,
+    // with no jump in the hub's pose.
+    let before = rig.hub_pose();
+    rig.emulator.as_mut().expect("emulator").kill9();
+    said(&rig.adapter_log, "went away", Duration::from_secs(10));
+    let truth_path = rig.dir.join("truth-2.jsonl");
+    let (emulator, out) = start_emulator(&rig.link(), &truth_path);
+    rig.emulator = Some(emulator);
+    rig.emulator_out = out;
+    rig.truth = Truth::new(truth_path);
+    rig.truth.wait_for(0, Duration::from_secs(20), "the new board driven after reconnecting", driving);
+    let after = rig.hub_pose();
+    assert!(dist(after, before[0], before[1]) < 0.5, "the odometry jumped on reconnect: {before:?} → {after:?}");
+
+    // The hub dies: no more ticks, so the adapter stops the chair.
+    rig.stop_after("the hub killed (SIGKILL)", |r| r.hub.as_mut().expect("hub").kill9());
+    rig.truth.wait_for(0, Duration::from_secs(5), "the board's latched stop", |v| v["event"] == "estop");
+    // The adapter and the controller leave on their own: the session is gone.
+    let adapter = rig.adapter.take().expect("adapter").wait(Duration::from_secs(20));
+    let said: Vec<String> = rig.adapter_log.try_iter().collect();
+    assert!(!adapter.status.success(), "an adapter whose hub died says so in its status: {said:?}");
+    let controller = rig.controller.take().expect("controller").wait(Duration::from_secs(20));
+    assert!(!controller.status.success(), "the controller's hub died");
+    let emulator = rig.emulator.take().expect("emulator");
+    emulator.signal("TERM");
+    let out = emulator.wait(Duration::from_secs(10));
+    assert!(out.status.success(), "the emulator stops cleanly on SIGTERM: {}", String::from_utf8_lossy(&out.stderr));
+    let summary: Vec<String> = rig.emulator_out.try_iter().collect();
+    assert!(
+        summary.last().is_some_and(|l| l.contains("frames ok")),
+        "the emulator's last line counts frames: {summary:?}"
+    );
+    assert!(!rig.link().exists(), "the emulator removed its link");
+    assert_no_shared_memory_left(&rig.s);
+}
