@@ -88,7 +88,7 @@ fn slalom_real_passes_with_no_contact_in_either_world() {
 
 #[test]
 fn slalom_augmented_passes_with_no_contact_in_either_world() {
-    let (ok, out, err, run, chair) = run_to_the_end("augmented", "builtin:slalom-augmented", "3", &[]);
+    let (ok, out, err, run, chair) = run_to_the_end("augmented", "builtin:slalom-augmented", "4", &[]);
     assert!(ok && run.passed, "{out}\n{err}\n{run:?}");
     assert_eq!(chair.mode, "augmented");
     assert_eq!((chair.contacts_sim, chair.contacts_room), (0, 0), "{chair:?}");

@@ -152,11 +152,25 @@ pub fn encode(message: &Message, seq: u8, out: &mut [u8]) -> Result<usize, Frame
     let mut payload = [0u8; MAX_PAYLOAD_LEN];
     let n = message.write_payload(&mut payload);
     raw[HEADER_LEN..HEADER_LEN + n].copy_from_slice(&payload[..n]);
-    let crc_at = HEADER_LEN + n;
-    let crc = crc16_ccitt_false(&raw[..crc_at]);
-    raw[crc_at..crc_at + CRC_LEN].copy_from_slice(&crc.to_le_bytes());
+    encode_raw(&raw[..HEADER_LEN + n], out)
+}
+
+/// Frames `body` — version, type, seq and payload, taken as given — as it goes on the wire:
+/// `0x00`, the COBS bytes of `body` and its CRC, `0x00`. Returns the bytes written; writes
+/// nothing on error. [`encode`] uses it for every message; a test bench uses it for frames a
+/// receiver must refuse (an unknown type, a payload of the wrong length), which [`encode`]
+/// cannot make. `body` is at most `MAX_FRAME_LEN - CRC_LEN` bytes.
+pub fn encode_raw(body: &[u8], out: &mut [u8]) -> Result<usize, FrameEncodeError> {
+    let mut raw = [0u8; MAX_FRAME_LEN];
+    let crc_at = body.len();
+    let Some(head) = raw.get_mut(..crc_at + CRC_LEN) else {
+        return Err(FrameEncodeError::BufferTooSmall { needed: crc_at + CRC_LEN, available: MAX_FRAME_LEN });
+    };
+    head[..crc_at].copy_from_slice(body);
+    let crc = crc16_ccitt_false(body);
+    head[crc_at..].copy_from_slice(&crc.to_le_bytes());
     let mut stuffed = [0u8; MAX_COBS_LEN];
-    let Some(m) = cobs::encode(&raw[..crc_at + CRC_LEN], &mut stuffed) else {
+    let Some(m) = cobs::encode(head, &mut stuffed) else {
         // Unreachable: MAX_COBS_LEN is COBS's bound for the longest frame.
         return Err(FrameEncodeError::BufferTooSmall { needed: MAX_ENCODED_LEN, available: MAX_COBS_LEN });
     };

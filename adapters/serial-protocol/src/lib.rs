@@ -36,7 +36,7 @@ mod message;
 pub use crc::crc16_ccitt_false;
 pub use frame::{
     CRC_LEN, Decoder, DecoderStats, Frame, FrameDecodeError, FrameEncodeError, HEADER_LEN, MAX_COBS_LEN,
-    MAX_ENCODED_LEN, MAX_FRAME_LEN, VERSION, decode, encode,
+    MAX_ENCODED_LEN, MAX_FRAME_LEN, VERSION, decode, encode, encode_raw,
 };
 pub use message::{
     BoardInfo, BoardStatus, EmergencyStop, FULL_POWER, HEADING_MDEG_MAX, Hello, MAX_PAYLOAD_LEN, MAX_SENSORS, Message,

@@ -448,3 +448,16 @@ proptest! {
         prop_assert_eq!(got, expected);
     }
 }
+
+#[test]
+fn raw_frames_carry_what_encode_refuses_to_and_are_refused_with_their_reason() {
+    // (Every message's frame goes through encode_raw, so the test vectors check its framing.)
+    // What a test bench sends to check a receiver: well framed, CRC right, yet refused.
+    let mut out = [0u8; MAX_ENCODED_LEN];
+    let n = encode_raw(&[VERSION, 0x7F, 1, 9, 9], &mut out).expect("fits");
+    assert_eq!(decode(&out[..n]), Err(FrameDecodeError::UnknownType { code: 0x7F }));
+    let n = encode_raw(&[VERSION, 0x84, 1, 1, 2, 3, 4, 5, 6], &mut out).expect("fits");
+    assert!(matches!(decode(&out[..n]), Err(FrameDecodeError::BadLength { .. })), "{:?}", decode(&out[..n]));
+    assert!(encode_raw(&[0u8; MAX_FRAME_LEN], &mut out).is_err(), "no room for the CRC");
+    assert!(encode_raw(&[VERSION, 0x7F, 1], &mut out[..4]).is_err(), "the output buffer is checked");
+}

@@ -57,6 +57,7 @@ fn config(args: &NavigatorArgs, header: &ipc_types::MapHeader) -> anyhow::Result
     // A hub that does not say gets the thesis's encoders: 1024 ticks a turn of a 0.17 m wheel.
     let ticks_per_m =
         if p.encoder_ticks_per_m > 0.0 { p.encoder_ticks_per_m } else { sim_model::encoder_ticks_per_m(1024.0, 0.17) };
+    let defaults = NavConfig::intellwheels();
     Ok(NavConfig {
         body,
         max_speed_mps: args.max_speed,
@@ -70,9 +71,14 @@ fn config(args: &NavigatorArgs, header: &ipc_types::MapHeader) -> anyhow::Result
         proximity_latency: p.latency[0],
         pose_source: args.pose_source,
         encoder_ticks_per_m: ticks_per_m,
-        ..NavConfig::intellwheels()
+        margin_m: if args.mode == crate::sensors::Mode::Virtual { defaults.margin_m } else { PHYSICAL_MARGIN_M },
     })
 }
+
+/// The planner's clearance with a physical chair, metres: its pose is the odometry of real
+/// wheels, which slip, so the walls it knows from the map are a few centimetres off by the
+/// end of a corridor; twice the simulated chair's 5 cm.
+const PHYSICAL_MARGIN_M: f64 = 0.08;
 
 fn drive(agent: &mut Agent, args: &NavigatorArgs) -> anyhow::Result<ExitCode> {
     let map_data = agent.map()?;

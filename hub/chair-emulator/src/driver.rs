@@ -610,7 +610,7 @@ pub fn spawn_on_pty(cfg: EmulatorConfig) -> Result<EmulatorHandle, EmulatorError
 /// match, a frame cut short, a frame of a type nobody knows and one whose payload is too long
 /// for its type. A host must count every piece and act on none.
 fn garbage(n: u32) -> Vec<u8> {
-    use serial_protocol::{Message, StopAck, StopReason, crc16_ccitt_false};
+    use serial_protocol::{Message, StopAck, StopReason};
     let mut out = Vec::with_capacity(256);
     // Stray bytes from a simple xorshift (zeros included: they end "frames" of junk).
     let mut x = 0x9E37_79B9u32 ^ n.wrapping_mul(0x85EB_CA6B);
@@ -641,37 +641,9 @@ fn garbage(n: u32) -> Vec<u8> {
         vec![serial_protocol::VERSION, 0x7F, 0xEF, 1, 2, 3],
         vec![serial_protocol::VERSION, 0x84, 0xF0, 1, 2, 3, 4, 5, 6],
     ] {
-        let mut frame = raw.clone();
-        frame.extend_from_slice(&crc16_ccitt_false(&raw).to_le_bytes());
-        out.push(0);
-        out.extend_from_slice(&cobs_encode(&frame));
-        out.push(0);
-    }
-    out
-}
-
-/// COBS for the burst's hand-made frames (the protocol crate encodes only messages it knows).
-fn cobs_encode(raw: &[u8]) -> Vec<u8> {
-    let mut out = vec![0u8];
-    let mut code_at = 0;
-    let mut code = 1u8;
-    for &b in raw {
-        if b == 0 {
-            out[code_at] = code;
-            code_at = out.len();
-            out.push(0);
-            code = 1;
-        } else {
-            out.push(b);
-            code += 1;
-            if code == 0xFF {
-                out[code_at] = code;
-                code_at = out.len();
-                out.push(0);
-                code = 1;
-            }
+        if let Ok(n) = serial_protocol::encode_raw(&raw, &mut wire) {
+            out.extend_from_slice(&wire[..n]);
         }
     }
-    out[code_at] = code;
     out
 }

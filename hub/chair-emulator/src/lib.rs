@@ -77,6 +77,7 @@ pub fn run(args: EmulatorArgs, stop: &AtomicBool) -> Result<Outcome, EmulatorErr
     let _ = stdout.flush();
     drop(stdout);
     let outcome = emulator.run(stop)?;
-    println!("{outcome}");
+    // As with the first line: a reader that has gone must not turn a clean stop into a panic.
+    let _ = writeln!(std::io::stdout().lock(), "{outcome}");
     Ok(outcome)
 }
