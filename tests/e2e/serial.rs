@@ -105,13 +105,20 @@ impl Rig {
     }
 
     fn start(tag: &str) -> Self {
+        let mut rig = Self::start_with(tag, &[]);
+        rig.control();
+        rig
+    }
+
+    /// A hub, an emulator (with `emulator_extra` options) and the adapter; no controller.
+    fn start_with(tag: &str, emulator_extra: &[&str]) -> Self {
         let s = session(tag);
         let dir = std::env::temp_dir().join(format!("iwsim-{s}"));
         std::fs::create_dir_all(&dir).expect("temp dir");
         let hub = Proc::spawn(&["hub", "--session", &s]);
         wait_for_tick(&s, 1, Duration::from_secs(30)).close();
         let truth_path = dir.join("truth.jsonl");
-        let (emulator, emulator_out) = start_emulator(&dir.join("chair.pty"), &truth_path);
+        let (emulator, emulator_out) = start_emulator(&dir.join("chair.pty"), &truth_path, emulator_extra);
         let link = dir.join("chair.pty");
         let mut adapter = Proc::spawn(&[
             "serial",
@@ -130,7 +137,7 @@ impl Rig {
         let robot = said(&adapter_log, "is robot ", Duration::from_secs(30));
         let robot: u32 = robot.split_whitespace().next().and_then(|w| w.parse().ok()).expect("robot id");
         said(&adapter_log, "the link is up", Duration::from_secs(30));
-        let mut rig = Self {
+        Self {
             s,
             dir,
             hub: Some(hub),
@@ -141,9 +148,7 @@ impl Rig {
             controller: None,
             truth: Truth::new(truth_path),
             robot,
-        };
-        rig.control();
-        rig
+        }
     }
 
     /// Starts a controller (the wheelchair agent registering `chair1`, which attaches to the
@@ -202,9 +207,9 @@ impl Drop for Rig {
 
 /// Starts an emulator on `link`, logging its truth to `truth`; returns it and its stdout's
 /// lines (read on a thread, so its last line can be written whenever it exits).
-fn start_emulator(link: &Path, truth: &Path) -> (Proc, Receiver<String>) {
+fn start_emulator(link: &Path, truth: &Path, extra: &[&str]) -> (Proc, Receiver<String>) {
     let _ = std::fs::remove_file(truth);
-    let mut emulator = Proc::spawn(&[
+    let mut args = vec![
         "chair-emulator",
         "--link",
         link.to_str().expect("utf-8"),
@@ -214,7 +219,9 @@ fn start_emulator(link: &Path, truth: &Path) -> (Proc, Receiver<String>) {
         START,
         "--seed",
         "3",
-    ]);
+    ];
+    args.extend_from_slice(extra);
+    let mut emulator = Proc::spawn(&args);
     let stdout = emulator.0.as_mut().and_then(|c| c.stdout.take()).expect("stdout");
     let (tx, rx) = std::sync::mpsc::channel();
     std::thread::spawn(move || {
@@ -347,7 +354,7 @@ fn every_way_the_chair_can_lose_its_driver_stops_it_within_300_ms() {
     rig.emulator.as_mut().expect("emulator").kill9();
     said(&rig.adapter_log, "went away", Duration::from_secs(10));
     let truth_path = rig.dir.join("truth-2.jsonl");
-    let (emulator, out) = start_emulator(&rig.link(), &truth_path);
+    let (emulator, out) = start_emulator(&rig.link(), &truth_path, &[]);
     rig.emulator = Some(emulator);
     rig.emulator_out = out;
     rig.truth = Truth::new(truth_path);
@@ -374,5 +381,63 @@ fn every_way_the_chair_can_lose_its_driver_stops_it_within_300_ms() {
         "the emulator's last line counts frames: {summary:?}"
     );
     assert!(!rig.link().exists(), "the emulator removed its link");
+    assert_no_shared_memory_left(&rig.s);
+}
+
+#[test]
+fn a_ciber_rato_client_over_udp_drives_the_chair_and_gets_its_real_readings() {
+    // A wall 0.32 m ahead of the chair's front IR beam in its room only: the hub's corridor is
+    // clear ahead, so the client's IRSensor 0 tells which world it reads.
+    let mut rig = Rig::start_with("serial-udp", &["--box", "W,11.2,5.6,11.5,6.6", "--ideal"]);
+    let mut bridge = Proc::spawn(&["udp", "--session", &rig.s, "--port", "0"]);
+    let reg: std::net::SocketAddr =
+        bridge.announced("registrations on ", Duration::from_secs(20)).parse().expect("address");
+    let sock = std::net::UdpSocket::bind("127.0.0.1:0").expect("bind");
+    sock.set_read_timeout(Some(Duration::from_secs(5))).expect("timeout");
+    // An unmodified client's registration: its name is the chair's, so it attaches.
+    let hello = format!(
+        r#"<Robot Name="chair1" Id="{}"><IRSensor Id="0" X="0.88" Y="0" Angle="0" Cone="2"/></Robot>"#,
+        rig.robot
+    );
+    sock.send_to(hello.as_bytes(), reg).expect("send");
+    let mut buf = [0u8; 65536];
+    let (n, port) = sock.recv_from(&mut buf).expect("a reply");
+    let reply = String::from_utf8_lossy(&buf[..n]).into_owned();
+    assert!(reply.starts_with("<Reply Status=\"Ok\""), "{reply}");
+    // Measures: IRSensor 0 is the chair's real front reading (1/0.32 m ≈ 3.1), not the hub's
+    // (nothing within 3 m: 0.3). Each is answered with a slow reverse, away from the wall.
+    let since = now_ns();
+    let deadline = Instant::now() + Duration::from_secs(20);
+    let mut real_seen = false;
+    loop {
+        let (n, _) = sock.recv_from(&mut buf).expect("Measures keep coming");
+        let m = String::from_utf8_lossy(&buf[..n]).into_owned();
+        if m.starts_with("<Measures") {
+            let v = m
+                .split("<IRSensor Id=\"0\" Value=\"")
+                .nth(1)
+                .and_then(|r| r.split('"').next())
+                .and_then(|v| v.parse::<f64>().ok());
+            real_seen |= v.is_some_and(|v| (2.5..=3.6).contains(&v));
+            sock.send_to(br#"<Actions LeftMotor="-0.05" RightMotor="-0.05"/>"#, port).expect("send");
+        }
+        rig.truth.poll();
+        let reversing = rig.truth.lines.iter().any(|v| {
+            v["t_ns"].as_u64().is_some_and(|t| t >= since)
+                && v["cmd"].as_array().is_some_and(|c| c.iter().all(|p| p.as_f64().is_some_and(|p| p < -0.2)))
+        });
+        if real_seen && reversing {
+            break;
+        }
+        assert!(Instant::now() < deadline, "real reading seen: {real_seen}, reversing: {reversing}; last: {m}");
+    }
+    assert_eq!(agent_sdk::control(&rig.s, ipc_types::Command::Stop, 0).expect("the hub answers").status, 0);
+    for p in [rig.hub.take(), rig.adapter.take(), Some(bridge)] {
+        let out = p.expect("running").wait(Duration::from_secs(20));
+        assert!(out.status.success(), "{:?}", out.status);
+    }
+    let emulator = rig.emulator.take().expect("emulator");
+    emulator.signal("TERM");
+    assert!(emulator.wait(Duration::from_secs(10)).status.success(), "the emulator stops on SIGTERM");
     assert_no_shared_memory_left(&rig.s);
 }
