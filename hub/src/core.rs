@@ -769,6 +769,12 @@ impl HubCore {
             if let Some(e) = c.real_encoders {
                 b.encoder_ticks = e;
             }
+            // A chair's position fix is its adapter's: the pose it pushes (the odometry,
+            // map-matched to the walls its real sensors see), exactly. The hub holds no truer
+            // pose of a physical chair to draw a GPS reading from, and its controller must know
+            // the frame its virtual obstacles stand in, which is this pose.
+            b.present |= HAS_GPS;
+            (b.gps_x_m, b.gps_y_m, b.gps_heading_deg) = (r.pose.x, r.pose.y, sim_model::wire_deg(r.pose.theta));
             b.sensor_mode = c.mode as u32;
             if controlled {
                 b.drive = c.drive.map(|v| v as f32);
@@ -1287,6 +1293,8 @@ mod tests {
         assert_eq!(b.drive, [0.5, -1.0], "clamped to [-1, 1]");
         assert_eq!(b.drive_flags, DRIVE_CONTROLLED | DRIVE_FRESH);
         assert_eq!(b.encoder_ticks, [100, 120], "a chair's encoders are its wheels'");
+        assert_ne!(b.present & HAS_GPS, 0, "a chair has a fix whatever the hub's GPS setting");
+        assert_eq!((b.gps_x_m, b.gps_y_m, b.gps_heading_deg), (10.5, 6.1, 0.0), "its adapter's pose, exactly");
         let state = c.robot_states().next().expect("one");
         assert_eq!((state.x_m, state.y_m), (10.5, 6.1), "the adapter's pose, not the controller's");
         // A tick without an answer makes the powers stale.

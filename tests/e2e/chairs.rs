@@ -62,7 +62,7 @@ fn run_to_the_end(
     (output.status.success(), out, err, run, chair)
 }
 
-/// The chair reached checkpoint 2 in the hub's world (its odometry pose) and the truth agrees.
+/// The chair reached checkpoint 2 in the hub's world (the pose its adapter pushes) and the truth agrees.
 fn assert_arrived(run: &RunSummary, chair: &ChairSummary) {
     let r = run.robots.iter().find(|r| r.name == "chair1").unwrap_or_else(|| panic!("chair1 in {run:?}"));
     assert_eq!((r.checkpoints_reached, r.checkpoints_total), (1, 1), "{r:?}");
@@ -73,8 +73,8 @@ fn assert_arrived(run: &RunSummary, chair: &ChairSummary) {
 }
 
 // Lock-step with a stepped emulator, a seed's run is the same every time (its state hash
-// too), so these are regression tests on seeds that pass; README gives the success rate over
-// seeds 1–10, not all of which pass (the odometry of a slipping chair drifts).
+// too), so these are regression tests on single seeds; README gives the success rate over
+// seeds 1–10.
 #[test]
 fn slalom_real_passes_with_no_contact_in_either_world() {
     let (ok, out, err, run, chair) = run_to_the_end("real", "builtin:slalom-real", "3", &[]);
@@ -87,12 +87,21 @@ fn slalom_real_passes_with_no_contact_in_either_world() {
 }
 
 #[test]
-fn slalom_augmented_passes_with_no_contact_in_either_world() {
-    let (ok, out, err, run, chair) = run_to_the_end("augmented", "builtin:slalom-augmented", "4", &[]);
+fn slalom_augmented_passes_with_no_contact_in_either_world_because_the_pose_is_map_matched() {
+    let (ok, out, err, run, chair) = run_to_the_end("augmented", "builtin:slalom-augmented", "1", &[]);
     assert!(ok && run.passed, "{out}\n{err}\n{run:?}");
     assert_eq!(chair.mode, "augmented");
     assert_eq!((chair.contacts_sim, chair.contacts_room), (0, 0), "{chair:?}");
     assert_arrived(&run, &chair);
+    let matched = chair.pose_error_m.expect("the hub's and the true final pose");
+    assert!(matched < 0.03, "the hub's pose ends {matched} m from the truth: {chair:?}");
+    // The same seed on raw odometry: the hub's frame, where virtual A and B stand, drifts
+    // from the room's, and the chair's corner meets a real wall beside a virtual box.
+    let (ok, out, err, run, raw) =
+        run_to_the_end("augmented-raw", "builtin:slalom-augmented", "1", &["--chair-odometry-only"]);
+    let drifted = raw.pose_error_m.expect("the hub's and the true final pose");
+    assert!(drifted > 2.0 * matched, "odometry alone {drifted} m off, map-matched {matched} m: {raw:?}");
+    assert!(raw.contacts_room > 0 && !ok && !run.passed, "{raw:?}\n{out}\n{err}");
 }
 
 #[test]

@@ -12,6 +12,7 @@ use ipc_types::{ACT_GHOST, ACT_LINK_DOWN, ACT_REAL, ActionBlock, SensorBlock};
 use serial_protocol::{BoardInfo, DecoderStats, Frame, FrameDecodeError, Hello, Message, SimStep};
 use sim_model::chair;
 
+use crate::localise::Localiser;
 use crate::odometry::{Step, WheelOdometry};
 use crate::port::{self, Port};
 use crate::readings::FreshReadings;
@@ -105,6 +106,8 @@ pub struct BoardLink {
     next_open: Duration,
     safety: Safety,
     odometry: WheelOdometry,
+    /// Map matching of the odometry pose (see [`Localiser`]); `None` pushes raw odometry.
+    localiser: Option<Localiser>,
     fresh: FreshReadings,
     ghost: Option<[f64; 3]>,
     board: Option<BoardInfo>,
@@ -136,6 +139,7 @@ impl BoardLink {
             next_open: Duration::ZERO,
             safety,
             odometry,
+            localiser: None,
             fresh: FreshReadings::new(),
             ghost: None,
             board: None,
@@ -150,6 +154,11 @@ impl BoardLink {
         };
         link.attach(port);
         link
+    }
+
+    /// Corrects the odometry pose by map matching from now on (see [`Localiser`]).
+    pub fn localise(&mut self, localiser: Localiser) {
+        self.localiser = Some(localiser);
     }
 
     /// Time since the link started.
@@ -218,6 +227,19 @@ impl BoardLink {
     /// The odometry pose: x, y metres, heading degrees.
     pub fn pose_deg(&self) -> [f64; 3] {
         self.odometry.pose_deg()
+    }
+
+    /// The pose the adapter pushes: the odometry pose, map-matched when localising; x, y
+    /// metres, heading degrees.
+    pub fn estimate_deg(&self) -> [f64; 3] {
+        let [x, y, h] = self.odometry.pose_deg();
+        match &self.localiser {
+            Some(l) => {
+                let [x, y, theta] = l.estimate([x, y, h.to_radians()]);
+                [x, y, sim_model::wire_deg(theta)]
+            }
+            None => [x, y, h],
+        }
     }
 
     /// Whether the board is known and talking.
@@ -385,10 +407,18 @@ impl BoardLink {
     }
 
     fn action(&mut self, robot_id: u32) -> ActionBlock {
-        let [x, y, heading] = self.odometry.pose_deg();
-        let mut a = ActionBlock::pose(robot_id, x, y, heading);
         let fresh = self.fresh.take();
-        if self.safety.link_up(self.now()) {
+        let link_up = self.safety.link_up(self.now());
+        if let Some(l) = &mut self.localiser
+            && link_up
+            && self.odometry.scaled()
+        {
+            let [x, y, h] = self.odometry.pose_deg();
+            l.update([x, y, h.to_radians()], &fresh);
+        }
+        let [x, y, heading] = self.estimate_deg();
+        let mut a = ActionBlock::pose(robot_id, x, y, heading);
+        if link_up {
             if self.odometry.scaled() {
                 a.flags |= ACT_REAL;
                 a.real_m = fresh;

@@ -1,8 +1,9 @@
 //! `iwsim serial`: the chair adapter. It joins a physical wheelchair — its acquisition board on
 //! an RS232 port, speaking `docs/serial-protocol.md` — to a hub's world as a Real robot: it
 //! registers the chair (`REG_CHAIR`, the body and sensors of `sim_model::chair`), forwards the
-//! controlling agent's motor powers to the board, integrates the board's encoder counts into the
-//! odometry pose it pushes every tick, and reports the board's real range readings, its
+//! controlling agent's motor powers to the board, integrates the board's encoder counts into an
+//! odometry pose, map-matches it to the walls its real sensors see ([`localise`]) and pushes it
+//! every tick, and reports the board's real range readings, its
 //! encoders and (from an emulator) the chair's true pose. Above all it stops the chair when
 //! anything it depends on goes quiet (see [`safety`]).
 //!
@@ -25,7 +26,8 @@
 //! ```
 //!
 //! The pieces, each testable alone: [`safety`] (the stop rule as a pure state machine),
-//! [`odometry`] (wheel counts to a pose), [`readings`] (board readings to the hub's sensor
+//! [`odometry`] (wheel counts to a pose), [`localise`] (that pose map-matched to the walls the
+//! real sensors see), [`readings`] (board readings to the hub's sensor
 //! order), [`port`] (the serial port, the one module that knows the `serialport` crate) and
 //! [`board`] (the serial side put together, driven by ticks without a hub).
 //!
@@ -33,6 +35,7 @@
 #![warn(missing_docs)]
 
 pub mod board;
+pub mod localise;
 pub mod odometry;
 pub mod port;
 pub mod readings;
@@ -47,6 +50,7 @@ use ipc_types::{FixedName, REG_CHAIR, RobotKind, RobotRegistration, SensorMode, 
 use sim_model::chair;
 
 pub use board::{BoardLink, LinkConfig, Outcome};
+pub use localise::Localiser;
 pub use port::{Port, PortOpenError};
 pub use safety::StopCause;
 
@@ -85,6 +89,10 @@ pub struct SerialArgs {
     /// deterministic runs.
     #[arg(long)]
     pub stepped: bool,
+    /// Push the raw odometry pose: no map matching of the real readings against the map's
+    /// walls (see `localise`), so the pose drifts as the wheels slip.
+    #[arg(long)]
+    pub odometry_only: bool,
 }
 
 /// `--mode`: the chair's sensor mode (thesis §5.4.3).
@@ -204,13 +212,17 @@ fn serve(agent: &mut Agent, port: Port, args: &SerialArgs, stop: &AtomicBool) ->
         start_pose: args.pose,
     };
     agent_sdk::report!(
-        "iwsim serial: chair {name} is robot {id} in session {:?} ({:?} sensors{}), starting at {:?}",
+        "iwsim serial: chair {name} is robot {id} in session {:?} ({:?} sensors{}, {}), starting at {:?}",
         args.hub.session,
         args.mode.wire(),
         if args.stepped { ", stepped board" } else { "" },
+        if args.odometry_only { "odometry pose" } else { "odometry map-matched to the walls" },
         args.pose
     );
     let mut board = BoardLink::new(cfg, port);
+    if !args.odometry_only {
+        board.localise(Localiser::new(&map));
+    }
     let mut end: Option<Result<(), SerialError>> = None;
     loop {
         if end.is_none() {
@@ -376,6 +388,7 @@ mod tests {
             mode: ModeArg::Real,
             pose,
             stepped: false,
+            odometry_only: false,
         };
         let long = "x".repeat(40);
         for (robot, pose, option) in

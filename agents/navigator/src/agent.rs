@@ -47,13 +47,6 @@ fn config(args: &NavigatorArgs, header: &ipc_types::MapHeader) -> anyhow::Result
         }
     };
     let p = &header.params;
-    if args.pose_source != PoseSourceKind::Odometry {
-        anyhow::ensure!(
-            p.sensors_on & SENSOR_GPS != 0,
-            "--pose-source {:?} needs GPS, which this hub's run has off (switch it on in the parameters file)",
-            args.pose_source
-        );
-    }
     // A hub that does not say gets the thesis's encoders: 1024 ticks a turn of a 0.17 m wheel.
     let ticks_per_m =
         if p.encoder_ticks_per_m > 0.0 { p.encoder_ticks_per_m } else { sim_model::encoder_ticks_per_m(1024.0, 0.17) };
@@ -71,14 +64,9 @@ fn config(args: &NavigatorArgs, header: &ipc_types::MapHeader) -> anyhow::Result
         proximity_latency: p.latency[0],
         pose_source: args.pose_source,
         encoder_ticks_per_m: ticks_per_m,
-        margin_m: if args.mode == crate::sensors::Mode::Virtual { defaults.margin_m } else { PHYSICAL_MARGIN_M },
+        margin_m: defaults.margin_m,
     })
 }
-
-/// The planner's clearance with a physical chair, metres: its pose is the odometry of real
-/// wheels, which slip, so the walls it knows from the map are a few centimetres off by the
-/// end of a corridor; twice the simulated chair's 5 cm.
-const PHYSICAL_MARGIN_M: f64 = 0.08;
 
 fn drive(agent: &mut Agent, args: &NavigatorArgs) -> anyhow::Result<ExitCode> {
     let map_data = agent.map()?;
@@ -128,6 +116,15 @@ fn drive(agent: &mut Agent, args: &NavigatorArgs) -> anyhow::Result<ExitCode> {
         };
         if !mode_checked {
             check_mode(args.mode, name, &block)?;
+            // Checked on the first block, not the map: a physical chair has a fix (its
+            // adapter's pose) whatever the hub's GPS setting.
+            anyhow::ensure!(
+                args.pose_source == PoseSourceKind::Odometry
+                    || map_data.header.params.sensors_on & SENSOR_GPS != 0
+                    || block.present & ipc_types::HAS_GPS != 0,
+                "--pose-source {:?} needs GPS, which this hub's run has off (switch it on in the parameters file)",
+                args.pose_source
+            );
             mode_checked = true;
         }
         contacts = block.collision_count;

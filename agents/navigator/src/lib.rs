@@ -135,7 +135,8 @@ pub struct NavigatorArgs {
     #[arg(long, default_value_t = 0.2)]
     pub arrive: f64,
     /// Where the pose estimate comes from: wheel-encoder odometry, GPS (the hub's GPS must
-    /// be on; 0.5 m noise by default), or odometry pulled slowly towards GPS.
+    /// be on; 0.5 m noise by default; a physical chair's GPS is the pose its adapter pushes,
+    /// exactly), or odometry pulled slowly towards GPS.
     #[arg(long, value_enum, default_value_t = PoseSourceKind::Odometry)]
     pub pose_source: PoseSourceKind,
     /// Where the sensor readings come from: virtual (the hub's), real (a physical chair's own

@@ -42,6 +42,10 @@ pub struct RunArgs {
     /// mode and the chair's agent's `sensors` (e.g. virtual, to see what the merge is worth).
     #[arg(long, value_enum, value_name = "MODE")]
     pub chair_mode: Option<crate::scenario::ChairMode>,
+    /// The scenario's physical chair pushes its raw odometry pose: no map matching (to see
+    /// what localisation is worth).
+    #[arg(long)]
+    pub chair_odometry_only: bool,
 }
 
 /// Options of `iwsim demo`.

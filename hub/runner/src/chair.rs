@@ -78,6 +78,9 @@ pub fn adapter_args(spec: &ChairSpec, mode: ChairMode, session: &str, stepped: b
     if stepped {
         args.push("--stepped".to_owned());
     }
+    if !spec.localise {
+        args.push("--odometry-only".to_owned());
+    }
     args
 }
 
@@ -212,7 +215,7 @@ pub struct ChairSummary {
     pub mode: String,
     /// Whether the adapter stepped the emulator's clock.
     pub stepped: bool,
-    /// Contacts in the simulator's world (of the chair's odometry pose), from the hub's record.
+    /// Contacts in the simulator's world (of the pose the adapter pushes), from the hub's record.
     pub contacts_sim: u64,
     /// Contacts with the emulator's room, from its ground truth.
     pub contacts_room: u64,
@@ -224,6 +227,10 @@ pub struct ChairSummary {
     pub checkpoint: Option<usize>,
     /// The true final pose's distance to that checkpoint's centre, metres (to the mm).
     pub distance_to_checkpoint_m: Option<f64>,
+    /// How far the chair's final pose in the hub (the pose its adapter pushed: odometry,
+    /// map-matched unless `--odometry-only`) is from its true final pose, metres (to the mm).
+    #[serde(default)]
+    pub pose_error_m: Option<f64>,
     /// Physics steps the emulator logged.
     pub truth_steps: u64,
     /// The ground-truth log's file name, in the run's folder.
@@ -239,6 +246,7 @@ impl ChairSummary {
         mode: ChairMode,
         stepped: bool,
         contacts_sim: u64,
+        hub_final_pose: Option<[f64; 3]>,
         truth: &RoomTruth,
     ) -> Self {
         let checkpoint = scenario
@@ -250,6 +258,10 @@ impl ChairSummary {
             (Some(c), Some([x, y, _])) => Some(round((x - c.x).hypot(y - c.y), 3)),
             _ => None,
         };
+        let pose_error = match (hub_final_pose, truth.final_pose) {
+            (Some([x, y, _]), Some([tx, ty, _])) => Some(round((x - tx).hypot(y - ty), 3)),
+            _ => None,
+        };
         Self {
             robot: spec.robot.clone(),
             mode: mode.as_str().to_owned(),
@@ -259,6 +271,7 @@ impl ChairSummary {
             final_pose_room: truth.final_pose.map(|[x, y, h]| [round(x, 4), round(y, 4), round(h, 2)]),
             checkpoint,
             distance_to_checkpoint_m: distance,
+            pose_error_m: pose_error,
             truth_steps: truth.steps,
             truth: TRUTH.to_owned(),
         }
@@ -281,8 +294,12 @@ impl ChairSummary {
             (Some(d), Some(n)) => format!(", {d:.3} m from checkpoint {n}"),
             _ => String::new(),
         };
+        let error = match self.pose_error_m {
+            Some(e) => format!("; the hub's pose {e:.3} m off"),
+            None => String::new(),
+        };
         format!(
-            "{} in the emulator's room ({} sensors{}): {} contacts, {pose}{distance}",
+            "{} in the emulator's room ({} sensors{}): {} contacts, {pose}{distance}{error}",
             self.robot,
             self.mode,
             if self.stepped { ", stepped" } else { "" },
@@ -352,6 +369,9 @@ mod tests {
             args.join(" "),
             "serial --device out/chair.pty --robot chair1 --mode virtual --pose 10,6.1,0 --session s1"
         );
+        let raw = ChairSpec { localise: false, ..spec.clone() };
+        let args = adapter_args(&raw, ChairMode::Real, "s1", true, Path::new("l"));
+        assert!(args.ends_with(&["--stepped".to_owned(), "--odometry-only".to_owned()]), "{args:?}");
         let mut dark = spec.clone();
         dark.room[0].dark = true;
         let args = emulator_args(&dark, "x.xml", 1, false, Path::new("l"), Path::new("t"));
@@ -400,8 +420,9 @@ mod tests {
         let s = Scenario::load("builtin:slalom-real").expect("built in");
         let spec = s.chair.clone().expect("a chair");
         let truth = RoomTruth { steps: 9, contacts: 2, final_pose: Some([19.7, 6.5, 3.333_33]), events: vec![] };
-        let c = ChairSummary::new(&s, &spec, ChairMode::Real, true, 1, &truth);
+        let c = ChairSummary::new(&s, &spec, ChairMode::Real, true, 1, Some([19.7, 6.45, 0.0]), &truth);
         assert_eq!((c.checkpoint, c.distance_to_checkpoint_m), (Some(2), Some(0.5)));
+        assert_eq!(c.pose_error_m, Some(0.05));
         assert_eq!(c.final_pose_room, Some([19.7, 6.5, 3.33]));
         assert_eq!((c.contacts_sim, c.contacts_room, c.truth_steps), (1, 2, 9));
         assert_eq!(
@@ -412,10 +433,10 @@ mod tests {
         assert_eq!(c.room_failure(None), None);
         assert_eq!(
             c.line(),
-            "chair1 in the emulator's room (real sensors, stepped): 2 contacts, true final pose 19.700, 6.500, 3.3°, 0.500 m from checkpoint 2"
+            "chair1 in the emulator's room (real sensors, stepped): 2 contacts, true final pose 19.700, 6.500, 3.3°, 0.500 m from checkpoint 2; the hub's pose 0.050 m off"
         );
-        let none = ChairSummary::new(&s, &spec, ChairMode::Real, false, 0, &RoomTruth::default());
-        assert_eq!((none.final_pose_room, none.distance_to_checkpoint_m), (None, None));
+        let none = ChairSummary::new(&s, &spec, ChairMode::Real, false, 0, Some([1.0; 3]), &RoomTruth::default());
+        assert_eq!((none.final_pose_room, none.distance_to_checkpoint_m, none.pose_error_m), (None, None, None));
     }
 
     #[test]

@@ -964,15 +964,16 @@ pub fn run_once(
         }
         Err(e) => return Err(e),
     };
-    // The physical chair is judged in both worlds: the hub's record above (its odometry
-    // pose), and the emulator's ground truth of the room.
+    // The physical chair is judged in both worlds: the hub's record above (the pose its
+    // adapter pushed), and the emulator's ground truth of the room.
     let chair_summary = chair.as_ref().map(|c| {
         let truth = chair::read_truth(&c.truth).unwrap_or_else(|e| {
             failures.push(format!("the chair's ground truth: {e}"));
             chair::RoomTruth::default()
         });
-        let sim = robots.iter().find(|r| r.name == c.spec.robot).map_or(0, |r| r.collisions);
-        ChairSummary::new(scenario, c.spec, c.spec.mode, c.stepped, sim, &truth)
+        let robot = robots.iter().find(|r| r.name == c.spec.robot);
+        let sim = robot.map_or(0, |r| r.collisions);
+        ChairSummary::new(scenario, c.spec, c.spec.mode, c.stepped, sim, robot.map(|r| r.final_pose), &truth)
     });
     if let Some(signal) = interrupted {
         failures.push(format!("interrupted by {} at tick {}", signal.name(), hub_outcome.ticks));
@@ -1137,6 +1138,13 @@ pub fn run(args: &RunArgs) -> anyhow::Result<ExitCode> {
     if let Some(mode) = args.chair_mode {
         scenario.set_chair_mode(mode).map_err(|e| anyhow::anyhow!("--chair-mode {}: {e}", mode.as_str()))?;
     }
+    if args.chair_odometry_only {
+        let name = scenario.name.clone();
+        let chair = scenario.chair.as_mut().ok_or_else(|| {
+            anyhow::anyhow!("--chair-odometry-only: scenario {name} has no [chair] to run on odometry")
+        })?;
+        chair.localise = false;
+    }
     if let Some(session) = &args.session {
         ipc_services::Session::new(session)?;
     }
@@ -1175,10 +1183,11 @@ pub fn run(args: &RunArgs) -> anyhow::Result<ExitCode> {
         "pass",
         "checkpoints",
         if with_chair { "contacts (sim)" } else { "contacts" },
-        if with_chair { "contacts (room) " } else { "" },
+        if with_chair { "contacts (room) pose off m " } else { "" },
         "time s"
     );
     let mut room_contacts = 0;
+    let mut pose_errors: Vec<f64> = Vec::new();
     for seed in seeds {
         let dir = out.join(format!("seed-{seed}"));
         let end = run_once(&scenario, seed, &dir, &RunOptions { verbose: false, ..opts.clone() }, &signals)?;
@@ -1191,6 +1200,8 @@ pub fn run(args: &RunArgs) -> anyhow::Result<ExitCode> {
         }
         let room = end.chair.as_ref().map(|c| c.contacts_room);
         room_contacts += room.unwrap_or(0);
+        let pose_error = end.chair.as_ref().and_then(|c| c.pose_error_m);
+        pose_errors.extend(pose_error);
         let s = end.summary;
         let reached: usize = s.robots.iter().map(|r| r.checkpoints_reached).sum();
         let total: usize = s.robots.iter().map(|r| r.checkpoints_total).sum();
@@ -1202,7 +1213,10 @@ pub fn run(args: &RunArgs) -> anyhow::Result<ExitCode> {
             if s.passed { "yes" } else { "NO" },
             format!("{reached}/{total}"),
             contacts,
-            room.map_or(String::new(), |n| format!("{n:>15} ")),
+            room.map_or(String::new(), |n| format!(
+                "{n:>15} {:>10} ",
+                pose_error.map_or("-".to_owned(), |e| format!("{e:.3}"))
+            )),
             if time.is_nan() { "-".into() } else { format!("{time:.1}") },
             s.state_hash
         );
@@ -1239,6 +1253,15 @@ pub fn run(args: &RunArgs) -> anyhow::Result<ExitCode> {
         },
         if with_chair { format!(" in the simulator, {room_contacts} in the chair's room") } else { String::new() }
     );
+    if !pose_errors.is_empty() {
+        // How far the hub's frame (where virtual obstacles stand) ended from the room's.
+        pose_errors.sort_by(f64::total_cmp);
+        println!(
+            "  the hub's final pose of the chair off its true pose: median {:.3} m, max {:.3} m",
+            pose_errors[pose_errors.len() / 2],
+            pose_errors[pose_errors.len() - 1]
+        );
+    }
     for s in all.iter().filter(|s| !s.passed) {
         for f in &s.failures {
             println!("  seed {}: {f}", s.seed);

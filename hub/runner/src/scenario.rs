@@ -42,6 +42,7 @@
 //! pose = [10.0, 6.1, 0.0]        # where it starts, in both worlds
 //! # lab = "builtin:liacc"        # the emulator's room (default: the scenario's lab)
 //! # stepped = true               # the adapter steps the emulator's clock (default: with --lockstep)
+//! # localise = false             # push raw odometry, no map matching (default: true)
 //! [[chair.room]]                 # furniture only the emulator's room has
 //! name = "C"
 //! x0 = 14.0
@@ -193,6 +194,10 @@ pub struct ChairSpec {
     /// Furniture only the emulator's room has.
     #[serde(default)]
     pub room: Vec<RoomBox>,
+    /// Whether the adapter map-matches the chair's odometry to the walls its real sensors see
+    /// (default true); false pushes raw odometry (`iwsim serial --odometry-only`).
+    #[serde(default = "yes")]
+    pub localise: bool,
 }
 
 /// A box in the chair emulator's room (checked as it is read, as obstacles are).

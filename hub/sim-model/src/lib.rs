@@ -78,6 +78,45 @@ pub fn encoder_ticks_per_m(ticks_per_rev: f64, wheel_radius_m: f64) -> f64 {
     ticks_per_rev / (TAU * wheel_radius_m)
 }
 
+/// The range a proximity sensor reads off one wall segment `a`–`b`: the distance from the
+/// sensor at `apex` to the segment's nearest point inside its cone (axis `axis_rad`, full
+/// opening `cone_rad`), or `range_m` when no point of it is inside the cone and nearer. This
+/// is the hub's proximity model (its world computes the same with prepared segments), here
+/// for clients that predict readings from the map, such as the chair adapter's localiser.
+pub fn cone_range(apex: [f64; 2], axis_rad: f64, cone_rad: f64, a: [f64; 2], b: [f64; 2], range_m: f64) -> f64 {
+    let half = cone_rad / 2.0;
+    if half > PI / 2.0 - 1e-9 {
+        // A cone of 180° or more is not convex: take its two halves, which are.
+        let quarter = half / 2.0;
+        let one = cone_range(apex, axis_rad - quarter, half, a, b, range_m);
+        return one.min(cone_range(apex, axis_rad + quarter, half, a, b, range_m));
+    }
+    let cross = |p: [f64; 2], q: [f64; 2]| p[0] * q[1] - p[1] * q[0];
+    let (u1, u2) = ((axis_rad - half).sin_cos(), (axis_rad + half).sin_cos());
+    let (u1, u2) = ([u1.1, u1.0], [u2.1, u2.0]);
+    let w = [a[0] - apex[0], a[1] - apex[1]];
+    let d = [b[0] - a[0], b[1] - a[1]];
+    // The part of w + t·d (t in 0..=1) right of neither edge: each side keeps k0 + t·k1 ≥ 0.
+    let (mut t0, mut t1) = (0.0_f64, 1.0_f64);
+    for (k0, k1) in [(cross(u1, w), cross(u1, d)), (cross(w, u2), cross(d, u2))] {
+        if k1 > 0.0 {
+            t0 = t0.max(-k0 / k1);
+        } else if k1 < 0.0 {
+            t1 = t1.min(-k0 / k1);
+        } else if k0 < 0.0 {
+            return range_m;
+        }
+    }
+    if t0 > t1 {
+        return range_m;
+    }
+    let len2 = d[0] * d[0] + d[1] * d[1];
+    let t_star = if len2 > 0.0 { -(w[0] * d[0] + w[1] * d[1]) / len2 } else { 0.0 };
+    let t = t_star.clamp(t0, t1);
+    let q = [w[0] + d[0] * t, w[1] + d[1] * t];
+    (q[0] * q[0] + q[1] * q[1]).sqrt().min(range_m)
+}
+
 /// The Intellwheels chair as the physical-chair pieces know it: the chair emulator simulates
 /// this body and these sensors, the serial adapter registers them with the hub for the chair's
 /// virtual twin, and the navigator's default body and sensor layout are the same (a test there
@@ -197,5 +236,22 @@ mod tests {
         assert_eq!(ir_value(3.0), 0.3);
         assert_eq!(ir_value(0.005), 100.0);
         assert!((encoder_ticks_per_m(1024.0, 0.17) - 958.67).abs() < 0.01);
+    }
+    #[test]
+    fn a_cone_reads_the_nearest_point_of_a_wall_inside_it() {
+        let wall = ([2.0, -5.0], [2.0, 5.0]);
+        let read = |axis_deg: f64, cone_deg: f64| {
+            cone_range([0.0, 0.0], axis_deg.to_radians(), cone_deg.to_radians(), wall.0, wall.1, 10.0)
+        };
+        assert!((read(0.0, 20.0) - 2.0).abs() < 1e-12, "the perpendicular foot");
+        // Axis 30° off, cone 20°: the nearest point in the cone is on its edge at 20°.
+        assert!((read(30.0, 20.0) - 2.0 / 20f64.to_radians().cos()).abs() < 1e-12);
+        assert_eq!(read(180.0, 30.0), 10.0, "a wall behind is not seen");
+        assert!((read(180.0, 360.0) - 2.0).abs() < 1e-12, "a full circle sees it");
+        assert_eq!(cone_range([0.0, 0.0], 0.0, 0.1, wall.0, wall.1, 1.5), 1.5, "beyond reach");
+        // A short segment beside the cone is not seen; the same segment in it is.
+        let (a, b) = ([2.0, 1.0], [2.0, 2.0]);
+        assert_eq!(cone_range([0.0, 0.0], 0.0, 0.2, a, b, 10.0), 10.0);
+        assert!((cone_range([0.0, 0.0], 0.0, PI / 2.0, a, b, 10.0) - 5f64.sqrt()).abs() < 1e-12);
     }
 }

@@ -628,6 +628,29 @@ mod tests {
     }
 
     proptest::proptest! {
+        /// `sim_model::cone_range`, which clients use to predict readings from the map, is
+        /// this model: on random walls and cones both give one range (the hub's segments are
+        /// one-sided, so each wall is tried both ways round).
+        #[test]
+        fn sim_models_cone_range_is_the_hubs_proximity(
+            (x, y, a, cone) in (-1.0f64..1.0, -1.0f64..1.0, -3.2f64..3.2, 0.05f64..3.1),
+            heading in -3.2f64..3.2,
+            (wx, wy, dx, dy) in (-5.0f64..5.0, -5.0f64..5.0, -5.0f64..5.0, -5.0f64..5.0),
+        ) {
+            let spec = crate::ProximitySpec { x_m: x, y_m: y, angle_rad: a, cone_rad: cone, range_m: Some(4.0) };
+            let sensor = PreparedSensor::new(&spec, 4.0);
+            let (p, q) = (Point2::new(wx, wy), Point2::new(wx + dx, wy + dy));
+            let segments: Vec<Segment> = [Segment::new(p, q), Segment::new(q, p)].into_iter().flatten().collect();
+            proptest::prop_assume!(segments.len() == 2);
+            let (s, c) = heading.sin_cos();
+            let hub = proximity(&sensor, Point2::origin(), c, s, &segments);
+            let apex = [x * c - y * s, x * s + y * c];
+            let client = sim_model::cone_range(apex, heading + a, cone, [p.x, p.y], [q.x, q.y], 4.0);
+            proptest::prop_assert!((hub - client).abs() < 1e-9, "hub {} vs sim-model {}", hub, client);
+        }
+    }
+
+    proptest::proptest! {
         /// The eight-lane f32 kernel and the scalar f64 path agree within 0.1 mm on random
         /// walls and sensors.
         #[test]
