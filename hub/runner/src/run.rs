@@ -485,6 +485,9 @@ enum Stop {
 struct ViewerStart {
     lines: Receiver<String>,
     since: Instant,
+    /// The last line before the banner: a library's log line to skip, or the viewer's error
+    /// if it then exits.
+    last: Option<String>,
 }
 
 /// Waits until the hub has accepted its lab and options, exited, or the runner is told to stop.
@@ -518,10 +521,18 @@ fn supervise(procs: &mut Procs, viewer: &mut Option<ViewerStart>, watch: &Watch,
             return Stop::HubExited;
         }
         if let Some(start) = viewer {
+            // Lines before the banner (a library's warning on a loaded machine) are not a
+            // failure: the viewer failed only if it exits or stays silent past the bound.
             let said = match start.lines.try_recv() {
-                Ok(line) => Some(Some(line)),
-                Err(TryRecvError::Disconnected) => Some(None),
-                Err(TryRecvError::Empty) => (start.since.elapsed() > VIEWER_START_BOUND).then_some(None),
+                Ok(line) if line.contains("open http") => Some(Some(line)),
+                Ok(line) => {
+                    start.last = Some(line);
+                    None
+                }
+                Err(TryRecvError::Disconnected) => Some(start.last.take()),
+                Err(TryRecvError::Empty) => {
+                    (start.since.elapsed() > VIEWER_START_BOUND).then(|| start.last.take())
+                }
             };
             match said {
                 Some(Some(line)) if line.contains("open http") => {
@@ -825,7 +836,7 @@ pub fn run_once(
                         let (vtx, lines) = std::sync::mpsc::channel();
                         v.forward_stderr(String::new(), false, vtx, None);
                         procs.viewer = Some(v);
-                        viewer_start = Some(ViewerStart { lines, since: Instant::now() });
+                        viewer_start = Some(ViewerStart { lines, since: Instant::now(), last: None });
                     }
                     supervise(&mut procs, &mut viewer_start, &watch, signals)
                 }
