@@ -10,6 +10,7 @@ mod hardening;
 mod hub;
 mod maps;
 mod mixed_view;
+mod python;
 mod replay;
 mod robots;
 mod runner;

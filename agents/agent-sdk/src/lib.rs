@@ -706,6 +706,11 @@ impl Agent {
         self.finished
     }
 
+    /// The session's name.
+    pub fn session(&self) -> &str {
+        self.session.name()
+    }
+
     /// Checks the hub is alive and no termination signal arrived.
     pub fn check_alive(&self) -> Result<(), AgentError> {
         self.check()

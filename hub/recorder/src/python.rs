@@ -28,9 +28,19 @@ pub fn checker_script() -> PathBuf {
     checker_dir().join("check_recording.py")
 }
 
-/// A Python with the packages of `requirements.txt`: `$IWSIM_PYTHON` when set (CI sets it),
-/// else `target/pyvenv/bin/python` of this workspace, made on first use with `python3 -m venv`
-/// and `pip install -r requirements.txt` (one process makes it while others wait on a lock).
+/// The requirement files of the project's Python environment: this checker's, and the test
+/// needs of the `iwsim` Python package (`python/requirements-test.txt`).
+pub fn requirement_files() -> [PathBuf; 2] {
+    [
+        checker_dir().join("requirements.txt"),
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../../python/requirements-test.txt"),
+    ]
+}
+
+/// A Python with the packages of [`requirement_files`]: `$IWSIM_PYTHON` when set, else
+/// `target/pyvenv/bin/python` of this workspace, made on first use with `python3 -m venv` and
+/// `pip install -r` each file (one process makes it while others wait on a lock). The venv's
+/// marker holds the files' text it was made from, so a changed requirement reinstalls.
 pub fn checker_python() -> Result<PathBuf, CheckerPythonError> {
     if let Some(p) = std::env::var_os("IWSIM_PYTHON") {
         return Ok(PathBuf::from(p));
@@ -43,7 +53,11 @@ pub fn checker_python() -> Result<PathBuf, CheckerPythonError> {
     let lock =
         std::fs::File::create(venv.with_extension("lock")).map_err(|e| fail("lock target/pyvenv", e.to_string()))?;
     lock.lock().map_err(|e| fail("lock target/pyvenv", e.to_string()))?;
-    if !ready.exists() {
+    let mut wanted = String::new();
+    for f in requirement_files() {
+        wanted += &std::fs::read_to_string(&f).map_err(|e| fail(&format!("read {}", f.display()), e.to_string()))?;
+    }
+    if std::fs::read_to_string(&ready).ok().as_deref() != Some(wanted.as_str()) {
         let run = |program: &Path, args: &[&str]| {
             let what = format!("{} {}", program.display(), args.join(" "));
             let out = Command::new(program).args(args).output().map_err(|e| fail(&what, e.to_string()))?;
@@ -53,10 +67,14 @@ pub fn checker_python() -> Result<PathBuf, CheckerPythonError> {
             Ok(())
         };
         let venv_s = venv.to_string_lossy().into_owned();
-        run(Path::new("python3"), &["-m", "venv", &venv_s])?;
-        let req = checker_dir().join("requirements.txt").to_string_lossy().into_owned();
-        run(&python, &["-m", "pip", "install", "--quiet", "--disable-pip-version-check", "-r", &req])?;
-        std::fs::write(&ready, "").map_err(|e| fail("mark target/pyvenv ready", e.to_string()))?;
+        if !python.exists() {
+            run(Path::new("python3"), &["-m", "venv", &venv_s])?;
+        }
+        for f in requirement_files() {
+            let req = f.to_string_lossy().into_owned();
+            run(&python, &["-m", "pip", "install", "--quiet", "--disable-pip-version-check", "-r", &req])?;
+        }
+        std::fs::write(&ready, &wanted).map_err(|e| fail("mark target/pyvenv ready", e.to_string()))?;
     }
     Ok(python)
 }

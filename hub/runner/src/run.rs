@@ -530,9 +530,7 @@ fn supervise(procs: &mut Procs, viewer: &mut Option<ViewerStart>, watch: &Watch,
                     None
                 }
                 Err(TryRecvError::Disconnected) => Some(start.last.take()),
-                Err(TryRecvError::Empty) => {
-                    (start.since.elapsed() > VIEWER_START_BOUND).then(|| start.last.take())
-                }
+                Err(TryRecvError::Empty) => (start.since.elapsed() > VIEWER_START_BOUND).then(|| start.last.take()),
             };
             match said {
                 Some(Some(line)) if line.contains("open http") => {

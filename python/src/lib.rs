@@ -1,0 +1,292 @@
+//! `iwsim._iwsim`: the native half of the `iwsim` Python package. It binds the Rust agent SDK
+//! (`agent-sdk`) with PyO3, so a Python agent talks to the hub over the same iceoryx2 shared
+//! memory as a Rust agent, with the same payloads: there is one definition of every layout,
+//! `ipc-types`, and the Python side builds its NumPy dtype from the offsets this module reports
+//! ([`sensor_block_layout`]) instead of mirroring them.
+//!
+//! The Python-facing API (`iwsim.connect`, `Agent.register`, `wait_tick`, `sensors`, `send`,
+//! the exceptions) is in `python/iwsim/__init__.py`, which wraps this module; this one stays
+//! small: calls in, checked values out, every SDK error mapped to a typed exception.
+//!
+//! Like every agent, it sees only what an agent may see (sensor blocks of its own robots, the
+//! map without the scenario's obstacles): it links the SDK, never the hub or the world.
+
+use std::time::{Duration, Instant};
+
+use agent_sdk::{Agent as SdkAgent, AgentError};
+use ipc_types::{ActionBlock, FixedName, RobotRegistration, SensorBlock};
+use pyo3::create_exception;
+use pyo3::exceptions::{PyException, PyKeyboardInterrupt, PyTimeoutError, PyValueError};
+use pyo3::prelude::*;
+use pyo3::types::PyBytes;
+
+create_exception!(_iwsim, IwsimError, PyException, "Base class of iwsim's errors.");
+create_exception!(_iwsim, SessionNotFound, IwsimError, "No hub serves the session (or its name is not valid).");
+create_exception!(_iwsim, Refused, IwsimError, "The hub refused a request, such as a registration.");
+create_exception!(_iwsim, HubGone, IwsimError, "The hub's process has exited.");
+create_exception!(_iwsim, NoAnswer, IwsimError, "The hub did not answer in time.");
+
+/// The longest a wait sleeps before it looks at Python's signals (so Ctrl-C interrupts it) and
+/// at the hub's liveness.
+const WAIT_SLICE: Duration = Duration::from_millis(50);
+
+/// An SDK error as the Python exception a caller can catch by kind.
+fn to_py(e: AgentError) -> PyErr {
+    let text = e.to_string();
+    match e {
+        AgentError::Services(_) => SessionNotFound::new_err(text),
+        AgentError::Refused { .. } => Refused::new_err(text),
+        AgentError::HubGone { .. } => HubGone::new_err(text),
+        AgentError::NoAnswer(_) => NoAnswer::new_err(text),
+        AgentError::Interrupted => PyKeyboardInterrupt::new_err(text),
+        AgentError::Ipc(_) | AgentError::Map(_) => IwsimError::new_err(text),
+    }
+}
+
+fn seconds(what: &str, s: f64) -> PyResult<Duration> {
+    Duration::try_from_secs_f64(s)
+        .map_err(|_| PyValueError::new_err(format!("{what} must be a finite number of seconds ≥ 0, not {s}")))
+}
+
+/// Connects to the hub of `session` as an agent named `name`, waiting up to `timeout` seconds
+/// for the hub to appear.
+#[pyfunction]
+#[pyo3(signature = (session, name = "python", timeout = 5.0))]
+fn connect(session: &str, name: &str, timeout: f64) -> PyResult<Agent> {
+    let timeout = seconds("timeout", timeout)?;
+    SdkAgent::connect_within(session, name, timeout).map(|a| Agent { sdk: Some(a) }).map_err(to_py)
+}
+
+/// An agent process's connection to a hub (one per process is the rule; several work).
+/// Not thread-safe: use it from the thread that made it.
+#[pyclass(unsendable, module = "iwsim._iwsim")]
+pub struct Agent {
+    sdk: Option<SdkAgent>,
+}
+
+impl std::fmt::Debug for Agent {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Agent").field("session", &self.sdk.as_ref().map(SdkAgent::session)).finish()
+    }
+}
+
+impl Agent {
+    fn sdk(&mut self) -> PyResult<&mut SdkAgent> {
+        self.sdk.as_mut().ok_or_else(|| IwsimError::new_err("the agent is closed"))
+    }
+}
+
+#[pymethods]
+impl Agent {
+    /// Registers a robot: `body` is (length, width, centre of movement as a fraction of the
+    /// length from the rear), `pose` (x m, y m, heading degrees), `motors` (top speed m/s,
+    /// acceleration curve); the hub's defaults where omitted. Returns the robot's id.
+    #[pyo3(signature = (name, *, body = None, pose = None, motors = None, id = 0))]
+    fn register(
+        &mut self,
+        name: &str,
+        body: Option<(f64, f64, f64)>,
+        pose: Option<(f64, f64, f64)>,
+        motors: Option<(f64, f64)>,
+        id: u32,
+    ) -> PyResult<u32> {
+        if FixedName::new(name).is_none_or(|n| n.as_str().is_none_or(str::is_empty)) {
+            return Err(PyValueError::new_err(format!(
+                "robot name {name:?} must be 1 to {} bytes of UTF-8",
+                ipc_types::NAME_BYTES - 1
+            )));
+        }
+        let mut reg = RobotRegistration::new(name).id(id).at(pose.map(|(x, y, d)| [x, y, d]));
+        if let Some((length, width, com)) = body {
+            reg = reg.body(length, width, com);
+        }
+        if let Some((speed, curve)) = motors {
+            reg = reg.motors(speed, curve);
+        }
+        self.sdk()?.register(&reg).map_err(to_py)
+    }
+
+    /// Says this agent's robots are registered; in lock-step the run starts once every
+    /// expected agent is ready.
+    fn ready(&mut self) -> PyResult<()> {
+        self.sdk()?.ready().map_err(to_py)
+    }
+
+    /// Waits for the next tick and returns (tick, simulated seconds), or `None` once the run
+    /// has finished. Raises `TimeoutError` after `timeout` seconds without one, `HubGone` when
+    /// the hub exits. Ctrl-C interrupts it.
+    #[pyo3(signature = (timeout = None))]
+    fn wait_tick(&mut self, py: Python<'_>, timeout: Option<f64>) -> PyResult<Option<(u64, f64)>> {
+        let deadline = match timeout {
+            Some(t) => Some(Instant::now() + seconds("timeout", t)?),
+            None => None,
+        };
+        loop {
+            let sdk = self.sdk()?;
+            if let Some(t) = sdk.try_tick().map_err(to_py)? {
+                return Ok(Some((t.tick, t.sim_time_s)));
+            }
+            if sdk.finished() {
+                return Ok(None);
+            }
+            let now = Instant::now();
+            let slice = match deadline {
+                Some(d) if now >= d => {
+                    return Err(PyTimeoutError::new_err(format!(
+                        "no tick from the hub of session {:?} within {:.3} s",
+                        sdk.session(),
+                        timeout.unwrap_or_default()
+                    )));
+                }
+                Some(d) => (d - now).min(WAIT_SLICE),
+                None => WAIT_SLICE,
+            };
+            let fd = sdk.tick_fd();
+            // The GIL is released while the thread sleeps on the tick's descriptor.
+            let rang = py.detach(|| wait_readable(fd, slice));
+            if !rang {
+                sdk.check_alive().map_err(to_py)?;
+            }
+            py.check_signals()?;
+        }
+    }
+
+    /// This tick's sensor blocks of this agent's robots, as the bytes of `SensorBlock`s back
+    /// to back (`iwsim.Agent.sensors` views them as a NumPy structured array).
+    fn sensors_bytes<'py>(&mut self, py: Python<'py>) -> PyResult<Bound<'py, PyBytes>> {
+        let blocks: &[SensorBlock] = self.sdk()?.sensors();
+        Ok(PyBytes::new(py, bytemuck::cast_slice(blocks)))
+    }
+
+    /// Answers tick `tick` with motor powers: `actions` is a list of (robot id, left, right),
+    /// powers in [-1, 1] (the hub clamps larger ones).
+    fn send(&mut self, tick: u64, actions: Vec<(u32, f64, f64)>) -> PyResult<()> {
+        let sdk = self.sdk()?;
+        let mut blocks = Vec::with_capacity(actions.len());
+        for (id, left, right) in actions {
+            if !sdk.robots().contains(&id) {
+                return Err(PyValueError::new_err(format!(
+                    "robot {id} is not one of this agent's robots {:?}",
+                    sdk.robots()
+                )));
+            }
+            if !(left.is_finite() && right.is_finite()) {
+                return Err(PyValueError::new_err(format!(
+                    "robot {id}: motor powers must be finite numbers, not ({left}, {right})"
+                )));
+            }
+            blocks.push(ActionBlock::motors(id, left, right));
+        }
+        sdk.send(tick, &blocks).map_err(to_py)
+    }
+
+    /// The ids of this agent's robots, in registration order.
+    #[getter]
+    fn robots(&self) -> Vec<u32> {
+        self.sdk.as_ref().map_or_else(Vec::new, |s| s.robots().to_vec())
+    }
+
+    /// Whether the hub has ended the run.
+    #[getter]
+    fn finished(&self) -> bool {
+        self.sdk.as_ref().is_none_or(SdkAgent::finished)
+    }
+
+    /// The session's name.
+    #[getter]
+    fn session(&self) -> Option<String> {
+        self.sdk.as_ref().map(|s| s.session().to_owned())
+    }
+
+    /// Leaves the hub (it removes this agent's robots); the last process of a session removes
+    /// its shared-memory files. Closing twice does nothing.
+    fn close(&mut self) {
+        if let Some(sdk) = self.sdk.take() {
+            sdk.close();
+        }
+    }
+}
+
+/// Waits up to `slice` for `fd` to become readable; whether it did.
+fn wait_readable(fd: i32, slice: Duration) -> bool {
+    let mut p = libc::pollfd { fd, events: libc::POLLIN, revents: 0 };
+    let ms = slice.as_millis().clamp(0, i32::MAX as u128) as i32;
+    #[allow(unsafe_code)]
+    // SAFETY: `p` is one live pollfd for the duration of the call; poll writes only its revents.
+    let n = unsafe { libc::poll(&mut p, 1, ms) };
+    n > 0
+}
+
+/// `SensorBlock`'s fields as (name, byte offset, NumPy type code, element count), from the
+/// Rust definition itself, so the Python dtype cannot drift from it.
+#[pyfunction]
+fn sensor_block_layout() -> Vec<(&'static str, usize, &'static str, usize)> {
+    use core::mem::offset_of;
+    use ipc_types::{INBOX_BYTES, MAX_BEACONS, MAX_INBOX_MESSAGES, MAX_PROXIMITY};
+    let entry = core::mem::size_of::<ipc_types::InboxEntry>();
+    vec![
+        ("tick", offset_of!(SensorBlock, tick), "<u8", 1),
+        ("robot_id", offset_of!(SensorBlock, robot_id), "<u4", 1),
+        ("present", offset_of!(SensorBlock, present), "<u4", 1),
+        ("proximity_m", offset_of!(SensorBlock, proximity_m), "<f8", MAX_PROXIMITY),
+        ("compass_deg", offset_of!(SensorBlock, compass_deg), "<f8", 1),
+        ("gps_x_m", offset_of!(SensorBlock, gps_x_m), "<f8", 1),
+        ("gps_y_m", offset_of!(SensorBlock, gps_y_m), "<f8", 1),
+        ("gps_heading_deg", offset_of!(SensorBlock, gps_heading_deg), "<f8", 1),
+        ("beacons_deg", offset_of!(SensorBlock, beacons_deg), "<f8", MAX_BEACONS),
+        ("encoder_ticks", offset_of!(SensorBlock, encoder_ticks), "<i8", 2),
+        ("collision_count", offset_of!(SensorBlock, collision_count), "<u4", 1),
+        ("ground", offset_of!(SensorBlock, ground), "<u4", 1),
+        ("proximity_count", offset_of!(SensorBlock, proximity_count), "<u4", 1),
+        ("beacon_count", offset_of!(SensorBlock, beacon_count), "<u4", 1),
+        ("inbox_count", offset_of!(SensorBlock, inbox_count), "<u4", 1),
+        ("inbox_dropped", offset_of!(SensorBlock, inbox_dropped), "<u4", 1),
+        ("inbox", offset_of!(SensorBlock, inbox), "V1", entry * MAX_INBOX_MESSAGES),
+        ("inbox_bytes", offset_of!(SensorBlock, inbox_bytes), "u1", INBOX_BYTES),
+        ("drive", offset_of!(SensorBlock, drive), "<f4", 2),
+        ("drive_flags", offset_of!(SensorBlock, drive_flags), "<u4", 1),
+        ("sensor_mode", offset_of!(SensorBlock, sensor_mode), "<u4", 1),
+    ]
+}
+
+/// The module `iwsim._iwsim`.
+#[pymodule]
+fn _iwsim(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    let py = m.py();
+    m.add_function(wrap_pyfunction!(connect, m)?)?;
+    m.add_function(wrap_pyfunction!(sensor_block_layout, m)?)?;
+    m.add_class::<Agent>()?;
+    m.add("SENSOR_BLOCK_BYTES", core::mem::size_of::<SensorBlock>())?;
+    m.add("MAX_PROXIMITY", ipc_types::MAX_PROXIMITY)?;
+    m.add("HAS_COMPASS", ipc_types::HAS_COMPASS)?;
+    m.add("HAS_GPS", ipc_types::HAS_GPS)?;
+    m.add("IwsimError", py.get_type::<IwsimError>())?;
+    m.add("SessionNotFound", py.get_type::<SessionNotFound>())?;
+    m.add("Refused", py.get_type::<Refused>())?;
+    m.add("HubGone", py.get_type::<HubGone>())?;
+    m.add("NoAnswer", py.get_type::<NoAnswer>())?;
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_layout_covers_every_byte_of_a_sensor_block_in_order_without_overlap() {
+        let size = |code: &str| match code {
+            "<u8" | "<i8" | "<f8" => 8,
+            "<u4" | "<f4" => 4,
+            "V1" | "u1" => 1,
+            other => panic!("unknown code {other}"),
+        };
+        let mut end = 0;
+        for (name, offset, code, count) in sensor_block_layout() {
+            assert!(offset >= end, "{name} at {offset} overlaps the field before (ends at {end})");
+            // Only alignment padding may lie between fields.
+            assert!(offset - end < 8, "{name}: a gap of {} bytes", offset - end);
+            end = offset + size(code) * count;
+        }
+        assert!(core::mem::size_of::<SensorBlock>() - end < 8, "the last field ends at {end}");
+    }
+}

@@ -1,0 +1,155 @@
+"""The Python agent API against a real hub over shared memory."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+import iwsim
+
+
+def test_the_sensor_block_dtype_is_the_rust_layout():
+    # Built from ipc-types' offsets, not mirrored by hand: its size is the Rust struct's.
+    assert iwsim.SENSOR_BLOCK.itemsize == iwsim._iwsim.SENSOR_BLOCK_BYTES == 824
+    assert iwsim.SENSOR_BLOCK["proximity_m"].shape == (iwsim._iwsim.MAX_PROXIMITY,)
+    assert iwsim.SENSOR_BLOCK.fields["tick"][1] == 0
+
+
+def test_a_python_agent_drives_a_chair_in_lock_step_and_reads_its_sensors(hub_factory):
+    hub = hub_factory("--lockstep", "--ticks", "30", "--wait-agents", "1", "--no-noise")
+    with iwsim.connect(hub.session, "pytest", timeout=20) as agent:
+        me = agent.register("chair1", body=(1.1, 0.65, 0.8), pose=(10.0, 6.1, 0.0), motors=(0.49, 0.83))
+        assert agent.robots == [me]
+        agent.ready()
+        ticks, encoders = [], []
+        while (tick := agent.wait_tick(timeout=20)) is not None:
+            blocks = agent.sensors()
+            assert blocks.dtype == iwsim.SENSOR_BLOCK and blocks.shape == (1,)
+            assert not blocks.flags.writeable
+            b = blocks[0]
+            assert b["robot_id"] == me and b["tick"] == tick.tick
+            encoders.append(tuple(b["encoder_ticks"]))
+            ticks.append(tick.tick)
+            agent.send(tick, {me: (1.0, 1.0)})
+        assert agent.finished
+    assert ticks == list(range(31)), ticks
+    # Full power on both wheels: both encoders count up, equally (no noise).
+    left, right = encoders[-1]
+    assert left > 100 and left == right, encoders[-5:]
+    # The hub's own end-of-run report agrees that the chair moved ahead, from x = 10.
+    out = hub.stop()
+    x = float(out.split("robot 1: x ")[1].split(" m")[0])
+    assert x > 10.5, out
+
+
+def test_proximity_readings_see_the_wall_ahead(hub_factory):
+    # builtin:liacc's corridor: from (10, 6.1) facing south, the south wall (y 5.13) is 0.97 m off.
+    hub = hub_factory("--lockstep", "--ticks", "3", "--wait-agents", "1", "--no-noise")
+    with iwsim.connect(hub.session, timeout=20) as agent:
+        me = agent.register("c", body=(1.1, 0.65, 0.8), pose=(10.0, 6.1, -90.0))
+        agent.ready()
+        tick = agent.wait_tick(timeout=20)
+        front = agent.sensors()[0]["proximity_m"]
+        agent.send(tick, {me: (0.0, 0.0)})
+    assert float(front.min()) < 0.5, front
+
+
+def test_a_session_without_a_hub_is_a_clear_error():
+    with pytest.raises(iwsim.SessionNotFound) as e:
+        iwsim.connect("py-no-such-session", timeout=0.2)
+    assert "py-no-such-session" in str(e.value)
+    assert isinstance(e.value, iwsim.IwsimError)
+
+
+def test_bad_actions_and_registrations_raise_and_the_run_goes_on(hub_factory):
+    hub = hub_factory("--lockstep", "--ticks", "5", "--wait-agents", "1")
+    with iwsim.connect(hub.session, timeout=20) as agent:
+        me = agent.register("chair1", pose=(10.0, 6.1, 0.0))
+        with pytest.raises(iwsim.Refused, match="DuplicateId"):
+            agent.register("chair2", pose=(12.0, 6.1, 0.0), id=me)
+        with pytest.raises(ValueError, match="1 to"):
+            agent.register("")
+        agent.ready()
+        tick = agent.wait_tick(timeout=20)
+        with pytest.raises(ValueError, match="finite"):
+            agent.send(tick, {me: (math.nan, 0.0)})
+        with pytest.raises(ValueError, match="shape"):
+            agent.send(tick, {me: (0.5, 0.5, 0.5)})
+        with pytest.raises(ValueError, match="not one of this agent's robots"):
+            agent.send(tick, {me + 99: (0.5, 0.5)})
+        agent.send(tick, {me: (0.5, 0.5)})
+        seen = [tick.tick]
+        while (tick := agent.wait_tick(timeout=20)) is not None:
+            agent.send(tick, {me: (0.5, 0.5)})
+            seen.append(tick.tick)
+        # Every tick of the run came, the refused calls cost none: 5 steps, states 0 to 5.
+        assert seen == list(range(6))
+
+
+def test_a_hub_that_dies_mid_run_raises_hub_gone(hub_factory):
+    hub = hub_factory("--lockstep", "--wait-agents", "1")
+    agent = iwsim.connect(hub.session, timeout=20)
+    me = agent.register("chair1", pose=(10.0, 6.1, 0.0))
+    agent.ready()
+    tick = agent.wait_tick(timeout=20)
+    agent.send(tick, {me: (0.0, 0.0)})
+    hub.proc.kill()
+    hub.proc.wait(timeout=20)
+    with pytest.raises(iwsim.HubGone):
+        while True:
+            tick = agent.wait_tick(timeout=20)
+            assert tick is not None
+            agent.send(tick, {me: (0.0, 0.0)})
+    agent.close()
+    agent.close()  # twice is fine
+    with pytest.raises(iwsim.IwsimError, match="closed"):
+        agent.wait_tick()
+
+
+def test_the_readme_example_runs_as_shown(hub_factory):
+    import pathlib
+    import re
+
+    readme = (pathlib.Path(__file__).resolve().parents[2] / "README.md").read_text()
+    example = re.search(r"```python\n(.*?)```", readme, re.S).group(1)
+    assert 'iwsim.connect("lab1"' in example
+    hub = hub_factory("--lockstep", "--ticks", "20", "--wait-agents", "1", "--no-noise")
+    exec(compile(example.replace('"lab1"', repr(hub.session)), "README.md", "exec"), {})
+    out = hub.stop()
+    x = float(out.split("robot 1: x ")[1].split(" m")[0])
+    assert x > 10.2, out  # the example drove the chair ahead
+
+
+def test_a_python_agent_and_a_rust_agent_share_one_lock_step_run(hub_factory):
+    import re
+    import subprocess
+
+    from conftest import iwsim_bin
+
+    hub = hub_factory("--lockstep", "--ticks", "30", "--wait-agents", "2", "--no-noise")
+    rust = subprocess.Popen(
+        [iwsim_bin(), "agent", "wheelchair", "--session", hub.session, "--connect-timeout", "20",
+         "--name", "rust", "--pose", "12.5,6.1,0", "--powers", "0.5,0.5"],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+    )
+    try:
+        with iwsim.connect(hub.session, "python", timeout=20) as agent:
+            me = agent.register("python", pose=(10.0, 6.1, 0.0))
+            agent.ready()
+            ticks = []
+            while (tick := agent.wait_tick(timeout=20)) is not None:
+                ticks.append(tick.tick)
+                agent.send(tick, {me: (0.5, 0.5)})
+        assert ticks == list(range(31))
+        assert rust.wait(timeout=20) == 0, rust.communicate()
+    finally:
+        if rust.poll() is None:
+            rust.kill()
+            rust.wait()
+    # Both chairs drove in the one world: the hub's report has each ahead of its start.
+    out = hub.stop()
+    xs = {int(i): float(x) for i, x in re.findall(r"robot (\d+): x ([0-9.]+) m", out)}
+    assert len(xs) == 2, out
+    assert sorted(xs.values())[0] > 10.2 and sorted(xs.values())[1] > 12.7, out
