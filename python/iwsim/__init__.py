@@ -29,6 +29,9 @@ from ._iwsim import HubGone, IwsimError, NoAnswer, Refused, SessionNotFound
 
 __all__ = [
     "Agent",
+    "CHAIR_BODY",
+    "CHAIR_MOTORS",
+    "CHAIR_SENSORS",
     "HubGone",
     "IwsimError",
     "NoAnswer",
@@ -53,6 +56,13 @@ def _sensor_block_dtype() -> np.dtype:
 
 #: The NumPy dtype of one sensor block, from the Rust definition's offsets (``ipc-types``).
 SENSOR_BLOCK: np.dtype = _sensor_block_dtype()
+
+#: The Intellwheels chair (``sim_model::chair``): body (length, width, centre of movement),
+#: motors (top speed, acceleration curve) and its 8 sensors — 3 IR beams ahead (0°, ±25°) and
+#: 5 sonars (±60°, ±90°, 180°) — as ``register`` takes them.
+CHAIR_BODY = _iwsim.CHAIR_BODY
+CHAIR_MOTORS = _iwsim.CHAIR_MOTORS
+CHAIR_SENSORS = _iwsim.CHAIR_SENSORS
 
 
 @dataclass(frozen=True)
@@ -82,16 +92,19 @@ class Agent:
         body: Optional[Tuple[float, float, float]] = None,
         pose: Optional[Tuple[float, float, float]] = None,
         motors: Optional[Tuple[float, float]] = None,
+        sensors: Optional[Sequence[Tuple[float, float, float, float, float]]] = None,
         id: int = 0,
     ) -> int:
         """Registers a robot and returns its id.
 
         ``body`` is (length m, width m, centre of movement as a fraction of the length from
         the rear), ``pose`` (x m, y m, heading degrees), ``motors`` (top speed m/s,
-        acceleration curve); the hub's defaults where omitted. Raises ``Refused`` when the
+        acceleration curve), ``sensors`` up to 8 proximity cones (x m, y m, direction degrees,
+        opening degrees, range m), e.g. ``CHAIR_SENSORS``; the hub's defaults where omitted.
+        Raises ``Refused`` when the
         hub refuses it (a name in use, a pose inside a wall, a full world).
         """
-        return self._native.register(name, body=body, pose=pose, motors=motors, id=id)
+        return self._native.register(name, body=body, pose=pose, motors=motors, sensors=sensors, id=id)
 
     def ready(self) -> None:
         """Says this agent's robots are registered (a lock-step run starts when all are)."""
@@ -124,6 +137,15 @@ class Agent:
                 f"actions must map each robot id to (left, right): got powers of shape {powers.shape[1:]}"
             )
         self._native.send(int(tick), [(i, float(l), float(r)) for i, (l, r) in zip(ids, powers)])
+
+    def send_powers(self, tick: int | Tick, ids: np.ndarray, powers: np.ndarray) -> None:
+        """Answers ``tick`` for many robots at once: ``ids`` (n,) and ``powers`` (n, 2) arrays,
+        checked as ``send`` checks them, without a Python object per robot."""
+        ids = np.ascontiguousarray(ids, dtype="<u4")
+        powers = np.ascontiguousarray(powers, dtype="<f8")
+        if ids.ndim != 1 or powers.shape != (ids.shape[0], 2):
+            raise ValueError(f"ids must be (n,) and powers (n, 2): got {ids.shape} and {powers.shape}")
+        self._native.send_powers(int(tick), ids.tobytes(), powers.tobytes())
 
     @property
     def robots(self) -> list[int]:

@@ -80,14 +80,17 @@ impl Agent {
 impl Agent {
     /// Registers a robot: `body` is (length, width, centre of movement as a fraction of the
     /// length from the rear), `pose` (x m, y m, heading degrees), `motors` (top speed m/s,
-    /// acceleration curve); the hub's defaults where omitted. Returns the robot's id.
-    #[pyo3(signature = (name, *, body = None, pose = None, motors = None, id = 0))]
+    /// acceleration curve), `sensors` up to 8 proximity cones (x m, y m, direction degrees,
+    /// opening degrees, range m; e.g. `CHAIR_SENSORS`); the hub's defaults where omitted.
+    /// Returns the robot's id.
+    #[pyo3(signature = (name, *, body = None, pose = None, motors = None, sensors = None, id = 0))]
     fn register(
         &mut self,
         name: &str,
         body: Option<(f64, f64, f64)>,
         pose: Option<(f64, f64, f64)>,
         motors: Option<(f64, f64)>,
+        sensors: Option<Vec<Cone>>,
         id: u32,
     ) -> PyResult<u32> {
         if FixedName::new(name).is_none_or(|n| n.as_str().is_none_or(str::is_empty)) {
@@ -102,6 +105,19 @@ impl Agent {
         }
         if let Some((speed, curve)) = motors {
             reg = reg.motors(speed, curve);
+        }
+        if let Some(cones) = sensors {
+            if cones.len() > reg.sensors.len() {
+                return Err(PyValueError::new_err(format!(
+                    "{} sensors: a robot has at most {}",
+                    cones.len(),
+                    reg.sensors.len()
+                )));
+            }
+            for (slot, &(x_m, y_m, angle_deg, cone_deg, range_m)) in reg.sensors.iter_mut().zip(&cones) {
+                *slot = ipc_types::SensorSpec { x_m, y_m, angle_deg, cone_deg, range_m };
+            }
+            reg.sensor_count = cones.len() as u32;
         }
         self.sdk()?.register(&reg).map_err(to_py)
     }
@@ -180,6 +196,24 @@ impl Agent {
         sdk.send(tick, &blocks).map_err(to_py)
     }
 
+    /// Answers tick `tick` with motor powers for many robots at once: `ids` (n robot ids, as
+    /// a little-endian u32 buffer such as a NumPy uint32 array) and `powers` (n × 2 float64,
+    /// C order, likewise), checked as [`Agent::send`] checks them.
+    fn send_powers(&mut self, tick: u64, ids: &[u8], powers: &[u8]) -> PyResult<()> {
+        if !ids.len().is_multiple_of(4) || powers.len() != ids.len() / 4 * 16 {
+            return Err(PyValueError::new_err(format!(
+                "{} id bytes and {} power bytes: expected n u32 ids and n × 2 float64 powers",
+                ids.len(),
+                powers.len()
+            )));
+        }
+        let ids = ids.chunks_exact(4).map(|b| u32::from_le_bytes([b[0], b[1], b[2], b[3]]));
+        let mut f = powers.chunks_exact(8).map(|b| f64::from_le_bytes(b.try_into().unwrap_or([0; 8])));
+        let actions: Vec<(u32, f64, f64)> =
+            ids.map(|id| (id, f.next().unwrap_or(f64::NAN), f.next().unwrap_or(f64::NAN))).collect();
+        self.send(tick, actions)
+    }
+
     /// The ids of this agent's robots, in registration order.
     #[getter]
     fn robots(&self) -> Vec<u32> {
@@ -206,6 +240,64 @@ impl Agent {
         }
     }
 }
+
+/// Connects to the hub of `session` as an observer: it sees every robot's true state (for a
+/// referee or a reward, never for the agent under test), and the hub does not count it.
+#[pyfunction]
+#[pyo3(signature = (session, timeout = 5.0))]
+fn observe(session: &str, timeout: f64) -> PyResult<Observer> {
+    let timeout = seconds("timeout", timeout)?;
+    let name = format!("python-observer-{}", std::process::id());
+    agent_sdk::Observer::connect_within(session, &name, timeout).map(|o| Observer { sdk: Some(o) }).map_err(to_py)
+}
+
+/// A read-only view of a session's truth: world snapshots.
+#[pyclass(unsendable, module = "iwsim._iwsim")]
+pub struct Observer {
+    sdk: Option<agent_sdk::Observer>,
+}
+
+impl std::fmt::Debug for Observer {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Observer").field("open", &self.sdk.is_some()).finish()
+    }
+}
+
+#[pymethods]
+impl Observer {
+    /// The world at tick `tick` or later (waiting up to `timeout` seconds for it): (tick,
+    /// [(robot id, x m, y m, heading degrees, collision count)]), in the hub's robot order.
+    #[pyo3(signature = (tick = 0, timeout = 5.0))]
+    fn robots(&mut self, py: Python<'_>, tick: u64, timeout: f64) -> PyResult<RobotStates> {
+        let deadline = Instant::now() + seconds("timeout", timeout)?;
+        let sdk = self.sdk.as_mut().ok_or_else(|| IwsimError::new_err("the observer is closed"))?;
+        loop {
+            let (header, robots) = sdk.world().map_err(to_py)?;
+            if header.tick >= tick {
+                let states = robots.iter().map(|r| (r.id, r.x_m, r.y_m, r.heading_deg, r.collision_count)).collect();
+                return Ok((header.tick, states));
+            }
+            if Instant::now() >= deadline {
+                return Err(PyTimeoutError::new_err(format!("no world of tick {tick} within {timeout} s")));
+            }
+            // The hub publishes a tick's world before it rings the agents, so this is rare
+            // and short: yield rather than sleep a scheduler quantum.
+            py.detach(std::thread::yield_now);
+            py.check_signals()?;
+        }
+    }
+
+    /// Stops observing. Closing twice does nothing.
+    fn close(&mut self) {
+        self.sdk = None;
+    }
+}
+
+/// A proximity cone as Python passes it: x m, y m, direction degrees, opening degrees, range m.
+type Cone = (f64, f64, f64, f64, f64);
+
+/// What [`Observer::robots`] returns.
+type RobotStates = (u64, Vec<(u32, f64, f64, f64, u32)>);
 
 /// Waits up to `slice` for `fd` to become readable; whether it did.
 fn wait_readable(fd: i32, slice: Duration) -> bool {
@@ -249,17 +341,32 @@ fn sensor_block_layout() -> Vec<(&'static str, usize, &'static str, usize)> {
     ]
 }
 
+/// [`sensor_block_layout`] for Rust tests.
+#[doc(hidden)]
+pub fn layout_for_tests() -> Vec<(&'static str, usize, &'static str, usize)> {
+    sensor_block_layout()
+}
+
 /// The module `iwsim._iwsim`.
 #[pymodule]
 fn _iwsim(m: &Bound<'_, PyModule>) -> PyResult<()> {
     let py = m.py();
     m.add_function(wrap_pyfunction!(connect, m)?)?;
     m.add_function(wrap_pyfunction!(sensor_block_layout, m)?)?;
+    m.add_function(wrap_pyfunction!(observe, m)?)?;
     m.add_class::<Agent>()?;
+    m.add_class::<Observer>()?;
     m.add("SENSOR_BLOCK_BYTES", core::mem::size_of::<SensorBlock>())?;
     m.add("MAX_PROXIMITY", ipc_types::MAX_PROXIMITY)?;
     m.add("HAS_COMPASS", ipc_types::HAS_COMPASS)?;
     m.add("HAS_GPS", ipc_types::HAS_GPS)?;
+    // The Intellwheels chair as every iwsim process knows it (sim_model::chair).
+    let [length, width, com] = sim_model::chair::BODY;
+    m.add("CHAIR_BODY", (length, width, com))?;
+    m.add("CHAIR_MOTORS", (sim_model::chair::MAX_SPEED_MPS, sim_model::chair::ACCEL_CURVE))?;
+    let cones: Vec<Cone> =
+        sim_model::chair::SENSORS.iter().map(|s| (s.x_m, s.y_m, s.angle_deg, s.cone_deg, s.range_m)).collect();
+    m.add("CHAIR_SENSORS", cones)?;
     m.add("IwsimError", py.get_type::<IwsimError>())?;
     m.add("SessionNotFound", py.get_type::<SessionNotFound>())?;
     m.add("Refused", py.get_type::<Refused>())?;

@@ -1,24 +1,56 @@
 //! The `iwsim` Python package, tested by its own pytest suite (`python/tests`) against real hub
 //! processes over shared memory: the suite runs in the project's Python environment
-//! (`target/pyvenv`, with numpy and pytest) on the native module this very build made
-//! (`lib_iwsim.so` of the `iwsim-python` package), so a Rust change is always tested from
-//! Python too, without a separate wheel build.
+//! (`target/pyvenv`, with numpy, pytest, Gymnasium and PettingZoo) on the native module built
+//! from this very tree (`lib_iwsim.so` of the `iwsim-python` package), so a Rust change is
+//! always tested from Python too, without a separate wheel build.
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
 use super::common::text;
 
-/// A package folder `iwsim/` made of `python/iwsim/*.py` and this build's native module, in a
+/// The newest modification time of the Rust sources the native module is built from.
+fn sources_changed(root: &Path) -> std::time::SystemTime {
+    let mut newest = std::time::SystemTime::UNIX_EPOCH;
+    for dir in ["python/src", "agents/agent-sdk/src", "ipc-types/src", "ipc-services/src"] {
+        for entry in std::fs::read_dir(root.join(dir)).into_iter().flatten().flatten() {
+            if let Ok(t) = entry.metadata().and_then(|m| m.modified()) {
+                newest = newest.max(t);
+            }
+        }
+    }
+    newest
+}
+
+/// The native module of this source tree. `cargo test --workspace` builds it with everything
+/// else (the `iwsim-python` package's integration test makes cargo build its library, cdylib
+/// included, into `target/debug/deps`); when it is missing or older than its sources (only
+/// this test was asked for), it is built here, into a target folder of its own
+/// (`target/python-module`: the outer `cargo test` holds `target/`'s lock). Never a stale wheel.
+fn native_module(root: &Path) -> PathBuf {
+    let bin_dir = PathBuf::from(env!("CARGO_BIN_EXE_iwsim")).parent().expect("target/debug").to_path_buf();
+    let built = bin_dir.join("deps/lib_iwsim.so");
+    let fresh = |p: &Path| p.metadata().and_then(|m| m.modified()).is_ok_and(|t| t >= sources_changed(root));
+    if fresh(&built) {
+        return built;
+    }
+    let target = root.join("target/python-module");
+    let out = Command::new(env!("CARGO"))
+        .args(["build", "--quiet", "--locked", "-p", "iwsim-python", "--target-dir"])
+        .arg(&target)
+        .current_dir(root)
+        .output()
+        .expect("cargo runs");
+    assert!(out.status.success(), "building the Python module failed:\n{}", text(&out.stderr));
+    let native = target.join("debug/lib_iwsim.so");
+    assert!(native.exists(), "{} is missing after the build", native.display());
+    native
+}
+
+/// A package folder `iwsim/` made of `python/iwsim/*.py` and this tree's native module, in a
 /// fresh temporary directory (what `pip install ./python` installs, without the wheel).
 fn package_from_this_build(root: &Path) -> PathBuf {
-    let bin = PathBuf::from(env!("CARGO_BIN_EXE_iwsim"));
-    let native = bin.with_file_name("lib_iwsim.so");
-    assert!(
-        native.exists(),
-        "{} is missing: `cargo test --workspace` builds it (or `cargo build -p iwsim-python`)",
-        native.display()
-    );
+    let native = native_module(root);
     let dir = std::env::temp_dir().join(format!("iwsim-e2e-python-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
     let pkg = dir.join("iwsim");

@@ -1,0 +1,97 @@
+"""The environments, checked by PettingZoo's and Gymnasium's own API tests, and for determinism."""
+
+from __future__ import annotations
+
+import pathlib
+
+import numpy as np
+import pytest
+
+from iwsim.env import ChairEnv, ChairsParallelEnv, Scenario
+
+SLALOM = pathlib.Path(__file__).resolve().parents[2] / "hub/runner/scenarios/slalom.toml"
+
+
+@pytest.fixture(autouse=True)
+def iwsim_on_path(monkeypatch):
+    from conftest import iwsim_bin
+
+    monkeypatch.setenv("IWSIM_BIN", iwsim_bin())
+
+
+def short(seconds: float = 3.0) -> Scenario:
+    s = Scenario.load(str(SLALOM))
+    s.seconds = seconds
+    return s
+
+
+def test_the_slalom_file_gives_its_lab_checkpoints_obstacles_and_start():
+    s = Scenario.load(str(SLALOM))
+    assert s.lab == "builtin:liacc"
+    assert [c[:2] for c in s.checkpoints] == [(10.0, 6.1), (20.0, 6.1)]
+    assert len(s.obstacles) == 2 and s.starts[0] == (10.0, 6.1, 0.0)
+
+
+def test_pettingzoos_parallel_api_test_passes():
+    from pettingzoo.test import parallel_api_test
+
+    env = ChairsParallelEnv(3, short())
+    try:
+        parallel_api_test(env, num_cycles=40)
+    finally:
+        env.close()
+
+
+def test_gymnasiums_env_checker_passes():
+    from gymnasium.utils.env_checker import check_env
+
+    env = ChairEnv(short())
+    try:
+        check_env(env, skip_render_check=True)
+    finally:
+        env.close()
+
+
+def test_one_seed_and_one_action_sequence_give_identical_observations():
+    rng = np.random.default_rng(7)
+    actions = [{f"chair{i}": rng.uniform(-1, 1, 2).astype(np.float32) for i in range(2)} for _ in range(25)]
+
+    def episode(seed):
+        env = ChairsParallelEnv(2, short())
+        try:
+            obs, _ = env.reset(seed=seed)
+            seen = [np.stack([obs[a] for a in sorted(obs)])]
+            rewards = []
+            for act in actions:
+                if not env.agents:
+                    break
+                obs, rew, _, _, _ = env.step({a: act[a] for a in env.agents})
+                seen.append(np.stack([obs[a] for a in sorted(obs)]))
+                rewards.append(sorted(rew.items()))
+            return np.concatenate(seen), rewards
+        finally:
+            env.close()
+
+    a, ra = episode(3)
+    b, rb = episode(3)
+    assert a.tobytes() == b.tobytes() and ra == rb, "same seed, same actions: same run, bit for bit"
+    c, _ = episode(4)
+    assert a.tobytes() != c.tobytes(), "another seed draws other sensor noise"
+
+
+def test_driving_ahead_is_rewarded_and_a_bad_action_is_refused():
+    env = ChairsParallelEnv(1, short(5.0))
+    try:
+        env.reset(seed=1)
+        total = 0.0
+        for _ in range(20):
+            _, rew, _, _, _ = env.step({"chair0": np.array([1.0, 1.0], dtype=np.float32)})
+            total += rew["chair0"]
+        assert total > 0.5, f"20 ticks at full power towards checkpoint 2 gained {total}"
+        with pytest.raises(ValueError, match="not finite"):
+            env.step({"chair0": np.array([np.nan, 0.0])})
+        with pytest.raises(ValueError, match="shape"):
+            env.step({"chair0": np.array([0.5, 0.5, 0.5])})
+        env.step({"chair0": np.array([0.0, 0.0])})  # the episode goes on
+    finally:
+        env.close()

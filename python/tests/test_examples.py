@@ -1,0 +1,37 @@
+"""The examples under python/examples run as their docstrings show (shortened), and do what
+they say."""
+
+from __future__ import annotations
+
+import os
+import pathlib
+import re
+import subprocess
+import sys
+
+EXAMPLES = pathlib.Path(__file__).resolve().parents[1] / "examples"
+
+
+def run(script: str, *args: str) -> str:
+    from conftest import iwsim_bin
+
+    env = {**os.environ, "IWSIM_BIN": iwsim_bin()}
+    out = subprocess.run([sys.executable, str(EXAMPLES / script), *args], env=env, capture_output=True,
+                         text=True, timeout=120)
+    assert out.returncode == 0, out.stdout + out.stderr
+    return out.stdout
+
+
+def test_the_reactive_avoider_passes_obstacle_a_without_touching_it():
+    # 32 s of the slalom: past A (x 17-17.6), which it must sidestep, with no contact.
+    out = run("avoider.py", "--seed", "1", "--seconds", "32")
+    m = re.search(r"return (-?[0-9.]+), (\d+) contacts", out)
+    assert m, out
+    assert float(m.group(1)) > 6.0 and int(m.group(2)) == 0, out
+
+
+def test_the_training_loop_improves_its_policy():
+    out = run("train.py", "--chairs", "16", "--iterations", "8", "--seconds", "5")
+    means = [float(v) for v in re.findall(r"return mean\s+(-?[0-9.]+) m", out)]
+    assert len(means) == 8, out
+    assert means[-1] > means[0] + 1.0, out
