@@ -100,7 +100,25 @@ impl Proc {
 }
 
 impl Drop for Proc {
+    /// A process still running when its test ends (or panics) is asked to stop first
+    /// (SIGTERM, and SIGCONT in case a test stopped it), so a runner forwards the signal to its
+    /// children and nothing of the run outlives the test; SIGKILL after 5 s.
     fn drop(&mut self) {
+        let Some(child) = self.0.as_mut() else { return };
+        if child.try_wait().ok().flatten().is_none() {
+            let pid = child.id() as libc::pid_t;
+            #[allow(unsafe_code)]
+            // SAFETY: signals to our own child, which has not been reaped (try_wait said it
+            // is running), so the pid is still its own.
+            unsafe {
+                libc::kill(pid, libc::SIGTERM);
+                libc::kill(pid, libc::SIGCONT);
+            }
+            let deadline = Instant::now() + Duration::from_secs(5);
+            while Instant::now() < deadline && child.try_wait().ok().flatten().is_none() {
+                std::thread::sleep(Duration::from_millis(5));
+            }
+        }
         self.kill9();
     }
 }
