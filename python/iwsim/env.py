@@ -181,27 +181,24 @@ class ChairsParallelEnv(ParallelEnv):
         if self._tick is None:
             raise IwsimError("the hub ended the run before its first tick")
         self.agents = list(self.possible_agents)
+        self._last_obs = {}
         self._state = self._truth({n: 0 for n in self.agents})
         return self._observations(), {a: {} for a in self.agents}
 
     def step(self, actions: dict):
         if self._tick is None or not self.agents:
             raise IwsimError("step() needs a running episode: call reset() first")
+        # One row per chair in registration order; chairs that are done (or not given) stop.
         live = set(self.agents)
-        rows = []
-        for name in self.possible_agents:
-            a = actions.get(name) if name in live else None
-            rows.append((0.0, 0.0) if a is None else a)
-        try:
-            table = np.asarray(rows, dtype=np.float64)
-        except ValueError:
-            table = None
-        if table is None or table.shape != (len(rows), 2):
-            bad = next(n for n, r in zip(self.possible_agents, rows) if np.shape(r) != (2,))
-            raise ValueError(f"{bad}: an action is (left, right), not shape {np.shape(rows[self.possible_agents.index(bad)])}")
-        if not np.isfinite(table).all():
-            bad = self.possible_agents[int(np.flatnonzero(~np.isfinite(table).all(axis=1))[0])]
-            raise ValueError(f"{bad}: action {table[self.possible_agents.index(bad)]} is not finite")
+        rows = [actions.get(n, (0.0, 0.0)) if n in live else (0.0, 0.0) for n in self.possible_agents]
+        for name, r in zip(self.possible_agents, rows):
+            if np.shape(r) != (2,):
+                raise ValueError(f"{name}: an action is (left, right), not shape {np.shape(r)}")
+        table = np.asarray(rows, dtype=np.float64)
+        finite = np.isfinite(table).all(axis=1)
+        if not finite.all():
+            k = int(np.flatnonzero(~finite)[0])
+            raise ValueError(f"{self.possible_agents[k]}: action {table[k]} is not finite")
         np.clip(table, -1.0, 1.0, out=table)
         self._agent.send_powers(self._tick, self._id_array, table)
         self._tick = self._agent.wait_tick(timeout=60)
@@ -263,7 +260,7 @@ class ChairsParallelEnv(ParallelEnv):
         table[:, -1] = np.where(has, np.sin(c), 0.0)
         row = {int(i): k for k, i in enumerate(blocks["robot_id"])}
         obs = {name: table[row[self._ids[name]]] for name in self.agents}
-        self._last_obs = {**getattr(self, "_last_obs", {}), **obs}
+        self._last_obs.update(obs)
         return obs
 
     def _truth(self, next_checkpoint: dict) -> dict:

@@ -148,18 +148,7 @@ fn agents_adapters_and_the_viewer_never_link_the_hub_or_the_world() {
     // Every client crate of the workspace is in the list above: a new agent or adapter is
     // checked from its first commit.
     for m in g.member_names() {
-        let is_client = [
-            "navigator",
-            "door",
-            "teleop",
-            "wheelchair",
-            "udp-bridge",
-            "serial-bridge",
-            "viewer",
-            "agent-sdk",
-            "iwsim-python",
-        ]
-        .contains(&m.as_str());
+        let is_client = clients.contains(&m.as_str());
         let known_other = [
             "iwsim",
             "ipc-types",

@@ -104,22 +104,31 @@ impl Drop for Proc {
     /// (SIGTERM, and SIGCONT in case a test stopped it), so a runner forwards the signal to its
     /// children and nothing of the run outlives the test; SIGKILL after 5 s.
     fn drop(&mut self) {
-        let Some(child) = self.0.as_mut() else { return };
-        if child.try_wait().ok().flatten().is_none() {
-            let pid = child.id() as libc::pid_t;
-            #[allow(unsafe_code)]
-            // SAFETY: signals to our own child, which has not been reaped (try_wait said it
-            // is running), so the pid is still its own.
-            unsafe {
-                libc::kill(pid, libc::SIGTERM);
-                libc::kill(pid, libc::SIGCONT);
-            }
-            let deadline = Instant::now() + Duration::from_secs(5);
-            while Instant::now() < deadline && child.try_wait().ok().flatten().is_none() {
-                std::thread::sleep(Duration::from_millis(5));
-            }
+        let Some(mut child) = self.0.take() else { return };
+        if child.try_wait().ok().flatten().is_some() {
+            return;
         }
-        self.kill9();
+        let pid = child.id() as libc::pid_t;
+        let signal = |sig| {
+            #[allow(unsafe_code)]
+            // SAFETY: a signal to our own child, not reaped until the waiter below has seen it
+            // exit, so the pid is still its own.
+            unsafe {
+                libc::kill(pid, sig);
+            }
+        };
+        signal(libc::SIGTERM);
+        signal(libc::SIGCONT);
+        // Wait for the exit itself (on a thread, so the wait can time out).
+        let (tx, rx) = std::sync::mpsc::channel();
+        let waiter = std::thread::spawn(move || {
+            let _ = child.wait();
+            let _ = tx.send(());
+        });
+        if rx.recv_timeout(Duration::from_secs(5)).is_err() {
+            signal(libc::SIGKILL);
+        }
+        let _ = waiter.join();
     }
 }
 

@@ -229,19 +229,6 @@ impl BoardLink {
         self.odometry.pose_deg()
     }
 
-    /// The pose the adapter pushes: the odometry pose, map-matched when localising; x, y
-    /// metres, heading degrees.
-    pub fn estimate_deg(&self) -> [f64; 3] {
-        let [x, y, h] = self.odometry.pose_deg();
-        match &self.localiser {
-            Some(l) => {
-                let [x, y, theta] = l.estimate([x, y, h.to_radians()]);
-                [x, y, sim_model::wire_deg(theta)]
-            }
-            None => [x, y, h],
-        }
-    }
-
     /// Whether the board is known and talking.
     pub fn link_up(&self) -> bool {
         self.safety.link_up(self.now())
@@ -409,14 +396,18 @@ impl BoardLink {
     fn action(&mut self, robot_id: u32) -> ActionBlock {
         let fresh = self.fresh.take();
         let link_up = self.safety.link_up(self.now());
-        if let Some(l) = &mut self.localiser
-            && link_up
-            && self.odometry.scaled()
-        {
-            let [x, y, h] = self.odometry.pose_deg();
-            l.update([x, y, h.to_radians()], &fresh);
-        }
-        let [x, y, heading] = self.estimate_deg();
+        // The pose pushed: the odometry's, map-matched when localising (learning from this
+        // tick's readings only while they are the board's own, scaled and fresh).
+        let [x, y, heading] = self.odometry.pose_deg();
+        let [x, y, heading] = match &mut self.localiser {
+            None => [x, y, heading],
+            Some(l) => {
+                let odometry = [x, y, heading.to_radians()];
+                let [x, y, theta] =
+                    if link_up && self.odometry.scaled() { l.update(odometry, &fresh) } else { l.estimate(odometry) };
+                [x, y, sim_model::wire_deg(theta)]
+            }
+        };
         let mut a = ActionBlock::pose(robot_id, x, y, heading);
         if link_up {
             if self.odometry.scaled() {

@@ -87,13 +87,17 @@ impl Localiser {
     /// estimate towards what they say, and returns it.
     pub fn update(&mut self, odometry: [f64; 3], readings: &[f32; MAX_PROXIMITY]) -> [f64; 3] {
         let pose = self.estimate(odometry);
-        let used: Vec<(&Mount, f64)> = SENSORS
+        // Each used reading with the map's prediction at the estimate.
+        let used: Vec<(&Mount, f64, f64)> = SENSORS
             .iter()
             .zip(readings)
             .filter_map(|(m, &z)| {
                 let z = f64::from(z);
+                if !z.is_finite() {
+                    return None;
+                }
                 let h = self.predict(pose, m);
-                (z.is_finite() && h < m.range_m - 0.01 && (z - h).abs() < GATE_M).then_some((m, z))
+                (h < m.range_m - 0.01 && (z - h).abs() < GATE_M).then_some((m, z, h))
             })
             .collect();
         self.matched = used.len();
@@ -105,8 +109,7 @@ impl Localiser {
         const EPS: [f64; 3] = [1e-3, 1e-3, 1e-3];
         let mut jtj = [[0.0; 3]; 3];
         let mut jtr = [0.0; 3];
-        for &(m, z) in &used {
-            let h = self.predict(pose, m);
+        for &(m, z, h) in &used {
             let mut j = [0.0; 3];
             for (k, e) in EPS.iter().enumerate() {
                 let mut p = pose;
@@ -134,7 +137,8 @@ impl Localiser {
         let (s, c) = self.turn.sin_cos();
         self.shift =
             [corrected[0] - (c * odometry[0] - s * odometry[1]), corrected[1] - (s * odometry[0] + c * odometry[1])];
-        corrected
+        // What `estimate` gives from now on (the corrected pose, to rounding).
+        self.estimate(odometry)
     }
 
     /// Readings matched to the map at the last update.
