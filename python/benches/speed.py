@@ -1,17 +1,21 @@
 """Env steps per second of the Python environment against the same chairs driven by the Rust
 agent SDK and by a Python client over the UDP/XML bridge, in one run.
 
-    IWSIM_BIN=target/release/iwsim python python/benches/speed.py [--runs 5] [--ticks 300] [--json]
+    IWSIM_BIN=target/release/iwsim python python/benches/speed.py [--runs 5] [--ticks 2000] [--json]
 
 Every variant runs the same lock-step hub (an open 40 m x 40 m floor, chairs 3 m apart, ten
 to a row, driving east at constant powers) and is timed by the hub itself: ticks over its
 ``run_s`` (first tick to last), so all three are measured alike. One env step is one tick.
 - python env: ``iwsim.env.ChairsParallelEnv``, one step() per tick, all chairs' observations
   built and their actions checked, rewards judged by the env's observer;
-- rust sdk: ``iwsim agent wheelchair --robots N`` (the Rust SDK, one process);
+- rust sdk: ``iwsim agent wheelchair --robots N`` (the Rust SDK, one process), as agents run by
+  default: it sleeps until the hub rings;
+- rust sdk busy-poll: the same with ``--busy-poll``, spinning on the tick as the env's step
+  does for up to half a millisecond before it sleeps (shown so the comparison is fair both ways);
 - python udp: one Python process with one UDP socket per chair, as a Ciber-Rato client has,
   parsing every <Measures> with xml.etree and answering with <Actions>.
-Medians of --runs runs, with min and max.
+Medians of --runs runs, with min and max; and the env's own Python work per step (the time a
+step spends outside its one native call).
 """
 
 from __future__ import annotations
@@ -23,11 +27,13 @@ import socket
 import statistics
 import subprocess
 import tempfile
+import time
 import uuid
 import xml.etree.ElementTree as ET
 
 import numpy as np
 
+import iwsim.env
 from iwsim.env import ChairsParallelEnv, Scenario
 
 SPACING = 3.0
@@ -57,25 +63,51 @@ def summary_of(out: str) -> dict:
     return next(json.loads(l) for l in out.splitlines() if l.startswith("{"))
 
 
-def python_env(lab: str, n: int, ticks: int) -> float:
+class _TimedNative:
+    """``iwsim._iwsim`` with its ``env_step`` timed: what a step spends outside it is the env's
+    own Python work."""
+
+    def __init__(self, native) -> None:
+        self._native = native
+        self.inside = 0.0
+
+    def env_step(self, *args):
+        t = time.perf_counter()
+        try:
+            return self._native.env_step(*args)
+        finally:
+            self.inside += time.perf_counter() - t
+
+    def __getattr__(self, name):
+        return getattr(self._native, name)
+
+
+def python_env(lab: str, n: int, ticks: int, python_us: list[float]) -> float:
     s = Scenario(lab=lab, checkpoints=[], starts=starts(n), seconds=ticks / 10, noise=True)
     env = ChairsParallelEnv(n, s)
     action = np.array([0.3, 0.28], dtype=np.float32)
+    timed = _TimedNative(iwsim.env._iwsim)
     try:
         env.reset(seed=1)
+        iwsim.env._iwsim = timed
+        steps, start = 0, time.perf_counter()
         while env.agents:
             env.step({a: action for a in env.agents})
+            steps += 1
+        python_us.append((time.perf_counter() - start - timed.inside) / steps * 1e6)
     finally:
+        iwsim.env._iwsim = timed._native
         env.close()
     return rate(env.last_run)
 
 
-def rust_sdk(lab: str, n: int, ticks: int) -> float:
+def rust_sdk(lab: str, n: int, ticks: int, busy_poll: bool = False) -> float:
     session = f"bench-{os.getpid()}-{uuid.uuid4().hex[:8]}"
     h = hub(lab, ticks, session)
     agent = subprocess.run(
         [iwsim_bin(), "agent", "wheelchair", "--session", session, "--robots", str(n), "--pose", "3,3,0",
-         "--spacing", str(SPACING), "--powers", "0.3,0.28", "--connect-timeout", "30"],
+         "--spacing", str(SPACING), "--powers", "0.3,0.28", "--connect-timeout", "30"]
+        + (["--busy-poll"] if busy_poll else []),
         stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, timeout=600,
     )
     out, _ = h.communicate(timeout=60)
@@ -136,7 +168,7 @@ def spread(values: list[float]) -> dict:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--runs", type=int, default=5)
-    ap.add_argument("--ticks", type=int, default=300)
+    ap.add_argument("--ticks", type=int, default=2000)
     ap.add_argument("--chairs", type=int, nargs="*", default=[1, 10, 100])
     ap.add_argument("--json", action="store_true")
     args = ap.parse_args()
@@ -145,22 +177,28 @@ def main() -> None:
         f.write('<Lab Name="open" Width="40" Height="40"></Lab>\n')
     results = {}
     for n in args.chairs:
-        runs = {"python env": [], "rust sdk": [], "python udp": []}
-        for _ in range(args.runs):  # interleaved, so a slow moment hits all three alike
-            runs["python env"].append(python_env(lab, n, args.ticks))
+        runs = {"python env": [], "rust sdk": [], "rust sdk busy-poll": [], "python udp": []}
+        python_us: list[float] = []
+        for _ in range(args.runs):  # interleaved, so a slow moment hits all alike
+            runs["python env"].append(python_env(lab, n, args.ticks, python_us))
             runs["rust sdk"].append(rust_sdk(lab, n, args.ticks))
+            runs["rust sdk busy-poll"].append(rust_sdk(lab, n, args.ticks, busy_poll=True))
             runs["python udp"].append(python_udp(lab, n, args.ticks))
         results[n] = {k: spread(v) for k, v in runs.items()}
+        results[n]["env python us per step"] = spread(python_us)
     if args.json:
         print(json.dumps(results))
         return
     print(f"env steps/s (lock-step ticks/s, by the hub), median [min, max] of {args.runs} runs of {args.ticks} ticks")
-    print(f"{'chairs':>6}  {'python env':>24}  {'rust sdk':>24}  {'python udp':>24}  env/rust  env/udp")
+    kinds = ("python env", "rust sdk", "rust sdk busy-poll", "python udp")
+    print(f"{'chairs':>6}" + "".join(f"  {k:>24}" for k in kinds) + "  env/rust  env/rust-busy  env/udp")
     for n, r in results.items():
         cell = lambda s: f"{s['median']:8.0f} [{s['min']:.0f}, {s['max']:.0f}]"
-        e, rs, u = (r[k]["median"] for k in ("python env", "rust sdk", "python udp"))
-        print(f"{n:>6}  {cell(r['python env']):>24}  {cell(r['rust sdk']):>24}  {cell(r['python udp']):>24}"
-              f"  {e / rs:8.2f}  {e / u:7.1f}")
+        e, rs, rb, u = (r[k]["median"] for k in kinds)
+        print(f"{n:>6}" + "".join(f"  {cell(r[k]):>24}" for k in kinds)
+              + f"  {e / rs:8.2f}  {e / rb:13.2f}  {e / u:7.1f}")
+    print("the env's own Python work per step (outside its one native call), median µs: "
+          + ", ".join(f"{n} chairs {r['env python us per step']['median']:.1f}" for n, r in results.items()))
 
 
 if __name__ == "__main__":

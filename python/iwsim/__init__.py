@@ -19,8 +19,7 @@ Errors are typed: ``SessionNotFound`` (no hub there), ``Refused`` (the hub said 
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-from typing import Mapping, Optional, Sequence, Tuple
+from typing import Mapping, NamedTuple, Optional, Sequence, Tuple
 
 import numpy as np
 
@@ -65,8 +64,7 @@ CHAIR_MOTORS = _iwsim.CHAIR_MOTORS
 CHAIR_SENSORS = _iwsim.CHAIR_SENSORS
 
 
-@dataclass(frozen=True)
-class Tick:
+class Tick(NamedTuple):
     """One tick of the hub: its number (answer it with ``Agent.send``) and simulated time."""
 
     tick: int
@@ -146,6 +144,23 @@ class Agent:
         if ids.ndim != 1 or powers.shape != (ids.shape[0], 2):
             raise ValueError(f"ids must be (n,) and powers (n, 2): got {ids.shape} and {powers.shape}")
         self._native.send_powers(int(tick), ids.tobytes(), powers.tobytes())
+
+    def step(self, tick: int | Tick, powers: np.ndarray, timeout: Optional[float] = None) -> Optional[Tick]:
+        """Answers ``tick`` for all this agent's robots at once and waits for the next tick (as
+        ``wait_tick``): ``powers`` is (n, 2), one (left, right) row per robot in registration
+        order, each finite (clipped to [-1, 1]). One native call per tick, whatever n."""
+        p = np.ascontiguousarray(powers, dtype="<f8")
+        if p.ndim != 2 or p.shape[1] != 2:
+            raise ValueError(f"powers must be (n, 2), one (left, right) row per robot: got shape {p.shape}")
+        t = self._native.step(int(tick), p.tobytes(), timeout)
+        return None if t is None else Tick(*t)
+
+    def observations(self, max_range: float = 20.0) -> np.ndarray:
+        """This tick's readings as a chair's observation, (n, 10) float32, one row per robot in
+        registration order: its 8 proximity readings in metres (clipped to [0, ``max_range``];
+        a missing one is ``max_range``) and its compass as (cos, sin) (zeros without one)."""
+        table = np.frombuffer(self._native.observations(max_range), dtype=np.float32)
+        return table.reshape(-1, _iwsim.MAX_PROXIMITY + 2)
 
     @property
     def robots(self) -> list[int]:

@@ -30,7 +30,7 @@ from typing import Callable, Optional
 
 import numpy as np
 
-from . import CHAIR_BODY, CHAIR_MOTORS, CHAIR_SENSORS, IwsimError, _iwsim, connect
+from . import CHAIR_BODY, CHAIR_MOTORS, CHAIR_SENSORS, IwsimError, Tick, _iwsim, connect
 
 try:  # the spaces both libraries use
     from gymnasium import Env, spaces
@@ -40,6 +40,12 @@ from pettingzoo import ParallelEnv
 
 #: Proximity readings are clipped to this many metres in observations (the hub's longest reach).
 MAX_RANGE_M = 20.0
+
+_STOP = (0.0, 0.0)
+
+#: How long a step polls for the hub's next tick before its thread sleeps: the hub's answer
+#: usually comes sooner than a sleeping thread wakes (see ``iwsim.Agent.step``).
+SPIN_S = 0.0005
 
 
 @dataclass
@@ -81,23 +87,32 @@ class Scenario:
 
 @dataclass
 class ChairState:
-    """What the referee knows of one chair after a tick (truth, from the observer)."""
+    """What the referee knows of the chairs after a tick (truth, from the observer): one entry
+    per chair, in ``possible_agents`` order, as NumPy arrays, so a reward is computed for all
+    chairs in one call."""
 
-    x: float
-    y: float
-    heading_deg: float
-    contacts: int
-    next_checkpoint: int
+    x: np.ndarray
+    y: np.ndarray
+    heading_deg: np.ndarray
+    contacts: np.ndarray
+    #: The index of the checkpoint each chair drives to next (``len(checkpoints)`` once done).
+    next_checkpoint: np.ndarray
 
 
-def progress_reward(before: ChairState, after: ChairState, checkpoints) -> float:
-    """Metres gained towards the next checkpoint, -1 per new contact, +10 at the last one."""
-    if before.next_checkpoint >= len(checkpoints):
-        return 0.0
-    cx, cy, _ = checkpoints[before.next_checkpoint]
-    gained = math.hypot(before.x - cx, before.y - cy) - math.hypot(after.x - cx, after.y - cy)
-    done = after.next_checkpoint >= len(checkpoints) > before.next_checkpoint
-    return gained - (after.contacts - before.contacts) + (10.0 if done else 0.0)
+def progress_reward(before: ChairState, after: ChairState, checkpoints) -> np.ndarray:
+    """Metres gained towards the next checkpoint, -1 per new contact, +10 at the last one;
+    one reward per chair (0 once a chair is done)."""
+    m = len(checkpoints)
+    contact = -(after.contacts - before.contacts)
+    if m == 0:
+        return contact
+    cps = np.asarray(checkpoints, dtype=np.float64)
+    going = before.next_checkpoint < m
+    k = np.minimum(before.next_checkpoint, m - 1)
+    cx, cy = cps[k, 0], cps[k, 1]
+    gained = np.hypot(before.x - cx, before.y - cy) - np.hypot(after.x - cx, after.y - cy)
+    done = going & (after.next_checkpoint >= m)
+    return np.where(going, gained + contact + 10.0 * done, 0.0)
 
 
 def _iwsim_bin() -> str:
@@ -117,7 +132,7 @@ class ChairsParallelEnv(ParallelEnv):
         self,
         n: int = 1,
         scenario: Scenario | str | None = None,
-        reward: Callable[[ChairState, ChairState, list], float] = progress_reward,
+        reward: Callable[[ChairState, ChairState, list], np.ndarray] = progress_reward,
         spacing_m: float = 1.5,
     ) -> None:
         self.scenario = Scenario.load(scenario) if isinstance(scenario, str) else (scenario or Scenario())
@@ -130,6 +145,9 @@ class ChairsParallelEnv(ParallelEnv):
             starts.append((x - spacing_m * math.cos(math.radians(h)), y - spacing_m * math.sin(math.radians(h)), h))
         self._starts = starts[:n]
         self.reward_fn = reward
+        self._index = {a: k for k, a in enumerate(f"chair{i}" for i in range(n))}
+        self._checkpoints = np.asarray(self.scenario.checkpoints, dtype=np.float64).reshape(-1, 3)
+        self._never = np.zeros(n, dtype=bool)
         self.possible_agents = [f"chair{i}" for i in range(n)]
         self.agents: list[str] = []
         low = np.array([0.0] * _iwsim.MAX_PROXIMITY + [-1.0, -1.0], dtype=np.float32)
@@ -174,55 +192,91 @@ class ChairsParallelEnv(ParallelEnv):
             self._ids[name] = self._agent.register(
                 name, body=CHAIR_BODY, pose=pose, motors=CHAIR_MOTORS, sensors=CHAIR_SENSORS
             )
-        self._id_array = np.array([self._ids[n] for n in self.possible_agents], dtype=np.uint32)
+        self._id_list = [self._ids[n] for n in self.possible_agents]
         self._observer = _iwsim.observe(self._session, 20)
         self._agent.ready()
         self._tick = self._agent.wait_tick(timeout=60)
         if self._tick is None:
             raise IwsimError("the hub ended the run before its first tick")
         self.agents = list(self.possible_agents)
-        self._last_obs = {}
-        self._state = self._truth({n: 0 for n in self.agents})
-        return self._observations(), {a: {} for a in self.agents}
+        _, raw_poses = self._observer.poses(self._tick.tick, self._id_list, 20)
+        self._state = self._judge(raw_poses, np.zeros(len(self.possible_agents), dtype=np.int64))
+        return dict(zip(self.agents, self._observation_table())), {a: {} for a in self.agents}
 
     def step(self, actions: dict):
         if self._tick is None or not self.agents:
             raise IwsimError("step() needs a running episode: call reset() first")
-        # One row per chair in registration order; chairs that are done (or not given) stop.
-        live = set(self.agents)
-        rows = [actions.get(n, (0.0, 0.0)) if n in live else (0.0, 0.0) for n in self.possible_agents]
-        for name, r in zip(self.possible_agents, rows):
-            if np.shape(r) != (2,):
-                raise ValueError(f"{name}: an action is (left, right), not shape {np.shape(r)}")
-        table = np.asarray(rows, dtype=np.float64)
-        finite = np.isfinite(table).all(axis=1)
-        if not finite.all():
-            k = int(np.flatnonzero(~finite)[0])
-            raise ValueError(f"{self.possible_agents[k]}: action {table[k]} is not finite")
-        np.clip(table, -1.0, 1.0, out=table)
-        self._agent.send_powers(self._tick, self._id_array, table)
-        self._tick = self._agent.wait_tick(timeout=60)
-        over = self._tick is None
-        if over:
+        # One native call: send every chair's action, wait for the hub's next tick, read the
+        # chairs' observations and the referee's true poses.
+        table = self._action_table(actions)
+        try:
+            stepped = _iwsim.env_step(self._agent._native, self._observer, self._tick.tick, table.tobytes(),
+                                      MAX_RANGE_M, 60, SPIN_S)
+        except ValueError:
+            # The native side checks every power is finite before anything is sent: name the chair.
+            bad = np.flatnonzero(~np.isfinite(table).all(axis=1))
+            if not len(bad):
+                raise
+            k = int(bad[0])
+            raise ValueError(f"{self.possible_agents[k]}: action {table[k]} is not finite") from None
+        if stepped is None:
             # The hub's last tick has passed: the run's time limit.
-            obs = {a: self._last_obs[a] for a in self.agents}
-            result = (obs, {a: 0.0 for a in self.agents}, {a: False for a in self.agents},
-                      {a: True for a in self.agents}, {a: {} for a in self.agents})
+            live = self.agents
+            result = ({a: self._last_obs[self._index[a]] for a in live}, dict.fromkeys(live, 0.0),
+                      dict.fromkeys(live, False), dict.fromkeys(live, True), {a: {} for a in live})
             self.agents = []
             return result
+        tick, sim_time_s, raw_obs, raw_poses = stepped
+        self._tick = Tick(tick, sim_time_s)
         before = self._state
-        after = self._truth({n: before[n].next_checkpoint for n in self.agents})
-        obs = self._observations()
-        checkpoints = self.scenario.checkpoints
-        rewards = {a: float(self.reward_fn(before[a], after[a], checkpoints)) for a in self.agents}
+        after = self._judge(raw_poses, before.next_checkpoint)
+        table = self._last_obs = np.frombuffer(raw_obs, dtype=np.float32).reshape(len(self.possible_agents), -1)
+        m = len(self.scenario.checkpoints)
+        rewards = np.asarray(self.reward_fn(before, after, self.scenario.checkpoints), dtype=np.float64)
+        if rewards.shape != (len(self.possible_agents),):
+            raise ValueError(f"the reward function returned shape {rewards.shape}: one reward per chair expected")
         # No checkpoints: no goal, the episode ends at the time limit.
-        terminations = {a: bool(checkpoints) and after[a].next_checkpoint >= len(checkpoints) for a in self.agents}
+        done = (after.next_checkpoint >= m) if m else self._never
         last = self._tick.tick >= self.scenario.ticks()
-        truncations = {a: last and not terminations[a] for a in self.agents}
-        infos = {a: {"tick": self._tick.tick, "contacts": after[a].contacts} for a in self.agents}
-        self._state = {**before, **after}
-        self.agents = [a for a in self.agents if not (terminations[a] or truncations[a])]
+        self._state = after
+        live = self.agents
+        if len(live) == len(self.possible_agents):
+            obs = dict(zip(live, table))
+            rewards = dict(zip(live, rewards.tolist()))
+            terminations = dict(zip(live, done.tolist()))
+            contacts = after.contacts.astype(np.int64).tolist()
+        else:
+            rows = [self._index[a] for a in live]
+            obs = {a: table[k] for a, k in zip(live, rows)}
+            rewards = {a: float(rewards[k]) for a, k in zip(live, rows)}
+            terminations = {a: bool(done[k]) for a, k in zip(live, rows)}
+            contacts = [int(after.contacts[k]) for k in rows]
+        truncations = {a: last and not t for a, t in terminations.items()}
+        infos = {a: {"tick": tick, "contacts": c} for a, c in zip(live, contacts)}
+        if last or (m and done.any()):
+            self.agents = [a for a in live if not (terminations[a] or truncations[a])]
         return obs, rewards, terminations, truncations, infos
+
+    def _action_table(self, actions: dict) -> np.ndarray:
+        """The actions as one (n, 2) float64 table in ``possible_agents`` order (chairs that are
+        done, or not given, stop), checked to be a pair per chair (the native step checks that
+        they are finite)."""
+        names = self.possible_agents
+        if len(self.agents) == len(names):
+            rows = [actions.get(a, _STOP) for a in names]
+        else:
+            live = set(self.agents)
+            rows = [actions.get(a, _STOP) if a in live else _STOP for a in names]
+        try:
+            table = np.array(rows, dtype=np.float64)
+        except (ValueError, TypeError):
+            table = None
+        if table is None or table.shape != (len(names), 2):
+            for name, r in zip(names, rows):
+                if np.shape(r) != (2,):
+                    raise ValueError(f"{name}: an action is (left, right), not shape {np.shape(r)}")
+            raise ValueError("the actions are not one (left, right) pair per chair")
+        return table
 
     def close(self) -> None:
         for part in (self._observer, self._agent):
@@ -243,37 +297,26 @@ class ChairsParallelEnv(ParallelEnv):
 
     # -- what the chairs see, and what the referee sees --------------------------------
 
-    def _observations(self) -> dict:
-        # All chairs at once, from the one structured array of this tick's blocks (registration
-        # order, which is possible_agents' order).
-        blocks = self._agent.sensors()
-        n = len(blocks)
-        table = np.empty((n, _iwsim.MAX_PROXIMITY + 2), dtype=np.float32)
-        p = table[:, : _iwsim.MAX_PROXIMITY]
-        p[:] = blocks["proximity_m"]
-        p[~np.isfinite(p)] = MAX_RANGE_M
-        p[np.arange(_iwsim.MAX_PROXIMITY) >= blocks["proximity_count"][:, None]] = MAX_RANGE_M
-        np.clip(p, 0.0, MAX_RANGE_M, out=p)
-        c = np.radians(blocks["compass_deg"])
-        has = (blocks["present"] & _iwsim.HAS_COMPASS) != 0
-        table[:, -2] = np.where(has, np.cos(c), 0.0)
-        table[:, -1] = np.where(has, np.sin(c), 0.0)
-        row = {int(i): k for k, i in enumerate(blocks["robot_id"])}
-        obs = {name: table[row[self._ids[name]]] for name in self.agents}
-        self._last_obs.update(obs)
-        return obs
+    def _observation_table(self) -> np.ndarray:
+        # All chairs at once, one row each in registration order (possible_agents' order),
+        # built natively from this tick's sensor blocks.
+        self._last_obs = self._agent.observations(MAX_RANGE_M)
+        return self._last_obs
 
-    def _truth(self, next_checkpoint: dict) -> dict:
-        _, robots = self._observer.robots(self._tick.tick, 20)
-        by_id = {r[0]: r for r in robots}
-        out = {}
-        for name, k in next_checkpoint.items():
-            _, x, y, heading, contacts = by_id[self._ids[name]]
-            cps = self.scenario.checkpoints
-            while k < len(cps) and math.hypot(x - cps[k][0], y - cps[k][1]) <= cps[k][2]:
-                k += 1
-            out[name] = ChairState(x, y, heading, contacts, k)
-        return out
+    def _judge(self, raw_poses: bytes, next_checkpoint: np.ndarray) -> ChairState:
+        """The referee's view from the observer's true poses: where each chair is, its
+        contacts, and the checkpoint it drives to next."""
+        x, y, heading, contacts = np.frombuffer(raw_poses, dtype=np.float64).reshape(-1, 4).T
+        nxt = next_checkpoint.copy()
+        cps = self._checkpoints
+        m = len(cps)
+        for _ in range(m):  # a chair may pass several checkpoints in one tick
+            k = np.minimum(nxt, m - 1)
+            reached = (nxt < m) & (np.hypot(x - cps[k, 0], y - cps[k, 1]) <= cps[k, 2])
+            if not reached.any():
+                break
+            nxt += reached
+        return ChairState(x, y, heading, contacts, nxt)
 
 
 class ChairEnv(Env):

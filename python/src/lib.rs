@@ -16,9 +16,9 @@ use std::time::{Duration, Instant};
 use agent_sdk::{Agent as SdkAgent, AgentError};
 use ipc_types::{ActionBlock, FixedName, RobotRegistration, SensorBlock};
 use pyo3::create_exception;
-use pyo3::exceptions::{PyException, PyKeyboardInterrupt, PyTimeoutError, PyValueError};
+use pyo3::exceptions::{PyException, PyKeyError, PyKeyboardInterrupt, PyTimeoutError, PyValueError};
 use pyo3::prelude::*;
-use pyo3::types::PyBytes;
+use pyo3::types::{PyByteArray, PyBytes};
 
 create_exception!(_iwsim, IwsimError, PyException, "Base class of iwsim's errors.");
 create_exception!(_iwsim, SessionNotFound, IwsimError, "No hub serves the session (or its name is not valid).");
@@ -29,6 +29,9 @@ create_exception!(_iwsim, NoAnswer, IwsimError, "The hub did not answer in time.
 /// The longest a wait sleeps before it looks at Python's signals (so Ctrl-C interrupts it) and
 /// at the hub's liveness.
 const WAIT_SLICE: Duration = Duration::from_millis(50);
+
+/// The longest [`Agent::step`] polls before it sleeps.
+const MAX_SPIN: Duration = Duration::from_millis(1);
 
 /// An SDK error as the Python exception a caller can catch by kind.
 fn to_py(e: AgentError) -> PyErr {
@@ -214,6 +217,69 @@ impl Agent {
         self.send(tick, actions)
     }
 
+    /// One environment step for every robot of this agent at once: answers `tick` with
+    /// `powers` (n × 2 float64, little-endian, one row per robot in registration order; each
+    /// checked finite and clipped to [-1, 1]) and waits for the next tick, as
+    /// [`Agent::wait_tick`] does. Returns that tick, or `None` once the run has finished.
+    ///
+    /// `spin` seconds (at most [`MAX_SPIN`]) are spent polling for the answer before the
+    /// thread sleeps: a lock-step hub usually answers within tens of microseconds, sooner than
+    /// a sleeping thread wakes, so a process that runs the whole step (an environment) spends a
+    /// core for speed. Python's other threads wait meanwhile.
+    #[pyo3(signature = (tick, powers, timeout = None, spin = 0.0))]
+    fn step(
+        &mut self,
+        py: Python<'_>,
+        tick: u64,
+        powers: &[u8],
+        timeout: Option<f64>,
+        spin: f64,
+    ) -> PyResult<Option<(u64, f64)>> {
+        let spin = seconds("spin", spin)?.min(MAX_SPIN);
+        let sdk = self.sdk()?;
+        let n = sdk.robots().len();
+        if powers.len() != n * 16 {
+            return Err(PyValueError::new_err(format!(
+                "{} power bytes for {n} robots: expected n × 2 float64 ({} bytes)",
+                powers.len(),
+                n * 16
+            )));
+        }
+        let mut blocks = Vec::with_capacity(n);
+        for (k, (&id, pair)) in sdk.robots().iter().zip(powers.chunks_exact(16)).enumerate() {
+            let left = f64::from_le_bytes(pair[..8].try_into().unwrap_or([0; 8]));
+            let right = f64::from_le_bytes(pair[8..].try_into().unwrap_or([0; 8]));
+            if !(left.is_finite() && right.is_finite()) {
+                return Err(PyValueError::new_err(format!(
+                    "row {k} (robot {id}): motor powers must be finite numbers, not ({left}, {right})"
+                )));
+            }
+            blocks.push(ActionBlock::motors(id, left.clamp(-1.0, 1.0), right.clamp(-1.0, 1.0)));
+        }
+        sdk.send(tick, &blocks).map_err(to_py)?;
+        let spin_until = Instant::now() + spin;
+        while !spin.is_zero() && Instant::now() < spin_until {
+            if let Some(t) = sdk.try_tick().map_err(to_py)? {
+                return Ok(Some((t.tick, t.sim_time_s)));
+            }
+            if sdk.finished() {
+                return Ok(None);
+            }
+            std::hint::spin_loop();
+        }
+        self.wait_tick(py, timeout)
+    }
+
+    /// What each robot's own sensors say this tick, as a chair's observation: one row per
+    /// robot in registration order of its `MAX_PROXIMITY` proximity readings in metres
+    /// (clipped to [0, `max_range`]; a missing or invalid reading is `max_range`) and its
+    /// compass as (cos, sin) (zeros without a compass), float32, little-endian, back to back
+    /// in a new `bytearray` (so the NumPy view of it is writable).
+    fn observations<'py>(&mut self, py: Python<'py>, max_range: f32) -> PyResult<Bound<'py, PyByteArray>> {
+        let sdk = self.sdk()?;
+        Ok(PyByteArray::new(py, &observation_table(sdk, max_range)))
+    }
+
     /// The ids of this agent's robots, in registration order.
     #[getter]
     fn robots(&self) -> Vec<u32> {
@@ -263,19 +329,20 @@ impl std::fmt::Debug for Observer {
     }
 }
 
-#[pymethods]
 impl Observer {
-    /// The world at tick `tick` or later (waiting up to `timeout` seconds for it): (tick,
-    /// [(robot id, x m, y m, heading degrees, collision count)]), in the hub's robot order.
-    #[pyo3(signature = (tick = 0, timeout = 5.0))]
-    fn robots(&mut self, py: Python<'_>, tick: u64, timeout: f64) -> PyResult<RobotStates> {
+    /// The world at tick `tick` or later, waiting up to `timeout` seconds for it.
+    fn world_at(
+        &mut self,
+        py: Python<'_>,
+        tick: u64,
+        timeout: f64,
+    ) -> PyResult<(ipc_types::WorldHeader, Vec<ipc_types::RobotState>)> {
         let deadline = Instant::now() + seconds("timeout", timeout)?;
         let sdk = self.sdk.as_mut().ok_or_else(|| IwsimError::new_err("the observer is closed"))?;
         loop {
             let (header, robots) = sdk.world().map_err(to_py)?;
             if header.tick >= tick {
-                let states = robots.iter().map(|r| (r.id, r.x_m, r.y_m, r.heading_deg, r.collision_count)).collect();
-                return Ok((header.tick, states));
+                return Ok((header, robots));
             }
             if Instant::now() >= deadline {
                 return Err(PyTimeoutError::new_err(format!("no world of tick {tick} within {timeout} s")));
@@ -286,6 +353,34 @@ impl Observer {
             py.check_signals()?;
         }
     }
+}
+
+#[pymethods]
+impl Observer {
+    /// The world at tick `tick` or later (waiting up to `timeout` seconds for it): (tick,
+    /// [(robot id, x m, y m, heading degrees, collision count)]), in the hub's robot order.
+    #[pyo3(signature = (tick = 0, timeout = 5.0))]
+    fn robots(&mut self, py: Python<'_>, tick: u64, timeout: f64) -> PyResult<RobotStates> {
+        let (header, robots) = self.world_at(py, tick, timeout)?;
+        let states = robots.iter().map(|r| (r.id, r.x_m, r.y_m, r.heading_deg, r.collision_count)).collect();
+        Ok((header.tick, states))
+    }
+
+    /// The true poses of robots `ids` at tick `tick` or later (waiting up to `timeout`
+    /// seconds), for a referee: (tick, bytes of n rows of (x m, y m, heading degrees,
+    /// collision count) as little-endian float64, in `ids`' order). A robot the world does
+    /// not hold raises `KeyError`.
+    #[pyo3(signature = (tick, ids, timeout = 5.0))]
+    fn poses<'py>(
+        &mut self,
+        py: Python<'py>,
+        tick: u64,
+        ids: Vec<u32>,
+        timeout: f64,
+    ) -> PyResult<(u64, Bound<'py, PyBytes>)> {
+        let (header, robots) = self.world_at(py, tick, timeout)?;
+        Ok((header.tick, PyBytes::new(py, &pose_table(&robots, &ids, header.tick)?)))
+    }
 
     /// Stops observing. Closing twice does nothing.
     fn close(&mut self) {
@@ -293,11 +388,98 @@ impl Observer {
     }
 }
 
+/// One step of `iwsim.env` in one call: `agent` answers `tick` with `powers` (see
+/// [`Agent::step`]) and waits for the next tick; returns `None` once the run has finished, else
+/// (tick, simulated seconds, the chairs' observations (see [`Agent::observations`]), their
+/// true poses from `observer` at that tick (see [`Observer::poses`]), both in the agent's
+/// registration order). The referee's poses never reach the agent: they go back to the
+/// environment's Python code, which judges rewards from them.
+#[pyfunction]
+#[pyo3(signature = (agent, observer, tick, powers, max_range, timeout = None, spin = 0.0))]
+#[allow(clippy::too_many_arguments)] // Python's keyword arguments, one call per step
+fn env_step<'py>(
+    py: Python<'py>,
+    agent: &Bound<'py, Agent>,
+    observer: &Bound<'py, Observer>,
+    tick: u64,
+    powers: &[u8],
+    max_range: f32,
+    timeout: Option<f64>,
+    spin: f64,
+) -> PyResult<Option<EnvStep<'py>>> {
+    let mut agent = agent.borrow_mut();
+    let Some((tick, sim_time_s)) = agent.step(py, tick, powers, timeout, spin)? else { return Ok(None) };
+    let sdk = agent.sdk()?;
+    let observations = PyByteArray::new(py, &observation_table(sdk, max_range));
+    let ids = sdk.robots().to_vec();
+    let (header, robots) = observer.borrow_mut().world_at(py, tick, timeout.unwrap_or(20.0))?;
+    let poses = PyBytes::new(py, &pose_table(&robots, &ids, header.tick)?);
+    Ok(Some((tick, sim_time_s, observations, poses)))
+}
+
+/// What [`env_step`] returns.
+type EnvStep<'py> = (u64, f64, Bound<'py, PyByteArray>, Bound<'py, PyBytes>);
+
 /// A proximity cone as Python passes it: x m, y m, direction degrees, opening degrees, range m.
 type Cone = (f64, f64, f64, f64, f64);
 
 /// What [`Observer::robots`] returns.
 type RobotStates = (u64, Vec<(u32, f64, f64, f64, u32)>);
+
+/// The chair observations of an agent's robots (see [`Agent::observations`]).
+fn observation_table(sdk: &SdkAgent, max_range: f32) -> Vec<u8> {
+    const ROW: usize = ipc_types::MAX_PROXIMITY + 2;
+    let blocks = sdk.sensors();
+    let mut out = vec![0u8; sdk.robots().len() * ROW * 4];
+    for (k, (row, &id)) in out.chunks_exact_mut(ROW * 4).zip(sdk.robots()).enumerate() {
+        let mut values = [max_range; ROW];
+        (values[ROW - 2], values[ROW - 1]) = (0.0, 0.0);
+        // Blocks come in registration order; look further only when the robots changed.
+        let block = blocks.get(k).filter(|b| b.robot_id == id).or_else(|| blocks.iter().find(|b| b.robot_id == id));
+        if let Some(b) = block {
+            let count = (b.proximity_count as usize).min(ipc_types::MAX_PROXIMITY);
+            for (v, &m) in values.iter_mut().zip(&b.proximity_m[..count]) {
+                let m = m as f32;
+                *v = if m.is_finite() { m.clamp(0.0, max_range) } else { max_range };
+            }
+            if b.present & ipc_types::HAS_COMPASS != 0 {
+                let r = b.compass_deg.to_radians();
+                (values[ROW - 2], values[ROW - 1]) = (r.cos() as f32, r.sin() as f32);
+            }
+        }
+        write_f32s(row, &values);
+    }
+    out
+}
+
+/// The true poses of robots `ids` in `robots` (see [`Observer::poses`]).
+fn pose_table(robots: &[ipc_types::RobotState], ids: &[u32], tick: u64) -> PyResult<Vec<u8>> {
+    let mut out = vec![0u8; ids.len() * 32];
+    for (k, (row, id)) in out.chunks_exact_mut(32).zip(ids).enumerate() {
+        // The hub keeps robots in registration order: a referee's ids usually line up with it.
+        let r = robots
+            .get(k)
+            .filter(|r| r.id == *id)
+            .or_else(|| robots.iter().find(|r| r.id == *id))
+            .ok_or_else(|| PyKeyError::new_err(format!("robot {id} is not in the world of tick {tick}")))?;
+        write_f64s(row, &[r.x_m, r.y_m, r.heading_deg, f64::from(r.collision_count)]);
+    }
+    Ok(out)
+}
+
+/// `values` as little-endian bytes into `out` (as long as both are).
+fn write_f32s(out: &mut [u8], values: &[f32]) {
+    for (bytes, v) in out.chunks_exact_mut(4).zip(values) {
+        bytes.copy_from_slice(&v.to_le_bytes());
+    }
+}
+
+/// `values` as little-endian bytes into `out` (as long as both are).
+fn write_f64s(out: &mut [u8], values: &[f64]) {
+    for (bytes, v) in out.chunks_exact_mut(8).zip(values) {
+        bytes.copy_from_slice(&v.to_le_bytes());
+    }
+}
 
 /// Waits up to `slice` for `fd` to become readable; whether it did.
 fn wait_readable(fd: i32, slice: Duration) -> bool {
@@ -354,6 +536,7 @@ fn _iwsim(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(connect, m)?)?;
     m.add_function(wrap_pyfunction!(sensor_block_layout, m)?)?;
     m.add_function(wrap_pyfunction!(observe, m)?)?;
+    m.add_function(wrap_pyfunction!(env_step, m)?)?;
     m.add_class::<Agent>()?;
     m.add_class::<Observer>()?;
     m.add("SENSOR_BLOCK_BYTES", core::mem::size_of::<SensorBlock>())?;

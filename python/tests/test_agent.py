@@ -88,6 +88,44 @@ def test_bad_actions_and_registrations_raise_and_the_run_goes_on(hub_factory):
         assert seen == list(range(6))
 
 
+def test_step_answers_every_robot_at_once_and_observations_are_its_sensors(hub_factory):
+    # Two chairs in the LIACC corridor: one facing the south wall, one facing east.
+    hub = hub_factory("--lockstep", "--ticks", "10", "--wait-agents", "1", "--no-noise")
+    with iwsim.connect(hub.session, timeout=20) as agent:
+        south = agent.register("south", body=iwsim.CHAIR_BODY, pose=(10.0, 6.1, -90.0), sensors=iwsim.CHAIR_SENSORS)
+        east = agent.register("east", body=iwsim.CHAIR_BODY, pose=(14.0, 6.1, 0.0), sensors=iwsim.CHAIR_SENSORS)
+        agent.ready()
+        tick = agent.wait_tick(timeout=20)
+        obs = agent.observations(max_range=5.0)
+        blocks = agent.sensors()
+        assert obs.shape == (2, 10) and obs.dtype == np.float32
+        # Rows in registration order: the proximity readings (clipped to 5 m) and the compass.
+        for row, block in zip(obs, blocks):
+            want = np.minimum(block["proximity_m"][: block["proximity_count"]], 5.0).astype(np.float32)
+            assert np.array_equal(row[: len(want)], want), (row, want)
+            c = math.radians(float(block["compass_deg"]))
+            assert np.allclose(row[-2:], [math.cos(c), math.sin(c)], atol=1e-6)
+        assert blocks["robot_id"].tolist() == [south, east]
+        # Compass as (cos, sin): south and east; the south chair has the wall within a metre.
+        assert np.allclose(obs[:, -2:], [[0.0, -1.0], [1.0, 0.0]], atol=1e-6), obs
+        assert obs[0, :8].min() < 1.0, obs
+        with pytest.raises(ValueError, match="finite"):
+            agent.step(tick, [[0.5, 0.5], [math.nan, 0.5]])
+        with pytest.raises(ValueError, match="expected n × 2"):
+            agent.step(tick, [[0.5, 0.5]])
+        with pytest.raises(ValueError, match=r"\(n, 2\)"):
+            agent.step(tick, [0.5, 0.5])
+        seen = [tick.tick]
+        # The refused calls sent nothing; one call per tick now drives both chairs.
+        while (tick := agent.step(tick, np.array([[0.0, 0.0], [1.0, 1.0]]), timeout=20)) is not None:
+            seen.append(tick.tick)
+    assert seen == list(range(11)), seen
+    out = hub.stop()
+    x_east = float(out.split("robot 2: x ")[1].split(" m")[0])
+    x_south = float(out.split("robot 1: x ")[1].split(" m")[0])
+    assert x_east > 14.3 and abs(x_south - 10.0) < 0.01, out
+
+
 def test_a_hub_that_dies_mid_run_raises_hub_gone(hub_factory):
     hub = hub_factory("--lockstep", "--wait-agents", "1")
     agent = iwsim.connect(hub.session, timeout=20)

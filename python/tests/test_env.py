@@ -95,3 +95,26 @@ def test_driving_ahead_is_rewarded_and_a_bad_action_is_refused():
         env.step({"chair0": np.array([0.0, 0.0])})  # the episode goes on
     finally:
         env.close()
+
+
+def test_a_swapped_reward_sees_every_chair_at_once_and_a_wrong_shape_is_refused():
+    from iwsim.env import ChairState
+
+    seen = []
+
+    def east(before: ChairState, after: ChairState, checkpoints):
+        seen.append((before.x.shape, after.next_checkpoint.shape))
+        return (after.x - before.x) - (after.contacts - before.contacts)
+
+    env = ChairsParallelEnv(2, short(), reward=east)
+    try:
+        env.reset(seed=2)
+        _, rew, _, _, _ = env.step({"chair0": np.array([1.0, 1.0]), "chair1": np.array([0.0, 0.0])})
+        _, rew, _, _, _ = env.step({"chair0": np.array([1.0, 1.0]), "chair1": np.array([0.0, 0.0])})
+        assert seen == [((2,), (2,))] * 2
+        assert rew["chair0"] > 0.0 and rew["chair1"] == 0.0, rew
+        env.reward_fn = lambda before, after, checkpoints: 1.0
+        with pytest.raises(ValueError, match="one reward per chair"):
+            env.step({"chair0": np.array([0.0, 0.0]), "chair1": np.array([0.0, 0.0])})
+    finally:
+        env.close()

@@ -35,3 +35,19 @@ def test_the_training_loop_improves_its_policy():
     means = [float(v) for v in re.findall(r"return mean\s+(-?[0-9.]+) m", out)]
     assert len(means) == 8, out
     assert means[-1] > means[0] + 1.0, out
+
+
+def test_the_speed_bench_runs_and_times_every_variant_by_the_hub():
+    import json
+
+    script = pathlib.Path(__file__).resolve().parents[1] / "benches" / "speed.py"
+    from conftest import iwsim_bin
+
+    env = {**os.environ, "IWSIM_BIN": iwsim_bin()}
+    out = subprocess.run([sys.executable, str(script), "--runs", "1", "--ticks", "40", "--chairs", "2", "--json"],
+                         env=env, capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stdout + out.stderr
+    result = json.loads(out.stdout)["2"]
+    assert set(result) == {"python env", "rust sdk", "rust sdk busy-poll", "python udp", "env python us per step"}
+    for kind, spread in result.items():
+        assert spread["runs"] == 1 and spread["median"] > 0, (kind, spread)
