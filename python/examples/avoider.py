@@ -1,6 +1,6 @@
 """A reactive avoider drives the thesis's slalom (builtin:slalom's lab, checkpoints and
-obstacles A and B) through the Gymnasium environment: hold the compass east, turn away from
-whatever the front sensors see near, keep off the side walls. No map, no plan, no pose.
+obstacles A and B) through the Gymnasium environment: keep to one side of the corridor, and
+when something blocks the way ahead, cross to the side with more room. No map, no plan, no pose.
 
     IWSIM_BIN=target/release/iwsim python python/examples/avoider.py [--seed N]
 """
@@ -8,6 +8,7 @@ whatever the front sensors see near, keep off the side walls. No map, no plan, n
 import argparse
 import math
 import pathlib
+from collections import deque
 
 import numpy as np
 
@@ -15,35 +16,55 @@ from iwsim.env import ChairEnv, Scenario
 
 SLALOM = pathlib.Path(__file__).resolve().parents[2] / "hub/runner/scenarios/slalom.toml"
 
+BLOCKED_M = 0.9  # the front IR this near (mean of 3 readings): change sides now
+GAP_M = 0.16  # the gap kept between the chair's side and the wall it keeps to
+NOSE_M = 0.13  # the least gap for the front corner, 0.88 m ahead of the pose point
+GENTLE, STEEP = math.radians(10), math.radians(32)
+
 
 class Avoider:
-    """The rule, with one bit of memory: which way it is turning round an obstacle, so sensor
-    noise cannot make it dither left and right in front of one."""
+    """Keep to one side, at ``GAP_M`` from whatever is there, wall or obstacle: to the right at
+    first, so it slips under A (A is then just the thing on the left). When the front IR finds
+    the way blocked (B, dead ahead in that lane), cross to the side where the sensors see more
+    room, steeply, and level out as that side comes near, before the nose reaches it.
+
+    Memory: the side kept to, whether it got there by a lane change (which may steer steeper),
+    and the last few readings (the sonars' noise is 0.1 m, about the whole margin under A)."""
 
     def __init__(self) -> None:
-        self.side = 0.0
+        self.side = -1.0  # +1 keeps to the left, -1 to the right
+        self.lane_change = False
+        self.ahead: deque = deque(maxlen=3)
+        self.gap: deque = deque(maxlen=4)
 
     def __call__(self, obs: np.ndarray) -> np.ndarray:
         heading = math.atan2(obs[9], obs[8])  # the compass, radians; east is 0
-        # Where to point: east, or up to 15° off it to sidestep what the IR beams see ahead
-        # (the ±25° beams count as nearer: they reach the walls farther on).
-        ahead = float(min(obs[0], 1.6 * obs[1], 1.6 * obs[2]))
-        if float(obs[0]) < 0.8:
-            # Blocked straight ahead: choose afresh (the last sidestep may lead into this).
-            self.side = 1.0 if obs[1] + obs[3] + obs[5] > obs[2] + obs[4] + obs[6] else -1.0
-        elif ahead < 2.0:
-            if self.side == 0.0:
-                self.side = 1.0 if obs[1] + obs[3] + obs[5] > obs[2] + obs[4] + obs[6] else -1.0
-        elif ahead > 2.5:
-            self.side = 0.0
-        target = self.side * math.radians(40 if float(obs[0]) < 0.8 else 15)
-        turn = 1.5 * (target - heading)
-        # Centre between what the side sonars see (+90° minus -90°), and off near corners.
-        left, right = min(float(obs[5]), 1.0), min(float(obs[6]), 1.0)
-        turn += 0.4 * (left - right)
-        turn -= 0.9 * max(0.0, (0.6 - float(obs[3])) / 0.6) - 0.9 * max(0.0, (0.6 - float(obs[4])) / 0.6)
-        turn = float(np.clip(turn, -0.5, 0.5))
-        speed = 0.5 * float(np.clip((float(obs[0]) - 0.3) / 0.8, -0.3, 1.0))
+        self.ahead.append(float(obs[0]))
+        # Only while pointing along the way: steering to a side, the front IR sees that wall.
+        if np.mean(self.ahead) < BLOCKED_M and abs(heading) < GENTLE:
+            side = 1.0 if obs[1] + obs[3] + obs[5] > obs[2] + obs[4] + obs[6] else -1.0
+            if side != self.side:
+                self.side, self.lane_change = side, True
+                self.gap.clear()
+        s = self.side
+        t = s * heading  # how much the chair points towards its side
+        r90, r60 = (float(obs[5]), float(obs[3])) if s > 0 else (float(obs[6]), float(obs[4]))
+        # The side's gap as if the chair pointed along the wall, from both sonars on that side:
+        # each reading made perpendicular (the cone's nearest ray: 90° sonar ±10°, 60° sonar ±5°)
+        # and moved back from its mount (0.33 m and 0.88 m ahead of the pose point).
+        cos_t = 0.325 * (math.cos(t) - 1.0)
+        g90 = r90 * math.cos(max(0.0, abs(t) - math.radians(10))) + 0.33 * math.sin(t) + cos_t
+        g60 = r60 * math.cos(max(0.0, abs(t - math.radians(30)) - math.radians(5))) + 0.88 * math.sin(t) + cos_t
+        self.gap.append((g90 + g60) / 2.0)
+        gap = float(np.mean(self.gap))
+        # Point towards the side in proportion to the surplus gap, but never so steeply that the
+        # nose would come within NOSE_M of it: the chair turns about a point 0.88 m behind its
+        # front, so a steep climb ends with the nose against the wall and a flank on the corner.
+        toward = min(1.2 * (gap - GAP_M), math.asin(float(np.clip((gap - NOSE_M) / 0.88, 0.0, 1.0))))
+        # Drifting to its side it goes gently; a lane change must be done within a chair length.
+        toward = float(np.clip(toward, -STEEP, STEEP if self.lane_change else GENTLE))
+        turn = float(np.clip(1.5 * (s * toward - heading), -0.4, 0.4))
+        speed = 0.4
         return np.clip(np.array([speed - turn, speed + turn], dtype=np.float32), -1.0, 1.0)
 
 

@@ -22,12 +22,12 @@ def run(script: str, *args: str) -> str:
     return out.stdout
 
 
-def test_the_reactive_avoider_passes_obstacle_a_without_touching_it():
-    # 32 s of the slalom: past A (x 17-17.6), which it must sidestep, with no contact.
-    out = run("avoider.py", "--seed", "1", "--seconds", "32")
-    m = re.search(r"return (-?[0-9.]+), (\d+) contacts", out)
+def test_the_reactive_avoider_drives_the_slalom_to_checkpoint_2_without_touching_anything():
+    # Under A, over B, into checkpoint 2 (about 50 s simulated, well under a second of wall clock).
+    out = run("avoider.py", "--seed", "1", "--seconds", "70")
+    m = re.search(r"reached checkpoint 2 after \d+ steps \([0-9.]+ s\), return (-?[0-9.]+), (\d+) contacts", out)
     assert m, out
-    assert float(m.group(1)) > 6.0 and int(m.group(2)) == 0, out
+    assert float(m.group(1)) > 19.0 and int(m.group(2)) == 0, out
 
 
 def test_the_training_loop_improves_its_policy():
