@@ -148,7 +148,7 @@ class Agent:
     def step(self, tick: int | Tick, powers: np.ndarray, timeout: Optional[float] = None) -> Optional[Tick]:
         """Answers ``tick`` for all this agent's robots at once and waits for the next tick (as
         ``wait_tick``): ``powers`` is (n, 2), one (left, right) row per robot in registration
-        order, each finite (clipped to [-1, 1]). One native call per tick, whatever n."""
+        order, each finite (the hub clamps them to [-1, 1]). One native call per tick, whatever n."""
         p = np.ascontiguousarray(powers, dtype="<f8")
         if p.ndim != 2 or p.shape[1] != 2:
             raise ValueError(f"powers must be (n, 2), one (left, right) row per robot: got shape {p.shape}")

@@ -145,10 +145,10 @@ class ChairsParallelEnv(ParallelEnv):
             starts.append((x - spacing_m * math.cos(math.radians(h)), y - spacing_m * math.sin(math.radians(h)), h))
         self._starts = starts[:n]
         self.reward_fn = reward
-        self._index = {a: k for k, a in enumerate(f"chair{i}" for i in range(n))}
         self._checkpoints = np.asarray(self.scenario.checkpoints, dtype=np.float64).reshape(-1, 3)
         self._never = np.zeros(n, dtype=bool)
         self.possible_agents = [f"chair{i}" for i in range(n)]
+        self._index = {a: k for k, a in enumerate(self.possible_agents)}
         self.agents: list[str] = []
         low = np.array([0.0] * _iwsim.MAX_PROXIMITY + [-1.0, -1.0], dtype=np.float32)
         high = np.array([MAX_RANGE_M] * _iwsim.MAX_PROXIMITY + [1.0, 1.0], dtype=np.float32)

@@ -189,12 +189,7 @@ impl Agent {
                     sdk.robots()
                 )));
             }
-            if !(left.is_finite() && right.is_finite()) {
-                return Err(PyValueError::new_err(format!(
-                    "robot {id}: motor powers must be finite numbers, not ({left}, {right})"
-                )));
-            }
-            blocks.push(ActionBlock::motors(id, left, right));
+            blocks.push(motors(&format!("robot {id}"), id, left, right)?);
         }
         sdk.send(tick, &blocks).map_err(to_py)
     }
@@ -211,15 +206,13 @@ impl Agent {
             )));
         }
         let ids = ids.chunks_exact(4).map(|b| u32::from_le_bytes([b[0], b[1], b[2], b[3]]));
-        let mut f = powers.chunks_exact(8).map(|b| f64::from_le_bytes(b.try_into().unwrap_or([0; 8])));
-        let actions: Vec<(u32, f64, f64)> =
-            ids.map(|id| (id, f.next().unwrap_or(f64::NAN), f.next().unwrap_or(f64::NAN))).collect();
+        let actions: Vec<(u32, f64, f64)> = ids.zip(power_pairs(powers)).map(|(id, [l, r])| (id, l, r)).collect();
         self.send(tick, actions)
     }
 
     /// One environment step for every robot of this agent at once: answers `tick` with
     /// `powers` (n × 2 float64, little-endian, one row per robot in registration order; each
-    /// checked finite and clipped to [-1, 1]) and waits for the next tick, as
+    /// checked finite; the hub clamps them to [-1, 1]) and waits for the next tick, as
     /// [`Agent::wait_tick`] does. Returns that tick, or `None` once the run has finished.
     ///
     /// `spin` seconds (at most [`MAX_SPIN`]) are spent polling for the answer before the
@@ -245,17 +238,13 @@ impl Agent {
                 n * 16
             )));
         }
-        let mut blocks = Vec::with_capacity(n);
-        for (k, (&id, pair)) in sdk.robots().iter().zip(powers.chunks_exact(16)).enumerate() {
-            let left = f64::from_le_bytes(pair[..8].try_into().unwrap_or([0; 8]));
-            let right = f64::from_le_bytes(pair[8..].try_into().unwrap_or([0; 8]));
-            if !(left.is_finite() && right.is_finite()) {
-                return Err(PyValueError::new_err(format!(
-                    "row {k} (robot {id}): motor powers must be finite numbers, not ({left}, {right})"
-                )));
-            }
-            blocks.push(ActionBlock::motors(id, left.clamp(-1.0, 1.0), right.clamp(-1.0, 1.0)));
-        }
+        let blocks = sdk
+            .robots()
+            .iter()
+            .zip(power_pairs(powers))
+            .enumerate()
+            .map(|(k, (&id, [left, right]))| motors(&format!("row {k} (robot {id})"), id, left, right))
+            .collect::<PyResult<Vec<_>>>()?;
         sdk.send(tick, &blocks).map_err(to_py)?;
         let spin_until = Instant::now() + spin;
         while !spin.is_zero() && Instant::now() < spin_until {
@@ -411,9 +400,8 @@ fn env_step<'py>(
     let Some((tick, sim_time_s)) = agent.step(py, tick, powers, timeout, spin)? else { return Ok(None) };
     let sdk = agent.sdk()?;
     let observations = PyByteArray::new(py, &observation_table(sdk, max_range));
-    let ids = sdk.robots().to_vec();
     let (header, robots) = observer.borrow_mut().world_at(py, tick, timeout.unwrap_or(20.0))?;
-    let poses = PyBytes::new(py, &pose_table(&robots, &ids, header.tick)?);
+    let poses = PyBytes::new(py, &pose_table(&robots, sdk.robots(), header.tick)?);
     Ok(Some((tick, sim_time_s, observations, poses)))
 }
 
@@ -465,6 +453,23 @@ fn pose_table(robots: &[ipc_types::RobotState], ids: &[u32], tick: u64) -> PyRes
         write_f64s(row, &[r.x_m, r.y_m, r.heading_deg, f64::from(r.collision_count)]);
     }
     Ok(out)
+}
+
+/// One robot's motor powers as an action, refused when not finite (`what` names the robot in
+/// the error). Out-of-range powers go as they are: the hub clamps them.
+fn motors(what: &str, id: u32, left: f64, right: f64) -> PyResult<ActionBlock> {
+    if left.is_finite() && right.is_finite() {
+        Ok(ActionBlock::motors(id, left, right))
+    } else {
+        Err(PyValueError::new_err(format!("{what}: motor powers must be finite numbers, not ({left}, {right})")))
+    }
+}
+
+/// (left, right) pairs from n × 2 little-endian float64 (a trailing partial pair is dropped;
+/// callers check the length first).
+fn power_pairs(bytes: &[u8]) -> impl Iterator<Item = [f64; 2]> + '_ {
+    let f = |b: &[u8]| f64::from_le_bytes(b.try_into().unwrap_or([0; 8]));
+    bytes.chunks_exact(16).map(move |p| [f(&p[..8]), f(&p[8..])])
 }
 
 /// `values` as little-endian bytes into `out` (as long as both are).
