@@ -73,6 +73,13 @@ pub struct HubArgs {
     /// world per tick in Foxglove's schemas.
     #[arg(long, value_name = "FILE.mcap")]
     pub record: Option<PathBuf>,
+    /// Threads the world's step may use (0: one per core). A run is the same on any number.
+    #[arg(long, default_value_t = 0, value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(0..=world::MAX_THREADS as u64))]
+    pub threads: usize,
+    /// The fewest robots a step is spread over threads for (smaller worlds step on one thread,
+    /// where handing out work would cost more than it saves).
+    #[arg(long, default_value_t = world::PARALLEL_MIN_ROBOTS)]
+    pub parallel_min_robots: usize,
 }
 
 /// Builds the hub's configuration from the command line.
@@ -125,6 +132,8 @@ pub fn config(args: &HubArgs) -> anyhow::Result<HubConfig> {
         obstacle_from,
         checkpoints,
         record: args.record.clone(),
+        threads: args.threads,
+        parallel_min_robots: args.parallel_min_robots,
     })
 }
 

@@ -199,6 +199,12 @@ impl HubCore {
         self.checkpoints = checkpoints;
     }
 
+    /// Lets the world's step use `threads` threads (0: one per core) from `parallel_min_robots`
+    /// robots on; returns the threads it will use. Never changes a run.
+    pub fn set_threads(&mut self, threads: usize, parallel_min_robots: usize) -> usize {
+        self.stage.set_threads(threads, parallel_min_robots)
+    }
+
     /// The world.
     pub fn world(&self) -> &World {
         self.stage.world()

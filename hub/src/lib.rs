@@ -63,6 +63,10 @@ pub struct HubConfig {
     pub checkpoints: Vec<records::places::Checkpoint>,
     /// Record the run to this MCAP file (see the `recorder` crate).
     pub record: Option<std::path::PathBuf>,
+    /// Threads the world's step may use (0: one per core); never changes a run.
+    pub threads: usize,
+    /// The fewest robots a step is spread over threads for.
+    pub parallel_min_robots: usize,
 }
 
 /// Why the hub stopped with an error.
@@ -157,6 +161,14 @@ fn named_publisher(r: &RegisterRequest) -> u128 {
     r.actions_publisher[0] as u128 | (r.actions_publisher[1] as u128) << 64
 }
 
+/// The threads a world steps on when `requested` (0: one per core).
+pub fn threads_for(requested: usize) -> usize {
+    match requested {
+        0 => std::thread::available_parallelism().map_or(1, std::num::NonZeroUsize::get),
+        n => n,
+    }
+}
+
 /// Runs a hub until its tick limit, a Stop command, or SIGINT/SIGTERM.
 pub fn run(cfg: HubConfig) -> Result<HubOutcome, HubError> {
     raise_fd_limit();
@@ -170,6 +182,7 @@ pub fn run(cfg: HubConfig) -> Result<HubOutcome, HubError> {
     }
     let node = session.node(HUB_NODE_NAME)?;
     let mut core = HubCore::new(&cfg.lab, cfg.grid.clone(), cfg.params.clone(), cfg.seed, cfg.mode, cfg.tick_limit)?;
+    core.set_threads(threads_for(cfg.threads), cfg.parallel_min_robots);
     core.set_max_robots(cfg.max_robots);
     core.set_scenario(cfg.obstacle_from, cfg.checkpoints.clone());
     let deadline_ms = cfg.deadline.as_millis().min(u32::MAX as u128) as u32;

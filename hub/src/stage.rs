@@ -76,6 +76,13 @@ impl Stage {
         })
     }
 
+    /// Lets the world's step use `threads` threads (0: one per core) from `parallel_min_robots`
+    /// robots on; returns the threads it will use.
+    pub fn set_threads(&mut self, threads: usize, parallel_min_robots: usize) -> usize {
+        self.world.set_parallel_min_robots(parallel_min_robots);
+        self.world.set_threads(threads)
+    }
+
     /// The world.
     pub fn world(&self) -> &World {
         &self.world
@@ -174,6 +181,7 @@ impl Stage {
             return; // the same lab and parameters built once already
         };
         world.set_capacity(MAX_ROBOTS);
+        world.use_threads_of(&self.world);
         let mut order: Vec<(String, u32)> =
             self.handles.iter().filter_map(|(&id, &h)| Some((self.world.robot(h)?.spec.name.clone(), id))).collect();
         order.sort();

@@ -81,12 +81,47 @@ fn map_check_refuses_an_unknown_root_and_a_missing_file() {
 
 #[test]
 fn bench_world_prints_the_documented_json_keys() {
-    let out = iwsim(&["bench", "world", "--robots", "30", "--ticks", "20", "--warmup", "5", "--json"]);
+    let out = iwsim(&["bench", "world", "--robots", "30", "--ticks", "20", "--warmup", "5", "--runs", "2", "--json"]);
     assert!(out.status.success());
     let text = String::from_utf8_lossy(&out.stdout);
-    for key in ["\"robots\":30", "\"ticks\":20", "\"ticks_per_s\":", "\"us_per_robot_tick\":"] {
+    for key in [
+        "\"robots\":30",
+        "\"ticks\":20",
+        "\"runs\":2",
+        "\"ticks_per_s\":",
+        "\"us_per_robot_tick\":",
+        "\"same_state_hash\":true",
+        "\"variants\":[{\"threads\":1,",
+        "\"median\":",
+        "\"state_hash\":\"",
+    ] {
         assert!(text.contains(key), "{key} missing from {text}");
     }
+}
+
+#[test]
+fn a_10000_chair_bench_world_ends_in_one_state_on_one_thread_or_two() {
+    // 1,000 ticks of 10,000 noisy chairs on tiled LIACC floors, stepped on one thread and on
+    // two: the command itself compares the state hashes and fails if they differ.
+    let out = iwsim(&[
+        "bench",
+        "world",
+        "--robots",
+        "10000",
+        "--ticks",
+        "1000",
+        "--warmup",
+        "0",
+        "--threads",
+        "1,2",
+        "--runs",
+        "1",
+        "--json",
+    ]);
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(out.status.success(), "{text}\n{}", String::from_utf8_lossy(&out.stderr));
+    assert!(text.contains("\"same_state_hash\":true"), "{text}");
+    assert!(text.contains("\"threads\":1,") && text.contains("\"threads\":2,"), "{text}");
 }
 
 #[test]

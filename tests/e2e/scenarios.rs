@@ -110,6 +110,38 @@ fn the_same_seed_in_lock_step_gives_the_same_run() {
 }
 
 #[test]
+fn one_seed_gives_one_state_hash_on_one_thread_or_two() {
+    // The hub's step on two threads (spread over them from the first robot on) ends where one
+    // thread does: every robot's noise is its own, whoever steps it first.
+    for (scenario, logs) in [("slalom", &["chair1.csv"][..]), ("corridor-swap", &["chair1.csv", "chair2.csv"][..])] {
+        let dirs: Vec<PathBuf> = ["one", "two"].iter().map(|t| out_dir(&format!("threads-{scenario}-{t}"))).collect();
+        for (d, threads) in
+            dirs.iter().zip([&["--threads", "1"][..], &["--threads", "2", "--parallel-min-robots", "0"]])
+        {
+            let name = format!("builtin:{scenario}");
+            let mut args =
+                vec!["run", &name, "--lockstep", "--headless", "--seed", "3", "--out", d.to_str().expect("utf-8")];
+            args.extend_from_slice(threads);
+            let (ok, out, err) = iwsim(&args, Duration::from_secs(180));
+            assert!(ok, "{out}\n{err}");
+        }
+        let (one, two) = (summary(&dirs[0]), summary(&dirs[1]));
+        assert_eq!(one.state_hash, two.state_hash, "{scenario}");
+        assert!(one.ticks > 100, "{scenario}: the run went on ({} ticks)", one.ticks);
+        for log in logs {
+            assert_eq!(
+                std::fs::read(dirs[0].join(log)).expect("log on one thread"),
+                std::fs::read(dirs[1].join(log)).expect("log on two threads"),
+                "{scenario}: identical {log}"
+            );
+        }
+        for d in dirs {
+            let _ = std::fs::remove_dir_all(d);
+        }
+    }
+}
+
+#[test]
 fn a_bad_scenario_file_is_refused_with_its_line() {
     let dir = out_dir("badscen");
     std::fs::create_dir_all(&dir).expect("dir");

@@ -15,9 +15,9 @@
 use sim_model::wrap_rad;
 
 /// The share of the compass's disagreement with the wheels' heading taken each tick. At
-/// 10 Hz it averages the compass over about 2 s, so its noise (2° by default) shrinks to about
-/// a third of a degree, while the wheels' heading walk under slip has no time to build up.
-pub const COMPASS_GAIN: f64 = 0.05;
+/// 10 Hz it averages the compass over about 1.2 s, so its noise (2° by default) shrinks to
+/// about 0.4° (√(g/(2−g))), while the wheels' heading walk under slip has no time to build up.
+pub const COMPASS_GAIN: f64 = 0.08;
 
 /// Dead reckoning from cumulative wheel-encoder ticks, with an optional compass.
 #[derive(Debug, Clone, PartialEq)]

@@ -177,6 +177,17 @@ pub struct BenchWorldArgs {
     /// Seed for placement and noise.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
+    /// Thread counts to time, comma-separated, each a variant of the same run (0: one per
+    /// core). Default: one thread, and one per core when the machine has more than one.
+    #[arg(long, value_delimiter = ',', value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(0..=world::MAX_THREADS as u64))]
+    pub threads: Vec<usize>,
+    /// The fewest chairs a step is spread over threads for.
+    #[arg(long, default_value_t = world::PARALLEL_MIN_ROBOTS)]
+    pub parallel_min_robots: usize,
+    /// Runs of each thread count, interleaved round by round; each figure is the median of
+    /// its runs with min and max. Every run times the same ticks from the same warmed world.
+    #[arg(long, default_value_t = 5, value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..=MAX_RUNS))]
+    pub runs: usize,
     /// Print one JSON object instead of text.
     #[arg(long)]
     pub json: bool,

@@ -40,34 +40,46 @@ use ipc_types::{PING_PAYLOAD_BYTES, Ping};
 use crate::args::{BenchLatencyArgs, BenchLockstepArgs, BenchWorldArgs, RawPeerArgs, Transport, UdpClientArgs};
 use crate::repeat::Spread;
 
-/// Result of `iwsim bench world`.
+/// One timed run of `iwsim bench world`.
 #[derive(Debug, Clone, PartialEq)]
 pub struct WorldBench {
     /// Chairs in the world.
     pub robots: usize,
     /// Ticks timed.
     pub ticks: u64,
+    /// Threads the step used.
+    pub threads: usize,
     /// Ticks per second of `World::step` alone.
     pub ticks_per_s: f64,
     /// Microseconds per robot per tick.
     pub us_per_robot_tick: f64,
     /// Median time of one tick, milliseconds.
     pub p50_tick_ms: f64,
-    /// Time to build the world and place the chairs, seconds.
-    pub build_s: f64,
+    /// The world's state hash after the timed ticks: the same for every thread count.
+    pub state_hash: u64,
 }
 
-/// Steps tiled LIACC floors with `robots` chairs and times `World::step` (the controller that
-/// makes the actions runs between ticks and is not timed).
-/// The chairs first drive `warmup` ticks untimed, so every run times the same stretch of the
-/// same (seeded) drive.
-pub fn measure_world(robots: usize, ticks: u64, warmup: u64, seed: u64) -> anyhow::Result<WorldBench> {
+/// Builds tiled LIACC floors with `robots` chairs and drives them `warmup` ticks (on every
+/// core: the warm state does not depend on it); returns the warm world and how long building
+/// took, seconds.
+pub fn warm_world(robots: usize, warmup: u64, seed: u64) -> anyhow::Result<(TiledWorld, f64)> {
     let t0 = Instant::now();
     let mut w = TiledWorld::build(robots, seed)?;
     let build_s = t0.elapsed().as_secs_f64();
+    let threads = w.world.threads();
+    w.world.set_threads(cores());
     for _ in 0..warmup {
         w.tick(0.1);
     }
+    w.world.set_threads(threads);
+    Ok((w, build_s))
+}
+
+/// Times `ticks` steps of `World::step` on a copy of `start` stepping with `threads`' threads
+/// (the controller that makes the actions runs between ticks and is not timed).
+pub fn measure_world(start: &TiledWorld, threads: &world::World, ticks: u64) -> WorldBench {
+    let mut w = start.clone();
+    w.world.use_threads_of(threads);
     let mut per_tick = Vec::with_capacity(ticks as usize);
     let mut total = Duration::ZERO;
     for _ in 0..ticks {
@@ -80,35 +92,114 @@ pub fn measure_world(robots: usize, ticks: u64, warmup: u64, seed: u64) -> anyho
     }
     per_tick.sort_unstable();
     let secs = total.as_secs_f64().max(1e-12);
-    Ok(WorldBench {
+    let robots = w.robots.len();
+    WorldBench {
         robots,
         ticks,
+        threads: w.world.threads(),
         ticks_per_s: ticks as f64 / secs,
         us_per_robot_tick: secs * 1e6 / (ticks as f64 * robots.max(1) as f64),
         p50_tick_ms: per_tick.get(per_tick.len() / 2).map_or(0.0, |d| d.as_secs_f64() * 1e3),
-        build_s,
-    })
+        state_hash: w.world.state_hash(),
+    }
 }
 
-/// `iwsim bench world`.
+/// The machine's cores.
+fn cores() -> usize {
+    std::thread::available_parallelism().map_or(1, std::num::NonZeroUsize::get)
+}
+
+/// The thread counts `iwsim bench world` times by default: one, and one per core.
+fn default_threads() -> Vec<usize> {
+    if cores() > 1 { vec![1, cores()] } else { vec![1] }
+}
+
+/// `iwsim bench world`: every thread count timed `runs` times from one warm world, interleaved;
+/// fails (exit 1) if two thread counts end in different states.
 pub fn world(args: &BenchWorldArgs) -> anyhow::Result<ExitCode> {
-    let b = measure_world(args.robots, args.ticks, args.warmup, args.seed)?;
+    let threads: Vec<usize> = if args.threads.is_empty() {
+        default_threads()
+    } else {
+        args.threads.iter().map(|&t| if t == 0 { cores() } else { t }).collect()
+    };
+    let (start, build_s) = warm_world(args.robots, args.warmup, args.seed)?;
+    // One world per thread count holds its pool, so no run pays for starting threads.
+    let pools: Vec<world::World> = threads
+        .iter()
+        .map(|&t| {
+            let mut w = world::World::new(start.world.lab(), start.world.params().clone(), args.seed)?;
+            w.set_parallel_min_robots(args.parallel_min_robots);
+            w.set_threads(t);
+            Ok(w)
+        })
+        .collect::<Result<_, world::WorldBuildError>>()?;
+    let runs = repeat::interleaved(args.runs, threads.len(), |_, v| {
+        Ok::<_, std::convert::Infallible>(measure_world(&start, &pools[v], args.ticks))
+    })
+    .unwrap_or_else(|e| match e {});
+    let hashes: Vec<u64> = runs.iter().flat_map(|r| r.iter().map(|b| b.state_hash)).collect();
+    let same = hashes.windows(2).all(|w| w[0] == w[1]);
+    let spread = |r: &[WorldBench], f: fn(&WorldBench) -> f64| {
+        Spread::of(&r.iter().map(f).collect::<Vec<_>>()).unwrap_or(Spread { median: 0.0, min: 0.0, max: 0.0, runs: 0 })
+    };
+    let one = spread(&runs[0], |b| b.ticks_per_s).median;
     if args.json {
+        let variants: Vec<String> = runs
+            .iter()
+            .map(|r| {
+                let t = spread(r, |b| b.ticks_per_s);
+                format!(
+                    "{{\"threads\":{},\"ticks_per_s\":{{\"median\":{:.1},\"min\":{:.1},\"max\":{:.1}}},\"us_per_robot_tick\":{:.4},\"p50_tick_ms\":{:.4},\"speedup\":{:.3},\"state_hash\":\"{:016x}\"}}",
+                    r[0].threads,
+                    t.median,
+                    t.min,
+                    t.max,
+                    spread(r, |b| b.us_per_robot_tick).median,
+                    spread(r, |b| b.p50_tick_ms).median,
+                    t.median / one.max(1e-12),
+                    r[0].state_hash
+                )
+            })
+            .collect();
+        let last = runs.last().map(|r| spread(r, |b| b.ticks_per_s).median).unwrap_or(0.0);
         println!(
-            "{{\"robots\":{},\"ticks\":{},\"warmup\":{},\"ticks_per_s\":{:.1},\"us_per_robot_tick\":{:.4},\"p50_tick_ms\":{:.4},\"build_s\":{:.3}}}",
-            b.robots, b.ticks, args.warmup, b.ticks_per_s, b.us_per_robot_tick, b.p50_tick_ms, b.build_s
+            "{{\"robots\":{},\"ticks\":{},\"warmup\":{},\"runs\":{},\"build_s\":{:.3},\"ticks_per_s\":{:.1},\"us_per_robot_tick\":{:.4},\"same_state_hash\":{},\"variants\":[{}]}}",
+            args.robots,
+            args.ticks,
+            args.warmup,
+            args.runs,
+            build_s,
+            last,
+            1e6 / (last.max(1e-12) * args.robots.max(1) as f64),
+            same,
+            variants.join(",")
         );
     } else {
         println!(
-            "world: {} chairs on tiled LIACC floors, 8 proximity sensors each, noise on\n  {:.1} ticks/s  ({:.3} us per robot-tick, median tick {:.3} ms, {} ticks timed; built in {:.2} s)\n  real-time factor at 100 ms ticks: {:.1}x",
-            b.robots,
-            b.ticks_per_s,
-            b.us_per_robot_tick,
-            b.p50_tick_ms,
-            b.ticks,
-            b.build_s,
-            b.ticks_per_s / 10.0
+            "world: {} chairs on tiled LIACC floors, 8 proximity sensors each, noise on; {} ticks timed after {} untimed, {} runs each, median [min, max]; built in {:.2} s",
+            args.robots, args.ticks, args.warmup, args.runs, build_s
         );
+        for r in &runs {
+            let t = spread(r, |b| b.ticks_per_s);
+            println!(
+                "  {} thread{}: {:.1} ticks/s [{:.1}, {:.1}]  ({:.3} us per robot-tick, median tick {:.3} ms, {:.2}x one thread, {:.1}x real time at 100 ms)  state {:016x}",
+                r[0].threads,
+                if r[0].threads == 1 { " " } else { "s" },
+                t.median,
+                t.min,
+                t.max,
+                spread(r, |b| b.us_per_robot_tick).median,
+                spread(r, |b| b.p50_tick_ms).median,
+                t.median / one.max(1e-12),
+                t.median / 10.0,
+                r[0].state_hash
+            );
+        }
+        println!("  same state on every thread count: {}", if same { "yes" } else { "NO" });
+    }
+    if !same {
+        eprintln!("iwsim bench world: thread counts ended in different states: {hashes:016x?}");
+        return Ok(ExitCode::FAILURE);
     }
     Ok(ExitCode::SUCCESS)
 }

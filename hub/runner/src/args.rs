@@ -46,6 +46,13 @@ pub struct RunArgs {
     /// what localisation is worth).
     #[arg(long)]
     pub chair_odometry_only: bool,
+    /// Threads the hub's world step may use (0: one per core); a seeded run is the same on any
+    /// number.
+    #[arg(long, default_value_t = 0, value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(0..=world::MAX_THREADS as u64))]
+    pub threads: usize,
+    /// The fewest robots the hub spreads a step over threads for (0: any world).
+    #[arg(long, default_value_t = world::PARALLEL_MIN_ROBOTS)]
+    pub parallel_min_robots: usize,
 }
 
 /// Options of `iwsim demo`.

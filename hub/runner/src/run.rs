@@ -595,6 +595,8 @@ pub struct RunOptions {
     pub verbose: bool,
     /// The session (default: a unique `run-<pid>-<seed>-<n>`).
     pub session: Option<String>,
+    /// More options for `iwsim hub` (e.g. `--threads 2`).
+    pub hub_options: Vec<String>,
 }
 
 /// The physical chair of one run: the scenario's `[chair]` and where its files go.
@@ -753,6 +755,7 @@ pub fn run_once(
     for c in &scenario.checkpoints {
         hub_args.extend([s("--checkpoint"), c.to_string()]);
     }
+    hub_args.extend(opts.hub_options.iter().cloned());
     let started = Instant::now();
     let (tx, rx) = std::sync::mpsc::channel::<String>();
     let (banner_tx, banner) = std::sync::mpsc::channel();
@@ -1165,6 +1168,12 @@ pub fn run(args: &RunArgs) -> anyhow::Result<ExitCode> {
         allow_control: args.allow_control,
         verbose: !args.quiet,
         session: args.session.clone(),
+        hub_options: vec![
+            "--threads".into(),
+            args.threads.to_string(),
+            "--parallel-min-robots".into(),
+            args.parallel_min_robots.to_string(),
+        ],
     };
     let Some(seeds) = &args.seeds else {
         let seed = args.seed.unwrap_or(scenario.seed);

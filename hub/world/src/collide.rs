@@ -16,16 +16,26 @@ impl World {
         let mut blocked = std::mem::take(&mut self.scratch.blocked);
         blocked.clear();
         blocked.resize(self.motion.len(), (false, false));
-        for (i, m) in self.motion.iter().enumerate() {
-            if !m.alive || !(m.moving || m.real) {
-                continue;
-            }
-            let hit = self.next_pose_hits(i, m);
-            if hit {
-                stats.colliding += 1;
-            }
-            blocked[i] = (hit, !m.real);
-        }
+        // Each robot's verdict reads only the phase's inputs, so chunks run in any order.
+        let mut units = vec![(); blocked.len()]; // zero-sized: never allocates
+        let mut chunk_units = [(); super::MAX_CHUNKS];
+        let chunking = self.chunking();
+        let this = &*self;
+        super::run_chunks(
+            chunking.as_ref().map(|(p, len)| (&**p, *len)),
+            &mut blocked,
+            &mut units,
+            &mut chunk_units,
+            |base, blocked, _, ()| {
+                for (k, b) in blocked.iter_mut().enumerate() {
+                    let m = &this.motion[base + k];
+                    if m.alive && (m.moving || m.real) {
+                        *b = (this.next_pose_hits(base + k, m), !m.real);
+                    }
+                }
+            },
+        );
+        stats.colliding += blocked.iter().filter(|(hit, _)| *hit).count() as u32;
         self.scratch.blocked = blocked;
     }
 

@@ -59,7 +59,7 @@ pub use readings::{
 use crate::geom::PlacedBody;
 use crate::map::{Lab, Params};
 use crate::math::{Pose, Real};
-use crate::rng::Rng;
+use crate::rng::{Draw, Rng};
 use body::{BodyGeom, PreparedSensor};
 use grid::{DynGrid, GridSpec, StaticIndex};
 
@@ -324,14 +324,66 @@ impl Geo {
 /// Reused buffers, so a warm tick allocates nothing.
 #[derive(Debug, Clone, Default)]
 struct Scratch {
-    segments: Vec<grid::Segment>,
-    local: Vec<sensors::LocalSegment>,
-    /// Discs some sensor may see: centre and radius.
-    discs: Vec<(Point2<Real>, Real)>,
+    /// One sensing scratch per chunk of robots (see [`World::chunking`]).
+    sense: Vec<SenseScratch>,
     blocked: Vec<(bool, bool)>,
     deliveries: Vec<(u32, Heard)>,
     speakers: Vec<u32>,
     listeners: Vec<u32>,
+}
+
+/// Buffers one chunk of robots is measured with.
+#[derive(Debug, Clone, Default)]
+struct SenseScratch {
+    segments: Vec<grid::Segment>,
+    local: Vec<sensors::LocalSegment>,
+    /// Discs some sensor may see: centre and radius.
+    discs: Vec<(Point2<Real>, Real)>,
+}
+
+/// Below this many robots a step runs on the calling thread: handing out work to threads
+/// costs a few microseconds a phase, more than a small world's whole step.
+pub const PARALLEL_MIN_ROBOTS: usize = 256;
+
+/// Chunks per thread in a parallel phase: more than one, so a thread whose robots sit in an
+/// empty corner takes another chunk instead of idling while a crowded one finishes.
+const CHUNKS_PER_THREAD: usize = 4;
+
+/// The most threads a world steps on (and so the most chunks a phase has).
+pub const MAX_THREADS: usize = 256;
+const MAX_CHUNKS: usize = MAX_THREADS * CHUNKS_PER_THREAD;
+
+/// The key a robot's noise streams are drawn under: its slot and the slot's generation, so a
+/// robot that takes a freed slot never replays its predecessor's noise.
+#[inline]
+fn stream_key(index: usize, generation: u32) -> u64 {
+    (index as u64) << 32 | generation as u64
+}
+
+/// Runs `f` on matching chunks of `a` and `b` (and one scratch per chunk): on the calling thread
+/// as one chunk when `pool` is `None`, else in parallel chunks of `len`. `f` gets the index of
+/// its chunk's first element.
+fn run_chunks<A: Send, B: Send, S: Send>(
+    pool: Option<(&rayon::ThreadPool, usize)>,
+    a: &mut [A],
+    b: &mut [B],
+    scratch: &mut [S],
+    f: impl Fn(usize, &mut [A], &mut [B], &mut S) + Sync,
+) {
+    debug_assert_eq!(a.len(), b.len());
+    match pool {
+        None => f(0, a, b, &mut scratch[0]),
+        Some((pool, len)) => {
+            use rayon::prelude::*;
+            pool.install(|| {
+                a.par_chunks_mut(len)
+                    .zip(b.par_chunks_mut(len))
+                    .zip(scratch.par_iter_mut())
+                    .enumerate()
+                    .for_each(|(k, ((a, b), s))| f(k * len, a, b, s))
+            })
+        }
+    }
 }
 
 /// Box corners (min, max) of a placed body.
@@ -344,7 +396,7 @@ fn overlaps(amin: Point2<Real>, amax: Point2<Real>, bmin: Point2<Real>, bmax: Po
     amin.x <= bmax.x && bmin.x <= amax.x && amin.y <= bmax.y && bmin.y <= amax.y
 }
 
-/// The world model: a lab, its robots, one random generator and the clock.
+/// The world model: a lab, its robots, the seed of their noise, and the clock.
 #[derive(Debug, Clone)]
 pub struct World {
     lab: Lab,
@@ -357,7 +409,13 @@ pub struct World {
     free: Vec<u32>,
     live: usize,
     capacity: usize,
-    rng: Rng,
+    /// Every random draw is a function of this, the robot, the tick and the draw's purpose.
+    seed: u64,
+    /// Threads a step may use (1: the calling thread only) and the pool that runs them, shared
+    /// by clones of the world.
+    threads: usize,
+    pool: Option<std::sync::Arc<rayon::ThreadPool>>,
+    parallel_min: usize,
     tick: u64,
     time_s: Real,
     scratch: Scratch,
@@ -412,7 +470,7 @@ impl World {
                 ),
             DYN_CELL_M,
         );
-        let scratch = Scratch::default();
+        let scratch = Scratch { sense: vec![SenseScratch::default()], ..Scratch::default() };
         Ok(Self {
             lab: lab.clone(),
             params,
@@ -424,7 +482,10 @@ impl World {
             free: Vec::new(),
             live: 0,
             capacity: DEFAULT_CAPACITY,
-            rng: Rng::seed_from_u64(seed),
+            seed,
+            threads: 1,
+            pool: None,
+            parallel_min: PARALLEL_MIN_ROBOTS,
             tick: 0,
             time_s: 0.0,
             scratch,
@@ -434,6 +495,64 @@ impl World {
     /// Changes how many robots the world accepts.
     pub fn set_capacity(&mut self, capacity: usize) {
         self.capacity = capacity;
+    }
+
+    /// Lets a step use `threads` threads (at least 1, at most [`MAX_THREADS`]). The outcome of
+    /// a step never depends on it: each robot's noise is its own and each robot's phase writes
+    /// only that robot. Returns the number of threads the world will use (1 when a pool cannot
+    /// be started).
+    pub fn set_threads(&mut self, threads: usize) -> usize {
+        let threads = threads.clamp(1, MAX_THREADS);
+        if threads == self.threads {
+            return threads;
+        }
+        self.pool = None;
+        self.threads = 1;
+        if threads > 1 {
+            match rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .thread_name(|k| format!("iwsim-world-{k}"))
+                .build()
+            {
+                Ok(pool) => {
+                    self.pool = Some(std::sync::Arc::new(pool));
+                    self.threads = threads;
+                }
+                Err(e) => tracing::warn!("stepping on one thread: cannot start {threads} threads: {e}"),
+            }
+        }
+        self.scratch.sense.resize_with(self.threads * CHUNKS_PER_THREAD, SenseScratch::default);
+        self.threads
+    }
+
+    /// Steps with `other`'s threads (sharing its pool rather than starting another).
+    pub fn use_threads_of(&mut self, other: &World) {
+        self.pool = other.pool.clone();
+        self.threads = other.threads;
+        self.parallel_min = other.parallel_min;
+        self.scratch.sense.resize_with(self.threads * CHUNKS_PER_THREAD, SenseScratch::default);
+    }
+
+    /// Threads a step may use.
+    pub fn threads(&self) -> usize {
+        self.threads
+    }
+
+    /// The fewest robots a step spreads over threads (default [`PARALLEL_MIN_ROBOTS`]; 0: any
+    /// world, as tests of the parallel path use).
+    pub fn set_parallel_min_robots(&mut self, robots: usize) {
+        self.parallel_min = robots;
+    }
+
+    /// How this step's per-robot phases are split: `None` on the calling thread, else the pool
+    /// and the slots per chunk.
+    fn chunking(&self) -> Option<(std::sync::Arc<rayon::ThreadPool>, usize)> {
+        let pool = self.pool.as_ref()?;
+        if self.live < self.parallel_min.max(1) {
+            return None;
+        }
+        let chunks = self.threads * CHUNKS_PER_THREAD;
+        Some((pool.clone(), self.slots.len().div_ceil(chunks).max(1)))
     }
 
     /// The lab.
@@ -630,13 +749,22 @@ impl World {
         let dt = if dt_s.is_finite() && dt_s > 0.0 { dt_s } else { 0.0 };
         self.tick += 1;
         self.time_s += dt;
-        self.apply_actions(actions, &mut stats);
-        self.drive(dt);
-        self.resolve_collisions(&mut stats);
-        self.commit(dt);
-        self.deliver_messages(&mut stats);
-        self.sense();
+        match self.chunking() {
+            // The whole step runs on one of the pool's threads, so its phases hand work to the
+            // others without a trip through the pool's queue each (one per step instead of four).
+            Some((pool, _)) => pool.install(|| self.phases(actions, dt, &mut stats)),
+            None => self.phases(actions, dt, &mut stats),
+        }
         stats
+    }
+
+    fn phases(&mut self, actions: &[Action], dt: Real, stats: &mut StepStats) {
+        self.apply_actions(actions, stats);
+        self.drive(dt);
+        self.resolve_collisions(stats);
+        self.commit(dt);
+        self.deliver_messages(stats);
+        self.sense();
     }
 
     fn apply_actions(&mut self, actions: &[Action], stats: &mut StepStats) {
@@ -677,62 +805,23 @@ impl World {
     /// every robot's next pose.
     fn drive(&mut self, dt: Real) {
         let motor_noise = self.params.noise.motor_frac;
-        for (i, slot) in self.slots.iter_mut().enumerate() {
-            let Some(r) = &mut slot.robot else { continue };
-            // The heading's cosine and sine as of the last commit.
-            let h = self.geo[i].normals[0];
-            let (co, s) = (h.x, h.y);
-            let next = match r.spec.kind {
-                _ if r.frozen => {
-                    r.pushed = None;
-                    r.motor_in = [0.0; 2];
-                    r.motor_out = [0.0; 2];
-                    r.pose
+        let (seed, tick) = (self.seed, self.tick);
+        let chunking = self.chunking();
+        let geo = &self.geo;
+        let mut units = [(); MAX_CHUNKS];
+        run_chunks(
+            chunking.as_ref().map(|(p, len)| (&**p, *len)),
+            &mut self.slots,
+            &mut self.motion,
+            &mut units,
+            |base, slots, motion, ()| {
+                for (k, (slot, m)) in slots.iter_mut().zip(motion.iter_mut()).enumerate() {
+                    let i = base + k;
+                    let Some(r) = &mut slot.robot else { continue };
+                    *m = Self::drive_one(r, &geo[i], motor_noise, (seed, stream_key(i, slot.generation), tick), dt);
                 }
-                RobotKind::Real => {
-                    r.motor_out = [0.0; 2];
-                    r.pushed.take().unwrap_or(r.pose)
-                }
-                RobotKind::Simulated | RobotKind::Door => {
-                    // Only Real robots take pushed poses.
-                    r.pushed = None;
-                    let c = r.spec.accel_curve;
-                    for w in 0..2 {
-                        let out = sim_model::motor_filter(r.motor_in[w], r.motor_out[w], c);
-                        r.motor_out[w] =
-                            if motor_noise > 0.0 { out * (1.0 + motor_noise * self.rng.gaussian()) } else { out };
-                    }
-                    let (v, omega) = r.velocity();
-                    let [x, y, theta] = sim_model::advance([r.pose.x, r.pose.y, r.pose.theta], v, omega, co, s, dt);
-                    Pose { x, y, theta }
-                }
-            };
-            let cur = r.shape.placed_cs(&r.pose, co, s);
-            let moving = next != r.pose;
-            let (next_cs, nb) = if !moving {
-                ((co, s), cur)
-            } else if next.theta == r.pose.theta {
-                ((co, s), r.shape.placed_cs(&next, co, s))
-            } else {
-                let (ns, nc) = next.theta.sin_cos();
-                ((nc, ns), r.shape.placed_cs(&next, nc, ns))
-            };
-            let (cur_min, cur_max) = aabb(&cur);
-            let (next_min, next_max) = if moving { aabb(&nb) } else { (cur_min, cur_max) };
-            self.motion[i] = Motion {
-                alive: true,
-                moving,
-                real: r.spec.kind == RobotKind::Real,
-                cur,
-                next: nb,
-                cur_min,
-                cur_max,
-                next_min,
-                next_max,
-                next_pose: next,
-                next_cs,
-            };
-        }
+            },
+        );
         // Index every robot by the box that holds both its current and its next pose: the
         // collision phase tests against both, and the sensors see the committed one, which is
         // one of the two.
@@ -746,54 +835,140 @@ impl World {
         }));
     }
 
+    /// One robot's motor filter and next pose, from its committed geometry `g`; `key` names
+    /// its noise stream.
+    fn drive_one(r: &mut Robot, g: &Geo, motor_noise: Real, key: (u64, u64, u64), dt: Real) -> Motion {
+        // The heading's cosine and sine as of the last commit.
+        let h = g.normals[0];
+        let (co, s) = (h.x, h.y);
+        let next = match r.spec.kind {
+            _ if r.frozen => {
+                r.pushed = None;
+                r.motor_in = [0.0; 2];
+                r.motor_out = [0.0; 2];
+                r.pose
+            }
+            RobotKind::Real => {
+                r.motor_out = [0.0; 2];
+                r.pushed.take().unwrap_or(r.pose)
+            }
+            RobotKind::Simulated | RobotKind::Door => {
+                // Only Real robots take pushed poses.
+                r.pushed = None;
+                let c = r.spec.accel_curve;
+                let mut rng = (motor_noise > 0.0).then(|| Rng::stream(key.0, key.1, key.2, Draw::Motor));
+                for w in 0..2 {
+                    let out = sim_model::motor_filter(r.motor_in[w], r.motor_out[w], c);
+                    r.motor_out[w] = match &mut rng {
+                        Some(rng) => out * (1.0 + motor_noise * rng.gaussian()),
+                        None => out,
+                    };
+                }
+                let (v, omega) = r.velocity();
+                let [x, y, theta] = sim_model::advance([r.pose.x, r.pose.y, r.pose.theta], v, omega, co, s, dt);
+                Pose { x, y, theta }
+            }
+        };
+        let cur = r.shape.placed_cs(&r.pose, co, s);
+        let moving = next != r.pose;
+        let (next_cs, nb) = if !moving {
+            ((co, s), cur)
+        } else if next.theta == r.pose.theta {
+            ((co, s), r.shape.placed_cs(&next, co, s))
+        } else {
+            let (ns, nc) = next.theta.sin_cos();
+            ((nc, ns), r.shape.placed_cs(&next, nc, ns))
+        };
+        let (cur_min, cur_max) = aabb(&cur);
+        let (next_min, next_max) = if moving { aabb(&nb) } else { (cur_min, cur_max) };
+        Motion {
+            alive: true,
+            moving,
+            real: r.spec.kind == RobotKind::Real,
+            cur,
+            next: nb,
+            cur_min,
+            cur_max,
+            next_min,
+            next_max,
+            next_pose: next,
+            next_cs,
+        }
+    }
+
     fn commit(&mut self, dt: Real) {
         let ticks_per_m =
             sim_model::encoder_ticks_per_m(self.params.encoder_ticks_per_rev as Real, self.params.wheel_radius_m);
         let slip = self.params.noise.encoder_slip_frac;
-        for (i, slot) in self.slots.iter_mut().enumerate() {
-            let Some(r) = &mut slot.robot else { continue };
-            let (hit, enforce) = self.scratch.blocked[i];
-            let m = &self.motion[i];
-            let moved = m.moving && !(hit && enforce);
-            // A chair's encoders count what its wheels turn, not where the body went: held by a
-            // wall or another body, its driven wheels spin on the floor and keep counting, as a
-            // real chair's do, and tyres slip. A door's encoder sits on its mechanism, which
-            // neither slips nor turns while the leaf is held: it counts the leaf's own motion.
-            let (counts, slips) = match r.spec.kind {
-                RobotKind::Simulated => (m.moving, slip > 0.0),
-                RobotKind::Door => (moved, false),
-                RobotKind::Real => (false, false),
-            };
-            if counts {
-                for w in 0..2 {
-                    let mut travel = r.spec.max_speed_mps * r.motor_out[w] * dt;
-                    // Only wheels that turn draw slip, so a parked chair leaves the generator
-                    // (and every other robot's noise) alone.
-                    if slips && travel != 0.0 {
-                        travel *= 1.0 + slip * self.rng.gaussian();
-                    }
-                    r.encoder_travel[w] += travel;
+        let (seed, tick) = (self.seed, self.tick);
+        let chunking = self.chunking();
+        let (motion, blocked) = (&self.motion, &self.scratch.blocked);
+        let mut units = [(); MAX_CHUNKS];
+        run_chunks(
+            chunking.as_ref().map(|(p, len)| (&**p, *len)),
+            &mut self.slots,
+            &mut self.geo,
+            &mut units,
+            |base, slots, geo, ()| {
+                for (k, (slot, g)) in slots.iter_mut().zip(geo.iter_mut()).enumerate() {
+                    let i = base + k;
+                    let Some(r) = &mut slot.robot else { continue };
+                    let key = (seed, stream_key(i, slot.generation), tick);
+                    Self::commit_one(r, g, &motion[i], blocked[i], (slip, ticks_per_m, dt), key);
                 }
-                r.readings.encoder_ticks = [
-                    (r.encoder_travel[0] * ticks_per_m).floor() as i64,
-                    (r.encoder_travel[1] * ticks_per_m).floor() as i64,
-                ];
+            },
+        );
+    }
+
+    /// One robot's move (or refusal), encoders and contact count; `g` is its committed geometry.
+    fn commit_one(
+        r: &mut Robot,
+        g: &mut Geo,
+        m: &Motion,
+        (hit, enforce): (bool, bool),
+        (slip, ticks_per_m, dt): (Real, Real, Real),
+        key: (u64, u64, u64),
+    ) {
+        let moved = m.moving && !(hit && enforce);
+        // A chair's encoders count what its wheels turn, not where the body went: held by a
+        // wall or another body, its driven wheels spin on the floor and keep counting, as a
+        // real chair's do, and tyres slip. A door's encoder sits on its mechanism, which
+        // neither slips nor turns while the leaf is held: it counts the leaf's own motion.
+        let (counts, slips) = match r.spec.kind {
+            RobotKind::Simulated => (m.moving, slip > 0.0),
+            RobotKind::Door => (moved, false),
+            RobotKind::Real => (false, false),
+        };
+        if counts {
+            let mut rng = slips.then(|| Rng::stream(key.0, key.1, key.2, Draw::Slip));
+            for w in 0..2 {
+                let mut travel = r.spec.max_speed_mps * r.motor_out[w] * dt;
+                if let Some(rng) = &mut rng
+                    && travel != 0.0
+                {
+                    travel *= 1.0 + slip * rng.gaussian();
+                }
+                r.encoder_travel[w] += travel;
             }
-            if moved {
-                r.pose = m.next_pose;
-                self.geo[i] = Geo::of_cs(r, m.next_cs.0, m.next_cs.1);
-            } else if m.moving && r.spec.shape == BodyShape::Disc {
-                // Ciber-Rato's rule: a refused move still turns the robot. A disc's footprint is
-                // the same at every heading, so turning where it stands meets nothing new; without
-                // this a disc held by a wall and steered on an arc (one wheel still) never turns away.
-                r.pose = Pose::new(r.pose.x, r.pose.y, m.next_pose.theta);
-                self.geo[i] = Geo::of_cs(r, m.next_cs.0, m.next_cs.1);
-            }
-            if hit && !r.collision {
-                r.collision_count += 1;
-            }
-            r.collision = hit;
+            r.readings.encoder_ticks = [
+                (r.encoder_travel[0] * ticks_per_m).floor() as i64,
+                (r.encoder_travel[1] * ticks_per_m).floor() as i64,
+            ];
         }
+        if moved {
+            r.pose = m.next_pose;
+            *g = Geo::of_cs(r, m.next_cs.0, m.next_cs.1);
+        } else if m.moving && r.spec.shape == BodyShape::Disc {
+            // Ciber-Rato's rule: a refused move still turns the robot. A disc's footprint is
+            // the same at every heading, so turning where it stands meets nothing new; without
+            // this a disc held by a wall and steered on an arc (one wheel still) never turns away.
+            r.pose = Pose::new(r.pose.x, r.pose.y, m.next_pose.theta);
+            *g = Geo::of_cs(r, m.next_cs.0, m.next_cs.1);
+        }
+        if hit && !r.collision {
+            r.collision_count += 1;
+        }
+        r.collision = hit;
     }
 
     fn deliver_messages(&mut self, stats: &mut StepStats) {
@@ -843,16 +1018,14 @@ impl World {
         }
     }
 
-    /// A 64-bit FNV-1a hash of everything that evolves: clock, generator, every robot's pose,
+    /// A 64-bit FNV-1a hash of everything that evolves (and the seed it evolves from): clock, every robot's pose,
     /// motors, collisions, encoders and readings. Two runs agree on it only if they agree bit
     /// for bit.
     pub fn state_hash(&self) -> u64 {
         let mut h = Fnv::new();
         h.u64(self.tick);
         h.f64(self.time_s);
-        for w in self.rng.state() {
-            h.u64(w);
-        }
+        h.u64(self.seed);
         for (i, slot) in self.slots.iter().enumerate() {
             let Some(r) = &slot.robot else { continue };
             h.u64(i as u64);

@@ -8,7 +8,7 @@ use super::grid::{DynGrid, Segment, StaticIndex};
 use super::{Geo, MAX_PROXIMITY, Robot, SensorReadings, World};
 use crate::map::{Lab, Params};
 use crate::math::{Real, cross, rotate, wire_deg, wrap_rad};
-use crate::rng::Rng;
+use crate::rng::{Draw, Rng};
 
 /// What the measuring of one robot reads (borrowed apart from the robots and the generator).
 struct Scene<'a> {
@@ -51,43 +51,63 @@ impl World {
         self.sense_with(false);
     }
 
-    /// Measures every robot; `exact` skips noise and latency and draws nothing from the
-    /// generator (used to prime readings before the first step).
+    /// Measures every robot; `exact` skips noise and latency and draws nothing (used to prime
+    /// readings before the first step).
     pub(super) fn sense_with(&mut self, exact: bool) {
-        let World { statics, dyn_grid, geo, lab, params, slots, rng, scratch, tick, .. } = self;
+        let chunking = self.chunking();
+        let World { statics, dyn_grid, geo, lab, params, slots, seed, scratch, tick, .. } = self;
         let quiet = crate::map::Params { noise: crate::map::NoiseParams::NONE, ..params.clone() };
         let params: &crate::map::Params = if exact { &quiet } else { params };
         let scene = Scene { statics, dyn_grid, geo, lab, params };
-        let mut cands =
-            Candidates { segments: &mut scratch.segments, local: &mut scratch.local, discs: &mut scratch.discs };
-        let lat = params.latency;
+        let (seed, tick) = (*seed, *tick);
+        let mut units = vec![(); slots.len()]; // zero-sized: never allocates
+        super::run_chunks(
+            chunking.as_ref().map(|(p, len)| (&**p, *len)),
+            slots,
+            &mut units,
+            &mut scratch.sense,
+            |base, slots, _, sc| {
+                let mut cands = Candidates { segments: &mut sc.segments, local: &mut sc.local, discs: &mut sc.discs };
+                for (k, slot) in slots.iter_mut().enumerate() {
+                    let i = base + k;
+                    let Some(r) = &mut slot.robot else { continue };
+                    let mut rng = Rng::stream(seed, super::stream_key(i, slot.generation), tick, Draw::Sense);
+                    let now = scene.measure(i, r, &mut cands, &mut rng, tick);
+                    scene.report(r, now, exact);
+                }
+            },
+        );
+    }
+}
+
+impl Scene<'_> {
+    /// Puts a robot's readings of this tick through the latency lines (or, `exact`, straight
+    /// out).
+    fn report(&self, r: &mut Robot, now: SensorReadings, exact: bool) {
+        let lat = self.params.latency;
         let depth = lat.max() as usize;
-        for (i, slot) in slots.iter_mut().enumerate() {
-            let Some(r) = &mut slot.robot else { continue };
-            let now = scene.measure(i, r, &mut cands, rng, *tick);
-            if depth == 0 || exact {
-                r.readings = now;
-                continue;
-            }
-            r.history.push_front(now);
-            r.history.truncate(depth + 1);
-            let past = |l: u32| r.history.get(l as usize);
-            let mut out = now;
-            match past(lat.proximity) {
-                Some(p) => out.proximity_m = p.proximity_m,
-                None => {
-                    for k in 0..r.sensor_count {
-                        out.proximity_m[k] = r.sensors[k].range;
-                    }
+        if depth == 0 || exact {
+            r.readings = now;
+            return;
+        }
+        r.history.push_front(now);
+        r.history.truncate(depth + 1);
+        let past = |l: u32| r.history.get(l as usize);
+        let mut out = now;
+        match past(lat.proximity) {
+            Some(p) => out.proximity_m = p.proximity_m,
+            None => {
+                for k in 0..r.sensor_count {
+                    out.proximity_m[k] = r.sensors[k].range;
                 }
             }
-            out.compass_deg = past(lat.compass).and_then(|p| p.compass_deg);
-            out.gps = past(lat.gps).and_then(|p| p.gps);
-            out.beacons_deg = past(lat.beacon).map_or([None; super::MAX_BEACONS], |p| p.beacons_deg);
-            out.ground = past(lat.ground).and_then(|p| p.ground);
-            out.collision = past(lat.collision).is_some_and(|p| p.collision);
-            r.readings = out;
         }
+        out.compass_deg = past(lat.compass).and_then(|p| p.compass_deg);
+        out.gps = past(lat.gps).and_then(|p| p.gps);
+        out.beacons_deg = past(lat.beacon).map_or([None; super::MAX_BEACONS], |p| p.beacons_deg);
+        out.ground = past(lat.ground).and_then(|p| p.ground);
+        out.collision = past(lat.collision).is_some_and(|p| p.collision);
+        r.readings = out;
     }
 }
 

@@ -858,3 +858,121 @@ fn worlds_of_discs_are_deterministic_and_hash_their_shape() {
     assert_eq!(run(true), run(true));
     assert_ne!(run(true), run(false));
 }
+
+/// One robot's readings and pose per tick, driven on a fixed pattern with every noise on, in a
+/// world that also holds `others` robots far out of its sensors' and messages' reach.
+fn lone_run(others: usize) -> Vec<(u64, Pose, [i64; 2])> {
+    let mut lab = empty_lab(120.0, 20.0);
+    lab.walls.push(rect_wall(10.0, 5.0, 12.0, 15.0, 2.0));
+    let mut p =
+        Params { sensors: crate::map::SensorSwitches { gps: true, beacon: true, compass: true }, ..Params::default() };
+    p.noise.encoder_slip_frac = 0.02;
+    lab.beacons.push(Beacon { pos: Point2::new(25.0, 10.0), height_m: 1.0 });
+    let mut w = World::new(&lab, p, 11).expect("valid");
+    let me = w.add_robot(RobotSpec::at(4.0, 10.0, 0.0)).expect("room");
+    let far: Vec<_> =
+        (0..others).map(|k| w.add_robot(RobotSpec::at(60.0 + 6.0 * k as Real, 10.0, 90.0)).expect("room")).collect();
+    (0..150)
+        .map(|t| {
+            let mut actions = vec![Action::motors(me, 0.8, 0.5 + 0.4 * ((t / 20) % 2) as Real)];
+            // The others drive too, so they draw noise of their own every tick.
+            actions.extend(far.iter().map(|&r| Action::motors(r, 0.7, 0.6)));
+            w.step(&actions, 0.1);
+            let r = w.robot(me).expect("alive");
+            let mut h = Fnv::new();
+            for &d in r.readings.proximity() {
+                h.f64(d);
+            }
+            h.f64(r.readings.compass_deg.unwrap_or(Real::NAN));
+            if let Some(g) = r.readings.gps {
+                h.f64(g.x_m);
+                h.f64(g.heading_deg);
+            }
+            for b in r.readings.beacons() {
+                h.f64(b.unwrap_or(Real::NAN));
+            }
+            (h.finish(), r.pose, r.readings.encoder_ticks)
+        })
+        .collect()
+}
+
+#[test]
+fn a_robots_noise_is_its_own_whoever_else_is_in_the_world() {
+    // Each robot draws from streams of its own: robots added elsewhere (and their draws) leave
+    // its noisy readings, slipping encoders and noisy motors exactly as they were.
+    let alone = lone_run(0);
+    assert_eq!(alone, lone_run(1));
+    assert_eq!(alone, lone_run(5));
+    // And the noise is really there: two ticks' readings are not copies of each other.
+    assert_ne!(alone[100].0, alone[101].0);
+}
+
+/// A crowded, noisy, talking world of `n` robots stepped on `threads` threads with the
+/// parallel path on from the first robot; the state hash per tick.
+fn crowded_run(n: usize, threads: usize) -> Vec<u64> {
+    let mut lab = empty_lab(70.0, 70.0);
+    for k in 0..6 {
+        let x = 8.0 + 10.0 * k as Real;
+        lab.walls.push(rect_wall(x, 10.0, x + 0.5, 60.0, 2.0));
+    }
+    let mut p =
+        Params { sensors: crate::map::SensorSwitches { gps: true, beacon: false, compass: true }, ..Params::default() };
+    p.noise.encoder_slip_frac = 0.01;
+    let mut w = World::new(&lab, p, 5).expect("valid");
+    w.set_parallel_min_robots(0);
+    assert_eq!(w.set_threads(threads), threads);
+    let robots: Vec<_> = (0..n)
+        .map(|k| {
+            // Rows 2 m apart, 1.7 m along: close enough that chairs meet and see each other.
+            let (x, y) = (2.0 + 1.7 * (k % 38) as Real, 3.0 + 2.0 * (k / 38) as Real);
+            let spec = RobotSpec::at(x, y, (k * 53 % 360) as Real);
+            if k % 7 == 3 { spec.disc(0.8) } else { spec }
+        })
+        .filter_map(|spec| if w.is_free(&spec) { w.add_robot(spec).ok() } else { None })
+        .collect();
+    assert!(robots.len() > n / 2, "placed {} of {n}", robots.len());
+    let hello = Message::new(b"hi").expect("short");
+    (0..80)
+        .map(|t| {
+            let actions: Vec<_> = robots
+                .iter()
+                .enumerate()
+                .map(|(k, &r)| {
+                    let mut a = Action::motors(r, ((t + k) % 5) as Real / 4.0, ((t * 3 + k) % 7) as Real / 6.0 - 0.1);
+                    if (t + k) % 11 == 0 {
+                        a.say = Some(hello);
+                    }
+                    a
+                })
+                .collect();
+            w.step(&actions, 0.1);
+            w.state_hash()
+        })
+        .collect()
+}
+
+#[test]
+fn the_thread_count_never_changes_a_run() {
+    let one = crowded_run(512, 1);
+    assert_eq!(one, crowded_run(512, 2), "two threads");
+    assert_eq!(one, crowded_run(512, 3), "three threads");
+}
+
+#[test]
+fn a_crowded_run_meets_walls_and_robots_so_the_thread_test_covers_contacts() {
+    // What `the_thread_count_never_changes_a_run` steps must exercise the collision phase.
+    let mut lab = empty_lab(70.0, 70.0);
+    lab.walls.push(rect_wall(8.0, 10.0, 8.5, 60.0, 2.0));
+    let mut w = World::new(&lab, quiet(), 5).expect("valid");
+    w.set_parallel_min_robots(0);
+    w.set_threads(2);
+    let a = w.add_robot(RobotSpec::at(6.0, 20.0, 0.0)).expect("room");
+    let b = w.add_robot(RobotSpec::at(3.0, 30.0, 0.0)).expect("room");
+    let c = w.add_robot(RobotSpec::at(5.5, 30.0, 180.0)).expect("room");
+    for _ in 0..40 {
+        w.step(&[Action::motors(a, 1.0, 1.0), Action::motors(b, 1.0, 1.0), Action::motors(c, 1.0, 1.0)], 0.1);
+    }
+    assert!(w.robot(a).expect("alive").collision_count >= 1, "a meets the wall");
+    assert!(w.robot(b).expect("alive").collision_count >= 1, "b and c meet");
+    assert!(w.robot(c).expect("alive").collision_count >= 1, "c and b meet");
+}
