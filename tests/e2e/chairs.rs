@@ -88,7 +88,7 @@ fn slalom_real_passes_with_no_contact_in_either_world() {
 
 #[test]
 fn slalom_augmented_passes_with_no_contact_in_either_world_because_the_pose_is_map_matched() {
-    let (ok, out, err, run, chair) = run_to_the_end("augmented", "builtin:slalom-augmented", "1", &[]);
+    let (ok, out, err, run, chair) = run_to_the_end("augmented", "builtin:slalom-augmented", "2", &[]);
     assert!(ok && run.passed, "{out}\n{err}\n{run:?}");
     assert_eq!(chair.mode, "augmented");
     assert_eq!((chair.contacts_sim, chair.contacts_room), (0, 0), "{chair:?}");
@@ -98,7 +98,7 @@ fn slalom_augmented_passes_with_no_contact_in_either_world_because_the_pose_is_m
     // The same seed on raw odometry: the hub's frame, where virtual A and B stand, drifts
     // from the room's, and the chair's corner meets a real wall beside a virtual box.
     let (ok, out, err, run, raw) =
-        run_to_the_end("augmented-raw", "builtin:slalom-augmented", "1", &["--chair-odometry-only"]);
+        run_to_the_end("augmented-raw", "builtin:slalom-augmented", "2", &["--chair-odometry-only"]);
     let drifted = raw.pose_error_m.expect("the hub's and the true final pose");
     assert!(drifted > 2.0 * matched, "odometry alone {drifted} m off, map-matched {matched} m: {raw:?}");
     assert!(raw.contacts_room > 0 && !ok && !run.passed, "{raw:?}\n{out}\n{err}");
