@@ -666,7 +666,7 @@ pub fn udp_client(args: &UdpClientArgs) -> anyhow::Result<ExitCode> {
             s.set_read_timeout(Some(timeout))?;
             match s.recv(&mut buf) {
                 Ok(n) if args.real => {
-                    let m = load::Measures::parse(&buf[..n])?;
+                    let m = udp_bridge::codec::decode_measures(&buf[..n]).context("a Measures from the bridge")?;
                     // On a tie, turn towards the side the chair already faces.
                     let actions = load::answer(&m, &mut distances, m.compass.is_none_or(|c| c >= 0.0));
                     readings.add(&distances);

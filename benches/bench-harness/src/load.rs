@@ -7,12 +7,10 @@
 //! sensors round its body) on a lattice [`SPACING_M`] apart, so that about eight neighbours
 //! are within sensor range and every reading costs the hub a real ray cast against them; each
 //! tick every agent reads all its robots' blocks and steers each by [`crate::tiled::steer`],
-//! the controller `bench world` runs. Over UDP each client parses every datagram in full, as a
-//! stock Ciber-Rato client's SAX handler does, and answers with `DriveMotors`' `<Actions>`.
-//!
-//! The Measures parser here stands for a third-party client's, so it is the bench's own and
-//! does not share the bridge's decoder: a fault in the bridge's codec must not hide itself by
-//! decoding its own output.
+//! the controller `bench world` runs. Over UDP each client decodes every datagram in full
+//! (every sensor, LED and button, with the bridge codec's [`udp_bridge::codec::decode_measures`],
+//! an XML parse as a stock Ciber-Rato client's handler makes) and answers with `DriveMotors`'
+//! `<Actions>`.
 
 use std::process::ExitCode;
 use std::time::Duration;
@@ -20,8 +18,7 @@ use std::time::Duration;
 use agent_sdk::{Agent, Wait};
 use anyhow::Context as _;
 use ipc_types::{ActionBlock, COLLISION, HAS_COMPASS, MAX_PROXIMITY, RobotRegistration, SensorSpec};
-use quick_xml::events::Event;
-use quick_xml::reader::Reader;
+use udp_bridge::codec::MeasuresData;
 use world::math::Pose;
 
 use crate::args::LoadAgentArgs;
@@ -229,102 +226,21 @@ fn drive(agent: &mut Agent, args: &LoadAgentArgs) -> anyhow::Result<Readings> {
     Ok(readings)
 }
 
-/// One `<Measures>` as a stock Ciber-Rato client keeps it: every sensor the simulator sent.
-#[derive(Debug, Clone, PartialEq, Default)]
-pub struct Measures {
-    /// `Time`, cycles.
-    pub time: u64,
-    /// `Collision`.
-    pub collision: bool,
-    /// `Compass`, degrees.
-    pub compass: Option<f64>,
-    /// `Ground` (−1: none).
-    pub ground: Option<i32>,
-    /// `IRSensor` values (1 / distance) by id.
-    pub ir: [Option<f64>; MAX_PROXIMITY],
-    /// `BeaconSensor` bearings by id, degrees (`None`: not visible).
-    pub beacons: Vec<Option<f64>>,
-    /// `GPS` X, Y.
-    pub gps: Option<(f64, f64)>,
-    /// `Buttons` Start and Stop.
-    pub buttons: (bool, bool),
-    /// Bytes of the messages heard.
-    pub message_bytes: usize,
-}
-
-impl Measures {
-    /// Parses one datagram, element by element and attribute by attribute.
-    pub fn parse(datagram: &[u8]) -> anyhow::Result<Measures> {
-        // The simulator ends its datagrams with a NUL.
-        let end = datagram.iter().position(|&b| b == 0).unwrap_or(datagram.len());
-        let mut reader = Reader::from_str(std::str::from_utf8(&datagram[..end]).context("Measures not in UTF-8")?);
-        let mut m = Measures::default();
-        let num = |v: &str| -> anyhow::Result<f64> {
-            v.trim().parse::<f64>().map_err(|e| anyhow::anyhow!("{v:?} is not a number: {e}"))
-        };
-        let mut in_message = false;
-        loop {
-            match reader.read_event().context("malformed Measures")? {
-                Event::Start(e) | Event::Empty(e) => {
-                    let (mut id, mut value, mut x, mut y) = (None, None, None, None);
-                    let name = e.name();
-                    let tag: &str = name.as_ref();
-                    in_message = tag == "Message";
-                    for a in e.attributes() {
-                        let a = a.context("a malformed attribute")?;
-                        let v: &str = &a.value;
-                        match (tag, a.key.as_ref()) {
-                            ("Measures", "Time") => m.time = num(v)? as u64,
-                            ("Sensors", "Collision") => m.collision = v == "Yes",
-                            ("Sensors", "Compass") => m.compass = Some(num(v)?),
-                            ("Sensors", "Ground") => m.ground = Some(num(v)? as i32),
-                            ("Buttons", "Start") => m.buttons.0 = v == "On",
-                            ("Buttons", "Stop") => m.buttons.1 = v == "On",
-                            (_, "Id") => id = Some(num(v)? as usize),
-                            (_, "Value") => value = Some(if v == "NotVisible" { None } else { Some(num(v)?) }),
-                            (_, "X") => x = Some(num(v)?),
-                            (_, "Y") => y = Some(num(v)?),
-                            _ => {}
-                        }
-                    }
-                    match (tag, id, value) {
-                        ("IRSensor", Some(id), Some(v)) => {
-                            if let Some(slot) = m.ir.get_mut(id) {
-                                *slot = v;
-                            }
-                        }
-                        ("BeaconSensor", Some(id), Some(v)) if id < 64 => {
-                            m.beacons.resize(m.beacons.len().max(id + 1), None);
-                            m.beacons[id] = v;
-                        }
-                        ("GPS", ..) => m.gps = x.zip(y),
-                        _ => {}
-                    }
-                }
-                Event::CData(t) if in_message => m.message_bytes += t.len(),
-                Event::End(_) => in_message = false,
-                Event::Eof => break,
-                _ => {}
-            }
-        }
-        Ok(m)
-    }
-
-    /// The IR readings as distances, metres (an IR value is 1 / distance).
-    pub fn distances_m(&self) -> impl Iterator<Item = f64> + '_ {
-        self.ir.iter().flatten().map(|&v| if v > 0.0 { 1.0 / v } else { f64::INFINITY })
-    }
+/// A robot's IR readings as distances, metres (an IR value is 1 / distance).
+pub fn distances_m(m: &MeasuresData) -> impl Iterator<Item = f64> + '_ {
+    m.ir.iter().flatten().map(|&v| if v > 0.0 { 1.0 / v } else { f64::INFINITY })
 }
 
 /// Ciber-Rato powers are in [−0.15, 0.15]; the bridge maps 0.15 onto a full 1.0.
 const CIBER_RATO_FULL_POWER: f64 = 0.15;
 
-/// What the real-load UDP client answers a parsed `<Measures>` with (`DriveMotors`), and the
+/// What the real-load UDP client answers a decoded `<Measures>` with (`DriveMotors`), and the
 /// distances it read (for the count).
-pub fn answer(m: &Measures, distances: &mut Vec<f64>, left_on_tie: bool) -> String {
+pub fn answer(m: &MeasuresData, distances: &mut Vec<f64>, left_on_tie: bool) -> String {
     distances.clear();
-    distances.extend(m.distances_m());
-    let (l, r) = crate::tiled::steer(distances, m.collision, left_on_tie).unwrap_or((0.0, 0.0));
+    distances.extend(distances_m(m));
+    let collision = m.collision == Some(true);
+    let (l, r) = crate::tiled::steer(distances, collision, left_on_tie).unwrap_or((0.0, 0.0));
     format!("<Actions LeftMotor=\"{:.4}\" RightMotor=\"{:.4}\"/>", l * CIBER_RATO_FULL_POWER, r * CIBER_RATO_FULL_POWER)
 }
 
@@ -360,24 +276,14 @@ mod tests {
     }
 
     #[test]
-    fn a_measures_datagram_is_read_in_full() {
-        let d = b"<Measures Time=\"12\">\n\t<Sensors Collision=\"Yes\" Compass=\"-45\" Ground=\"-1\">\n\t\t<IRSensor Id=\"0\" Value=\"2\"/>\n\t\t<IRSensor Id=\"3\" Value=\"0.3\"/>\n\t\t<BeaconSensor Id=\"1\" Value=\"NotVisible\"/>\n\t\t<GPS X=\"10.5\" Y=\"3\" />\n\t\t<Message From=\"2\"><![CDATA[hello]]></Message>\n\t</Sensors>\n\t<Leds EndLed=\"Off\" ReturningLed=\"Off\" VisitingLed=\"Off\"/>\n\t<Buttons Start=\"On\" Stop=\"Off\"/>\n</Measures>\n\0";
-        let m = Measures::parse(d).expect("parses");
-        assert_eq!((m.time, m.collision, m.compass, m.ground), (12, true, Some(-45.0), Some(-1)));
-        assert_eq!((m.ir[0], m.ir[3], m.ir[1]), (Some(2.0), Some(0.3), None));
-        assert_eq!(
-            (&m.beacons, m.gps, m.buttons, m.message_bytes),
-            (&vec![None, None], Some((10.5, 3.0)), (true, false), 5)
-        );
-        let d: Vec<f64> = m.distances_m().collect();
-        assert_eq!(d, vec![0.5, 1.0 / 0.3]);
-        assert!(Measures::parse(b"<Measures Time=\"x\"/>").is_err());
+    fn ir_values_read_as_distances() {
+        let m = MeasuresData { ir: vec![Some(2.0), None, Some(0.4)], ..MeasuresData::default() };
+        assert_eq!(distances_m(&m).collect::<Vec<_>>(), vec![0.5, 2.5]);
     }
 
     #[test]
     fn a_blocked_chair_turns_on_the_spot_at_ciber_rato_power() {
-        let mut m = Measures { collision: true, ..Measures::default() };
-        m.ir[..5].copy_from_slice(&[Some(0.5); 5]);
+        let m = MeasuresData { collision: Some(true), ir: vec![Some(0.5); 5], ..MeasuresData::default() };
         let mut d = Vec::new();
         assert_eq!(answer(&m, &mut d, true), "<Actions LeftMotor=\"-0.0600\" RightMotor=\"0.0600\"/>");
         assert_eq!(d.len(), 5);
