@@ -50,6 +50,11 @@ impl Crew {
         self.helpers.push((child, what));
     }
 
+    /// Helpers so far.
+    pub(crate) fn len(&self) -> usize {
+        self.helpers.len()
+    }
+
     /// The error of the helper pushed `index`-th, which is ending before its time (it closed
     /// its stdout early): its own words if it failed, else `why`. The rest of the crew is
     /// stopped.
@@ -119,15 +124,6 @@ pub(crate) fn peak_rss_kib(pid: u32) -> Option<u64> {
     line.trim().strip_suffix("kB")?.trim().parse().ok()
 }
 
-#[cfg(test)]
-mod tests {
-    #[test]
-    fn this_process_has_a_peak_resident_set() {
-        let kib = super::peak_rss_kib(std::process::id()).expect("Linux reports VmHWM");
-        // A test binary with its libraries is at least a megabyte, and not a terabyte.
-        assert!((1024..1 << 30).contains(&kib), "{kib} KiB");
-    }
-}
 
 impl Drop for Crew {
     fn drop(&mut self) {
@@ -144,5 +140,15 @@ impl Drop for Crew {
                 let _ = child.wait();
             }
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn this_process_has_a_peak_resident_set() {
+        let kib = super::peak_rss_kib(std::process::id()).expect("Linux reports VmHWM");
+        // A test binary with its libraries is at least a megabyte, and not a terabyte.
+        assert!((1024..1 << 30).contains(&kib), "{kib} KiB");
     }
 }

@@ -439,6 +439,7 @@ fn run_lockstep(
     let mut flooder = None;
     let mut stderr_bytes = None;
     let mut client_outputs = Vec::new();
+    let mut agent_errs = Vec::new();
     if udp {
         let mut bridge = spawn_self(&[
             "udp".into(),
@@ -495,58 +496,96 @@ fn run_lockstep(
         if flood > 0 {
             flooder = Some(start_flood(server, flood)?);
         }
-    } else if real {
-        for i in 0..agents {
-            crew.push(
-                spawn_self(&[
-                    "bench".into(),
-                    "load-agent".into(),
-                    "--session".into(),
-                    session.to_owned(),
-                    "--robots".into(),
-                    robots_per_agent.to_string(),
-                    "--first".into(),
-                    (i * robots_per_agent).to_string(),
-                    "--total".into(),
-                    total.clone(),
-                ])?,
-                "load agent",
-            );
-        }
     } else {
-        for i in 0..agents {
-            let (bx, by) = origin(i);
-            crew.push(
-                spawn_self(&[
-                    "agent".into(),
-                    "wheelchair".into(),
-                    "--session".into(),
-                    session.to_owned(),
-                    "--robots".into(),
-                    robots_per_agent.to_string(),
-                    "--pose".into(),
-                    format!("{bx},{by},0"),
-                    "--spacing".into(),
-                    IPC_SPACING.to_string(),
-                    "--powers".into(),
-                    "0.3,0.28".into(),
-                    "--connect-timeout".into(),
-                    "30".into(),
-                ])?,
-                "agent",
-            );
+        // Agents join in waves, each wave once the last has registered: a hub that met a
+        // hundred hellos at once would make them in one pass of its loop, and the first agents
+        // would wait longer than their 5 s for the map it hands out between passes. Only the
+        // start is staggered; the ticks are timed once every agent is in.
+        for wave in (0..agents).collect::<Vec<_>>().chunks(AGENT_WAVE) {
+            let first_helper = crew.len();
+            let mut announced = Vec::new();
+            for &i in wave {
+                let args: Vec<String> = if real {
+                    [
+                        "bench",
+                        "load-agent",
+                        "--session",
+                        session,
+                        "--robots",
+                        &robots_per_agent.to_string(),
+                        "--first",
+                        &(i * robots_per_agent).to_string(),
+                        "--total",
+                        &total,
+                    ]
+                    .map(str::to_owned)
+                    .into()
+                } else {
+                    let (bx, by) = origin(i);
+                    [
+                        "agent",
+                        "wheelchair",
+                        "--session",
+                        session,
+                        "--robots",
+                        &robots_per_agent.to_string(),
+                        "--pose",
+                        &format!("{bx},{by},0"),
+                        "--spacing",
+                        &IPC_SPACING.to_string(),
+                        "--powers",
+                        "0.3,0.28",
+                        "--connect-timeout",
+                        "30",
+                    ]
+                    .map(str::to_owned)
+                    .into()
+                };
+                let mut agent = spawn_self(&args)?;
+                announced.push(std::io::BufReader::new(agent.stderr.take().context("an agent's stderr")?));
+                crew.push(agent, "agent");
+            }
+            for (k, err) in announced.iter_mut().enumerate() {
+                if !registered(err) {
+                    return Err(crew.helper_failed(first_helper + k, "an agent ended before registering its robots"));
+                }
+            }
+            agent_errs.extend(announced);
         }
     }
     let mut out = crew.finish()?;
     // The UDP clients' stdout was taken to read their registration: the rest of it (their
-    // report) is read here, now that they have exited.
+    // report) is read here, now that they have exited; and the rest of the agents' stderr.
     for mut client in client_outputs {
         let _ = std::io::Read::read_to_string(&mut client, &mut out.helpers);
+    }
+    for mut err in agent_errs {
+        let _ = std::io::copy(&mut err, &mut std::io::sink());
     }
     let flood_sent = flooder.map_or(0, Flood::stop);
     // The bridge has exited: its stderr is closed and the counting thread ends.
     let bridge_stderr_bytes = stderr_bytes.map_or(0, |h| h.join().unwrap_or(0));
     Ok((out, flood_sent, bridge_stderr_bytes))
+}
+
+/// Shared-memory agents that join the hub at once (see `run_lockstep`).
+const AGENT_WAVE: usize = 10;
+
+/// Reads an agent's stderr up to the line saying its robots are registered ("… drives robots
+/// …", from the wheelchair and the load agent alike); false when it ends first.
+fn registered(stderr: &mut impl std::io::BufRead) -> bool {
+    let mut line = String::new();
+    loop {
+        line.clear();
+        match stderr.read_line(&mut line) {
+            Ok(n) if n > 0 => {
+                if line.contains(" drives robots ") {
+                    return true;
+                }
+            }
+            _ => return false,
+        }
+    }
 }
 
 /// What the UDP bench client prints on stdout once all its robots are registered.

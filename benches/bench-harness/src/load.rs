@@ -207,6 +207,14 @@ fn drive(agent: &mut Agent, args: &LoadAgentArgs) -> anyhow::Result<Readings> {
             .with_context(|| format!("robot {g}"))?;
     }
     agent.ready()?;
+    // The bench starts agents in waves, each once the last has said this.
+    agent_sdk::report!(
+        "load agent: agent {} drives robots {}..{} in session {:?}",
+        agent.id(),
+        args.first,
+        args.first + args.robots,
+        args.session
+    );
     let mut actions = Vec::with_capacity(args.robots);
     let mut readings = Readings::default();
     while let Some(tick) = agent.wait_tick(Wait::Blocking)? {
