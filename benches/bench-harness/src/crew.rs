@@ -124,7 +124,6 @@ pub(crate) fn peak_rss_kib(pid: u32) -> Option<u64> {
     line.trim().strip_suffix("kB")?.trim().parse().ok()
 }
 
-
 impl Drop for Crew {
     fn drop(&mut self) {
         // The hub first, by SIGTERM, so it removes its shared memory; then the helpers.
