@@ -149,3 +149,43 @@ fn the_demo_runs_headless_in_lock_step_and_passes() {
     }
     let _ = std::fs::remove_dir_all(dir);
 }
+
+#[test]
+fn bench_lockstep_runs_the_real_load_beside_ipc_only_and_states_the_hub_memory() {
+    let bench = Command::new(env!("CARGO_BIN_EXE_iwsim"))
+        .args(["bench", "lockstep", "--agents", "2", "--robots-per-agent", "3", "--ticks", "30"])
+        .args(["--transport", "both", "--runs", "1", "--json"])
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .expect("iwsim runs");
+    let pid = bench.id();
+    let out = bench.wait_with_output().expect("the bench ends");
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(out.status.success(), "{text}\n{}", String::from_utf8_lossy(&out.stderr));
+    let j: serde_json::Value = serde_json::from_str(&text).expect("one JSON object");
+    for variant in ["shm", "udp", "shm_real", "udp_real"] {
+        let rate = j[format!("{variant}_ticks_per_s")].as_f64().unwrap_or(0.0);
+        assert!(rate > 0.0, "{variant}: no rate in {text}");
+        let rss = j[format!("{variant}_hub_peak_rss_mib")].as_f64().unwrap_or(0.0);
+        // The hub maps iceoryx2 services for 10,000 robots; whatever it costs, it is stated.
+        assert!(rss > 1.0, "{variant}: no hub memory in {text}");
+    }
+    // The real load's robots stand within each other's sensor range, and the agents (over
+    // UDP: the clients parsing Measures) read every robot's every sensor each tick.
+    assert!(j["real_neighbours_in_range"].as_f64().unwrap_or(0.0) > 2.0, "{text}");
+    for variant in ["shm_real", "udp_real"] {
+        let readings = j[format!("{variant}_readings")].as_u64().unwrap_or(0);
+        let near = j[format!("{variant}_readings_near")].as_u64().unwrap_or(0);
+        assert!(readings >= 30 * 6 * 8, "{variant}: {readings} readings for 6 robots x 8 sensors x 30 ticks");
+        assert!(near > 0 && near < readings, "{variant}: {near} of {readings} readings saw a neighbour");
+    }
+    // Every run's hub removed its session's shared memory.
+    let prefix = format!("iwsim_bench-ls-{pid}-");
+    let left: Vec<String> = std::fs::read_dir("/dev/shm")
+        .expect("/dev/shm")
+        .filter_map(|e| e.ok()?.file_name().into_string().ok())
+        .filter(|n| n.starts_with(&prefix))
+        .collect();
+    assert!(left.is_empty(), "left in /dev/shm: {left:?}");
+}

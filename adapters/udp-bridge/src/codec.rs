@@ -710,6 +710,59 @@ pub fn encode_restart() -> Vec<u8> {
     finish("<Restart/>".into())
 }
 
+/// Decodes a `<Measures>` as a client reads it, every sensor the simulator sent: the reverse
+/// of [`encode_measures`]. Elements a client does not know are passed over, as the stock
+/// clients' handlers do.
+pub fn decode_measures(datagram: &[u8]) -> Result<MeasuresData, DecodeError> {
+    let el = parse(datagram, Repeats::Refused)?;
+    if el.name != "Measures" {
+        return Err(DecodeError::UnknownRoot(el.name));
+    }
+    let on = |e: &Element, name: &str| e.attr(name) == Some("On");
+    let mut m = MeasuresData { time: el.num(&["Time"])?.map_or(0, |t| t.max(0.0) as u64), ..MeasuresData::default() };
+    for c in &el.children {
+        match c.name.as_str() {
+            "Sensors" => {
+                m.collision = c.attr("Collision").map(|v| v == "Yes");
+                m.compass = c.num(&["Compass"])?;
+                m.ground = c.num(&["Ground"])?.map(|g| g as i32);
+                for s in &c.children {
+                    match s.name.as_str() {
+                        "IRSensor" | "BeaconSensor" => {
+                            // Ids index a robot's sensors (at most 8) or the lab's beacons.
+                            let id = parse_id(s)? as usize;
+                            if id >= 64 {
+                                return Err(DecodeError::OutOfRange { attr: "Id".into(), value: id.to_string() });
+                            }
+                            if s.name == "IRSensor" {
+                                m.ir.resize(m.ir.len().max(id + 1), None);
+                                m.ir[id] = s.num(&["Value"])?;
+                            } else {
+                                m.beacons.resize(m.beacons.len().max(id + 1), None);
+                                m.beacons[id] = if s.attr("Value") == Some("NotVisible") {
+                                    Some(None)
+                                } else {
+                                    Some(s.num(&["Value"])?)
+                                };
+                            }
+                        }
+                        "GPS" => m.gps = s.num(&["X"])?.zip(s.num(&["Y"])?),
+                        "Message" => {
+                            let from = s.num(&["From"])?.map_or(0, |f| f.max(0.0) as u32);
+                            m.messages.push((from, s.text.as_bytes().to_vec()));
+                        }
+                        _ => {}
+                    }
+                }
+            }
+            "Leds" => m.leds = [on(c, "EndLed"), on(c, "ReturningLed"), on(c, "VisitingLed")],
+            "Buttons" => m.buttons = (on(c, "Start"), on(c, "Stop")),
+            _ => {}
+        }
+    }
+    Ok(m)
+}
+
 #[cfg(test)]
 #[path = "codec_tests.rs"]
 mod tests;

@@ -284,3 +284,33 @@ fn lab_and_grid_replies_are_byte_exact() {
         "<Grid>\n\t<Position X=\"3\" Y=\"11\" Dir=\"0\"/>\n\t<Position X=\"5\" Y=\"7\" Dir=\"90\"/>\n</Grid>\n\0"
     );
 }
+
+#[test]
+fn measures_decode_to_what_was_encoded() {
+    let m = MeasuresData {
+        time: 1234,
+        collision: Some(true),
+        compass: Some(-45.0),
+        ground: Some(-1),
+        ir: vec![Some(2.0), None, Some(0.3), Some(100.0)],
+        beacons: vec![Some(Some(12.0)), Some(None)],
+        gps: Some((10.5, 3.25)),
+        messages: vec![(2, b"hi ]]> there".to_vec())],
+        leds: [false, true, false],
+        buttons: (true, false),
+    };
+    assert_eq!(decode_measures(&encode_measures(&m)), Ok(m));
+    let quiet = MeasuresData { time: 7, ..MeasuresData::default() };
+    assert_eq!(decode_measures(&encode_measures(&quiet)), Ok(quiet));
+}
+
+#[test]
+fn a_measures_with_a_bad_number_or_sensor_id_is_refused() {
+    assert!(matches!(
+        decode_measures(b"<Measures Time=\"1\"><Sensors Compass=\"x\"/></Measures>"),
+        Err(DecodeError::BadNumber { .. })
+    ));
+    let far = b"<Measures Time=\"1\"><Sensors><IRSensor Id=\"99\" Value=\"1\"/></Sensors></Measures>";
+    assert!(matches!(decode_measures(far), Err(DecodeError::OutOfRange { .. })));
+    assert_eq!(decode_measures(b"<Reply/>"), Err(DecodeError::UnknownRoot("Reply".into())));
+}

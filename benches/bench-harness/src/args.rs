@@ -24,6 +24,9 @@ pub enum BenchCommand {
     /// A Ciber-Rato-style UDP client answering every Measures (started by `bench lockstep`).
     #[command(hide = true)]
     UdpClient(UdpClientArgs),
+    /// A shared-memory agent carrying a controller's load (started by `bench lockstep`).
+    #[command(hide = true)]
+    LoadAgent(LoadAgentArgs),
 }
 
 /// Options of `iwsim bench latency`.
@@ -106,8 +109,16 @@ pub struct BenchLockstepArgs {
     /// report ticks/s with and without and the recording's bytes per robot per tick.
     #[arg(long)]
     pub record: bool,
-    /// Runs of each variant (shm, udp, udp+flood, shm+record), interleaved round by round; each figure is
-    /// the median of its runs with min and max.
+    /// What the agents do each tick: `ipc` answers constant powers without reading the sensors
+    /// (robots 5 m apart, 4 sensors each: the cost of the IPC alone); `real` reads every
+    /// sensor block (over UDP: parses every Measures, as a stock Ciber-Rato client does) and
+    /// steers each robot by a reactive avoidance rule, with robots 2 m apart and 8 sensors
+    /// each, so that about 8 neighbours are in sensor range; `both` runs the two, interleaved,
+    /// and prints a labelled line for each.
+    #[arg(long, value_enum, default_value = "both")]
+    pub load: Load,
+    /// Runs of each variant (shm, udp, udp+flood, shm+record, shm+real, udp+real), interleaved
+    /// round by round; each figure is the median of its runs with min and max.
     #[arg(long, default_value_t = 5, value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..=MAX_RUNS))]
     pub runs: usize,
     /// Print one JSON object instead of text.
@@ -117,6 +128,30 @@ pub struct BenchLockstepArgs {
 
 /// The most runs `--runs` takes: one run of a variant is seconds, so a thousand is hours.
 pub const MAX_RUNS: u64 = 1000;
+
+/// What bench agents do each tick (`--load`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum Load {
+    /// Constant powers, sensors unread: the IPC alone.
+    Ipc,
+    /// Every sensor block read, a reactive avoidance rule per robot, robots within each
+    /// other's sensor range.
+    Real,
+    /// Both, interleaved, each on its own line.
+    Both,
+}
+
+impl Load {
+    /// Whether the IPC-only variants run.
+    pub fn ipc(self) -> bool {
+        matches!(self, Load::Ipc | Load::Both)
+    }
+
+    /// Whether the real-load variants run.
+    pub fn real(self) -> bool {
+        matches!(self, Load::Real | Load::Both)
+    }
+}
 
 /// How bench agents attach to the hub.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
@@ -138,9 +173,36 @@ pub struct UdpClientArgs {
     /// Robots to register (one socket each, as Ciber-Rato clients do).
     #[arg(long, default_value_t = 1)]
     pub robots: usize,
-    /// Start pose of the first robot X,Y (a lattice 5 m apart, ten to a row).
+    /// Start pose of the first robot X,Y (a lattice 5 m apart, ten to a row; IPC only).
     #[arg(long, value_parser = agent_sdk::args::powers, allow_hyphen_values = true)]
     pub pose: [f64; 2],
+    /// With the real load: register 8-sensor chairs on the bench lattice (`--first` and
+    /// `--total` place them), parse every Measures and steer by the reactive rule.
+    #[arg(long)]
+    pub real: bool,
+    /// With `--real`: the lattice index of the first robot.
+    #[arg(long, default_value_t = 0)]
+    pub first: usize,
+    /// With `--real`: robots on the whole lattice (all clients).
+    #[arg(long, default_value_t = 1)]
+    pub total: usize,
+}
+
+/// Options of the hidden real-load agent.
+#[derive(Debug, Args, Clone)]
+pub struct LoadAgentArgs {
+    /// Session of the hub.
+    #[arg(long)]
+    pub session: String,
+    /// Robots to register.
+    #[arg(long, default_value_t = 1)]
+    pub robots: usize,
+    /// The lattice index of the first robot.
+    #[arg(long, default_value_t = 0)]
+    pub first: usize,
+    /// Robots on the whole lattice (all agents).
+    #[arg(long, default_value_t = 1)]
+    pub total: usize,
 }
 
 /// Options of the hidden raw ping-pong peer.

@@ -4,7 +4,9 @@
 //! A lock-step hub waits for its agents for ever: if a helper dies first (a UDP client whose
 //! registration was lost under a flood, say), waiting on the hub alone would hang the bench.
 //! The crew watches every helper while the hub runs, ends the run at the first failure with
-//! that helper's own words, and stops whatever is still running on the way out.
+//! that helper's own words, and stops whatever is still running on the way out. While it
+//! watches, it reads the hub's peak resident set (`VmHWM`), the last time just before the hub
+//! exits.
 
 use std::process::Child;
 use std::time::{Duration, Instant};
@@ -48,6 +50,11 @@ impl Crew {
         self.helpers.push((child, what));
     }
 
+    /// Helpers so far.
+    pub(crate) fn len(&self) -> usize {
+        self.helpers.len()
+    }
+
     /// The error of the helper pushed `index`-th, which is ending before its time (it closed
     /// its stdout early): its own words if it failed, else `why`. The rest of the crew is
     /// stopped.
@@ -62,10 +69,16 @@ impl Crew {
         }
     }
 
-    /// Waits for the hub to end, then for every helper; the hub's stdout. A helper that fails
-    /// while the hub runs ends the run at once with its error.
-    pub(crate) fn finish(mut self) -> anyhow::Result<String> {
+    /// Waits for the hub to end, then for every helper; what they printed and the hub's peak
+    /// memory. A helper that fails while the hub runs ends the run at once with its error.
+    pub(crate) fn finish(mut self) -> anyhow::Result<CrewOutput> {
+        let mut hub_peak_rss_kib = 0;
         let status = loop {
+            // Read before the exit check: the last value read is the peak of the whole run but
+            // its last poll interval, in which the hub only tears down.
+            if let Some(kib) = peak_rss_kib(self.hub.id()) {
+                hub_peak_rss_kib = kib;
+            }
             if let Some(status) = self.hub.try_wait()? {
                 break status;
             }
@@ -83,12 +96,32 @@ impl Crew {
         let join = |d: Drain| d.join().map_err(|_| anyhow::anyhow!("reading the hub's output panicked"));
         let (out, err) = (String::from_utf8_lossy(&join(out)?).into_owned(), join(err)?);
         anyhow::ensure!(status.success(), "the hub failed: {out}{}", String::from_utf8_lossy(&err));
+        let mut helpers = String::new();
         while !self.helpers.is_empty() {
             let (child, what) = self.helpers.remove(0);
-            crate::finish(child, what)?;
+            helpers += &crate::finish(child, what)?;
         }
-        Ok(out)
+        Ok(CrewOutput { hub: out, helpers, hub_peak_rss_kib })
     }
+}
+
+/// What a crew's run printed, and the hub's memory.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub(crate) struct CrewOutput {
+    /// The hub's stdout.
+    pub(crate) hub: String,
+    /// The helpers' stdout (what they had not been read of before), one after the other.
+    pub(crate) helpers: String,
+    /// The hub's peak resident set size, KiB (`VmHWM`; 0: never read).
+    pub(crate) hub_peak_rss_kib: u64,
+}
+
+/// The peak resident set size (`VmHWM` in `/proc/PID/status`) of process `pid`, KiB; `None`
+/// when it cannot be read (the process has exited, or this is not Linux).
+pub(crate) fn peak_rss_kib(pid: u32) -> Option<u64> {
+    let status = std::fs::read_to_string(format!("/proc/{pid}/status")).ok()?;
+    let line = status.lines().find_map(|l| l.strip_prefix("VmHWM:"))?;
+    line.trim().strip_suffix("kB")?.trim().parse().ok()
 }
 
 impl Drop for Crew {
@@ -106,5 +139,15 @@ impl Drop for Crew {
                 let _ = child.wait();
             }
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn this_process_has_a_peak_resident_set() {
+        let kib = super::peak_rss_kib(std::process::id()).expect("Linux reports VmHWM");
+        // A test binary with its libraries is at least a megabyte, and not a terabyte.
+        assert!((1024..1 << 30).contains(&kib), "{kib} KiB");
     }
 }

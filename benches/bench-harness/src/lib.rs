@@ -8,6 +8,7 @@
 
 pub mod args;
 mod crew;
+pub mod load;
 pub mod repeat;
 pub mod serial;
 pub mod tiled;
@@ -25,6 +26,7 @@ pub fn run(command: &BenchCommand) -> anyhow::Result<std::process::ExitCode> {
         BenchCommand::Serial(a) => serial::run(a),
         BenchCommand::RawPeer(a) => raw_peer(a),
         BenchCommand::UdpClient(a) => udp_client(a),
+        BenchCommand::LoadAgent(a) => load::load_agent(a),
     }
 }
 
@@ -401,38 +403,56 @@ pub struct LockstepBench {
     pub bridge_stderr_bytes: u64,
     /// Bytes of the hub's recording (0: not recorded).
     pub recorded_bytes: u64,
+    /// The hub process's peak resident set size, KiB (`VmHWM`, read just before it exited;
+    /// 0: not read).
+    pub hub_peak_rss_kib: u64,
+    /// What the agents read (real load only; zero otherwise).
+    pub readings: load::Readings,
 }
 
 /// A hub in lock-step with `agents` agent processes of `robots_per_agent` robots each, physics
-/// and sensors on, on an open 400 m lab; ticks per second from the first step to the last.
-/// Robots stand in lattices 5 m apart (one per 25 m², about three times the density of the
-/// LIACC floor in `bench world`), driving slow arcs. Over UDP, each agent is a Ciber-Rato-style
-/// client process (one socket per robot, one `<Actions>` per `<Measures>`) talking to
-/// `iwsim udp`. With `flood` > 0 (UDP only), a thread sends that many junk datagrams at the
-/// bridge while the run goes on.
+/// and sensors on; ticks per second from the first step to the last, and the hub's peak
+/// memory.
+///
+/// IPC only (`plan.real` false): on an open lab of at least 400 m, robots stand in lattices
+/// 5 m apart (one per 25 m², about three times the density of the LIACC floor in `bench
+/// world`) with the four default sensors, driving slow arcs on constant powers that their
+/// agents send without reading their sensors. With the real load, robots stand on one lattice
+/// 2 m apart with eight sensors each ([`load`]), and every agent reads every sensor block and
+/// steers. Over UDP, each agent is a Ciber-Rato-style client process (one socket per robot,
+/// one `<Actions>` per `<Measures>`; with the real load it parses every Measures) talking to
+/// `iwsim udp`. With `plan.flood` > 0 (UDP only), a thread sends that many junk datagrams at
+/// the bridge while the run goes on.
 pub fn measure_lockstep(
     agents: usize,
     robots_per_agent: usize,
     ticks: u64,
-    udp: bool,
-    flood: u64,
-    record: bool,
+    plan: VariantPlan,
 ) -> anyhow::Result<LockstepBench> {
+    let VariantPlan { udp, flood, record, real, .. } = plan;
     // Repeated runs in one invocation each get a session and folder of their own, so nothing a
     // run leaves behind can be mistaken for the next run's.
     static RUN: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
     let run = RUN.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-    let tag = format!("{}-{}-{}-{run}", udp as u8, (flood > 0) as u8, record as u8);
+    let tag = format!("{}-{}-{}-{}-{run}", udp as u8, (flood > 0) as u8, record as u8, real as u8);
     let dir = std::env::temp_dir().join(format!("iwsim-bench-{}-{tag}", std::process::id()));
     std::fs::create_dir_all(&dir)?;
     let lab = dir.join("lab.xml");
-    std::fs::write(
-        &lab,
-        "<Lab Name=\"bench\" Width=\"400\" Height=\"400\">\n  <Wall Height=\"2\"><Corner X=\"200\" Y=\"0\"/><Corner X=\"201\" Y=\"0\"/><Corner X=\"201\" Y=\"150\"/><Corner X=\"200\" Y=\"150\"/></Wall>\n</Lab>\n",
-    )?;
+    let lab_xml = if real {
+        load::Lattice::new(agents * robots_per_agent).lab_xml()
+    } else {
+        // 400 m square, or taller when the agents' lattices need it (1,000 robots in one agent
+        // are 100 rows of ten, 500 m).
+        let height =
+            400f64.max(ipc_origin(agents.saturating_sub(1), robots_per_agent).1 + ipc_block_height(robots_per_agent));
+        format!(
+            "<Lab Name=\"bench\" Width=\"400\" Height=\"{height}\">\n  <Wall Height=\"2\"><Corner X=\"200\" Y=\"0\"/><Corner X=\"201\" Y=\"0\"/><Corner X=\"201\" Y=\"150\"/><Corner X=\"200\" Y=\"150\"/></Wall>\n</Lab>\n"
+        )
+    };
+    std::fs::write(&lab, lab_xml)?;
     let session = format!("bench-ls-{}-{tag}", std::process::id());
     let recording = record.then(|| dir.join("run.mcap"));
-    let run = run_lockstep(&session, &lab, (agents, robots_per_agent, ticks), udp, flood, recording.as_deref());
+    let run = run_lockstep(&session, &lab, (agents, robots_per_agent, ticks), plan, recording.as_deref());
     let _ = std::fs::remove_dir_all(&dir);
     // A run that failed stopped its hub, perhaps before the hub could clean up (a helper that
     // fails at once stops it while it starts): remove what a dead hub left of the session.
@@ -440,8 +460,13 @@ pub fn measure_lockstep(
         s.release_if_unused();
     }
     let (out, flood_sent, bridge_stderr_bytes) = run?;
-    let hub_out = HubOutcome::from_stdout(&out).context("reading how the hub's run ended")?;
+    let hub_out = HubOutcome::from_stdout(&out.hub).context("reading how the hub's run ended")?;
     let ticks_per_s = hub_out.ticks as f64 / hub_out.run_s.max(1e-9);
+    let readings = load::Readings::sum_of(&out.helpers);
+    if real {
+        // A loaded run whose agents read nothing did not carry the load it reports.
+        anyhow::ensure!(readings.ticks > 0 && readings.total > 0, "the loaded agents reported no readings");
+    }
     Ok(LockstepBench {
         agents,
         robots_per_agent,
@@ -450,19 +475,37 @@ pub fn measure_lockstep(
         flood_sent,
         bridge_stderr_bytes,
         recorded_bytes: hub_out.recorded_bytes,
+        hub_peak_rss_kib: out.hub_peak_rss_kib,
+        readings,
     })
 }
 
-/// One lock-step run in `session` on `lab`: the hub's stdout, the junk datagrams sent and the
-/// bytes the bridge wrote to stderr.
+/// Robots of the IPC-only lattices stand this far apart, ten to a row.
+const IPC_SPACING: f64 = 5.0;
+
+/// The depth of one agent's IPC-only lattice, metres, with a gap to the next.
+fn ipc_block_height(robots_per_agent: usize) -> f64 {
+    robots_per_agent.div_ceil(10).max(1) as f64 * IPC_SPACING + IPC_SPACING
+}
+
+/// Where agent `i`'s IPC-only lattice starts: seven lattices to a row.
+fn ipc_origin(i: usize, robots_per_agent: usize) -> (f64, f64) {
+    (
+        5.0 + (10.0 * IPC_SPACING + IPC_SPACING) * (i % 7) as f64,
+        5.0 + ipc_block_height(robots_per_agent) * (i / 7) as f64,
+    )
+}
+
+/// One lock-step run in `session` on `lab`: what the crew printed (and the hub's memory), the
+/// junk datagrams sent and the bytes the bridge wrote to stderr.
 fn run_lockstep(
     session: &str,
     lab: &std::path::Path,
     (agents, robots_per_agent, ticks): (usize, usize, u64),
-    udp: bool,
-    flood: u64,
+    plan: VariantPlan,
     record: Option<&std::path::Path>,
-) -> anyhow::Result<(String, u64, u64)> {
+) -> anyhow::Result<(crew::CrewOutput, u64, u64)> {
+    let VariantPlan { udp, flood, real, .. } = plan;
     // Over UDP the bridge is the hub's one agent, whatever the number of UDP clients.
     let hub_agents = if udp { 1 } else { agents };
     let mut hub_args = vec![
@@ -482,11 +525,12 @@ fn run_lockstep(
         hub_args.extend(["--record".into(), path.display().to_string()]);
     }
     let mut crew = crew::Crew::new(spawn_self(&hub_args)?);
-    const SPACING: f64 = 5.0;
-    let rows = robots_per_agent.div_ceil(10).max(1) as f64 * SPACING + SPACING;
-    let origin = |i: usize| (5.0 + (10.0 * SPACING + SPACING) * (i % 7) as f64, 5.0 + rows * (i / 7) as f64);
+    let origin = |i: usize| ipc_origin(i, robots_per_agent);
+    let total = (agents * robots_per_agent).to_string();
     let mut flooder = None;
     let mut stderr_bytes = None;
+    let mut client_outputs = Vec::new();
+    let mut agent_errs = Vec::new();
     if udp {
         let mut bridge = spawn_self(&[
             "udp".into(),
@@ -506,7 +550,7 @@ fn run_lockstep(
         let mut registered = Vec::new();
         for i in 0..agents {
             let (bx, by) = origin(i);
-            let mut client = spawn_self(&[
+            let mut client_args = vec![
                 "bench".into(),
                 "udp-client".into(),
                 "--server".into(),
@@ -515,52 +559,124 @@ fn run_lockstep(
                 robots_per_agent.to_string(),
                 "--pose".into(),
                 format!("{bx},{by}"),
-            ])?;
-            registered.push(client.stdout.take().context("a UDP client's stdout")?);
+            ];
+            if real {
+                client_args.extend([
+                    "--real".into(),
+                    "--first".into(),
+                    (i * robots_per_agent).to_string(),
+                    "--total".into(),
+                    total.clone(),
+                ]);
+            }
+            let mut client = spawn_self(&client_args)?;
+            registered.push(std::io::BufReader::new(client.stdout.take().context("a UDP client's stdout")?));
             crew.push(client, "UDP client");
         }
         // The bridge is helper 0, the clients follow.
         // The flood starts once every robot is in: a registration lost in it would leave the
         // hub waiting for ever, and what is measured is the run under the flood.
-        for (i, out) in registered.into_iter().enumerate() {
+        for (i, out) in registered.iter_mut().enumerate() {
             let mut line = String::new();
-            let _ = std::io::BufRead::read_line(&mut std::io::BufReader::new(out), &mut line);
+            let _ = std::io::BufRead::read_line(out, &mut line);
             if !line.starts_with(UDP_CLIENT_REGISTERED) {
                 return Err(crew.helper_failed(1 + i, "a UDP client ended before registering its robots"));
             }
         }
+        client_outputs = registered;
         if flood > 0 {
             flooder = Some(start_flood(server, flood)?);
         }
     } else {
-        for i in 0..agents {
-            let (bx, by) = origin(i);
-            crew.push(
-                spawn_self(&[
-                    "agent".into(),
-                    "wheelchair".into(),
-                    "--session".into(),
-                    session.to_owned(),
-                    "--robots".into(),
-                    robots_per_agent.to_string(),
-                    "--pose".into(),
-                    format!("{bx},{by},0"),
-                    "--spacing".into(),
-                    SPACING.to_string(),
-                    "--powers".into(),
-                    "0.3,0.28".into(),
-                    "--connect-timeout".into(),
-                    "30".into(),
-                ])?,
-                "agent",
-            );
+        // Agents join in waves, each wave once the last has registered: a hub that met a
+        // hundred hellos at once would make them in one pass of its loop, and the first agents
+        // would wait longer than their 5 s for the map it hands out between passes. Only the
+        // start is staggered; the ticks are timed once every agent is in.
+        for wave in (0..agents).collect::<Vec<_>>().chunks(AGENT_WAVE) {
+            let first_helper = crew.len();
+            let mut announced = Vec::new();
+            for &i in wave {
+                let args: Vec<String> = if real {
+                    [
+                        "bench",
+                        "load-agent",
+                        "--session",
+                        session,
+                        "--robots",
+                        &robots_per_agent.to_string(),
+                        "--first",
+                        &(i * robots_per_agent).to_string(),
+                        "--total",
+                        &total,
+                    ]
+                    .map(str::to_owned)
+                    .into()
+                } else {
+                    let (bx, by) = origin(i);
+                    [
+                        "agent",
+                        "wheelchair",
+                        "--session",
+                        session,
+                        "--robots",
+                        &robots_per_agent.to_string(),
+                        "--pose",
+                        &format!("{bx},{by},0"),
+                        "--spacing",
+                        &IPC_SPACING.to_string(),
+                        "--powers",
+                        "0.3,0.28",
+                        "--connect-timeout",
+                        "30",
+                    ]
+                    .map(str::to_owned)
+                    .into()
+                };
+                let mut agent = spawn_self(&args)?;
+                announced.push(std::io::BufReader::new(agent.stderr.take().context("an agent's stderr")?));
+                crew.push(agent, "agent");
+            }
+            for (k, err) in announced.iter_mut().enumerate() {
+                if !registered(err) {
+                    return Err(crew.helper_failed(first_helper + k, "an agent ended before registering its robots"));
+                }
+            }
+            agent_errs.extend(announced);
         }
     }
-    let out = crew.finish()?;
+    let mut out = crew.finish()?;
+    // The UDP clients' stdout was taken to read their registration: the rest of it (their
+    // report) is read here, now that they have exited; and the rest of the agents' stderr.
+    for mut client in client_outputs {
+        let _ = std::io::Read::read_to_string(&mut client, &mut out.helpers);
+    }
+    for mut err in agent_errs {
+        let _ = std::io::copy(&mut err, &mut std::io::sink());
+    }
     let flood_sent = flooder.map_or(0, Flood::stop);
     // The bridge has exited: its stderr is closed and the counting thread ends.
     let bridge_stderr_bytes = stderr_bytes.map_or(0, |h| h.join().unwrap_or(0));
     Ok((out, flood_sent, bridge_stderr_bytes))
+}
+
+/// Shared-memory agents that join the hub at once (see `run_lockstep`).
+const AGENT_WAVE: usize = 10;
+
+/// Reads an agent's stderr up to the line saying its robots are registered ("… drives robots
+/// …", from the wheelchair and the load agent alike); false when it ends first.
+fn registered(stderr: &mut impl std::io::BufRead) -> bool {
+    let mut line = String::new();
+    loop {
+        line.clear();
+        match stderr.read_line(&mut line) {
+            Ok(n) if n > 0 => {
+                if line.contains(" drives robots ") {
+                    return true;
+                }
+            }
+            _ => return false,
+        }
+    }
 }
 
 /// What the UDP bench client prints on stdout once all its robots are registered.
@@ -640,15 +756,23 @@ fn bridge_address(
 }
 
 /// The UDP bench client: registers robots like a Ciber-Rato client (one socket each) and
-/// answers every `<Measures>` with one `<Actions>`, until the Measures stop.
+/// answers every `<Measures>` with one `<Actions>`, until the Measures stop. IPC only, it
+/// answers constant powers unread; with `--real` it registers the bench's eight-sensor chairs
+/// on the lattice, parses every Measures in full and steers each robot by the reactive rule.
 pub fn udp_client(args: &UdpClientArgs) -> anyhow::Result<ExitCode> {
     use std::net::UdpSocket;
+    let lattice = load::Lattice::new(args.total);
     let mut socks = Vec::new();
     for k in 0..args.robots {
         let s = UdpSocket::bind("127.0.0.1:0").context("bind a client socket")?;
         s.set_read_timeout(Some(Duration::from_secs(10)))?;
-        let (x, y) = (args.pose[0] + 5.0 * (k % 10) as f64, args.pose[1] + 5.0 * (k / 10) as f64);
-        let reg = format!("<Robot Name=\"udp{k}\" X=\"{x}\" Y=\"{y}\" Dir=\"0\"/>");
+        let reg = if args.real {
+            let g = args.first + k;
+            load::chair_registration_xml(&format!("udp{g}"), lattice.pose(g))
+        } else {
+            let (x, y) = (args.pose[0] + 5.0 * (k % 10) as f64, args.pose[1] + 5.0 * (k / 10) as f64);
+            format!("<Robot Name=\"udp{k}\" X=\"{x}\" Y=\"{y}\" Dir=\"0\"/>")
+        };
         s.send_to(reg.as_bytes(), args.server)?;
         let mut buf = [0u8; 4096];
         let (n, from) = s.recv_from(&mut buf).context("no registration reply")?;
@@ -662,6 +786,8 @@ pub fn udp_client(args: &UdpClientArgs) -> anyhow::Result<ExitCode> {
     }
     println!("{UDP_CLIENT_REGISTERED} {} robots", socks.len());
     let mut answered = 0u64;
+    let mut readings = load::Readings::default();
+    let mut distances = Vec::with_capacity(ipc_types::MAX_PROXIMITY);
     let mut buf = [0u8; 4096];
     'run: loop {
         for s in &socks {
@@ -669,6 +795,14 @@ pub fn udp_client(args: &UdpClientArgs) -> anyhow::Result<ExitCode> {
             let timeout = if answered == 0 { Duration::from_secs(30) } else { Duration::from_millis(1500) };
             s.set_read_timeout(Some(timeout))?;
             match s.recv(&mut buf) {
+                Ok(n) if args.real => {
+                    let m = udp_bridge::codec::decode_measures(&buf[..n]).context("a Measures from the bridge")?;
+                    // On a tie, turn towards the side the chair already faces.
+                    let actions = load::answer(&m, &mut distances, m.compass.is_none_or(|c| c >= 0.0));
+                    readings.add(&distances);
+                    s.send(actions.as_bytes())?;
+                    answered += 1;
+                }
                 Ok(_) => {
                     s.send(b"<Actions LeftMotor=\"0.045\" RightMotor=\"0.042\"/>")?;
                     answered += 1;
@@ -676,15 +810,20 @@ pub fn udp_client(args: &UdpClientArgs) -> anyhow::Result<ExitCode> {
                 Err(_) => break 'run,
             }
         }
+        readings.ticks += 1;
     }
     eprintln!("udp client: answered {answered} Measures");
+    if args.real {
+        println!("{}", readings.line());
+    }
     Ok(ExitCode::SUCCESS)
 }
 
-/// One variant of `iwsim bench lockstep` (shared memory, UDP, UDP under a flood) and its runs.
+/// One variant of `iwsim bench lockstep` (shared memory or UDP, IPC only or with the real
+/// load, UDP under a flood, shared memory recorded) and its runs.
 #[derive(Debug, Clone, PartialEq)]
 pub struct LockstepVariant {
-    /// `shm`, `udp` or `udp+flood`.
+    /// `shm`, `udp`, `udp+flood`, `shm+record`, `shm+real` or `udp+real`.
     pub name: &'static str,
     /// Every run, in the order they ran.
     pub runs: Vec<LockstepBench>,
@@ -705,6 +844,25 @@ impl LockstepVariant {
     /// The most bytes the bridge wrote to stderr in one run: the bound a user cares about.
     pub fn bridge_stderr_bytes(&self) -> u64 {
         self.runs.iter().map(|b| b.bridge_stderr_bytes).max().unwrap_or(0)
+    }
+
+    /// The hub's peak resident set over the runs, MiB: the most any run needed.
+    pub fn hub_peak_rss_mib(&self) -> f64 {
+        self.runs.iter().map(|b| b.hub_peak_rss_kib).max().unwrap_or(0) as f64 / 1024.0
+    }
+
+    /// What the agents read over all runs.
+    pub fn readings(&self) -> load::Readings {
+        self.runs.iter().fold(load::Readings::default(), |a, b| load::Readings {
+            ticks: a.ticks + b.readings.ticks,
+            total: a.total + b.readings.total,
+            near: a.near + b.readings.near,
+        })
+    }
+
+    /// Whether the agents carried the real load.
+    pub fn real(&self) -> bool {
+        self.name.ends_with("+real")
     }
 }
 
@@ -730,28 +888,71 @@ impl LockstepRatio {
     }
 }
 
-/// The variants `args` asks for, in the order each round runs them: (name, over UDP, flood).
-/// The variants one invocation runs: (name, over UDP, junk datagrams, recorded).
-fn lockstep_variants(args: &BenchLockstepArgs) -> Vec<(&'static str, bool, u64, bool)> {
-    let mut v = match args.transport {
-        Transport::Shm if args.flood == 0 || args.record => vec![("shm", false, 0, false)],
-        Transport::Shm => vec![],
-        Transport::Udp => vec![("udp", true, 0, false)],
-        Transport::Both => vec![("shm", false, 0, false), ("udp", true, 0, false)],
+/// How one variant of `iwsim bench lockstep` runs.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct VariantPlan {
+    /// Its name in the report.
+    pub name: &'static str,
+    /// Agents attach through the UDP/XML bridge.
+    pub udp: bool,
+    /// Junk datagrams sent at the bridge during the run.
+    pub flood: u64,
+    /// The hub records the run.
+    pub record: bool,
+    /// The agents carry the real load ([`load`]).
+    pub real: bool,
+}
+
+impl VariantPlan {
+    const fn new(name: &'static str, udp: bool) -> Self {
+        Self { name, udp, flood: 0, record: false, real: false }
+    }
+}
+
+const SHM: VariantPlan = VariantPlan::new("shm", false);
+const UDP: VariantPlan = VariantPlan::new("udp", true);
+const SHM_REAL: VariantPlan = VariantPlan { real: true, ..VariantPlan::new("shm+real", false) };
+const UDP_REAL: VariantPlan = VariantPlan { real: true, ..VariantPlan::new("udp+real", true) };
+
+/// The variants one invocation runs, in the order each round runs them.
+fn lockstep_variants(args: &BenchLockstepArgs) -> Vec<VariantPlan> {
+    let (shm, udp) = match args.transport {
+        Transport::Shm => (true, false),
+        Transport::Udp => (false, true),
+        Transport::Both => (true, true),
     };
+    let mut v = Vec::new();
+    if args.load.ipc() {
+        // A shared-memory flood run is a UDP run: `--transport shm --flood N` compares UDP with
+        // and without the flood alone, unless the recorder is asked for too.
+        if shm && (args.flood == 0 || args.record) {
+            v.push(SHM);
+        }
+        if udp {
+            v.push(UDP);
+        }
+    }
     if args.flood > 0 {
         // The flood is at the bridge: compare UDP runs with and without it, in one invocation.
-        if !v.iter().any(|(name, ..)| *name == "udp") {
-            v.push(("udp", true, 0, false));
+        if !v.contains(&UDP) {
+            v.push(UDP);
         }
-        v.push(("udp+flood", true, args.flood, false));
+        v.push(VariantPlan { flood: args.flood, ..VariantPlan::new("udp+flood", true) });
     }
     if args.record {
         // The recorder's cost: the same shared-memory run with the hub recording.
-        if !v.iter().any(|(name, ..)| *name == "shm") {
-            v.push(("shm", false, 0, false));
+        if !v.contains(&SHM) {
+            v.push(SHM);
         }
-        v.push(("shm+record", false, 0, true));
+        v.push(VariantPlan { record: true, ..VariantPlan::new("shm+record", false) });
+    }
+    if args.load.real() {
+        if shm {
+            v.push(SHM_REAL);
+        }
+        if udp {
+            v.push(UDP_REAL);
+        }
     }
     v
 }
@@ -760,36 +961,37 @@ fn lockstep_variants(args: &BenchLockstepArgs) -> Vec<(&'static str, bool, u64, 
 pub fn measure_lockstep_runs(args: &BenchLockstepArgs) -> anyhow::Result<Vec<LockstepVariant>> {
     let variants = lockstep_variants(args);
     let runs = repeat::interleaved(args.runs, variants.len(), |round, i| {
-        let (name, udp, flood, record) = variants[i];
-        measure_lockstep(args.agents, args.robots_per_agent, args.ticks, udp, flood, record)
-            .with_context(|| format!("run {} of {name}", round + 1))
+        let plan = variants[i];
+        measure_lockstep(args.agents, args.robots_per_agent, args.ticks, plan)
+            .with_context(|| format!("run {} of {}", round + 1, plan.name))
     })?;
-    Ok(variants.iter().zip(runs).map(|(&(name, ..), runs)| LockstepVariant { name, runs }).collect())
+    Ok(variants.iter().zip(runs).map(|(plan, runs)| LockstepVariant { name: plan.name, runs }).collect())
 }
 
 /// What `iwsim bench lockstep` prints for `variants` (text, or one JSON object with `--json`).
 pub fn lockstep_report(args: &BenchLockstepArgs, variants: &[LockstepVariant]) -> String {
     let find = |n: &str| variants.iter().find(|v| v.name == n);
-    let shm_udp = match (variants.first(), variants.get(1)) {
-        (Some(a), Some(b)) if a.name == "shm" && b.name == "udp" => Some(LockstepRatio::of(a, b)),
+    let pair = |a: &str, b: &str| match (find(a), find(b)) {
+        (Some(a), Some(b)) => Some(LockstepRatio::of(a, b)),
         _ => None,
     };
+    let shm_udp = pair("shm", "udp");
+    let shm_udp_real = pair("shm+real", "udp+real");
+    let real_shm = pair("shm+real", "shm");
+    let real_udp = pair("udp+real", "udp");
     let (flood, quiet) = (find("udp+flood"), find("udp"));
-    let flood_ratio = match (flood, quiet) {
-        (Some(f), Some(q)) => Some(LockstepRatio::of(f, q)),
-        _ => None,
-    };
+    let flood_ratio = pair("udp+flood", "udp");
     let recorded = find("shm+record");
-    let record_ratio = match (recorded, find("shm")) {
-        (Some(r), Some(q)) => Some(LockstepRatio::of(r, q)),
-        _ => None,
-    };
+    let record_ratio = pair("shm+record", "shm");
     // The recording's size per robot per tick, from the median-sized file.
     let bytes_per_robot_tick = recorded.map(|r| {
         let mut b: Vec<u64> = r.runs.iter().map(|b| b.recorded_bytes).collect();
         b.sort_unstable();
         let robots = (args.agents * args.robots_per_agent).max(1) as f64;
         b.get(b.len() / 2).copied().unwrap_or(0) as f64 / robots / r.runs.first().map_or(1, |b| b.ticks.max(1)) as f64
+    });
+    let neighbours = variants.iter().any(LockstepVariant::real).then(|| {
+        load::Lattice::new(args.agents * args.robots_per_agent).mean_neighbours_within(load::sensor_range_m())
     });
     let ticks = variants.first().and_then(|v| v.runs.first()).map_or(0, |b| b.ticks);
     let mut s = String::new();
@@ -801,13 +1003,29 @@ pub fn lockstep_report(args: &BenchLockstepArgs, variants: &[LockstepVariant]) -
         for v in variants {
             let t = v.ticks_per_s();
             // One variant keeps the old `transport` and `ticks_per_s` keys; several are named.
-            let key = if variants.len() == 1 {
+            let (key, prefix) = if variants.len() == 1 {
                 s += &format!(",\"transport\":\"{}\"", v.name);
-                "ticks_per_s".to_owned()
+                ("ticks_per_s".to_owned(), String::new())
             } else {
-                format!("{}_ticks_per_s", v.name.replace('+', "_"))
+                let name = v.name.replace('+', "_");
+                (format!("{name}_ticks_per_s"), format!("{name}_"))
             };
             s += &format!(",\"{key}\":{:.1},\"{key}_min\":{:.1},\"{key}_max\":{:.1}", t.median, t.min, t.max);
+            if v.hub_peak_rss_mib() > 0.0 {
+                s += &format!(",\"{prefix}hub_peak_rss_mib\":{:.1}", v.hub_peak_rss_mib());
+            }
+            if v.real() {
+                let r = v.readings();
+                s += &format!(
+                    ",\"{prefix}readings\":{},\"{prefix}readings_near\":{},\"{prefix}readings_near_fraction\":{:.3}",
+                    r.total,
+                    r.near,
+                    r.near_fraction()
+                );
+            }
+        }
+        if let Some(n) = neighbours {
+            s += &format!(",\"real_neighbours_in_range\":{n:.2},\"real_near_m\":{}", load::NEAR_M);
         }
         let ratio = |s: &mut String, key: &str, r: &LockstepRatio| {
             *s += &format!(
@@ -815,8 +1033,15 @@ pub fn lockstep_report(args: &BenchLockstepArgs, variants: &[LockstepVariant]) -
                 r.of_medians, r.by_round.min, r.by_round.max
             );
         };
-        if let Some(r) = &shm_udp {
-            ratio(&mut s, "ratio_shm_over_udp", r);
+        for (key, r) in [
+            ("ratio_shm_over_udp", &shm_udp),
+            ("ratio_shm_real_over_udp_real", &shm_udp_real),
+            ("ratio_shm_real_over_shm", &real_shm),
+            ("ratio_udp_real_over_udp", &real_udp),
+        ] {
+            if let Some(r) = r {
+                ratio(&mut s, key, r);
+            }
         }
         if let (Some(f), Some(r), Some(q)) = (flood, &flood_ratio, quiet) {
             s += &format!(",\"flood_sent\":{}", f.flood_sent());
@@ -848,9 +1073,24 @@ pub fn lockstep_report(args: &BenchLockstepArgs, variants: &[LockstepVariant]) -
             (true, false) => format!("; bridge stderr {} bytes", v.bridge_stderr_bytes()),
             _ => String::new(),
         };
+        let rss = if v.hub_peak_rss_mib() > 0.0 {
+            format!("; hub peak RSS {:.1} MiB", v.hub_peak_rss_mib())
+        } else {
+            String::new()
+        };
+        let (transport, what) = match v.name.split_once('+') {
+            Some((transport, "real")) => (transport, "real load: every sensor read, reactive steering"),
+            _ => (v.name, "IPC only, physics and sensors on"),
+        };
+        let near = if v.real() {
+            let r = v.readings();
+            format!("; {:.0}% of {} readings under {} m", 100.0 * r.near_fraction(), r.total, load::NEAR_M)
+        } else {
+            String::new()
+        };
         s += &format!(
-            "lockstep over {}: {} agents x {} robots, physics and sensors on: {rate} over {ticks} ticks{flooded}{stderr}\n",
-            v.name, args.agents, args.robots_per_agent
+            "lockstep over {transport}: {} agents x {} robots, {what}: {rate} over {ticks} ticks{flooded}{stderr}{near}{rss}\n",
+            args.agents, args.robots_per_agent
         );
     }
     let ratio = |r: &LockstepRatio| {
@@ -866,11 +1106,27 @@ pub fn lockstep_report(args: &BenchLockstepArgs, variants: &[LockstepVariant]) -
     if let Some(r) = &shm_udp {
         s += &format!("  shared memory / UDP: {}\n", ratio(r));
     }
+    if let Some(r) = &shm_udp_real {
+        s += &format!("  shared memory / UDP, real load: {}\n", ratio(r));
+    }
+    if let Some(r) = &real_shm {
+        s += &format!("  real load / IPC only, shared memory: {}\n", ratio(r));
+    }
+    if let Some(r) = &real_udp {
+        s += &format!("  real load / IPC only, UDP: {}\n", ratio(r));
+    }
     if let Some(r) = &flood_ratio {
         s += &format!("  UDP with the flood / without: {}\n", ratio(r));
     }
     if let (Some(r), Some(bytes)) = (&record_ratio, bytes_per_robot_tick) {
         s += &format!("  recording / not: {} ticks/s; {bytes:.0} bytes per robot per tick recorded\n", ratio(r));
+    }
+    if let Some(n) = neighbours {
+        s += &format!(
+            "  IPC only: robots {IPC_SPACING} m apart, 4 sensors each, agents send constant powers unread. Real load: robots {} m apart, 8 sensors each, {n:.1} neighbours within {} m on average at the start; agents read every sensor block (UDP clients parse every Measures) and steer each robot by a reactive rule\n",
+            load::SPACING_M,
+            load::sensor_range_m()
+        );
     }
     s
 }
@@ -910,6 +1166,8 @@ mod tests {
             flood_sent,
             bridge_stderr_bytes,
             recorded_bytes: 0,
+            hub_peak_rss_kib: 0,
+            readings: load::Readings::default(),
         }
     }
 
@@ -939,16 +1197,72 @@ mod tests {
 
     #[test]
     fn a_flood_invocation_runs_udp_quiet_and_flooded() {
-        let a = lockstep_args(&["--transport", "udp", "--flood", "10"]).expect("parses");
-        assert_eq!(lockstep_variants(&a), vec![("udp", true, 0, false), ("udp+flood", true, 10, false)]);
-        let a = lockstep_args(&["--transport", "both"]).expect("parses");
-        assert_eq!(lockstep_variants(&a), vec![("shm", false, 0, false), ("udp", true, 0, false)]);
+        let names = |line: &[&str]| -> Vec<&'static str> {
+            lockstep_variants(&lockstep_args(line).expect("parses")).iter().map(|v| v.name).collect()
+        };
+        let a = lockstep_args(&["--transport", "udp", "--flood", "10", "--load", "ipc"]).expect("parses");
+        let flooded = VariantPlan { flood: 10, ..VariantPlan::new("udp+flood", true) };
+        assert_eq!(lockstep_variants(&a), vec![UDP, flooded]);
+        assert_eq!(names(&["--transport", "both", "--load", "ipc"]), ["shm", "udp"]);
+        // The flood is an IPC-only comparison; the real load adds its own variant.
+        assert_eq!(names(&["--transport", "udp", "--flood", "10"]), ["udp", "udp+flood", "udp+real"]);
+    }
+
+    #[test]
+    fn one_invocation_runs_ipc_only_and_the_real_load_unless_told() {
+        let names = |line: &[&str]| -> Vec<&'static str> {
+            lockstep_variants(&lockstep_args(line).expect("parses")).iter().map(|v| v.name).collect()
+        };
+        assert_eq!(names(&[]), ["shm", "shm+real"]);
+        assert_eq!(names(&["--transport", "both"]), ["shm", "udp", "shm+real", "udp+real"]);
+        assert_eq!(names(&["--transport", "udp", "--load", "real"]), ["udp+real"]);
+        let plans = lockstep_variants(&lockstep_args(&["--transport", "both"]).expect("parses"));
+        assert_eq!(
+            plans.iter().map(|v| (v.udp, v.real)).collect::<Vec<_>>(),
+            [(false, false), (true, false), (false, true), (true, true)]
+        );
+    }
+
+    #[test]
+    fn the_report_labels_ipc_only_and_real_load_lines_with_the_hub_memory() {
+        let loaded = |ticks_per_s: f64, near: u64| LockstepBench {
+            hub_peak_rss_kib: 20 * 1024,
+            readings: load::Readings { ticks: 10, total: 8000, near },
+            ..run(ticks_per_s, 0, 0)
+        };
+        let ipc = LockstepBench { hub_peak_rss_kib: 18 * 1024, ..run(8000.0, 0, 0) };
+        let v = [
+            LockstepVariant { name: "shm", runs: vec![ipc] },
+            LockstepVariant { name: "shm+real", runs: vec![loaded(6000.0, 6000)] },
+        ];
+        let a = lockstep_args(&["--runs", "1"]).expect("parses");
+        let out = lockstep_report(&a, &v);
+        let lines: Vec<&str> = out.lines().collect();
+        assert!(
+            lines[0].contains("over shm: 1 agents x 100 robots, IPC only") && lines[0].contains("18.0 MiB"),
+            "{out}"
+        );
+        assert!(
+            lines[1].contains("over shm: 1 agents x 100 robots, real load")
+                && lines[1].contains("75% of 8000 readings under 2.5 m")
+                && lines[1].ends_with("hub peak RSS 20.0 MiB"),
+            "{out}"
+        );
+        assert!(out.contains("real load / IPC only, shared memory: 0.75x"), "{out}");
+        let a = lockstep_args(&["--runs", "1", "--json"]).expect("parses");
+        let j: serde_json::Value = serde_json::from_str(&lockstep_report(&a, &v)).expect("one JSON object");
+        assert_eq!(j["shm_hub_peak_rss_mib"], 18.0);
+        assert_eq!(j["shm_real_hub_peak_rss_mib"], 20.0);
+        assert_eq!(j["shm_real_readings_near_fraction"], 0.75);
+        assert_eq!(j["ratio_shm_real_over_shm"], 0.75);
+        assert_eq!(j["real_neighbours_in_range"], 6.84);
     }
 
     #[test]
     fn a_record_invocation_runs_shared_memory_with_and_without_the_recorder() {
-        let a = lockstep_args(&["--record"]).expect("parses");
-        assert_eq!(lockstep_variants(&a), vec![("shm", false, 0, false), ("shm+record", false, 0, true)]);
+        let a = lockstep_args(&["--record", "--load", "ipc"]).expect("parses");
+        let recorded_plan = VariantPlan { record: true, ..VariantPlan::new("shm+record", false) };
+        assert_eq!(lockstep_variants(&a), vec![SHM, recorded_plan]);
         let mut quiet = run(1000.0, 0, 0);
         let mut recorded = run(900.0, 0, 0);
         (quiet.robots_per_agent, recorded.robots_per_agent) = (100, 100);

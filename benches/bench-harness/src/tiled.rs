@@ -166,25 +166,34 @@ pub fn wander(world: &World, robots: &[RobotHandle], out: &mut Vec<Action>) {
     out.clear();
     for (k, &h) in robots.iter().enumerate() {
         let Some(r) = world.robot(h) else { continue };
-        let d = r.readings.proximity();
-        if d.len() < 5 {
-            continue;
+        if let Some((l, rr)) = steer(r.readings.proximity(), r.collision, k % 2 == 0) {
+            out.push(Action::motors(h, l, rr));
         }
-        // Straight ahead decides whether to turn on the spot; the diagonals and sides only
-        // steer, so a chair follows a corridor narrower than its sensors' reach.
-        let (ahead, front_left, front_right, left, right) = (d[0], d[1], d[2], d[3], d[4]);
-        let turn_left = front_left + left > front_right + right || (front_left == front_right && k % 2 == 0);
-        let (l, rr) = if ahead < 0.7 || r.collision {
-            if turn_left { (-0.4, 0.4) } else { (0.4, -0.4) }
-        } else if front_left < 0.45 || left < 0.3 {
-            (0.8, 0.45)
-        } else if front_right < 0.45 || right < 0.3 {
-            (0.45, 0.8)
-        } else {
-            (0.9, 0.9)
-        };
-        out.push(Action::motors(h, l, rr));
     }
+}
+
+/// The reactive rule of [`wander`] for one chair of [`chair_spec`]'s sensor layout: motor
+/// powers (left, right) from its proximity readings `d` (metres, in sensor order) and whether
+/// it is blocked; `left_on_tie` picks the way to turn when both sides read alike. `None` when
+/// the chair has fewer than the five front and side sensors the rule reads. The bench agents
+/// of `iwsim bench lockstep` steer by this rule too, so both benchmarks carry one controller.
+pub fn steer(d: &[Real], collision: bool, left_on_tie: bool) -> Option<(Real, Real)> {
+    if d.len() < 5 {
+        return None;
+    }
+    // Straight ahead decides whether to turn on the spot; the diagonals and sides only
+    // steer, so a chair follows a corridor narrower than its sensors' reach.
+    let (ahead, front_left, front_right, left, right) = (d[0], d[1], d[2], d[3], d[4]);
+    let turn_left = front_left + left > front_right + right || (front_left == front_right && left_on_tie);
+    Some(if ahead < 0.7 || collision {
+        if turn_left { (-0.4, 0.4) } else { (0.4, -0.4) }
+    } else if front_left < 0.45 || left < 0.3 {
+        (0.8, 0.45)
+    } else if front_right < 0.45 || right < 0.3 {
+        (0.45, 0.8)
+    } else {
+        (0.9, 0.9)
+    })
 }
 
 #[cfg(test)]
