@@ -765,7 +765,14 @@ impl HubCore {
         let mut b = pack_sensor_block(r, robot_id, tick, |h| self.stage.id_of(h));
         if let Some(c) = &entry.chair {
             let default_range = self.stage.world().params().proximity_range_m;
-            let specs = if r.spec.sensors.is_empty() { r.spec.default_sensors() } else { r.spec.sensors.clone() };
+            // Borrowed, not cloned: this runs for every chair at every publication.
+            let defaults;
+            let specs = if r.spec.sensors.is_empty() {
+                defaults = r.spec.default_sensors();
+                &defaults
+            } else {
+                &r.spec.sensors
+            };
             let controlled = c.controller.is_some_and(|a| self.agents.contains_key(&a));
             merge_chair_readings(&mut b, c.mode, &c.real_m, |i| {
                 specs.get(i).map_or(default_range, |s| s.range_m.unwrap_or(default_range))

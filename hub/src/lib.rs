@@ -100,6 +100,12 @@ fn ipc<E: std::fmt::Debug>(what: &str) -> impl FnOnce(E) -> HubError + '_ {
 /// subscribers that joined without ringing.
 const IDLE_POLL: Duration = Duration::from_millis(50);
 
+/// How long registrations must pause before the hub republishes the tick they changed. An
+/// agent registering many robots back to back (each answer takes a round trip) thus costs one
+/// republication of the world, not one per robot (N robots: O(N) to set up, not O(N²)); a
+/// step or a Ready publishes at once, whatever the pause.
+const REGISTRATION_SETTLE: Duration = Duration::from_millis(2);
+
 /// A Linux pidfd: readable once the process has exited.
 #[derive(Debug)]
 struct PidFd(OwnedFd);
@@ -132,17 +138,27 @@ fn raise_fd_limit() {
     }
 }
 
-/// Waits until one of `fds` is readable or `timeout` passes; returns the readable ones.
-fn poll_readable(fds: &[i32], timeout: Duration, ready: &mut Vec<usize>) {
-    ready.clear();
-    let mut pfds: Vec<libc::pollfd> =
-        fds.iter().map(|&fd| libc::pollfd { fd, events: libc::POLLIN, revents: 0 }).collect();
-    let ms = timeout.as_millis().min(i32::MAX as u128) as i32;
-    #[allow(unsafe_code)]
-    // SAFETY: pfds is a live, correctly sized array of pollfd for the duration of the call.
-    let n = unsafe { libc::poll(pfds.as_mut_ptr(), pfds.len() as libc::nfds_t, ms) };
-    if n > 0 {
-        ready.extend(pfds.iter().enumerate().filter(|(_, p)| p.revents != 0).map(|(i, _)| i));
+/// `poll(2)` on a set of file descriptors, with its `pollfd` array kept between calls so the
+/// hub's loop allocates nothing once warm.
+#[derive(Debug, Default)]
+struct Poller {
+    pfds: Vec<libc::pollfd>,
+}
+
+impl Poller {
+    /// Waits until one of `fds` is readable or `timeout` passes; `ready` gets the indexes of
+    /// the readable ones.
+    fn readable(&mut self, fds: &[i32], timeout: Duration, ready: &mut Vec<usize>) {
+        ready.clear();
+        self.pfds.clear();
+        self.pfds.extend(fds.iter().map(|&fd| libc::pollfd { fd, events: libc::POLLIN, revents: 0 }));
+        let ms = timeout.as_millis().min(i32::MAX as u128) as i32;
+        #[allow(unsafe_code)]
+        // SAFETY: pfds is a live, correctly sized array of pollfd for the duration of the call.
+        let n = unsafe { libc::poll(self.pfds.as_mut_ptr(), self.pfds.len() as libc::nfds_t, ms) };
+        if n > 0 {
+            ready.extend(self.pfds.iter().enumerate().filter(|(_, p)| p.revents != 0).map(|(i, _)| i));
+        }
     }
 }
 
@@ -211,16 +227,19 @@ pub fn run(cfg: HubConfig) -> Result<HubOutcome, HubError> {
     let mut agents: BTreeMap<u32, AgentPorts> = BTreeMap::new();
     let mut outcome = HubOutcome::default();
     let mut first_step: Option<Instant> = None;
+    // The snapshot as the recorder takes it (filled only when recording).
     let mut states: Vec<RobotState> = Vec::new();
-    let mut blocks: Vec<SensorBlock> = Vec::new();
     let cycle = Duration::from_millis(cfg.params.cycle_ms.max(1) as u64);
     let mut next_tick_at = Instant::now() + cycle;
     let mut deadline_at = Instant::now() + cfg.deadline;
     let mut fds: Vec<i32> = Vec::new();
     let mut fd_agents: Vec<u32> = Vec::new();
+    let mut poller = Poller::default();
     let mut ready = Vec::new();
     let mut dead_agents: Vec<u32> = Vec::new();
     let mut publish = true;
+    // When the last robot was registered, while the republication it asks for is pending.
+    let mut registered_at: Option<Instant> = None;
     let mut last_published: Option<u64> = None;
 
     tracing::info!(
@@ -230,20 +249,26 @@ pub fn run(cfg: HubConfig) -> Result<HubOutcome, HubError> {
         cfg.lab.name,
         cfg.grid.poses.len()
     );
-    let mut chairs = Vec::new();
     loop {
         if node.wait(Duration::ZERO).is_err() {
             outcome.interrupted = true;
             break;
         }
+        if registered_at.is_some_and(|t| t.elapsed() >= REGISTRATION_SETTLE) {
+            publish = true;
+        }
         if publish {
+            registered_at = None;
+            outcome.snapshots += 1;
             if core.world().tick() == 0 {
                 core.prime_sensors();
             }
-            publish_tick(&core, &ports.world_pub, &agents, &mut states, &mut blocks)?;
-            ports.roster.publish_if_changed(&states, || core.robot_sensors())?;
+            let recorded = recording.is_some().then_some(&mut states);
+            publish_tick(&core, &ports.world_pub, &agents, &mut ports.roster, recorded)?;
+            ports.roster.publish_if_changed(|| core.robot_sensors())?;
             if core.has_chairs() {
-                ports::publish_chairs(&ports.chairs_pub, core.world().tick(), &mut chairs, core.chair_states())?;
+                let count = core.chair_states().count();
+                ports::publish_chairs(&ports.chairs_pub, core.world().tick(), count, core.chair_states())?;
             }
             ports.tick_notifier.notify().map_err(ipc("ring the tick"))?;
             publish = false;
@@ -277,7 +302,8 @@ pub fn run(cfg: HubConfig) -> Result<HubOutcome, HubError> {
                 Mode::LockStep => deadline_at.saturating_duration_since(now),
             }
         }
-        .min(IDLE_POLL);
+        .min(IDLE_POLL)
+        .min(registered_at.map_or(Duration::MAX, |t| (t + REGISTRATION_SETTLE).saturating_duration_since(now)));
         fds.clear();
         fd_agents.clear();
         fds.push(doorbell_fd);
@@ -287,7 +313,7 @@ pub fn run(cfg: HubConfig) -> Result<HubOutcome, HubError> {
                 fd_agents.push(id);
             }
         }
-        poll_readable(&fds, timeout, &mut ready);
+        poller.readable(&fds, timeout, &mut ready);
         let _ = ports.doorbell.try_wait(|_| {});
         // A new subscriber gets the kept (history) sample only when the publisher next looks
         // at its connections: the map is sent once, and the world not while paused.
@@ -377,8 +403,9 @@ pub fn run(cfg: HubConfig) -> Result<HubOutcome, HubError> {
                         Ok((robot_id, sensors)) => {
                             resp.robot_id = robot_id;
                             resp.sensor_count = sensors;
-                            // Its agent gets the new robot's readings without waiting a tick.
-                            publish = true;
+                            // Its agent gets the new robot's readings without waiting a tick,
+                            // once registrations pause for REGISTRATION_SETTLE (or at a Ready).
+                            registered_at = Some(Instant::now());
                         }
                         Err(refused) => {
                             resp.status = refused.reason as u32;
@@ -500,7 +527,7 @@ pub fn run(cfg: HubConfig) -> Result<HubOutcome, HubError> {
     // Interrupted: tell everyone the run is over before the services go away.
     if outcome.interrupted {
         core.command(Command::Stop, 0);
-        let _ = publish_tick(&core, &ports.world_pub, &agents, &mut states, &mut blocks);
+        let _ = publish_tick(&core, &ports.world_pub, &agents, &mut ports.roster, None);
         let _ = ports.tick_notifier.notify();
     }
     // An agent reads the final tick from the hub's shared memory, which goes when the hub does:
@@ -508,7 +535,7 @@ pub fn run(cfg: HubConfig) -> Result<HubOutcome, HubError> {
     let linger_until = Instant::now() + Duration::from_secs(2);
     let mut waiting: Vec<i32> = agents.values().filter_map(|a| a.pidfd.as_ref().map(|p| p.0.as_raw_fd())).collect();
     while !waiting.is_empty() && Instant::now() < linger_until {
-        poll_readable(&waiting, linger_until.saturating_duration_since(Instant::now()), &mut ready);
+        poller.readable(&waiting, linger_until.saturating_duration_since(Instant::now()), &mut ready);
         if ready.is_empty() {
             break;
         }
@@ -550,37 +577,43 @@ fn record_changes(core: &mut HubCore, rec: &mut Recorder, journal: &mut Vec<reco
     }
 }
 
+/// Publishes the current tick: the world snapshot and every agent's sensor blocks, each written
+/// straight into its loaned sample (no scratch copy). The roster notes the snapshot's robot ids
+/// (published by the caller if they changed); `recorded` gets a copy of the snapshot when the
+/// run is recorded.
 fn publish_tick(
     core: &HubCore,
     world_pub: &Publisher<Svc, [RobotState], ipc_types::WorldHeader>,
     agents: &BTreeMap<u32, AgentPorts>,
-    states: &mut Vec<RobotState>,
-    blocks: &mut Vec<SensorBlock>,
+    roster: &mut ports::Roster,
+    recorded: Option<&mut Vec<RobotState>>,
 ) -> Result<(), HubError> {
-    states.clear();
-    states.extend(core.robot_states());
     let header = core.world_header();
-    let mut sample = world_pub.loan_slice_uninit(states.len()).map_err(ipc("loan a world snapshot"))?;
+    let mut sample = world_pub.loan_slice_uninit(core.robot_count()).map_err(ipc("loan a world snapshot"))?;
     *sample.user_header_mut() = header;
-    sample.write_from_slice(states).send().map_err(ipc("send a world snapshot"))?;
+    let sample = ports::fill(sample, core.robot_states());
+    roster.note(sample.payload().iter().map(|s| s.id));
+    if let Some(states) = recorded {
+        states.clear();
+        states.extend_from_slice(sample.payload());
+    }
+    sample.send().map_err(ipc("send a world snapshot"))?;
     let finished = header.run_state == RunState::Finished as u32;
     for (&id, ports) in agents {
-        let mut robots = core.agent_blocks(id).peekable();
+        let count = core.agent_blocks(id).count();
         // Agents without robots get nothing per tick, but every agent hears the end.
-        if robots.peek().is_none() && !finished {
+        if count == 0 && !finished {
             continue;
         }
-        blocks.clear();
-        blocks.extend(robots.map(|r| core.sensor_block(r)));
-        let mut sample = ports.publisher.loan_slice_uninit(blocks.len()).map_err(ipc("loan sensor blocks"))?;
+        let mut sample = ports.publisher.loan_slice_uninit(count).map_err(ipc("loan sensor blocks"))?;
         *sample.user_header_mut() = TickHeader {
             tick: header.tick,
             sim_time_s: header.sim_time_s,
             run_state: header.run_state,
-            count: blocks.len() as u32,
+            count: count as u32,
             t_pub_ns: 0,
         };
-        let mut sample = sample.write_from_slice(blocks);
+        let mut sample = ports::fill(sample, core.agent_blocks(id).map(|r| core.sensor_block(r)));
         // Stamped last, so the latency figure starts at the send itself.
         sample.user_header_mut().t_pub_ns = ipc_services::monotonic_ns();
         sample.send().map_err(ipc("send sensor blocks"))?;

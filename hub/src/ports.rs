@@ -1,6 +1,8 @@
 //! The session's services and the serving side of each, as the hub holds them: what `hub::run`
 //! and a served replay (`hub::serve`) both open, so the two serve observers and agents alike.
 
+use std::mem::MaybeUninit;
+
 use ipc_services::iceoryx2::node::Node;
 use ipc_services::iceoryx2::port::listener::Listener;
 use ipc_services::iceoryx2::port::notifier::Notifier;
@@ -9,6 +11,9 @@ use ipc_services::iceoryx2::port::server::Server;
 use ipc_services::iceoryx2::port::subscriber::Subscriber;
 use ipc_services::iceoryx2::port::update_connections::UpdateConnections as _;
 use ipc_services::iceoryx2::prelude::FileDescriptorBased;
+use ipc_services::iceoryx2::prelude::ZeroCopySend;
+use ipc_services::iceoryx2::sample_mut::SampleMut;
+use ipc_services::iceoryx2::sample_mut_uninit::SampleMutUninit;
 use ipc_services::{Role, SLICE_ALLOCATION, Session, Svc};
 use ipc_types::{
     ActionBlock, ActionHeader, ChairState, ControlRequest, ControlResponse, MapHeader, MapItem, RegisterRequest,
@@ -20,29 +25,64 @@ use crate::{HubError, ipc};
 /// The publisher of every robot's sensor geometry and the robot ids it last published for.
 pub(crate) struct Roster {
     pub(crate) publisher: Publisher<Svc, [RobotSensors], ()>,
-    ids: Option<Vec<u32>>,
+    /// The robot ids of the last snapshot, in its order.
+    ids: Vec<u32>,
+    /// Whether the ids changed since the geometry was last published (true at first).
+    changed: bool,
     /// The geometry last published, in the robots' order.
     pub(crate) scratch: Vec<RobotSensors>,
 }
 
 impl Roster {
-    /// Republishes every robot's sensor geometry when the set of robots has changed since the
-    /// last time (a robot's sensors are fixed at registration, so ids are enough).
+    fn new(publisher: Publisher<Svc, [RobotSensors], ()>) -> Self {
+        Self { publisher, ids: Vec::new(), changed: true, scratch: Vec::new() }
+    }
+
+    /// Notes the robot ids of the snapshot being published (read from the loaned sample, so
+    /// nothing is copied unless the set changed).
+    pub(crate) fn note(&mut self, ids: impl Iterator<Item = u32> + Clone) {
+        if !self.ids.iter().copied().eq(ids.clone()) {
+            self.ids.clear();
+            self.ids.extend(ids);
+            self.changed = true;
+        }
+    }
+
+    /// Republishes every robot's sensor geometry when the set of robots noted has changed
+    /// since the last time (a robot's sensors are fixed at registration, so ids are enough).
     pub(crate) fn publish_if_changed<I: Iterator<Item = RobotSensors>>(
         &mut self,
-        states: &[RobotState],
         sensors: impl FnOnce() -> I,
     ) -> Result<(), HubError> {
-        if self.ids.as_ref().is_some_and(|ids| ids.iter().copied().eq(states.iter().map(|r| r.id))) {
+        if !self.changed {
             return Ok(());
         }
-        self.ids = Some(states.iter().map(|r| r.id).collect());
+        self.changed = false;
+        // Kept (not written in place): the recorder takes the geometry with each world frame.
         self.scratch.clear();
         self.scratch.extend(sensors());
         let sample = self.publisher.loan_slice_uninit(self.scratch.len()).map_err(ipc("loan robot sensors"))?;
         sample.write_from_slice(&self.scratch).send().map_err(ipc("send robot sensors"))?;
         Ok(())
     }
+}
+
+/// Writes `items` into a loaned slice, element by element, straight into shared memory: how
+/// the hub fills every per-tick sample (no scratch `Vec`, no second copy). The loan is sized
+/// from the same source, so `items` has exactly as many; were it short, the rest is zeroed
+/// rather than left uninitialised.
+pub(crate) fn fill<T, H>(
+    sample: SampleMutUninit<Svc, [MaybeUninit<T>], H>,
+    items: impl IntoIterator<Item = T>,
+) -> SampleMut<Svc, [T], H>
+where
+    T: Copy + std::fmt::Debug + ZeroCopySend + bytemuck::Zeroable,
+    H: ZeroCopySend,
+{
+    let mut items = items.into_iter();
+    let sample = sample.write_from_fn(|_| items.next().unwrap_or_else(T::zeroed));
+    debug_assert!(items.next().is_none(), "a loan sized from the same source holds every item");
+    sample
 }
 
 /// Every service of a session and its serving port. Fields drop in order: the ports first,
@@ -127,7 +167,7 @@ impl HubPorts {
             world_pub,
             map_pub,
             observer_map_pub,
-            roster: Roster { publisher: sensors_pub, ids: None, scratch: Vec::new() },
+            roster: Roster::new(sensors_pub),
             chairs_pub,
             actions_sub: actions_svc.subscriber_builder().create().map_err(ipc("create the actions subscriber"))?,
             register_server: register_svc.server_builder().create().map_err(ipc("create the register server"))?,
@@ -166,21 +206,20 @@ impl HubPorts {
     }
 }
 
-/// Publishes the chairs' states for observers, when the run has chairs.
+/// Publishes the chairs' states for observers, when the run has chairs: `count` of them,
+/// written in place.
 pub(crate) fn publish_chairs(
     publisher: &Publisher<Svc, [ChairState], u64>,
     tick: u64,
-    chairs: &mut Vec<ChairState>,
+    count: usize,
     states: impl Iterator<Item = ChairState>,
 ) -> Result<(), HubError> {
-    chairs.clear();
-    chairs.extend(states);
-    if chairs.is_empty() {
+    if count == 0 {
         return Ok(());
     }
-    let mut sample = publisher.loan_slice_uninit(chairs.len()).map_err(ipc("loan chair states"))?;
+    let mut sample = publisher.loan_slice_uninit(count).map_err(ipc("loan chair states"))?;
     *sample.user_header_mut() = tick;
-    sample.write_from_slice(chairs).send().map_err(ipc("send chair states"))?;
+    fill(sample, states).send().map_err(ipc("send chair states"))?;
     Ok(())
 }
 

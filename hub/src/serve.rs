@@ -36,7 +36,7 @@ use crate::core::{MapAudience, Mode, hub_params, pack_map_for, robot_state, sens
 use crate::ports::{HubPorts, agent_sensor_port};
 use crate::replay::outcome_of;
 use crate::stage::{Stage, StageApplyError};
-use crate::{HubError, HubOutcome, IDLE_POLL, PidFd, named_publisher, poll_readable};
+use crate::{HubError, HubOutcome, IDLE_POLL, PidFd, Poller, named_publisher};
 
 /// How to serve a recording.
 #[derive(Debug, Clone, PartialEq)]
@@ -270,6 +270,11 @@ impl<'a> Player<'a> {
         })
     }
 
+    /// How many robots [`Player::robot_states`] yields.
+    pub fn robot_count(&self) -> usize {
+        self.stage.ids().filter(|&id| self.stage.robot(id).is_some()).count()
+    }
+
     /// Every robot's proximity-sensor geometry, in id order.
     pub fn robot_sensors(&self) -> impl Iterator<Item = RobotSensors> + '_ {
         let range = self.stage.world().params().proximity_range_m;
@@ -356,9 +361,9 @@ pub fn serve(recording: &Recording, options: &ServeOptions) -> Result<Served, Re
     let mut next_agent_id = 1u32;
     let mut served =
         Served { steps: 0, outcome: HubOutcome::default(), mismatch: None, agents_seen: 0, robots_refused: 0 };
-    let mut states: Vec<RobotState> = Vec::new();
     let mut fds: Vec<i32> = Vec::new();
     let mut fd_agents: Vec<u32> = Vec::new();
+    let mut poller = Poller::default();
     let mut ready = Vec::new();
     let mut next_tick_at = Instant::now() + period;
     let mut publish = true;
@@ -378,22 +383,23 @@ pub fn serve(recording: &Recording, options: &ServeOptions) -> Result<Served, Re
         }
         if publish {
             publish = false;
-            states.clear();
-            states.extend(player.robot_states());
             let finished = player.state() == RunState::Finished;
             let header = player.world_header(agents.len());
-            let mut sample = io.world_pub.loan_slice_uninit(states.len()).map_err(ipc("loan a world snapshot"))?;
+            let count = player.robot_count();
+            let mut sample = io.world_pub.loan_slice_uninit(count).map_err(ipc("loan a world snapshot"))?;
             *sample.user_header_mut() = header;
-            sample.write_from_slice(&states).send().map_err(ipc("send a world snapshot"))?;
+            let sample = crate::ports::fill(sample, player.robot_states());
+            io.roster.note(sample.payload().iter().map(|s| s.id));
+            sample.send().map_err(ipc("send a world snapshot"))?;
             io.roster
-                .publish_if_changed(&states, || player.robot_sensors())
+                .publish_if_changed(|| player.robot_sensors())
                 .map_err(|e| ReplayServeError::Ipc(e.to_string()))?;
             if finished {
                 // Agents have no robots here, so they get no blocks per tick, but every agent
                 // hears the end.
                 for ports in agents.values() {
                     let sample = ports.publisher.loan_slice_uninit(0).map_err(ipc("loan sensor blocks"))?;
-                    let mut sample = sample.write_from_slice(&[]);
+                    let mut sample = crate::ports::fill(sample, std::iter::empty());
                     *sample.user_header_mut() = TickHeader {
                         tick: header.tick,
                         sim_time_s: header.sim_time_s,
@@ -427,7 +433,7 @@ pub fn serve(recording: &Recording, options: &ServeOptions) -> Result<Served, Re
                 fd_agents.push(id);
             }
         }
-        poll_readable(&fds, timeout, &mut ready);
+        poller.readable(&fds, timeout, &mut ready);
         let _ = io.doorbell.try_wait(|_| {});
         // A new subscriber gets the kept sample only when the publisher next looks at its
         // connections: the maps are sent once, and the world not while paused.
@@ -540,7 +546,7 @@ pub fn serve(recording: &Recording, options: &ServeOptions) -> Result<Served, Re
             break;
         }
         // Wakes when an agent exits; observers leave no fd to wait on, so look again soon.
-        poll_readable(&alive, Duration::from_millis(10), &mut ready);
+        poller.readable(&alive, Duration::from_millis(10), &mut ready);
         for &i in &ready {
             let fd = alive[i];
             agents.retain(|_, a| a.pidfd.as_ref().is_none_or(|p| p.0.as_raw_fd() != fd));

@@ -319,19 +319,24 @@ impl std::fmt::Debug for Observer {
 }
 
 impl Observer {
-    /// The world at tick `tick` or later, waiting up to `timeout` seconds for it.
-    fn world_at(
+    /// Runs `f` on the world at tick `tick` or later, waiting up to `timeout` seconds for it:
+    /// the snapshot is read where the hub wrote it, nothing copied.
+    fn with_world_at<R>(
         &mut self,
         py: Python<'_>,
         tick: u64,
         timeout: f64,
-    ) -> PyResult<(ipc_types::WorldHeader, Vec<ipc_types::RobotState>)> {
+        f: impl FnOnce(&ipc_types::WorldHeader, &[ipc_types::RobotState]) -> R,
+    ) -> PyResult<R> {
         let deadline = Instant::now() + seconds("timeout", timeout)?;
         let sdk = self.sdk.as_mut().ok_or_else(|| IwsimError::new_err("the observer is closed"))?;
+        let mut f = Some(f);
         loop {
-            let (header, robots) = sdk.world().map_err(to_py)?;
-            if header.tick >= tick {
-                return Ok((header, robots));
+            let done = sdk
+                .with_world(|h, robots| if h.tick >= tick { f.take().map(|f| f(h, robots)) } else { None })
+                .map_err(to_py)?;
+            if let Some(done) = done {
+                return Ok(done);
             }
             if Instant::now() >= deadline {
                 return Err(PyTimeoutError::new_err(format!("no world of tick {tick} within {timeout} s")));
@@ -350,9 +355,9 @@ impl Observer {
     /// [(robot id, x m, y m, heading degrees, collision count)]), in the hub's robot order.
     #[pyo3(signature = (tick = 0, timeout = 5.0))]
     fn robots(&mut self, py: Python<'_>, tick: u64, timeout: f64) -> PyResult<RobotStates> {
-        let (header, robots) = self.world_at(py, tick, timeout)?;
-        let states = robots.iter().map(|r| (r.id, r.x_m, r.y_m, r.heading_deg, r.collision_count)).collect();
-        Ok((header.tick, states))
+        self.with_world_at(py, tick, timeout, |h, robots| {
+            (h.tick, robots.iter().map(|r| (r.id, r.x_m, r.y_m, r.heading_deg, r.collision_count)).collect())
+        })
     }
 
     /// The true poses of robots `ids` at tick `tick` or later (waiting up to `timeout`
@@ -367,8 +372,9 @@ impl Observer {
         ids: Vec<u32>,
         timeout: f64,
     ) -> PyResult<(u64, Bound<'py, PyBytes>)> {
-        let (header, robots) = self.world_at(py, tick, timeout)?;
-        Ok((header.tick, PyBytes::new(py, &pose_table(&robots, &ids, header.tick)?)))
+        let (tick, table) =
+            self.with_world_at(py, tick, timeout, |h, robots| (h.tick, pose_table(robots, &ids, h.tick)))?;
+        Ok((tick, PyBytes::new(py, &table?)))
     }
 
     /// Stops observing. Closing twice does nothing.
@@ -400,8 +406,11 @@ fn env_step<'py>(
     let Some((tick, sim_time_s)) = agent.step(py, tick, powers, timeout, spin)? else { return Ok(None) };
     let sdk = agent.sdk()?;
     let observations = PyByteArray::new(py, &observation_table(sdk, max_range));
-    let (header, robots) = observer.borrow_mut().world_at(py, tick, timeout.unwrap_or(20.0))?;
-    let poses = PyBytes::new(py, &pose_table(&robots, sdk.robots(), header.tick)?);
+    // The referee reads the snapshot in the hub's shared memory; only the poses asked for leave it.
+    let poses = observer
+        .borrow_mut()
+        .with_world_at(py, tick, timeout.unwrap_or(20.0), |h, robots| pose_table(robots, sdk.robots(), h.tick))??;
+    let poses = PyBytes::new(py, &poses);
     Ok(Some((tick, sim_time_s, observations, poses)))
 }
 

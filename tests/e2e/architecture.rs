@@ -345,6 +345,18 @@ fn only_ipc_services_names_iceoryx2_service_builders() {
 }
 
 #[test]
+fn the_hub_writes_every_per_tick_sample_in_place() {
+    // Architecture invariant: the hub builds no per-tick sample in a Vec to copy it into shared
+    // memory; it fills the loaned sample (`ports::fill`). A slice is copied in only where it is
+    // kept anyway: the maps (published once) and the robot roster (on change, kept for the
+    // recorder), both in hub/src/ports.rs.
+    let bad = offending(&["write_from_slice"], |r| !r.starts_with("hub/src/") || r == "hub/src/ports.rs");
+    assert!(bad.is_empty(), "per-tick samples staged in a Vec and copied:\n  {}", bad.join("\n  "));
+    let kept = offending(&["write_from_slice"], |r| r != "hub/src/ports.rs");
+    assert_eq!(kept.len(), 2, "the maps and the roster only: {kept:#?}");
+}
+
+#[test]
 fn parry2d_is_met_in_one_module_and_quick_xml_in_two() {
     // Architecture invariant: parry2d and glam types appear only in hub/world/src/geom.rs.
     let bad = offending(&["parry2d::", "glam::"], |r| r == "hub/world/src/geom.rs");

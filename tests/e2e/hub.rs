@@ -209,6 +209,42 @@ fn registration_refusals_come_back_as_typed_errors() {
 }
 
 #[test]
+fn registering_many_robots_republishes_the_world_once_not_once_per_robot() {
+    // Enough that one republication per robot would stand out by far; few enough that the
+    // hub's JSON line (every robot's pose) fits the pipe the test reads after the exit.
+    const N: usize = 600;
+    let s = session("many");
+    let hub = Proc::spawn(&["hub", "--session", &s, "--start-on-command", "--json"]);
+    let mut agent = Agent::connect_within(&s, "many", Duration::from_secs(20)).expect("hub comes up");
+    let observer = agent_sdk::Observer::connect_within(&s, "many-observer", Duration::from_secs(20)).expect("attach");
+    for i in 0..N {
+        let pose = [1.0 + (i % 50) as f64 * 0.3, 1.0 + (i / 50) as f64 * 0.2, 0.0];
+        agent.register(&RobotRegistration::new("r").disc(0.2).at(Some(pose))).expect("accepted");
+    }
+    // Without a Ready (or a tick), the registrations still reach observers once they settle.
+    let mut observer = observer;
+    let start = Instant::now();
+    loop {
+        let robots = observer.with_world(|_, robots| robots.len()).expect("snapshot");
+        if robots == N {
+            break;
+        }
+        assert!(start.elapsed() < Duration::from_secs(10), "the snapshot shows {robots} of {N} robots");
+        std::thread::sleep(Duration::from_millis(5));
+    }
+    agent.ready().expect("ready");
+    assert_eq!(control(&s, Cmd::Stop, 0).expect("hub answers").status, 0);
+    drop((agent, observer));
+    let out = hub.wait(Duration::from_secs(20));
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let outcome = HubOutcome::from_stdout(&text(&out.stdout)).expect("the hub's JSON line");
+    assert_eq!((outcome.ticks, outcome.robots.len()), (0, N));
+    // One republication per registration (the O(N²) set-up) would be at least N; registrations
+    // settle into a few (one, when the agent is never held up for 2 ms between two).
+    assert!(outcome.snapshots <= (N / 20) as u64, "{} snapshots published for {N} registrations", outcome.snapshots);
+}
+
+#[test]
 fn a_restarted_hub_with_the_same_session_needs_no_cleanup() {
     let s = session("restart");
     let mut first = Proc::spawn(&["hub", "--session", &s, "--cycle-ms", "20"]);

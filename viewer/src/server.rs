@@ -25,7 +25,7 @@ use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
 use agent_sdk::{AgentError, ControlClient, Observer};
-use ipc_types::{ChairState, Command, ControlResponse, RobotState, RunState, WorldHeader};
+use ipc_types::{ChairState, Command, ControlResponse, RunState};
 use tungstenite::Message;
 use tungstenite::handshake::server::{ErrorResponse, Request, Response};
 use tungstenite::protocol::WebSocketConfig;
@@ -271,7 +271,6 @@ impl Viewer {
         let mut ids: Vec<u32> = Vec::new();
         let mut sensors: Vec<ipc_types::RobotSensors> = Vec::new();
         let mut roster_dirty = false;
-        let mut world: Option<(WorldHeader, Vec<RobotState>)> = None;
         let mut chairs: Option<(u64, Vec<ChairState>)> = None;
         let mut chair_poll = ChairPoll::default();
         loop {
@@ -281,7 +280,16 @@ impl Viewer {
                 sensors = s;
                 roster_dirty = true;
             }
-            let new_world = self.observer.try_world()?;
+            // Read where the hub wrote it: only the roster, when the robots changed, is made
+            // from it here; the frame below is encoded from the same held snapshot.
+            let new_world = self.observer.try_with_world(|_, robots| {
+                let changed = roster_dirty || !ids.iter().copied().eq(robots.iter().map(|r| r.id));
+                if changed {
+                    ids.clear();
+                    ids.extend(robots.iter().map(|r| r.id));
+                }
+                changed.then(|| frame::roster_json(robots, &sensors))
+            })?;
             let new_chairs = chair_poll.poll(&mut self.observer, Instant::now())?;
             if new_world.is_none() && new_chairs.is_none() {
                 // The world arrives once per tick; checking 100 times a second is plenty
@@ -297,18 +305,18 @@ impl Viewer {
             if new_chairs.is_some() {
                 chairs = new_chairs;
             }
-            let mut roster = None;
-            if let Some((h, robots)) = new_world {
-                let now_ids: Vec<u32> = robots.iter().map(|r| r.id).collect();
-                roster = (now_ids != ids || roster_dirty).then(|| frame::roster_json(&robots, &sensors));
+            if new_world.is_some() {
                 roster_dirty = false;
-                ids = now_ids;
-                world = Some((h, robots));
             }
+            let roster = new_world.flatten();
             // Chair states alone (they land just after their tick's world) re-send the
             // newest world with them, so a page never waits a tick to see them.
-            let Some((h, robots)) = &world else { continue };
-            let bytes = frame::encode_with_chairs(h, robots, &frame::chairs_for(h.tick, robots, chairs.as_ref()));
+            let Some((bytes, finished)) = self.observer.with_last_world(|h, robots| {
+                let bytes = frame::encode_with_chairs(h, robots, &frame::chairs_for(h.tick, robots, chairs.as_ref()));
+                (bytes, h.run_state == RunState::Finished as u32)
+            }) else {
+                continue;
+            };
             let (lock, cv) = &*shared;
             let mut l = lock.lock().unwrap_or_else(|p| p.into_inner());
             l.frame = Arc::new(bytes);
@@ -317,7 +325,6 @@ impl Viewer {
                 l.roster = Arc::new(r);
                 l.roster_seq += 1;
             }
-            let finished = h.run_state == RunState::Finished as u32;
             l.finished = finished;
             cv.notify_all();
             drop(l);

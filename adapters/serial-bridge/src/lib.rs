@@ -239,19 +239,21 @@ fn serve(agent: &mut Agent, port: Port, args: &SerialArgs, stop: &AtomicBool) ->
         // stopped: in lock-step it waits for us.
         if !matches!(end, Some(Err(_))) {
             match agent.try_tick() {
-                Ok(Some(tick)) => match agent.sensors().iter().find(|b| b.robot_id == id).copied() {
-                    Some(block) => {
-                        let action = board.on_tick(tick.tick, id, &block);
-                        if let Err(e) = agent.send(tick.tick, &[action]) {
-                            end = Some(give_up(&mut board, e));
+                // The block is read where the hub wrote it; only the action leaves the borrow.
+                Ok(Some(tick)) => {
+                    match agent.sensors().iter().find(|b| b.robot_id == id).map(|b| board.on_tick(tick.tick, id, b)) {
+                        Some(action) => {
+                            if let Err(e) = agent.send(tick.tick, &[action]) {
+                                end = Some(give_up(&mut board, e));
+                            }
                         }
+                        None if end.is_none() => {
+                            board.shutdown(StopCause::HubGone);
+                            end = Some(Err(SerialError::Removed { name: name.to_owned(), id }));
+                        }
+                        None => {}
                     }
-                    None if end.is_none() => {
-                        board.shutdown(StopCause::HubGone);
-                        end = Some(Err(SerialError::Removed { name: name.to_owned(), id }));
-                    }
-                    None => {}
-                },
+                }
                 Ok(None) if agent.finished() && end.is_none() => {
                     agent_sdk::report!("iwsim serial: the hub ended the run");
                     board.shutdown(StopCause::Shutdown);

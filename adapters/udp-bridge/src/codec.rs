@@ -416,32 +416,128 @@ pub fn decode_viewer(datagram: &[u8]) -> Result<ViewerCommand, DecodeError> {
 }
 
 /// C's `%g`: six significant digits, trailing zeros dropped, exponent form outside
-/// [1e-4, 1e6).
+/// [1e-4, 1e6). Allocates: encoders write [`G`] in place instead.
 pub fn g(x: f64) -> String {
-    if x.is_nan() {
-        return "nan".into();
+    G(x).to_string()
+}
+
+/// A number as C's `%g` prints it, written in place by `write!` (no allocation): what every
+/// encoder here uses for its numbers.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct G(pub f64);
+
+impl std::fmt::Display for G {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let x = self.0;
+        if x.is_nan() {
+            return f.write_str("nan");
+        }
+        if x.is_infinite() {
+            return f.write_str(if x > 0.0 { "inf" } else { "-inf" });
+        }
+        if x == 0.0 {
+            return f.write_str("0");
+        }
+        // The exponent of the number rounded to six digits decides the form, as in C.
+        let mut sci = Digits::default();
+        write!(sci, "{x:.5e}")?;
+        let (mant, exp) = sci.as_str().split_once('e').unwrap_or((sci.as_str(), "0"));
+        let exp: i32 = exp.parse().unwrap_or(0);
+        if !(-4..6).contains(&exp) {
+            f.write_str(trim_zeros(mant))?;
+            write!(f, "e{}{:02}", if exp < 0 { '-' } else { '+' }, exp.unsigned_abs())
+        } else {
+            let mut fixed = Digits::default();
+            write!(fixed, "{:.*}", (5 - exp).max(0) as usize, x)?;
+            f.write_str(trim_zeros(fixed.as_str()))
+        }
     }
-    if x.is_infinite() {
-        return if x > 0.0 { "inf".into() } else { "-inf".into() };
+}
+
+/// Drops a fraction's trailing zeros, and its point if nothing is left after it.
+fn trim_zeros(s: &str) -> &str {
+    if s.contains('.') { s.trim_end_matches('0').trim_end_matches('.') } else { s }
+}
+
+/// Room on the stack for one number's text (`%g` needs at most 13 bytes, a fixed form with
+/// nine decimals 18).
+struct Digits {
+    buf: [u8; 48],
+    len: usize,
+}
+
+impl Default for Digits {
+    fn default() -> Self {
+        Self { buf: [0; 48], len: 0 }
     }
-    if x == 0.0 {
-        return "0".into();
+}
+
+impl Digits {
+    fn as_str(&self) -> &str {
+        // Only `str`s are ever written, whole, so the bytes are UTF-8.
+        std::str::from_utf8(&self.buf[..self.len]).unwrap_or("")
     }
-    let sci = format!("{x:.5e}");
-    let (mant, exp) = sci.split_once('e').unwrap_or((&sci, "0"));
-    let exp: i32 = exp.parse().unwrap_or(0);
-    let trim = |s: &str| -> String {
-        if s.contains('.') { s.trim_end_matches('0').trim_end_matches('.').to_owned() } else { s.to_owned() }
-    };
-    if !(-4..6).contains(&exp) {
-        format!("{}e{}{:02}", trim(mant), if exp < 0 { '-' } else { '+' }, exp.abs())
-    } else {
-        trim(&format!("{:.*}", (5 - exp).max(0) as usize, x))
+}
+
+impl std::fmt::Write for Digits {
+    fn write_str(&mut self, s: &str) -> std::fmt::Result {
+        let end = self.len + s.len();
+        self.buf.get_mut(self.len..end).ok_or(std::fmt::Error)?.copy_from_slice(s.as_bytes());
+        self.len = end;
+        Ok(())
+    }
+}
+
+/// Text escaped for an XML attribute, written in place.
+struct Escaped<'a>(&'a str);
+
+impl std::fmt::Display for Escaped<'_> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let mut rest = self.0;
+        while let Some(i) = rest.find(['&', '<', '>', '"']) {
+            f.write_str(&rest[..i])?;
+            f.write_str(match rest.as_bytes()[i] {
+                b'&' => "&amp;",
+                b'<' => "&lt;",
+                b'>' => "&gt;",
+                _ => "&quot;",
+            })?;
+            rest = &rest[i + 1..];
+        }
+        f.write_str(rest)
+    }
+}
+
+/// A message's bytes as CDATA text: invalid UTF-8 as U+FFFD, and `]]>` (which CDATA cannot
+/// hold) split the standard way, written in place.
+struct Cdata<'a>(&'a [u8]);
+
+impl std::fmt::Display for Cdata<'_> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        for chunk in self.0.utf8_chunks() {
+            let mut parts = chunk.valid().split("]]>");
+            if let Some(first) = parts.next() {
+                f.write_str(first)?;
+            }
+            for part in parts {
+                f.write_str("]]]]><![CDATA[>")?;
+                f.write_str(part)?;
+            }
+            if !chunk.invalid().is_empty() {
+                f.write_str("\u{fffd}")?;
+            }
+        }
+        Ok(())
     }
 }
 
 fn on(b: bool) -> &'static str {
     if b { "On" } else { "Off" }
+}
+
+/// Ends a datagram written into `out`: a newline and the NUL the simulator sends.
+fn finish_in(out: &mut Vec<u8>) {
+    out.extend_from_slice(b"\n\0");
 }
 
 fn finish(mut s: String) -> Vec<u8> {
@@ -498,14 +594,14 @@ pub fn encode_reply_ok(p: &ReplyParams) -> Vec<u8> {
         "<Reply Status=\"Ok\">\n\t<Parameters SimTime=\"{}\" CycleTime=\"{}\" CompassNoise=\"{}\" BeaconNoise=\"{}\" ObstacleNoise=\"{}\" MotorsNoise=\"{}\" KeyTime=\"{}\" GPS=\"{}\" GPSLinNoise=\"{}\" GPSDirNoise=\"{}\" BeaconSensor=\"{}\" CompassSensor=\"{}\" ScoreSensor=\"Off\" ShowActions=\"False\" NBeacons=\"{}\" NRequestsPerCycle=\"{}\" RequestsPerCycle=\"{}\" ObstacleRequestable=\"{}\" BeaconRequestable=\"{}\" GroundRequestable=\"{}\" CompassRequestable=\"{}\" CollisionRequestable=\"{}\" ObstacleLatency=\"{}\" BeaconLatency=\"{}\" GroundLatency=\"{}\" CompassLatency=\"{}\" CollisionLatency=\"{}\" BeaconAperture=\"{}\"/>\n</Reply>",
         p.sim_time,
         p.cycle_ms,
-        g(p.compass_noise),
-        g(p.beacon_noise),
-        g(p.obstacle_noise),
-        g(p.motors_noise),
+        G(p.compass_noise),
+        G(p.beacon_noise),
+        G(p.obstacle_noise),
+        G(p.motors_noise),
         p.sim_time,
         on(p.gps),
-        g(p.gps_lin_noise),
-        g(p.gps_dir_noise),
+        G(p.gps_lin_noise),
+        G(p.gps_dir_noise),
         on(p.beacon_sensor),
         on(p.compass_sensor),
         p.n_beacons,
@@ -521,7 +617,7 @@ pub fn encode_reply_ok(p: &ReplyParams) -> Vec<u8> {
         lg,
         lc,
         lcol,
-        g(p.beacon_aperture),
+        G(p.beacon_aperture),
     );
     finish(s)
 }
@@ -558,44 +654,52 @@ pub struct MeasuresData {
 
 /// `<Measures>` in the simulator's element and attribute order, under 4096 bytes.
 pub fn encode_measures(m: &MeasuresData) -> Vec<u8> {
-    let mut s = String::with_capacity(512);
-    let _ = write!(s, "<Measures Time=\"{}\">\n\t<Sensors", m.time);
+    let mut out = Vec::with_capacity(512);
+    encode_measures_into(m, &mut out);
+    out
+}
+
+/// [`encode_measures`] into `out` (cleared first), so a buffer kept between ticks makes each
+/// tick's datagram without allocating.
+pub fn encode_measures_into(m: &MeasuresData, out: &mut Vec<u8>) {
+    use std::io::Write as _;
+    out.clear();
+    // Writing to a Vec cannot fail.
+    let _ = write!(out, "<Measures Time=\"{}\">\n\t<Sensors", m.time);
     if let Some(c) = m.collision {
-        let _ = write!(s, " Collision=\"{}\"", if c { "Yes" } else { "No" });
+        let _ = write!(out, " Collision=\"{}\"", if c { "Yes" } else { "No" });
     }
     if let Some(c) = m.compass {
-        let _ = write!(s, " Compass=\"{}\"", g(c));
+        let _ = write!(out, " Compass=\"{}\"", G(c));
     }
     if let Some(gr) = m.ground {
-        let _ = write!(s, " Ground=\"{gr}\"");
+        let _ = write!(out, " Ground=\"{gr}\"");
     }
-    s.push_str(">\n");
+    out.extend_from_slice(b">\n");
     for (id, v) in m.ir.iter().enumerate() {
         if let Some(v) = v {
-            let _ = writeln!(s, "\t\t<IRSensor Id=\"{id}\" Value=\"{}\"/>", g(*v));
+            let _ = writeln!(out, "\t\t<IRSensor Id=\"{id}\" Value=\"{}\"/>", G(*v));
         }
     }
     for (id, b) in m.beacons.iter().enumerate() {
         match b {
             Some(Some(deg)) => {
-                let _ = writeln!(s, "\t\t<BeaconSensor Id=\"{id}\" Value=\"{}\"/>", g(*deg));
+                let _ = writeln!(out, "\t\t<BeaconSensor Id=\"{id}\" Value=\"{}\"/>", G(*deg));
             }
             Some(None) => {
-                let _ = writeln!(s, "\t\t<BeaconSensor Id=\"{id}\" Value=\"NotVisible\"/>");
+                let _ = writeln!(out, "\t\t<BeaconSensor Id=\"{id}\" Value=\"NotVisible\"/>");
             }
             None => {}
         }
     }
     if let Some((x, y)) = m.gps {
-        let _ = writeln!(s, "\t\t<GPS X=\"{}\" Y=\"{}\" />", g(x), g(y));
+        let _ = writeln!(out, "\t\t<GPS X=\"{}\" Y=\"{}\" />", G(x), G(y));
     }
     for (from, text) in &m.messages {
-        // CDATA cannot hold "]]>"; such a message is split the standard way.
-        let t = String::from_utf8_lossy(text).replace("]]>", "]]]]><![CDATA[>");
-        let _ = writeln!(s, "\t\t<Message From=\"{from}\"><![CDATA[{t}]]></Message>");
+        let _ = writeln!(out, "\t\t<Message From=\"{from}\"><![CDATA[{}]]></Message>", Cdata(text));
     }
     let _ = write!(
-        s,
+        out,
         "\t</Sensors>\n\t<Leds EndLed=\"{}\" ReturningLed=\"{}\" VisitingLed=\"{}\"/>\n\t<Buttons Start=\"{}\" Stop=\"{}\"/>\n</Measures>",
         on(m.leds[0]),
         on(m.leds[1]),
@@ -603,18 +707,14 @@ pub fn encode_measures(m: &MeasuresData) -> Vec<u8> {
         on(m.buttons.0),
         on(m.buttons.1)
     );
-    finish(s)
-}
-
-fn xml_escape(s: &str) -> String {
-    s.replace('&', "&amp;").replace('<', "&lt;").replace('>', "&gt;").replace('"', "&quot;")
+    finish_in(out);
 }
 
 /// One robot as viewers see it each tick.
 #[derive(Debug, Clone, PartialEq, Default)]
-pub struct ViewerRobot {
+pub struct ViewerRobot<'a> {
     /// `Name`.
-    pub name: String,
+    pub name: &'a str,
     /// `Id`.
     pub id: u32,
     /// `Time`.
@@ -641,26 +741,34 @@ pub struct ViewerRobot {
 ///
 /// iwsim keeps no Ciber-Rato score: `Score`, `ArrivalTime` and `ReturningTime` are always 0
 /// and `VisitedMask` is empty, whatever the lab's targets; `Collisions` is the hub's count.
-pub fn encode_viewer_robot(r: &ViewerRobot) -> Vec<u8> {
-    let mut s = String::with_capacity(300);
+pub fn encode_viewer_robot(r: &ViewerRobot<'_>) -> Vec<u8> {
+    let mut out = Vec::with_capacity(300);
+    encode_viewer_robot_into(r, &mut out);
+    out
+}
+
+/// [`encode_viewer_robot`] into `out` (cleared first), without allocating once `out` is warm.
+pub fn encode_viewer_robot_into(r: &ViewerRobot<'_>, out: &mut Vec<u8>) {
+    use std::io::Write as _;
+    out.clear();
     let _ = write!(
-        s,
+        out,
         "<Robot Name=\"{}\" Id=\"{}\" Time=\"{}\" Score=\"0\" ArrivalTime=\"0\" ReturningTime=\"0\" Collisions=\"{}\" Collision=\"{}\" VisitedMask=\"\" State=\"{}\" Width=\"{}\" Height=\"{}\" CenterOfMovement=\"{}\" Type=\"{}\">\n\t<Position X=\"{}\" Y=\"{}\" Dir=\"{}\"/>\n</Robot>",
-        xml_escape(&r.name),
+        Escaped(r.name),
         r.id,
         r.time,
         r.collisions,
         if r.collision { "True" } else { "False" },
         r.state,
-        g(r.width),
-        g(r.height),
-        g(r.com),
+        G(r.width),
+        G(r.height),
+        G(r.com),
         r.kind,
-        g(r.pose.0),
-        g(r.pose.1),
-        g(r.pose.2),
+        G(r.pose.0),
+        G(r.pose.1),
+        G(r.pose.2),
     );
-    finish(s)
+    finish_in(out);
 }
 
 /// `<Lab>` as the simulator sends it to viewers (no border wall, polygons not rows). A
@@ -674,20 +782,20 @@ pub fn encode_lab(map: &Map) -> Vec<u8> {
     let _ = writeln!(
         s,
         "<Lab Name=\"{}\" Height=\"{}\" Width=\"{}\">",
-        xml_escape(&map.name),
-        g(map.height_m),
-        g(map.width_m)
+        Escaped(&map.name),
+        G(map.height_m),
+        G(map.width_m)
     );
     for b in &map.beacons {
-        let _ = writeln!(s, "\t<Beacon X=\"{}\" Y=\"{}\" Height=\"{}\"/>", g(b.pos.x), g(b.pos.y), g(b.height_m));
+        let _ = writeln!(s, "\t<Beacon X=\"{}\" Y=\"{}\" Height=\"{}\"/>", G(b.pos.x), G(b.pos.y), G(b.height_m));
     }
     for t in &map.targets {
-        let _ = writeln!(s, "\t<Target X=\"{}\" Y=\"{}\" Radius=\"{}\"/>", g(t.pos.x), g(t.pos.y), g(t.radius_m));
+        let _ = writeln!(s, "\t<Target X=\"{}\" Y=\"{}\" Radius=\"{}\"/>", G(t.pos.x), G(t.pos.y), G(t.radius_m));
     }
     for w in &map.walls {
-        let _ = writeln!(s, "\t<Wall Height=\"{}\">", g(w.height_m));
+        let _ = writeln!(s, "\t<Wall Height=\"{}\">", G(w.height_m));
         for c in &w.corners {
-            let _ = writeln!(s, "\t\t<Corner X=\"{}\" Y=\"{}\"/>", g(c.x), g(c.y));
+            let _ = writeln!(s, "\t\t<Corner X=\"{}\" Y=\"{}\"/>", G(c.x), G(c.y));
         }
         s.push_str("\t</Wall>\n");
     }
@@ -699,7 +807,7 @@ pub fn encode_lab(map: &Map) -> Vec<u8> {
 pub fn encode_grid(map: &Map) -> Vec<u8> {
     let mut s = String::from("<Grid>\n");
     for p in &map.grid {
-        let _ = writeln!(s, "\t<Position X=\"{}\" Y=\"{}\" Dir=\"{}\"/>", g(p.pos.x), g(p.pos.y), g(p.heading_deg));
+        let _ = writeln!(s, "\t<Position X=\"{}\" Y=\"{}\" Dir=\"{}\"/>", G(p.pos.x), G(p.pos.y), G(p.heading_deg));
     }
     s.push_str("</Grid>");
     finish(s)

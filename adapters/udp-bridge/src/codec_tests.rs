@@ -241,7 +241,7 @@ fn measures_with_every_sensor_on_are_byte_exact() {
 #[test]
 fn viewer_robots_carry_the_intellwheels_body() {
     let r = ViewerRobot {
-        name: "r1".into(),
+        name: "r1",
         id: 1,
         time: 42,
         collisions: 2,
@@ -313,4 +313,115 @@ fn a_measures_with_a_bad_number_or_sensor_id_is_refused() {
     let far = b"<Measures Time=\"1\"><Sensors><IRSensor Id=\"99\" Value=\"1\"/></Sensors></Measures>";
     assert!(matches!(decode_measures(far), Err(DecodeError::OutOfRange { .. })));
     assert_eq!(decode_measures(b"<Reply/>"), Err(DecodeError::UnknownRoot("Reply".into())));
+}
+
+/// The `%g` the encoder used before it wrote numbers in place (two `String`s per number):
+/// every encoded number must come out as it did, byte for byte.
+fn g_as_before(x: f64) -> String {
+    if x.is_nan() {
+        return "nan".into();
+    }
+    if x.is_infinite() {
+        return if x > 0.0 { "inf".into() } else { "-inf".into() };
+    }
+    if x == 0.0 {
+        return "0".into();
+    }
+    let sci = format!("{x:.5e}");
+    let (mant, exp) = sci.split_once('e').unwrap_or((&sci, "0"));
+    let exp: i32 = exp.parse().unwrap_or(0);
+    let trim = |s: &str| -> String {
+        if s.contains('.') { s.trim_end_matches('0').trim_end_matches('.').to_owned() } else { s.to_owned() }
+    };
+    if !(-4..6).contains(&exp) {
+        format!("{}e{}{:02}", trim(mant), if exp < 0 { '-' } else { '+' }, exp.abs())
+    } else {
+        trim(&format!("{:.*}", (5 - exp).max(0) as usize, x))
+    }
+}
+
+#[test]
+fn numbers_are_written_exactly_as_before_they_were_written_in_place() {
+    let mut specials = vec![
+        0.0,
+        -0.0,
+        f64::NAN,
+        f64::INFINITY,
+        f64::NEG_INFINITY,
+        f64::MIN_POSITIVE,
+        5e-324,
+        f64::MAX,
+        f64::MIN,
+        99999.95,
+        999999.5,
+        9.999995,
+        0.000099999,
+        0.00009999995,
+        179.99999,
+        -179.999995,
+    ];
+    // Powers of ten and their neighbours (where the exponent form and the rounding turn),
+    // then a spread of pseudo-random magnitudes.
+    for e in -310..=310 {
+        let p = 10f64.powi(e);
+        specials.extend([p, -p, p * (1.0 - 5e-7), p * (1.0 + 5e-7), p * 0.999_995, p * 9.999_995]);
+    }
+    let mut state = 0x9e37_79b9_7f4a_7c15_u64;
+    for _ in 0..20_000 {
+        state ^= state << 13;
+        state ^= state >> 7;
+        state ^= state << 17;
+        let bits = state;
+        let x = f64::from_bits(bits);
+        let scaled = (bits >> 11) as f64 / (1u64 << 53) as f64 * 10f64.powi((bits % 40) as i32 - 20);
+        specials.extend([x, scaled, -scaled, (scaled * 1e4).round() / 1e4]);
+    }
+    let mut out = String::new();
+    for x in specials {
+        out.clear();
+        let _ = write!(out, "{}", G(x));
+        assert_eq!(out, g_as_before(x), "{x:e} ({:#x})", x.to_bits());
+        assert_eq!(g(x), g_as_before(x));
+    }
+}
+
+#[test]
+fn measures_and_viewer_robots_keep_their_bytes() {
+    // Expected strings written by the encoder before it wrote numbers in place.
+    let m = MeasuresData {
+        time: 123456789,
+        collision: Some(true),
+        compass: Some(-179.99999),
+        ground: Some(3),
+        ir: vec![None, Some(1.0 / 3.0), Some(99999.95), None, Some(0.000099999)],
+        beacons: vec![None, Some(Some(-0.000012345)), Some(None), Some(Some(1234567.0))],
+        gps: Some((-1e-300, 5e21)),
+        messages: vec![(7, b"a]]>b".to_vec()), (9, vec![0xff, b'x'])],
+        leds: [true, false, true],
+        buttons: (true, true),
+    };
+    let want = "<Measures Time=\"123456789\">\n\t<Sensors Collision=\"Yes\" Compass=\"-180\" Ground=\"3\">\n\t\t<IRSensor Id=\"1\" Value=\"0.333333\"/>\n\t\t<IRSensor Id=\"2\" Value=\"99999.9\"/>\n\t\t<IRSensor Id=\"4\" Value=\"9.9999e-05\"/>\n\t\t<BeaconSensor Id=\"1\" Value=\"-1.2345e-05\"/>\n\t\t<BeaconSensor Id=\"2\" Value=\"NotVisible\"/>\n\t\t<BeaconSensor Id=\"3\" Value=\"1.23457e+06\"/>\n\t\t<GPS X=\"-1e-300\" Y=\"5e+21\" />\n\t\t<Message From=\"7\"><![CDATA[a]]]]><![CDATA[>b]]></Message>\n\t\t<Message From=\"9\"><![CDATA[\u{fffd}x]]></Message>\n\t</Sensors>\n\t<Leds EndLed=\"On\" ReturningLed=\"Off\" VisitingLed=\"On\"/>\n\t<Buttons Start=\"On\" Stop=\"On\"/>\n</Measures>\n\0";
+    assert_eq!(text(&encode_measures(&m)), want);
+    // Into a reused buffer, holding an earlier datagram: the same bytes.
+    let mut buf = b"left over from the last tick".to_vec();
+    encode_measures_into(&m, &mut buf);
+    assert_eq!(text(&buf), want);
+
+    let r = ViewerRobot {
+        name: "a&<\"b>",
+        id: 77,
+        time: 9,
+        collisions: 3,
+        collision: true,
+        state: "Stopped",
+        width: 0.000099999,
+        height: 1e21,
+        com: 1.0 / 3.0,
+        kind: "Door",
+        pose: (99999.95, -0.0, 179.99999),
+    };
+    let want = "<Robot Name=\"a&amp;&lt;&quot;b&gt;\" Id=\"77\" Time=\"9\" Score=\"0\" ArrivalTime=\"0\" ReturningTime=\"0\" Collisions=\"3\" Collision=\"True\" VisitedMask=\"\" State=\"Stopped\" Width=\"9.9999e-05\" Height=\"1e+21\" CenterOfMovement=\"0.333333\" Type=\"Door\">\n\t<Position X=\"99999.9\" Y=\"0\" Dir=\"180\"/>\n</Robot>\n\0";
+    assert_eq!(text(&encode_viewer_robot(&r)), want);
+    encode_viewer_robot_into(&r, &mut buf);
+    assert_eq!(text(&buf), want);
 }

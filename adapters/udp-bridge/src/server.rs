@@ -16,7 +16,6 @@
 //! `ReturningTime="0"` and an empty `VisitedMask`, and the registration reply says
 //! `ScoreSensor="Off"`, so Measures carry no `<Score>`; `Collisions` is the hub's count.
 
-use std::collections::BTreeMap;
 use std::io::ErrorKind;
 use std::net::{IpAddr, SocketAddr, UdpSocket};
 use std::os::fd::AsRawFd;
@@ -304,11 +303,41 @@ pub fn measures(
     map: &Map,
     requested: &[String],
 ) -> MeasuresData {
+    let mut m = MeasuresData::default();
+    measures_into(&mut m, b, tick, state, ir_ids, leds, map, requested);
+    m
+}
+
+/// Whether `request` names sensor `prefix` + `id` (`IRSensor3`), as `format!("{prefix}{id}")`
+/// would spell it, without making that string.
+fn names_numbered(request: &str, prefix: &str, id: usize) -> bool {
+    request.strip_prefix(prefix).is_some_and(|digits| {
+        let canonical = digits == "0" || !digits.starts_with('0');
+        canonical && digits.bytes().all(|c| c.is_ascii_digit()) && digits.parse::<usize>().ok() == Some(id)
+    })
+}
+
+/// [`measures`] into `m`, reusing its lists: a bridge keeps one between robots and ticks, so
+/// a tick's Measures allocate nothing once warm.
+#[allow(clippy::too_many_arguments)] // measures' arguments and the one it fills
+pub fn measures_into(
+    m: &mut MeasuresData,
+    b: &SensorBlock,
+    tick: u64,
+    state: RunState,
+    ir_ids: &[u32],
+    leds: [bool; 3],
+    map: &Map,
+    requested: &[String],
+) {
     let p = &map.header.params;
     let requested = honoured(requested, p.requests_per_cycle);
     let asked = |name: &str| requested.iter().any(|r| r == name);
+    let asked_numbered = |prefix: &str, id: usize| requested.iter().any(|r| names_numbered(r, prefix, id));
     let allowed = |bit: u32, name: &str| p.requestable & bit == 0 || asked(name);
-    let mut m = MeasuresData { time: tick, leds, buttons: buttons(state), ..MeasuresData::default() };
+    let (mut ir, mut beacons, mut messages) =
+        (std::mem::take(&mut m.ir), std::mem::take(&mut m.beacons), std::mem::take(&mut m.messages));
+    *m = MeasuresData { time: tick, leds, buttons: buttons(state), ..MeasuresData::default() };
     if allowed(SENSOR_COLLISION, "Collision") {
         m.collision = Some(b.present & COLLISION != 0);
     }
@@ -320,27 +349,56 @@ pub fn measures(
     }
     // Ids were checked at registration to lie in 0..8.
     let max_id = ir_ids.iter().copied().max().unwrap_or(0).min(7) as usize;
-    m.ir = vec![None; max_id + 1];
+    ir.clear();
+    ir.resize(max_id + 1, None);
     for (k, &id) in ir_ids.iter().enumerate().take(b.proximity_count as usize) {
-        if let (Some(slot), Some(&d)) = (m.ir.get_mut(id as usize), b.proximity_m.get(k))
-            && (p.requestable & SENSOR_OBSTACLE == 0 || asked(&format!("IRSensor{id}")))
+        if let (Some(slot), Some(&d)) = (ir.get_mut(id as usize), b.proximity_m.get(k))
+            && (p.requestable & SENSOR_OBSTACLE == 0 || asked_numbered("IRSensor", id as usize))
         {
             *slot = Some(sim_model::ir_value(d));
         }
     }
+    m.ir = ir;
+    beacons.clear();
     if p.sensors_on & SENSOR_BEACON != 0 {
-        m.beacons = (0..(b.beacon_count as usize).min(b.beacons_deg.len()))
-            .map(|k| {
-                (p.requestable & SENSOR_BEACON == 0 || asked(&format!("Beacon{k}")))
-                    .then(|| b.beacons_deg.get(k).copied().filter(|v| !v.is_nan()).map(f64::round))
-            })
-            .collect();
+        beacons.extend((0..(b.beacon_count as usize).min(b.beacons_deg.len())).map(|k| {
+            (p.requestable & SENSOR_BEACON == 0 || asked_numbered("Beacon", k))
+                .then(|| b.beacons_deg.get(k).copied().filter(|v| !v.is_nan()).map(f64::round))
+        }));
     }
+    m.beacons = beacons;
     if b.present & HAS_GPS != 0 {
         m.gps = Some((b.gps_x_m, b.gps_y_m));
     }
-    m.messages = b.messages().map(|(from, bytes)| (from, bytes.to_vec())).collect();
-    m
+    messages.clear();
+    messages.extend(b.messages().map(|(from, bytes)| (from, bytes.to_vec())));
+    m.messages = messages;
+}
+
+/// The hub's sensor sample of the tick in hand, read where it lies (the agent holds it), with
+/// each robot's place in it.
+struct Blocks<'a> {
+    blocks: &'a [SensorBlock],
+    /// (robot id, index in `blocks`), sorted by id.
+    index: &'a [(u32, u32)],
+}
+
+impl<'a> Blocks<'a> {
+    fn get(&self, robot_id: u32) -> Option<&'a SensorBlock> {
+        let i = self.index.binary_search_by_key(&robot_id, |&(id, _)| id).ok()?;
+        self.blocks.get(self.index[i].1 as usize).filter(|b| b.robot_id == robot_id)
+    }
+}
+
+/// What a bridge keeps between ticks so that serving one allocates nothing once warm.
+#[derive(Debug, Default)]
+struct Scratch {
+    /// One robot's measures, refilled for each.
+    measures: MeasuresData,
+    /// One viewer datagram, rewritten for each robot.
+    datagram: Vec<u8>,
+    /// The actions sent to the hub.
+    actions: Vec<ActionBlock>,
 }
 
 /// A running bridge.
@@ -368,8 +426,10 @@ pub struct Bridge {
     joining: Vec<Joining>,
     /// Bad datagrams, logged at a bounded rate.
     noise: NoiseLog,
-    /// The latest sensor block of each robot.
-    blocks: BTreeMap<u32, SensorBlock>,
+    /// Where each robot's block lies in the agent's sensor sample of the tick in hand
+    /// (robot id, index), sorted by id: the blocks themselves are read in place.
+    block_index: Vec<(u32, u32)>,
+    scratch: Scratch,
     control: Option<agent_sdk::ControlClient>,
     /// When Measures were last sent: while the run waits or is paused they are re-sent every
     /// cycle, as the simulator does (pClient quits after 2 s without them).
@@ -378,9 +438,8 @@ pub struct Bridge {
     pub counters: Counters,
     /// When an ignored run command was last reported (at most once a second).
     ignored_reported: Option<Instant>,
-    /// The last world snapshot and whether its run was going: while it is not, viewers get
-    /// its robots every cycle, as the simulator sends them.
-    last_world: Option<(ipc_types::WorldHeader, Vec<ipc_types::RobotState>)>,
+    /// Whether the run of the last world snapshot was going: while it is not, viewers get its
+    /// robots every cycle, as the simulator sends them (the snapshot stays in the observer).
     world_running: bool,
     /// When viewers were last sent their `<Robot>` datagrams.
     last_viewed: Instant,
@@ -417,12 +476,12 @@ impl Bridge {
             ready: None,
             joining: Vec::new(),
             noise: NoiseLog::new(),
-            blocks: BTreeMap::new(),
+            block_index: Vec::new(),
+            scratch: Scratch::default(),
             control: None,
             last_sent: Instant::now(),
             counters: Counters::default(),
             ignored_reported: None,
-            last_world: None,
             world_running: false,
             last_viewed: Instant::now(),
         })
@@ -647,7 +706,8 @@ impl Bridge {
             // the bridge's ready: its Measures are due now (a run that waits for a Start
             // brings no other tick to send them with).
             if let Some((tick, _)) = self.tick {
-                send_measures(&mut client, &self.blocks, tick, self.run_state, &self.map);
+                let blocks = Blocks { blocks: self.agent.sensors(), index: &self.block_index };
+                send_measures(&mut client, &blocks, &mut self.scratch.measures, tick, self.run_state, &self.map);
             }
             self.clients.push(client);
         }
@@ -750,10 +810,11 @@ impl Bridge {
             self.answered = false;
         }
         self.run_state = state;
-        self.blocks.clear();
-        for b in self.agent.sensors() {
-            self.blocks.insert(b.robot_id, *b);
-        }
+        let sensors = self.agent.sensors();
+        self.block_index.clear();
+        self.block_index.extend(sensors.iter().enumerate().map(|(i, b)| (b.robot_id, i as u32)));
+        self.block_index.sort_unstable();
+        let blocks = Blocks { blocks: sensors, index: &self.block_index };
         for c in &mut self.clients {
             // A tick re-published (a robot joined) goes only to the robots that lack it, so
             // no client gets the same Time twice.
@@ -762,7 +823,7 @@ impl Bridge {
             {
                 continue;
             }
-            send_measures(c, &self.blocks, tick, state, &self.map);
+            send_measures(c, &blocks, &mut self.scratch.measures, tick, state, &self.map);
         }
         self.last_sent = Instant::now();
     }
@@ -771,10 +832,14 @@ impl Bridge {
     /// and while the run waits or is paused (no snapshot comes) the last ones every cycle, as
     /// the simulator sends them every cycle whatever its state.
     fn serve_viewers(&mut self) -> Result<(), BridgeError> {
-        let due = match self.observer.try_world()? {
-            Some(world) => {
-                self.world_running = RunState::from_u32(world.0.run_state) == Some(RunState::Running);
-                self.last_world = Some(world);
+        // Only viewers read the world: with none there, snapshots are not even received (the
+        // newest waits in the observer's queue for the next viewer).
+        if !self.clients.iter().any(|c| matches!(c.kind, Kind::Viewer)) {
+            return Ok(());
+        }
+        let due = match self.observer.try_with_world(|h, _| h.run_state)? {
+            Some(run_state) => {
+                self.world_running = RunState::from_u32(run_state) == Some(RunState::Running);
                 true
             }
             None => {
@@ -782,43 +847,45 @@ impl Bridge {
                 !self.world_running && self.last_viewed.elapsed() >= cycle
             }
         };
-        // Encoded only for viewers that are there to read it.
-        if !due || !self.clients.iter().any(|c| matches!(c.kind, Kind::Viewer)) {
+        if !due {
             return Ok(());
         }
-        let Some((h, robots)) = &self.last_world else { return Ok(()) };
-        let state_name = match RunState::from_u32(h.run_state) {
-            Some(RunState::Running) => "Running",
-            Some(RunState::Finished) => "Finished",
-            _ => "Stopped",
-        };
-        let datagrams: Vec<Vec<u8>> = robots
-            .iter()
-            .map(|s| {
-                codec::encode_viewer_robot(&ViewerRobot {
-                    name: s.name.as_str().unwrap_or("").to_owned(),
-                    id: s.id,
-                    time: h.tick,
-                    collisions: s.collision_count,
-                    collision: s.flags & ipc_types::ROBOT_COLLISION != 0,
-                    state: state_name,
-                    width: s.width_m as f64,
-                    height: s.height_m as f64,
-                    com: s.com as f64,
-                    kind: match RobotKind::from_u32(s.kind) {
-                        Some(RobotKind::Real) => "Real",
-                        Some(RobotKind::Door) => "Door",
-                        _ => "Simulated",
+        let (clients, datagram) = (&self.clients, &mut self.scratch.datagram);
+        // Encoded from the snapshot where the hub wrote it, one robot at a time into one buffer.
+        let sent = self.observer.with_last_world(|h, robots| {
+            let state_name = match RunState::from_u32(h.run_state) {
+                Some(RunState::Running) => "Running",
+                Some(RunState::Finished) => "Finished",
+                _ => "Stopped",
+            };
+            for s in robots {
+                codec::encode_viewer_robot_into(
+                    &ViewerRobot {
+                        name: s.name.as_str().unwrap_or(""),
+                        id: s.id,
+                        time: h.tick,
+                        collisions: s.collision_count,
+                        collision: s.flags & ipc_types::ROBOT_COLLISION != 0,
+                        state: state_name,
+                        width: s.width_m as f64,
+                        height: s.height_m as f64,
+                        com: s.com as f64,
+                        kind: match RobotKind::from_u32(s.kind) {
+                            Some(RobotKind::Real) => "Real",
+                            Some(RobotKind::Door) => "Door",
+                            _ => "Simulated",
+                        },
+                        pose: (s.x_m, s.y_m, s.heading_deg),
                     },
-                    pose: (s.x_m, s.y_m, s.heading_deg),
-                })
-            })
-            .collect();
-        self.last_viewed = Instant::now();
-        for c in self.clients.iter().filter(|c| matches!(c.kind, Kind::Viewer)) {
-            for d in &datagrams {
-                send(&c.socket, c.peer, d);
+                    datagram,
+                );
+                for c in clients.iter().filter(|c| matches!(c.kind, Kind::Viewer)) {
+                    send(&c.socket, c.peer, datagram);
+                }
             }
+        });
+        if sent.is_some() {
+            self.last_viewed = Instant::now();
         }
         Ok(())
     }
@@ -867,26 +934,27 @@ impl Bridge {
         if !due {
             return Ok(());
         }
-        let blocks: Vec<ActionBlock> = robots()
-            .map(|r| {
-                let mut b = ActionBlock::motors(r.robot_id, r.motors[0], r.motors[1]);
-                if r.real {
-                    b.flags &= !ACT_MOTORS;
-                    if let Some((x, y, d)) = r.pose {
-                        b.flags |= ACT_POSE;
-                        b.pose = [x, y, d];
-                    }
+        let mut actions = std::mem::take(&mut self.scratch.actions);
+        actions.clear();
+        actions.extend(robots().map(|r| {
+            let mut b = ActionBlock::motors(r.robot_id, r.motors[0], r.motors[1]);
+            if r.real {
+                b.flags &= !ACT_MOTORS;
+                if let Some((x, y, d)) = r.pose {
+                    b.flags |= ACT_POSE;
+                    b.pose = [x, y, d];
                 }
-                if let Some(say) = &r.say {
-                    b.with_say(say);
-                }
-                b.flags |= (r.leds[0] as u32 * LED_END)
-                    | (r.leds[1] as u32 * LED_RETURNING)
-                    | (r.leds[2] as u32 * LED_VISITING);
-                b
-            })
-            .collect();
-        self.agent.send(tick, &blocks)?;
+            }
+            if let Some(say) = &r.say {
+                b.with_say(say);
+            }
+            b.flags |=
+                (r.leds[0] as u32 * LED_END) | (r.leds[1] as u32 * LED_RETURNING) | (r.leds[2] as u32 * LED_VISITING);
+            b
+        }));
+        let sent = self.agent.send(tick, &actions);
+        self.scratch.actions = actions;
+        sent?;
         self.answered = true;
         for c in &mut self.clients {
             if let Kind::Robot(r) = &mut c.kind {
@@ -939,16 +1007,24 @@ const MAX_REQUESTS_IN_FLIGHT: usize = 2;
 /// Sensor requests kept per robot between ticks.
 const MAX_REQUESTS: usize = 64;
 
-/// Sends a robot client its Measures for `tick`, if the hub's sample has its robot's block.
-fn send_measures(c: &mut Client, blocks: &BTreeMap<u32, SensorBlock>, tick: u64, state: RunState, map: &Map) {
+/// Sends a robot client its Measures for `tick`, if the hub's sample has its robot's block,
+/// written into the client's kept datagram (re-sent while the run is stopped).
+fn send_measures(
+    c: &mut Client,
+    blocks: &Blocks<'_>,
+    scratch: &mut MeasuresData,
+    tick: u64,
+    state: RunState,
+    map: &Map,
+) {
     if let Kind::Robot(r) = &mut c.kind
-        && let Some(b) = blocks.get(&r.robot_id)
+        && let Some(b) = blocks.get(r.robot_id)
     {
-        let m = measures(b, tick, state, &r.ir_ids, r.leds, map, &r.requests);
+        measures_into(scratch, b, tick, state, &r.ir_ids, r.leds, map, &r.requests);
         r.requests.clear();
-        let datagram = codec::encode_measures(&m);
-        send(&c.socket, c.peer, &datagram);
-        r.last_measures = Some(datagram);
+        let datagram = r.last_measures.get_or_insert_with(Vec::new);
+        codec::encode_measures_into(scratch, datagram);
+        send(&c.socket, c.peer, datagram);
         r.measured_tick = Some(tick);
         r.measures_sent += 1;
         // A client that is behind never owes more than the tick in hand.
@@ -1046,5 +1122,51 @@ mod registration_tests {
         let (reg, _) = hub_registration(&door, 50).expect("valid");
         assert_eq!(reg.flags & REG_DISC, 0);
         assert_eq!((reg.max_speed_mps, reg.kind), (0.5, RobotKind::Door as u32));
+    }
+}
+
+#[cfg(test)]
+mod measures_tests {
+    use super::*;
+
+    #[test]
+    fn a_numbered_request_matches_exactly_the_name_format_would_make() {
+        let requests = [
+            "IRSensor3",
+            "IRSensor03",
+            "IRSensor+3",
+            "IRSensor",
+            "IRSensor 3",
+            "IRSensor30",
+            "Beacon0",
+            "Beacon00",
+            "x",
+        ];
+        for r in requests {
+            for prefix in ["IRSensor", "Beacon"] {
+                for id in [0, 3, 30, 300] {
+                    assert_eq!(names_numbered(r, prefix, id), r == format!("{prefix}{id}"), "{r} {prefix}{id}");
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn measures_refilled_in_place_are_the_measures_made_afresh() {
+        let mut b =
+            SensorBlock { robot_id: 1, proximity_count: 3, present: HAS_COMPASS, ..bytemuck::Zeroable::zeroed() };
+        b.proximity_m[..3].copy_from_slice(&[0.5, 1.25, 3.0]);
+        b.compass_deg = 12.6;
+        let map = Map::default();
+        let mut kept = MeasuresData {
+            ir: vec![Some(9.0); 8],
+            beacons: vec![None; 3],
+            messages: vec![(1, b"old".to_vec())],
+            ..MeasuresData::default()
+        };
+        for (ids, tick) in [(&[0u32, 1, 2][..], 7), (&[2, 0][..], 8), (&[5][..], 9)] {
+            measures_into(&mut kept, &b, tick, RunState::Running, ids, [true, false, false], &map, &[]);
+            assert_eq!(kept, measures(&b, tick, RunState::Running, ids, [true, false, false], &map, &[]));
+        }
     }
 }

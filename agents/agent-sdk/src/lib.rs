@@ -54,12 +54,14 @@ pub mod pending;
 use std::time::{Duration, Instant};
 
 use ipc_services::iceoryx2::node::Node;
+use ipc_services::iceoryx2::port::ReceiveError;
 use ipc_services::iceoryx2::port::client::Client;
 use ipc_services::iceoryx2::port::listener::{Listener, ListenerWaitError};
 use ipc_services::iceoryx2::port::notifier::Notifier;
 use ipc_services::iceoryx2::port::publisher::Publisher;
 use ipc_services::iceoryx2::port::subscriber::Subscriber;
-use ipc_services::iceoryx2::prelude::PortFactory as _;
+use ipc_services::iceoryx2::prelude::{PortFactory as _, ZeroCopySend};
+use ipc_services::iceoryx2::sample::Sample;
 use ipc_services::{Role, SLICE_ALLOCATION, ServicesError, Session, Svc};
 use ipc_types::{
     ActionBlock, ActionHeader, MapHeader, MapItem, Refusal, RegisterKind, RegisterRequest, RegisterResponse,
@@ -173,9 +175,37 @@ pub fn control(
     }
 }
 
-/// Whether two sensor samples carry the same robots, in the same order.
-fn same_robots(a: &[SensorBlock], b: &[SensorBlock]) -> bool {
-    a.len() == b.len() && a.iter().zip(b).all(|(x, y)| x.robot_id == y.robot_id)
+/// Whether a sensor sample carries the robots `ids`, in that order.
+fn same_robots(ids: &[u32], blocks: &[SensorBlock]) -> bool {
+    ids.iter().copied().eq(blocks.iter().map(|b| b.robot_id))
+}
+
+/// A received world snapshot, held in shared memory.
+type WorldSample = Sample<Svc, [RobotState], WorldHeader>;
+
+/// A received sample of an agent's sensor blocks, held in shared memory.
+type SensorSample = Sample<Svc, [SensorBlock], TickHeader>;
+
+/// Receives the newest sample of `sub` into `held`, replacing the one held; true if one came.
+/// A subscriber may borrow one sample at a time, so the held one is let go only when a newer
+/// one is waiting (receiving then fails with `ExceedsMaxBorrows` without taking it).
+fn receive_newest<T: std::fmt::Debug + ZeroCopySend, H: std::fmt::Debug + ZeroCopySend>(
+    sub: &Subscriber<Svc, [T], H>,
+    held: &mut Option<Sample<Svc, [T], H>>,
+    what: &str,
+) -> Result<bool, AgentError> {
+    let mut fresh = false;
+    loop {
+        match sub.receive() {
+            Ok(Some(sample)) => {
+                *held = Some(sample);
+                fresh = true;
+            }
+            Ok(None) => return Ok(fresh),
+            Err(ReceiveError::ExceedsMaxBorrows) if held.is_some() => *held = None,
+            Err(e) => return Err(AgentError::Ipc(format!("{what}: {e:?}"))),
+        }
+    }
 }
 
 /// The physical chairs' states, with the tick as header.
@@ -190,7 +220,9 @@ pub struct Observer {
     world: Subscriber<Svc, [RobotState], WorldHeader>,
     sensors: Subscriber<Svc, [RobotSensors], ()>,
     map_svc: ipc_services::MapService,
-    last_world: Option<(WorldHeader, Vec<RobotState>)>,
+    /// The newest snapshot received, held in shared memory (not copied): what
+    /// [`Observer::with_world`] lends and [`Observer::world`] copies.
+    last_world: Option<WorldSample>,
     /// The physical chairs' port, opened at the first look (a served replay has none).
     chairs: Option<(ChairSubscriber, ipc_services::ChairService)>,
     /// Last, so it runs after every port and the node are gone.
@@ -262,29 +294,52 @@ impl Observer {
         }
     }
 
-    /// The newest world snapshot if one arrived since the last call.
+    /// The newest world snapshot if one arrived since the last call, copied out (see
+    /// [`Observer::try_with_world`] to read it in place).
     pub fn try_world(&mut self) -> Result<Option<(WorldHeader, Vec<RobotState>)>, AgentError> {
-        let mut newest = None;
-        while let Some(s) = self.world.receive().map_err(ipc("receive the world"))? {
-            newest = Some((*s.user_header(), s.payload().to_vec()));
-        }
-        if let Some(latest) = &newest {
-            self.last_world = Some(latest.clone());
-        }
-        Ok(newest)
+        self.try_with_world(|h, robots| (*h, robots.to_vec()))
     }
 
-    /// The latest world snapshot: every robot's true state. The first call gets the snapshot
-    /// the hub keeps for late subscribers (waiting up to 5 s for it); later calls return the
-    /// newest one.
+    /// Runs `f` on the newest world snapshot, in the hub's shared memory (nothing is copied),
+    /// if one arrived since the last call; `None` if none did.
+    pub fn try_with_world<R>(
+        &mut self,
+        f: impl FnOnce(&WorldHeader, &[RobotState]) -> R,
+    ) -> Result<Option<R>, AgentError> {
+        if !receive_newest(&self.world, &mut self.last_world, "receive the world")? {
+            return Ok(None);
+        }
+        Ok(self.with_last_world(f))
+    }
+
+    /// Runs `f` on the world snapshot the last call received (held in shared memory, nothing
+    /// copied), without looking for a newer one; `None` before the first.
+    pub fn with_last_world<R>(&self, f: impl FnOnce(&WorldHeader, &[RobotState]) -> R) -> Option<R> {
+        self.last_world.as_ref().map(|s| f(s.user_header(), s.payload()))
+    }
+
+    /// The latest world snapshot: every robot's true state, copied out (see
+    /// [`Observer::with_world`] to read it in place). The first call gets the snapshot the hub
+    /// keeps for late subscribers (waiting up to 5 s for it); later calls return the newest one.
     pub fn world(&mut self) -> Result<(WorldHeader, Vec<RobotState>), AgentError> {
+        self.with_world(|h, robots| (*h, robots.to_vec()))
+    }
+
+    /// Runs `f` on the latest world snapshot (as [`Observer::world`] finds it) where it lies in
+    /// the hub's shared memory: the header and every robot's true state, with nothing copied.
+    ///
+    /// ```no_run
+    /// let mut observer = agent_sdk::Observer::connect_within("demo", "counter", std::time::Duration::from_secs(5))?;
+    /// let frozen = observer.with_world(|_, robots| robots.iter().filter(|r| r.flags & ipc_types::ROBOT_FROZEN != 0).count())?;
+    /// # let _ = frozen;
+    /// # Ok::<(), agent_sdk::AgentError>(())
+    /// ```
+    pub fn with_world<R>(&mut self, f: impl FnOnce(&WorldHeader, &[RobotState]) -> R) -> Result<R, AgentError> {
         let start = Instant::now();
         loop {
-            if let Some(latest) = self.try_world()? {
-                return Ok(latest);
-            }
-            if let Some(last) = &self.last_world {
-                return Ok(last.clone());
+            receive_newest(&self.world, &mut self.last_world, "receive the world")?;
+            if let Some(s) = &self.last_world {
+                return Ok(f(s.user_header(), s.payload()));
             }
             self.check_alive()?;
             if start.elapsed() > ANSWER_TIMEOUT {
@@ -467,7 +522,12 @@ pub struct Agent {
     last_tick: Option<u64>,
     last_header: TickHeader,
     received_ns: u64,
-    blocks: Vec<SensorBlock>,
+    /// The sensor sample of the last tick, held in shared memory: [`Agent::sensors`] lends it,
+    /// nothing copies it.
+    held: Option<SensorSample>,
+    /// The robot ids of the held sample, in its order (kept to tell a republished tick's
+    /// newcomers, since the sample must be let go before the next can be received).
+    held_ids: Vec<u32>,
     finished: bool,
     /// Last, so it runs after every port and the node are gone: an agent that ends any way
     /// (an error, a signal, the end of the run) leaves nothing in /dev/shm if it was the
@@ -537,7 +597,8 @@ impl Agent {
             last_tick: None,
             last_header: TickHeader::default(),
             received_ns: 0,
-            blocks: Vec::new(),
+            held: None,
+            held_ids: Vec::new(),
             finished: false,
             _release: release,
         };
@@ -727,9 +788,11 @@ impl Agent {
     }
 
     /// This agent's robots' sensor blocks of the last tick returned by [`Agent::wait_tick`],
-    /// in registration order.
+    /// in registration order: a view of the sample where the hub wrote it in shared memory,
+    /// nothing copied (copy the blocks out, e.g. with `to_vec()`, to keep them past the next
+    /// tick).
     pub fn sensors(&self) -> &[SensorBlock] {
-        &self.blocks
+        self.held.as_ref().map_or(&[], |s| s.payload())
     }
 
     fn tick_from_last(&mut self) -> Result<Option<Tick>, AgentError> {
@@ -753,26 +816,41 @@ impl Agent {
     fn take_sensors(&mut self) -> Result<bool, AgentError> {
         let Some(sub) = &self.sensors else { return Ok(false) };
         let mut fresh = false;
-        while let Some(sample) = sub.receive().map_err(ipc("receive sensor blocks"))? {
+        loop {
+            let sample = match sub.receive() {
+                Ok(Some(sample)) => sample,
+                Ok(None) => return Ok(fresh),
+                // A newer sample waits, and the subscriber may borrow one at a time.
+                Err(ReceiveError::ExceedsMaxBorrows) if self.held.is_some() => {
+                    self.held = None;
+                    continue;
+                }
+                Err(e) => return Err(AgentError::Ipc(format!("receive sensor blocks: {e:?}"))),
+            };
             let received_ns = ipc_services::monotonic_ns();
             let h = *sample.user_header();
             let finished = RunState::from_u32(h.run_state) == Some(RunState::Finished);
+            let same = same_robots(&self.held_ids, sample.payload());
             let seen = match self.last_tick {
                 Some(t) if h.tick < t => true,
-                Some(t) if h.tick == t => same_robots(&self.blocks, sample.payload()),
+                Some(t) if h.tick == t => same,
                 _ => false,
             };
+            if !same {
+                self.held_ids.clear();
+                self.held_ids.extend(sample.payload().iter().map(|b| b.robot_id));
+            }
+            // Held in any case (the one before had to go to receive it); a tick seen already
+            // brings nothing new, so the tick in hand and its header stay.
+            self.held = Some(sample);
             if seen && !finished {
                 continue;
             }
-            self.blocks.clear();
-            self.blocks.extend_from_slice(sample.payload());
             self.last_tick = Some(h.tick);
             self.last_header = h;
             self.received_ns = received_ns;
             fresh = true;
         }
-        Ok(fresh)
     }
 
     /// Sends this agent's actions answering `tick` and rings the hub.
@@ -837,11 +915,10 @@ mod tests {
 
     #[test]
     fn a_republished_tick_is_fresh_only_when_its_robots_changed() {
-        let one = [block(1)];
         let two = [block(1), block(2)];
-        assert!(same_robots(&one, &[block(1)]), "the same tick again: nothing new");
-        assert!(!same_robots(&one, &two), "a robot joined: its readings are new");
-        assert!(!same_robots(&two, &[block(2)]), "a robot left");
-        assert!(!same_robots(&[block(1), block(2)], &[block(2), block(1)]));
+        assert!(same_robots(&[1], &[block(1)]), "the same tick again: nothing new");
+        assert!(!same_robots(&[1], &two), "a robot joined: its readings are new");
+        assert!(!same_robots(&[1, 2], &[block(2)]), "a robot left");
+        assert!(!same_robots(&[1, 2], &[block(2), block(1)]));
     }
 }

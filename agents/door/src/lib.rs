@@ -339,8 +339,8 @@ impl Door {
     /// `pose` is where the door thinks its leaf is (x, y metres, heading degrees), from its own
     /// encoders and compass (see [`serve`]): an agent never gets its robot's true pose.
     pub fn step(&mut self, b: &SensorBlock, pose: [f64; 3], now_s: f64, asked: bool) -> ([f64; 2], Option<DoorState>) {
-        let readings = b.proximity_m[..(b.proximity_count as usize).min(b.proximity_m.len())].to_vec();
-        let seen = self.observe(&readings) || asked;
+        let readings = &b.proximity_m[..(b.proximity_count as usize).min(b.proximity_m.len())];
+        let seen = self.observe(readings) || asked;
         if seen {
             self.last_seen_s = now_s;
         }

@@ -110,12 +110,13 @@ fn drive(agent: &mut Agent, args: &NavigatorArgs) -> anyhow::Result<ExitCode> {
     while let Some(tick) = agent.wait_tick(Wait::Blocking)? {
         let time_s = tick.tick as f64 * cycle_s;
         last_time = time_s;
-        let Some(block) = agent.sensors().iter().find(|b| b.robot_id == id).copied() else {
+        // Read where the hub wrote it (the SDK holds the sample), not copied.
+        let Some(block) = agent.sensors().iter().find(|b| b.robot_id == id) else {
             agent.send(tick.tick, &[ActionBlock::motors(id, 0.0, 0.0)])?;
             continue;
         };
         if !mode_checked {
-            check_mode(args.mode, name, &block)?;
+            check_mode(args.mode, name, block)?;
             // Checked on the first block, not the map: a physical chair has a fix (its
             // adapter's pose) whatever the hub's GPS setting.
             anyhow::ensure!(
@@ -128,7 +129,7 @@ fn drive(agent: &mut Agent, args: &NavigatorArgs) -> anyhow::Result<ExitCode> {
             mode_checked = true;
         }
         contacts = block.collision_count;
-        let input = Input::from_block(&block, time_s);
+        let input = Input::from_block(block, time_s);
         let out = pilot.tick(&input, block.messages().map(|(_, m)| m));
         for e in &out.events {
             report(name, &checkpoints, e);
@@ -145,7 +146,10 @@ fn drive(agent: &mut Agent, args: &NavigatorArgs) -> anyhow::Result<ExitCode> {
             agent_sdk::report!("navigator {name}: message of {} bytes too long to say: {say}", say.len());
         }
         agent.send(tick.tick, &[action])?;
-        logs.row(&block, time_s, out.powers)?;
+        // Logged after the send, so the log never delays the action; the sample is the same.
+        if let Some(block) = agent.sensors().iter().find(|b| b.robot_id == id) {
+            logs.row(block, time_s, out.powers)?;
+        }
     }
     // The run's final readings: the last contacts, and the log's last row.
     if let Some(block) = agent.sensors().iter().find(|b| b.robot_id == id) {

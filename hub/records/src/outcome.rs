@@ -82,6 +82,11 @@ pub struct HubOutcome {
     /// replay journal is never dropped).
     #[serde(default)]
     pub recording_dropped_frames: u64,
+    /// World snapshots published: one per tick, plus republications of a tick in hand (a
+    /// command, an agent getting ready, robots registered: those settle first, so registering
+    /// many robots costs one republication, not one per robot).
+    #[serde(default)]
+    pub snapshots: u64,
     /// Stopped by SIGINT/SIGTERM.
     pub interrupted: bool,
     /// Robots at the end.
@@ -128,12 +133,13 @@ mod tests {
             foreign_dropped: 4,
             recorded_bytes: 0,
             recording_dropped_frames: 0,
+            snapshots: 61,
             interrupted: false,
             robots: vec![RobotAtEnd { id: 3, x_m: 10.5, y_m: 6.1, heading_deg: -90.0, flags: 4 }],
         };
         assert_eq!(
             out.json_line(),
-            r#"{"ticks":60,"run_s":0.123457,"state_hash":"0123456789abcdef","agents_seen":2,"agents_died":1,"foreign_dropped":4,"recorded_bytes":0,"recording_dropped_frames":0,"interrupted":false,"robots":[{"id":3,"x_m":10.5,"y_m":6.1,"heading_deg":-90.0,"flags":4}]}"#
+            r#"{"ticks":60,"run_s":0.123457,"state_hash":"0123456789abcdef","agents_seen":2,"agents_died":1,"foreign_dropped":4,"recorded_bytes":0,"recording_dropped_frames":0,"snapshots":61,"interrupted":false,"robots":[{"id":3,"x_m":10.5,"y_m":6.1,"heading_deg":-90.0,"flags":4}]}"#
         );
     }
 
