@@ -2,7 +2,7 @@
 //! barrier, the run state, and the conversion of the world into the shared-memory layouts.
 //! The process loop in [`super`] feeds it what arrived and publishes what it fills.
 
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, BTreeSet};
 
 use bytemuck::Zeroable;
 use ipc_types::{
@@ -147,6 +147,13 @@ pub struct HubCore {
     state: RunState,
     agents: BTreeMap<u32, AgentEntry>,
     robots: BTreeMap<u32, RobotEntry>,
+    /// Robots whose agent died and that no agent has taken back: a registration looks for
+    /// its robot among these, not among every robot (so N registrations cost O(N log N)).
+    orphans: BTreeSet<u32>,
+    /// Physical chairs' robots (an adapter's), which a controller's registration may attach to.
+    chairs: BTreeSet<u32>,
+    /// No id below this is free for a registration asking for any id.
+    free_from: u32,
     next_agent_id: u32,
     tick_limit: u64,
     max_robots: usize,
@@ -177,6 +184,9 @@ impl HubCore {
             state: RunState::Waiting,
             agents: BTreeMap::new(),
             robots: BTreeMap::new(),
+            orphans: BTreeSet::new(),
+            chairs: BTreeSet::new(),
+            free_from: 1,
             next_agent_id: 1,
             tick_limit,
             max_robots: MAX_ROBOTS,
@@ -283,7 +293,7 @@ impl HubCore {
         }
         let has_pose = reg.flags & REG_HAS_POSE != 0;
         let id = if reg.requested_id == 0 {
-            let free = (1u32..).find(|id| !self.robots.contains_key(id)).unwrap_or(u32::MAX);
+            let free = (self.free_from..).find(|id| !self.robots.contains_key(id)).unwrap_or(u32::MAX);
             if !has_pose && free as usize > self.grid.poses.len() {
                 return Err(Refused::new(
                     Refusal::GridFull,
@@ -309,6 +319,12 @@ impl HubCore {
             world::AddRobotError::Full { .. } => Refused::new(Refusal::Capacity, e.to_string()),
             _ => Refused::new(Refusal::BadParameters, e.to_string()),
         })?;
+        if chair.is_some() {
+            self.chairs.insert(id);
+        }
+        if reg.requested_id == 0 {
+            self.free_from = id.saturating_add(1);
+        }
         self.robots.insert(id, RobotEntry { agent_id, leds: 0, chair });
         if let Some(a) = self.agents.get_mut(&agent_id) {
             a.robots.push(id);
@@ -337,7 +353,9 @@ impl HubCore {
         if name.is_empty() {
             return Ok(None);
         }
-        let found = self.robots.iter().find_map(|(&id, e)| {
+        let found = self.chairs.iter().find_map(|id| {
+            let (id, e) = self.robots.get_key_value(id)?;
+            let id = *id;
             let chair = e.chair.as_ref()?;
             let named = self.stage.robot(id).is_some_and(|r| r.spec.name == name);
             (named && (reg.requested_id == 0 || reg.requested_id == id) && e.agent_id != agent_id)
@@ -379,19 +397,20 @@ impl HubCore {
     /// `None` when `reg` names no orphan.
     fn take_back(&mut self, agent_id: u32, reg: &RobotRegistration) -> Result<Option<(u32, u32)>, Refused> {
         let name = reg.name.as_str().ok_or_else(|| Refused::new(Refusal::Malformed, "the name is not UTF-8"))?;
-        let orphan = |(&id, e): (&u32, &RobotEntry)| {
+        let orphan = |&id: &u32| {
             let named = |want: &str| self.stage.robot(id).is_some_and(|r| r.spec.name == want);
             let matches = match reg.requested_id {
                 0 => !name.is_empty() && named(name),
                 wanted => id == wanted && (if name.is_empty() { named(&format!("robot{id}")) } else { named(name) }),
             };
-            (matches && !self.agents.contains_key(&e.agent_id)).then_some(id)
+            matches.then_some(id)
         };
         let found = match reg.requested_id {
-            0 => self.robots.iter().find_map(orphan),
-            wanted => self.robots.get_key_value(&wanted).and_then(orphan),
+            0 => self.orphans.iter().find_map(orphan),
+            wanted => self.orphans.get(&wanted).and_then(orphan),
         };
         let Some(id) = found else { return Ok(None) };
+        self.orphans.remove(&id);
         let Some(entry) = self.robots.get_mut(&id) else { return Ok(None) };
         entry.agent_id = agent_id;
         entry.leds = 0;
@@ -475,6 +494,9 @@ impl HubCore {
     /// Removes a robot from the world and from its controller's list.
     fn remove_robot(&mut self, id: u32) -> Option<RobotEntry> {
         let entry = self.robots.remove(&id)?;
+        self.orphans.remove(&id);
+        self.chairs.remove(&id);
+        self.free_from = self.free_from.min(id);
         self.stage.remove(id);
         if let Some(a) = entry.chair.as_ref().and_then(|c| c.controller).and_then(|c| self.agents.get_mut(&c)) {
             a.controls.retain(|&x| x != id);
@@ -494,6 +516,7 @@ impl HubCore {
         for &id in &a.robots {
             if self.robots.contains_key(&id) {
                 self.stage.set_frozen(id, true);
+                self.orphans.insert(id);
             }
         }
         true
@@ -501,7 +524,7 @@ impl HubCore {
 
     /// Robots whose agent died and that no agent has taken back, in id order.
     pub fn orphan_robots(&self) -> impl Iterator<Item = u32> + '_ {
-        self.robots.iter().filter(|(_, e)| !self.agents.contains_key(&e.agent_id)).map(|(&id, _)| id)
+        self.orphans.iter().copied()
     }
 
     /// Agents whose process id is `pid` (normally one).
@@ -1164,6 +1187,42 @@ mod tests {
         c.bye(a);
         assert_eq!((c.agents.len(), c.robot_count()), (0, 0), "goodbye takes the robots too");
         assert_eq!(c.register(a, &RobotRegistration::new("a")).map_err(|e| e.reason), Err(Refusal::UnknownAgent));
+    }
+
+    #[test]
+    fn any_id_is_the_lowest_free_one_and_a_dead_agents_robots_wait_to_be_taken_back() {
+        let mut c = core(Mode::LockStep);
+        let a = c.hello(1).expect("room");
+        let mut reg = RobotRegistration::new("");
+        reg.flags |= REG_HAS_POSE;
+        let ids: Vec<u32> = (0..5)
+            .map(|k| {
+                reg.pose = [3.0 + 3.0 * k as f64, 3.0, 0.0];
+                c.register(a, &reg).expect("room").0
+            })
+            .collect();
+        assert_eq!(ids, [1, 2, 3, 4, 5]);
+        c.remove_robot(2);
+        c.remove_robot(4);
+        reg.pose = [3.0, 9.0, 0.0];
+        assert_eq!(c.register(a, &reg).expect("room").0, 2, "the lowest free id");
+        reg.pose = [6.0, 9.0, 0.0];
+        assert_eq!(c.register(a, &reg).expect("room").0, 4);
+        reg.pose = [9.0, 9.0, 0.0];
+        assert_eq!(c.register(a, &reg).expect("room").0, 6);
+        // A dead agent's named robot is waiting for a restarted agent, by name, among orphans.
+        let b = c.hello(2).expect("room");
+        let mut named = RobotRegistration::new("kept");
+        named.flags |= REG_HAS_POSE;
+        named.pose = [12.0, 9.0, 0.0];
+        let (kept, _) = c.register(b, &named).expect("room");
+        assert!(c.agent_died(b));
+        assert_eq!(c.orphan_robots().collect::<Vec<_>>(), [kept]);
+        let b2 = c.hello(3).expect("room");
+        assert_eq!(c.register(b2, &named).expect("taken back").0, kept);
+        assert_eq!(c.orphan_robots().count(), 0, "taken back once");
+        named.pose = [15.0, 9.0, 0.0];
+        assert_ne!(c.register(b2, &named).expect("a new robot").0, kept, "a second registration adds one");
     }
 
     #[test]
