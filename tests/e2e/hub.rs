@@ -5,7 +5,7 @@ use std::time::{Duration, Instant};
 
 use super::common::{Proc, assert_no_shared_memory_left, session, text, truth, wait_for_tick};
 
-use agent_sdk::{Agent, AgentError, control};
+use agent_sdk::{Agent, AgentError, Wait, control};
 use ipc_types::{Command as Cmd, REG_HAS_POSE, ROBOT_FROZEN, Refusal, RobotRegistration};
 use records::outcome::{HubOutcome, StateHash};
 use world::map::{NoiseParams, Params, builtin};
@@ -221,17 +221,23 @@ fn registering_many_robots_republishes_the_world_once_not_once_per_robot() {
         let pose = [1.0 + (i % 50) as f64 * 0.3, 1.0 + (i / 50) as f64 * 0.2, 0.0];
         agent.register(&RobotRegistration::new("r").disc(0.2).at(Some(pose))).expect("accepted");
     }
-    // Without a Ready (or a tick), the registrations still reach observers once they settle.
-    let mut observer = observer;
-    let start = Instant::now();
-    loop {
-        let robots = observer.with_world(|_, robots| robots.len()).expect("snapshot");
-        if robots == N {
-            break;
+    // Without a Ready (or a tick), the registrations still reach the agent and observers once
+    // they settle: the hub republishes tick 0 and rings it. Should it never do so, a watchdog
+    // stops the hub after 10 s, which ends the agent's wait with an error.
+    let (settled, watch) = std::sync::mpsc::channel::<()>();
+    let watched = s.clone();
+    let watchdog = std::thread::spawn(move || {
+        if watch.recv_timeout(Duration::from_secs(10)).is_err() {
+            let _ = control(&watched, Cmd::Stop, 0);
         }
-        assert!(start.elapsed() < Duration::from_secs(10), "the snapshot shows {robots} of {N} robots");
-        std::thread::sleep(Duration::from_millis(5));
+    });
+    while agent.sensors().len() < N {
+        agent.wait_tick(Wait::Blocking).expect("the hub republishes once registrations settle");
     }
+    let _ = settled.send(());
+    watchdog.join().expect("watchdog");
+    let mut observer = observer;
+    assert_eq!(observer.with_world(|_, robots| robots.len()).expect("snapshot"), N);
     agent.ready().expect("ready");
     assert_eq!(control(&s, Cmd::Stop, 0).expect("hub answers").status, 0);
     drop((agent, observer));

@@ -144,26 +144,43 @@ pub fn world(args: &BenchWorldArgs) -> anyhow::Result<ExitCode> {
     let spread = |r: &[WorldBench], f: fn(&WorldBench) -> f64| {
         Spread::of(&r.iter().map(f).collect::<Vec<_>>()).unwrap_or(Spread { median: 0.0, min: 0.0, max: 0.0, runs: 0 })
     };
-    let one = spread(&runs[0], |b| b.ticks_per_s).median;
+    // One line of figures per thread count, for the JSON and the text alike.
+    struct Variant {
+        threads: usize,
+        rate: Spread,
+        us: f64,
+        p50_ms: f64,
+        hash: u64,
+    }
+    let variants: Vec<Variant> = runs
+        .iter()
+        .map(|r| Variant {
+            threads: r[0].threads,
+            rate: spread(r, |b| b.ticks_per_s),
+            us: spread(r, |b| b.us_per_robot_tick).median,
+            p50_ms: spread(r, |b| b.p50_tick_ms).median,
+            hash: r[0].state_hash,
+        })
+        .collect();
+    let one = variants[0].rate.median.max(1e-12);
     if args.json {
-        let variants: Vec<String> = runs
+        let json: Vec<String> = variants
             .iter()
-            .map(|r| {
-                let t = spread(r, |b| b.ticks_per_s);
+            .map(|v| {
                 format!(
                     "{{\"threads\":{},\"ticks_per_s\":{{\"median\":{:.1},\"min\":{:.1},\"max\":{:.1}}},\"us_per_robot_tick\":{:.4},\"p50_tick_ms\":{:.4},\"speedup\":{:.3},\"state_hash\":\"{:016x}\"}}",
-                    r[0].threads,
-                    t.median,
-                    t.min,
-                    t.max,
-                    spread(r, |b| b.us_per_robot_tick).median,
-                    spread(r, |b| b.p50_tick_ms).median,
-                    t.median / one.max(1e-12),
-                    r[0].state_hash
+                    v.threads,
+                    v.rate.median,
+                    v.rate.min,
+                    v.rate.max,
+                    v.us,
+                    v.p50_ms,
+                    v.rate.median / one,
+                    v.hash
                 )
             })
             .collect();
-        let last = runs.last().map(|r| spread(r, |b| b.ticks_per_s).median).unwrap_or(0.0);
+        let last = variants.last().map_or(0.0, |v| v.rate.median);
         println!(
             "{{\"robots\":{},\"ticks\":{},\"warmup\":{},\"runs\":{},\"build_s\":{:.3},\"ticks_per_s\":{:.1},\"us_per_robot_tick\":{:.4},\"same_state_hash\":{},\"variants\":[{}]}}",
             args.robots,
@@ -174,27 +191,26 @@ pub fn world(args: &BenchWorldArgs) -> anyhow::Result<ExitCode> {
             last,
             1e6 / (last.max(1e-12) * args.robots.max(1) as f64),
             same,
-            variants.join(",")
+            json.join(",")
         );
     } else {
         println!(
             "world: {} chairs on tiled LIACC floors, 8 proximity sensors each, noise on; {} ticks timed after {} untimed, {} runs each, median [min, max]; built in {:.2} s",
             args.robots, args.ticks, args.warmup, args.runs, build_s
         );
-        for r in &runs {
-            let t = spread(r, |b| b.ticks_per_s);
+        for v in &variants {
             println!(
                 "  {} thread{}: {:.1} ticks/s [{:.1}, {:.1}]  ({:.3} us per robot-tick, median tick {:.3} ms, {:.2}x one thread, {:.1}x real time at 100 ms)  state {:016x}",
-                r[0].threads,
-                if r[0].threads == 1 { " " } else { "s" },
-                t.median,
-                t.min,
-                t.max,
-                spread(r, |b| b.us_per_robot_tick).median,
-                spread(r, |b| b.p50_tick_ms).median,
-                t.median / one.max(1e-12),
-                t.median / 10.0,
-                r[0].state_hash
+                v.threads,
+                if v.threads == 1 { " " } else { "s" },
+                v.rate.median,
+                v.rate.min,
+                v.rate.max,
+                v.us,
+                v.p50_ms,
+                v.rate.median / one,
+                v.rate.median / 10.0,
+                v.hash
             );
         }
         println!("  same state on every thread count: {}", if same { "yes" } else { "NO" });

@@ -12,29 +12,22 @@ impl World {
     /// robot already overlaps at its current pose does not block it, so bodies that start
     /// interpenetrated (a Real chair driven into a virtual one) can separate. Real robots are
     /// never refused; `hit` then reports that they overlap something.
-    pub(super) fn resolve_collisions(&mut self, stats: &mut super::StepStats) {
+    pub(super) fn resolve_collisions(&mut self, stats: &mut super::StepStats, chunking: &super::Chunking) {
         let mut blocked = std::mem::take(&mut self.scratch.blocked);
         blocked.clear();
         blocked.resize(self.motion.len(), (false, false));
         // Each robot's verdict reads only the phase's inputs, so chunks run in any order.
         let mut units = vec![(); blocked.len()]; // zero-sized: never allocates
         let mut chunk_units = [(); super::MAX_CHUNKS];
-        let chunking = self.chunking();
         let this = &*self;
-        super::run_chunks(
-            chunking.as_ref().map(|(p, len)| (&**p, *len)),
-            &mut blocked,
-            &mut units,
-            &mut chunk_units,
-            |base, blocked, _, ()| {
-                for (k, b) in blocked.iter_mut().enumerate() {
-                    let m = &this.motion[base + k];
-                    if m.alive && (m.moving || m.real) {
-                        *b = (this.next_pose_hits(base + k, m), !m.real);
-                    }
+        super::run_chunks(chunking, &mut blocked, &mut units, &mut chunk_units, |base, blocked, _, ()| {
+            for (k, b) in blocked.iter_mut().enumerate() {
+                let m = &this.motion[base + k];
+                if m.alive && (m.moving || m.real) {
+                    *b = (this.next_pose_hits(base + k, m), !m.real);
                 }
-            },
-        );
+            }
+        });
         stats.colliding += blocked.iter().filter(|(hit, _)| *hit).count() as u32;
         self.scratch.blocked = blocked;
     }

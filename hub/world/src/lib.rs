@@ -364,7 +364,7 @@ fn stream_key(index: usize, generation: u32) -> u64 {
 /// as one chunk when `pool` is `None`, else in parallel chunks of `len`. `f` gets the index of
 /// its chunk's first element.
 fn run_chunks<A: Send, B: Send, S: Send>(
-    pool: Option<(&rayon::ThreadPool, usize)>,
+    pool: &Chunking,
     a: &mut [A],
     b: &mut [B],
     scratch: &mut [S],
@@ -375,6 +375,7 @@ fn run_chunks<A: Send, B: Send, S: Send>(
         None => f(0, a, b, &mut scratch[0]),
         Some((pool, len)) => {
             use rayon::prelude::*;
+            let len = *len;
             pool.install(|| {
                 a.par_chunks_mut(len)
                     .zip(b.par_chunks_mut(len))
@@ -385,6 +386,10 @@ fn run_chunks<A: Send, B: Send, S: Send>(
         }
     }
 }
+
+/// How a step's per-robot phases are split: `None` on the calling thread, else the pool and
+/// the slots per chunk (see [`World::chunking`]).
+type Chunking = Option<(std::sync::Arc<rayon::ThreadPool>, usize)>;
 
 /// Box corners (min, max) of a placed body.
 fn aabb(b: &PlacedBody) -> (Point2<Real>, Point2<Real>) {
@@ -546,7 +551,7 @@ impl World {
 
     /// How this step's per-robot phases are split: `None` on the calling thread, else the pool
     /// and the slots per chunk.
-    fn chunking(&self) -> Option<(std::sync::Arc<rayon::ThreadPool>, usize)> {
+    fn chunking(&self) -> Chunking {
         let pool = self.pool.as_ref()?;
         if self.live < self.parallel_min.max(1) {
             return None;
@@ -740,7 +745,8 @@ impl World {
             let half = (m.cur_max.x - m.cur_min.x).max(m.cur_max.y - m.cur_min.y) / 2.0;
             (i as u32, centre, half)
         }));
-        self.sense_with(true);
+        let chunking = self.chunking();
+        self.sense_with(true, &chunking);
     }
 
     /// Advances the world by one tick of `dt_s` simulated seconds with this tick's actions.
@@ -749,22 +755,23 @@ impl World {
         let dt = if dt_s.is_finite() && dt_s > 0.0 { dt_s } else { 0.0 };
         self.tick += 1;
         self.time_s += dt;
-        match self.chunking() {
+        let chunking = self.chunking();
+        match &chunking {
             // The whole step runs on one of the pool's threads, so its phases hand work to the
             // others without a trip through the pool's queue each (one per step instead of four).
-            Some((pool, _)) => pool.install(|| self.phases(actions, dt, &mut stats)),
-            None => self.phases(actions, dt, &mut stats),
+            Some((pool, _)) => pool.install(|| self.phases(actions, dt, &mut stats, &chunking)),
+            None => self.phases(actions, dt, &mut stats, &chunking),
         }
         stats
     }
 
-    fn phases(&mut self, actions: &[Action], dt: Real, stats: &mut StepStats) {
+    fn phases(&mut self, actions: &[Action], dt: Real, stats: &mut StepStats, chunking: &Chunking) {
         self.apply_actions(actions, stats);
-        self.drive(dt);
-        self.resolve_collisions(stats);
-        self.commit(dt);
+        self.drive(dt, chunking);
+        self.resolve_collisions(stats, chunking);
+        self.commit(dt, chunking);
         self.deliver_messages(stats);
-        self.sense();
+        self.sense_with(false, chunking);
     }
 
     fn apply_actions(&mut self, actions: &[Action], stats: &mut StepStats) {
@@ -803,25 +810,18 @@ impl World {
 
     /// Motor filter (thesis eq. 4.4) and kinematics (eqs. 4.5–4.9, with 4.8's typo fixed):
     /// every robot's next pose.
-    fn drive(&mut self, dt: Real) {
+    fn drive(&mut self, dt: Real, chunking: &Chunking) {
         let motor_noise = self.params.noise.motor_frac;
         let (seed, tick) = (self.seed, self.tick);
-        let chunking = self.chunking();
         let geo = &self.geo;
         let mut units = [(); MAX_CHUNKS];
-        run_chunks(
-            chunking.as_ref().map(|(p, len)| (&**p, *len)),
-            &mut self.slots,
-            &mut self.motion,
-            &mut units,
-            |base, slots, motion, ()| {
-                for (k, (slot, m)) in slots.iter_mut().zip(motion.iter_mut()).enumerate() {
-                    let i = base + k;
-                    let Some(r) = &mut slot.robot else { continue };
-                    *m = Self::drive_one(r, &geo[i], motor_noise, (seed, stream_key(i, slot.generation), tick), dt);
-                }
-            },
-        );
+        run_chunks(chunking, &mut self.slots, &mut self.motion, &mut units, |base, slots, motion, ()| {
+            for (k, (slot, m)) in slots.iter_mut().zip(motion.iter_mut()).enumerate() {
+                let i = base + k;
+                let Some(r) = &mut slot.robot else { continue };
+                *m = Self::drive_one(r, &geo[i], motor_noise, (seed, stream_key(i, slot.generation), tick), dt);
+            }
+        });
         // Index every robot by the box that holds both its current and its next pose: the
         // collision phase tests against both, and the sensors see the committed one, which is
         // one of the two.
@@ -896,28 +896,21 @@ impl World {
         }
     }
 
-    fn commit(&mut self, dt: Real) {
+    fn commit(&mut self, dt: Real, chunking: &Chunking) {
         let ticks_per_m =
             sim_model::encoder_ticks_per_m(self.params.encoder_ticks_per_rev as Real, self.params.wheel_radius_m);
         let slip = self.params.noise.encoder_slip_frac;
         let (seed, tick) = (self.seed, self.tick);
-        let chunking = self.chunking();
         let (motion, blocked) = (&self.motion, &self.scratch.blocked);
         let mut units = [(); MAX_CHUNKS];
-        run_chunks(
-            chunking.as_ref().map(|(p, len)| (&**p, *len)),
-            &mut self.slots,
-            &mut self.geo,
-            &mut units,
-            |base, slots, geo, ()| {
-                for (k, (slot, g)) in slots.iter_mut().zip(geo.iter_mut()).enumerate() {
-                    let i = base + k;
-                    let Some(r) = &mut slot.robot else { continue };
-                    let key = (seed, stream_key(i, slot.generation), tick);
-                    Self::commit_one(r, g, &motion[i], blocked[i], (slip, ticks_per_m, dt), key);
-                }
-            },
-        );
+        run_chunks(chunking, &mut self.slots, &mut self.geo, &mut units, |base, slots, geo, ()| {
+            for (k, (slot, g)) in slots.iter_mut().zip(geo.iter_mut()).enumerate() {
+                let i = base + k;
+                let Some(r) = &mut slot.robot else { continue };
+                let key = (seed, stream_key(i, slot.generation), tick);
+                Self::commit_one(r, g, &motion[i], blocked[i], (slip, ticks_per_m, dt), key);
+            }
+        });
     }
 
     /// One robot's move (or refusal), encoders and contact count; `g` is its committed geometry.

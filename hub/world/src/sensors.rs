@@ -44,39 +44,33 @@ fn visible_from(seg: &Segment, centre: Point2<Real>, inner: Real, reach: Real) -
 }
 
 impl World {
-    /// Measures every robot on its committed pose and reports through the latency lines.
-    /// Measuring reads the neighbours only through `geo` and the grids, so each robot's
-    /// readings are written in the same pass.
-    pub(super) fn sense(&mut self) {
-        self.sense_with(false);
-    }
-
-    /// Measures every robot; `exact` skips noise and latency and draws nothing (used to prime
-    /// readings before the first step).
-    pub(super) fn sense_with(&mut self, exact: bool) {
-        let chunking = self.chunking();
+    /// Measures every robot on its committed pose and reports through the latency lines;
+    /// `exact` skips noise and latency and draws nothing (used to prime readings before the
+    /// first step). Measuring reads the neighbours only through `geo` and the grids, so each
+    /// robot's readings are written in the same pass.
+    pub(super) fn sense_with(&mut self, exact: bool, chunking: &super::Chunking) {
         let World { statics, dyn_grid, geo, lab, params, slots, seed, scratch, tick, .. } = self;
-        let quiet = crate::map::Params { noise: crate::map::NoiseParams::NONE, ..params.clone() };
-        let params: &crate::map::Params = if exact { &quiet } else { params };
+        // Noise-free parameters only for priming: a step measures with the world's own.
+        let quiet;
+        let params: &crate::map::Params = if exact {
+            quiet = crate::map::Params { noise: crate::map::NoiseParams::NONE, ..params.clone() };
+            &quiet
+        } else {
+            params
+        };
         let scene = Scene { statics, dyn_grid, geo, lab, params };
         let (seed, tick) = (*seed, *tick);
         let mut units = vec![(); slots.len()]; // zero-sized: never allocates
-        super::run_chunks(
-            chunking.as_ref().map(|(p, len)| (&**p, *len)),
-            slots,
-            &mut units,
-            &mut scratch.sense,
-            |base, slots, _, sc| {
-                let mut cands = Candidates { segments: &mut sc.segments, local: &mut sc.local, discs: &mut sc.discs };
-                for (k, slot) in slots.iter_mut().enumerate() {
-                    let i = base + k;
-                    let Some(r) = &mut slot.robot else { continue };
-                    let mut rng = Rng::stream(seed, super::stream_key(i, slot.generation), tick, Draw::Sense);
-                    let now = scene.measure(i, r, &mut cands, &mut rng, tick);
-                    scene.report(r, now, exact);
-                }
-            },
-        );
+        super::run_chunks(chunking, slots, &mut units, &mut scratch.sense, |base, slots, _, sc| {
+            let mut cands = Candidates { segments: &mut sc.segments, local: &mut sc.local, discs: &mut sc.discs };
+            for (k, slot) in slots.iter_mut().enumerate() {
+                let i = base + k;
+                let Some(r) = &mut slot.robot else { continue };
+                let mut rng = Rng::stream(seed, super::stream_key(i, slot.generation), tick, Draw::Sense);
+                let now = scene.measure(i, r, &mut cands, &mut rng, tick);
+                scene.report(r, now, exact);
+            }
+        });
     }
 }
 

@@ -558,15 +558,30 @@ fn noisy_run(seed: u64) -> Vec<u64> {
         })
         .collect();
     let hello = Message::new(b"hello").expect("short");
-    (0..200)
+    patterned_run(&mut w, &robots, 200, (hello, 9), |t, k| {
+        (((t + k) % 7) as Real / 6.0, ((t * 3 + k) % 5) as Real / 4.0 - 0.2)
+    })
+}
+
+/// Steps `w` for `ticks` ticks, robot k driving at `powers(t, k)` and saying `say.0` every
+/// `say.1`-th tick (staggered by k); the state hash after each tick.
+fn patterned_run(
+    w: &mut World,
+    robots: &[RobotHandle],
+    ticks: usize,
+    say: (Message, usize),
+    powers: impl Fn(usize, usize) -> (Real, Real),
+) -> Vec<u64> {
+    (0..ticks)
         .map(|t| {
             let actions: Vec<_> = robots
                 .iter()
                 .enumerate()
                 .map(|(k, &r)| {
-                    let mut a = Action::motors(r, ((t + k) % 7) as Real / 6.0, ((t * 3 + k) % 5) as Real / 4.0 - 0.2);
-                    if (t + k) % 9 == 0 {
-                        a.say = Some(hello);
+                    let (left, right) = powers(t, k);
+                    let mut a = Action::motors(r, left, right);
+                    if (t + k) % say.1 == 0 {
+                        a.say = Some(say.0);
                     }
                     a
                 })
@@ -932,23 +947,9 @@ fn crowded_run(n: usize, threads: usize) -> Vec<u64> {
         .collect();
     assert!(robots.len() > n / 2, "placed {} of {n}", robots.len());
     let hello = Message::new(b"hi").expect("short");
-    (0..80)
-        .map(|t| {
-            let actions: Vec<_> = robots
-                .iter()
-                .enumerate()
-                .map(|(k, &r)| {
-                    let mut a = Action::motors(r, ((t + k) % 5) as Real / 4.0, ((t * 3 + k) % 7) as Real / 6.0 - 0.1);
-                    if (t + k) % 11 == 0 {
-                        a.say = Some(hello);
-                    }
-                    a
-                })
-                .collect();
-            w.step(&actions, 0.1);
-            w.state_hash()
-        })
-        .collect()
+    patterned_run(&mut w, &robots, 80, (hello, 11), |t, k| {
+        (((t + k) % 5) as Real / 4.0, ((t * 3 + k) % 7) as Real / 6.0 - 0.1)
+    })
 }
 
 #[test]

@@ -1,60 +1,15 @@
 //! A warm tick allocates nothing: scratch buffers live in the world, so stepping thousands of
 //! ticks costs no allocator traffic (ARCHITECTURE.md states it; this counts it). The count is
-//! taken with a global allocator that counts the calls made on the test's own thread.
-#![allow(unsafe_code)] // A global allocator can only be written with `unsafe impl`.
-
-use std::alloc::{GlobalAlloc, Layout, System};
-use std::cell::Cell;
+//! taken with a global allocator that counts every thread's calls (the world steps on one).
+mod counting;
 
 use world::map::{Params, builtin};
 use world::{Action, RobotSpec, World};
 
-struct Counting;
-
-thread_local! {
-    // `const` initialisation: reading it never allocates, so the allocator may use it.
-    static COUNTING: Cell<bool> = const { Cell::new(false) };
-    static CALLS: Cell<u64> = const { Cell::new(0) };
-}
-
-fn note() {
-    if COUNTING.with(Cell::get) {
-        CALLS.with(|c| c.set(c.get() + 1));
-    }
-}
-
-// SAFETY: every call is forwarded unchanged to the system allocator; counting touches only
-// const-initialised thread-locals, which neither allocate nor re-enter the allocator.
-unsafe impl GlobalAlloc for Counting {
-    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
-        note();
-        // SAFETY: the caller's contract for `alloc` is passed on as it is.
-        unsafe { System.alloc(layout) }
-    }
-
-    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
-        // SAFETY: `ptr` came from `System` through this allocator, with this layout.
-        unsafe { System.dealloc(ptr, layout) }
-    }
-
-    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
-        note();
-        // SAFETY: as for `dealloc`; the new size is the caller's.
-        unsafe { System.realloc(ptr, layout, new_size) }
-    }
-}
-
 #[global_allocator]
-static ALLOCATOR: Counting = Counting;
+static ALLOCATOR: counting::Counting = counting::Counting;
 
-/// Allocator calls made on this thread while `f` runs.
-fn allocations_in(f: impl FnOnce()) -> u64 {
-    CALLS.with(|c| c.set(0));
-    COUNTING.with(|c| c.set(true));
-    f();
-    COUNTING.with(|c| c.set(false));
-    CALLS.with(Cell::get)
-}
+use counting::allocations_in;
 
 #[test]
 fn a_warm_tick_allocates_nothing() {

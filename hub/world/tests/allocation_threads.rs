@@ -2,48 +2,13 @@
 //! per-chunk scratch, so the only allocator calls left are the thread pool's (its job queue
 //! grows one block per 63 steps handed to it). ARCHITECTURE.md states it; this counts every
 //! thread's calls, so it lives alone in its own test binary.
-#![allow(unsafe_code)] // A global allocator can only be written with `unsafe impl`.
-
-use std::alloc::{GlobalAlloc, Layout, System};
-use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+mod counting;
 
 use world::map::{Params, builtin};
 use world::{Action, RobotSpec, World};
 
-struct Counting;
-
-static COUNTING: AtomicBool = AtomicBool::new(false);
-static CALLS: AtomicU64 = AtomicU64::new(0);
-
-fn note() {
-    if COUNTING.load(Ordering::Relaxed) {
-        CALLS.fetch_add(1, Ordering::Relaxed);
-    }
-}
-
-// SAFETY: every call is forwarded unchanged to the system allocator; counting touches only
-// atomics, which neither allocate nor re-enter the allocator.
-unsafe impl GlobalAlloc for Counting {
-    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
-        note();
-        // SAFETY: the caller's contract for `alloc` is passed on as it is.
-        unsafe { System.alloc(layout) }
-    }
-
-    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
-        // SAFETY: `ptr` came from `System` through this allocator, with this layout.
-        unsafe { System.dealloc(ptr, layout) }
-    }
-
-    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
-        note();
-        // SAFETY: as for `dealloc`; the new size is the caller's.
-        unsafe { System.realloc(ptr, layout, new_size) }
-    }
-}
-
 #[global_allocator]
-static ALLOCATOR: Counting = Counting;
+static ALLOCATOR: counting::Counting = counting::Counting;
 
 #[test]
 fn a_warm_parallel_tick_leaves_allocation_to_the_thread_pool() {
@@ -72,13 +37,11 @@ fn a_warm_parallel_tick_leaves_allocation_to_the_thread_pool() {
         world.step(&actions, 0.1);
     }
     let before = world.state_hash();
-    CALLS.store(0, Ordering::Relaxed);
-    COUNTING.store(true, Ordering::Relaxed);
-    for _ in 0..100 {
-        world.step(&actions, 0.1);
-    }
-    COUNTING.store(false, Ordering::Relaxed);
-    let calls = CALLS.load(Ordering::Relaxed);
+    let calls = counting::allocations_in(|| {
+        for _ in 0..100 {
+            world.step(&actions, 0.1);
+        }
+    });
     assert_ne!(world.state_hash(), before, "the chairs kept moving while counted");
     // One job handed to the pool per step: its queue takes a new block every 63 (2 per 100).
     assert!(calls <= 4, "allocator calls on all threads in 100 warm ticks of {} robots: {calls}", world.len());
