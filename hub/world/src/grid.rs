@@ -120,14 +120,11 @@ impl Segment {
     }
 }
 
-/// A wall edge, the height of its wall, and the first cell (lowest x and y) of the cells it is
-/// listed in: a query over a box of cells takes the edge only in the first of its cells inside
-/// the box, so nothing is seen twice without marking what was seen.
+/// A wall edge and the height of its wall.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub(crate) struct Edge {
     pub seg: Segment,
     pub height: Real,
-    pub first_cell: (u32, u32),
 }
 
 /// A triangle of a wall's triangulation, with its bounding box for the broad phase.
@@ -140,13 +137,14 @@ pub(crate) struct WallTriangle {
 
 /// Compressed lists of item indices per cell.
 #[derive(Debug, Clone, Default)]
-struct CellLists {
+struct CellLists<T> {
     start: Vec<u32>,
-    items: Vec<u32>,
+    items: Vec<T>,
 }
 
-impl CellLists {
-    fn build(n_cells: usize, pairs: &mut [(u32, u32)]) -> Self {
+impl<T: Copy + Ord> CellLists<T> {
+    /// Lists from (cell, item) pairs; within a cell, items in their order.
+    fn build(n_cells: usize, pairs: &mut [(u32, T)]) -> Self {
         pairs.sort_unstable();
         let mut start = vec![0u32; n_cells + 1];
         for &(cell, _) in pairs.iter() {
@@ -159,8 +157,57 @@ impl CellLists {
     }
 
     #[inline]
-    fn cell(&self, cell: usize) -> &[u32] {
+    fn cell(&self, cell: usize) -> &[T] {
         &self.items[self.start[cell] as usize..self.start[cell + 1] as usize]
+    }
+}
+
+/// An edge's entry in a cell's list: its index, and whether this cell is in the first column
+/// and the first row of the cells the edge is listed in. A query over a box of cells takes
+/// an edge only in the first of its cells inside the box, and these two bits decide that from
+/// the list alone, without loading the edge (at 10,000 chairs that load missed the cache
+/// often enough to be a tenth of sensing).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) struct EdgeEntry(u32);
+
+// Entries sort by edge index, so a cell lists its edges in the order they were built.
+impl Ord for EdgeEntry {
+    fn cmp(&self, other: &Self) -> std::cmp::Ordering {
+        (self.0 & EDGE_INDEX_MASK).cmp(&(other.0 & EDGE_INDEX_MASK)).then(self.0.cmp(&other.0))
+    }
+}
+
+impl PartialOrd for EdgeEntry {
+    fn partial_cmp(&self, other: &Self) -> Option<std::cmp::Ordering> {
+        Some(self.cmp(other))
+    }
+}
+
+/// The entry bits that hold the edge index ([`MAX_WALL_ENTRIES`] bounds the edges far below).
+const EDGE_INDEX_MASK: u32 = (1 << 30) - 1;
+const EDGE_FIRST_COL: u32 = 1 << 31;
+const EDGE_FIRST_ROW: u32 = 1 << 30;
+const _: () = assert!(MAX_WALL_ENTRIES <= EDGE_INDEX_MASK as u64);
+
+impl EdgeEntry {
+    fn new(index: usize, first_col: bool, first_row: bool) -> Self {
+        debug_assert!(index as u64 <= EDGE_INDEX_MASK as u64);
+        let flag = |f: bool, bit: u32| if f { bit } else { 0 };
+        Self(index as u32 | flag(first_col, EDGE_FIRST_COL) | flag(first_row, EDGE_FIRST_ROW))
+    }
+
+    /// The edge's index in [`StaticIndex::edges`].
+    #[inline]
+    pub(crate) fn index(self) -> usize {
+        (self.0 & EDGE_INDEX_MASK) as usize
+    }
+
+    /// Whether a query over cells `x0..`, `y0..` takes this entry, listed in cell (`ix`, `iy`):
+    /// when that cell is the first of the edge's cells inside the query, so each edge is
+    /// taken once.
+    #[inline]
+    pub(crate) fn first_in(self, ix: usize, iy: usize, x0: usize, y0: usize) -> bool {
+        (ix == x0 || self.0 & EDGE_FIRST_COL != 0) && (iy == y0 || self.0 & EDGE_FIRST_ROW != 0)
     }
 }
 
@@ -189,8 +236,8 @@ pub(crate) struct StaticIndex {
     pub spec: GridSpec,
     pub edges: Vec<Edge>,
     pub triangles: Vec<WallTriangle>,
-    edge_cells: CellLists,
-    tri_cells: CellLists,
+    edge_cells: CellLists<EdgeEntry>,
+    tri_cells: CellLists<u32>,
 }
 
 impl StaticIndex {
@@ -231,7 +278,7 @@ impl StaticIndex {
             }
             for i in 0..poly.len() {
                 if let Some(seg) = Segment::new(poly[i], poly[(i + 1) % poly.len()]) {
-                    edges.push(Edge { seg, height: *height, first_cell: (0, 0) });
+                    edges.push(Edge { seg, height: *height });
                 }
             }
         }
@@ -241,19 +288,18 @@ impl StaticIndex {
         let mut pairs = Vec::new();
         // Edges are listed in every cell of their bounding box (not only the cells they cross),
         // so that the first cell of any query box that holds an edge lists it.
-        for (i, e) in edges.iter_mut().enumerate() {
+        for (i, e) in edges.iter().enumerate() {
             let (a, b) = (e.seg.a, e.seg.b());
             let (x0, y0, x1, y1) =
                 spec.cell_range(Point2::new(a.x.min(b.x), a.y.min(b.y)), Point2::new(a.x.max(b.x), a.y.max(b.y)));
-            e.first_cell = (x0 as u32, y0 as u32);
             for iy in y0..=y1 {
                 for ix in x0..=x1 {
-                    pairs.push(((iy * spec.nx + ix) as u32, i as u32));
+                    pairs.push(((iy * spec.nx + ix) as u32, EdgeEntry::new(i, ix == x0, iy == y0)));
                 }
             }
         }
         let edge_cells = CellLists::build(n_cells, &mut pairs);
-        pairs.clear();
+        let mut pairs = Vec::new();
         for (i, tri) in triangles.iter().enumerate() {
             let (x0, y0, x1, y1) = spec.cell_range(tri.min, tri.max);
             for iy in y0..=y1 {
@@ -304,9 +350,9 @@ impl StaticIndex {
         self.tri_cells.items.len()
     }
 
-    /// Edge indices listed in one cell.
+    /// Edges listed in one cell.
     #[inline]
-    pub(crate) fn edges_in(&self, cell: usize) -> &[u32] {
+    pub(crate) fn edges_in(&self, cell: usize) -> &[EdgeEntry] {
         self.edge_cells.cell(cell)
     }
 
@@ -322,7 +368,7 @@ impl StaticIndex {
         let mut blocked = false;
         self.walk_cells(a, b, |cell| {
             for &e in self.edges_in(cell) {
-                let edge = &self.edges[e as usize];
+                let edge = &self.edges[e.index()];
                 if edge.height > min_height && segments_cross(a, b, edge.seg.a, edge.seg.b()) {
                     blocked = true;
                     return false;
@@ -467,6 +513,8 @@ pub(crate) struct DynGrid {
     items: Vec<u32>,
     /// Sorted layout: (cell, item) pairs ordered by cell, then by insertion.
     keyed: Vec<(u32, u32)>,
+    /// Sorted layout: where each row's pairs start in `keyed` (one more than rows).
+    row_start: Vec<u32>,
     cell_of_item: Vec<u32>,
     max_half: Real,
 }
@@ -480,6 +528,7 @@ impl DynGrid {
             fill: Vec::new(),
             items: Vec::new(),
             keyed: Vec::new(),
+            row_start: Vec::new(),
             cell_of_item: Vec::new(),
             max_half: 0.0,
         }
@@ -516,10 +565,35 @@ impl DynGrid {
                 self.fill[cell] += 1;
             }
         } else {
+            // Bucketed by row with a counting sort, then each row sorted by cell: a query
+            // looks a row up directly and searches only that row's few entries, where one
+            // search of the whole list missed the cache at every step. Both sorts are stable,
+            // so equal cells keep insertion order.
+            let (nx, ny) = (self.spec.nx, self.spec.ny);
+            self.row_start.clear();
+            self.row_start.resize(ny + 1, 0);
+            for &c in &self.cell_of_item {
+                self.row_start[c as usize / nx + 1] += 1;
+            }
+            for i in 0..ny {
+                self.row_start[i + 1] += self.row_start[i];
+            }
+            self.fill.clear();
+            self.fill.extend_from_slice(&self.row_start);
             self.keyed.clear();
-            self.keyed.extend(entries.enumerate().map(|(k, (item, _, _))| (self.cell_of_item[k], item)));
-            // Stable: equal cells keep insertion order.
-            self.keyed.sort_by_key(|&(cell, _)| cell);
+            self.keyed.resize(count, (0, 0));
+            for (k, (item, _, _)) in entries.enumerate() {
+                let cell = self.cell_of_item[k];
+                let row = cell as usize / nx;
+                self.keyed[self.fill[row] as usize] = (cell, item);
+                self.fill[row] += 1;
+            }
+            for row in 0..ny {
+                let (s, e) = (self.row_start[row] as usize, self.row_start[row + 1] as usize);
+                if e - s > 1 {
+                    self.keyed[s..e].sort_by_key(|&(cell, _)| cell);
+                }
+            }
         }
     }
 
@@ -537,8 +611,9 @@ impl DynGrid {
                 }
             } else {
                 let (lo, hi) = ((row + x0) as u32, (row + x1) as u32);
-                let first = self.keyed.partition_point(|&(c, _)| c < lo);
-                for &(c, item) in &self.keyed[first..] {
+                let in_row = &self.keyed[self.row_start[iy] as usize..self.row_start[iy + 1] as usize];
+                let first = in_row.partition_point(|&(c, _)| c < lo);
+                for &(c, item) in &in_row[first..] {
                     if c > hi {
                         break;
                     }

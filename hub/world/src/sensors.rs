@@ -175,11 +175,13 @@ impl Scene<'_> {
         let (x0, y0, x1, y1) = s.spec.cell_range(lo, hi);
         for iy in y0..=y1 {
             for ix in x0..=x1 {
-                for &edge in s.edges_in(iy * s.spec.nx + ix) {
-                    let e = &s.edges[edge as usize];
+                for &entry in s.edges_in(iy * s.spec.nx + ix) {
                     // Take each edge once: in the first of its cells inside the query box.
-                    let first = (e.first_cell.0.max(x0 as u32), e.first_cell.1.max(y0 as u32));
-                    if first == (ix as u32, iy as u32) && visible_from(&e.seg, pos, inner, reach) {
+                    if !entry.first_in(ix, iy, x0, y0) {
+                        continue;
+                    }
+                    let e = &s.edges[entry.index()];
+                    if visible_from(&e.seg, pos, inner, reach) {
                         cands.segments.push(e.seg);
                         cands.local.push(LocalSegment::new(&e.seg, pos));
                     }
@@ -241,9 +243,11 @@ impl LocalSegment {
 #[derive(Debug, Clone, Copy, PartialEq)]
 struct F8([f32; 8]);
 
-/// Eight lane masks.
+/// Eight lane masks, each all ones or all zeros: the form an SSE compare gives, so a select
+/// is three bitwise operations. (As `[bool; 8]` every select widened bytes to lanes first, and
+/// selects and mins took a third of sensing.)
 #[derive(Debug, Clone, Copy)]
-struct M8([bool; 8]);
+struct M8([u32; 8]);
 
 // Index loops over the eight lanes are the shape LLVM vectorises most reliably.
 #[allow(clippy::needless_range_loop)]
@@ -266,9 +270,9 @@ impl F8 {
 
     #[inline(always)]
     fn test(self, o: F8, f: impl Fn(f32, f32) -> bool) -> M8 {
-        let mut r = [false; 8];
+        let mut r = [0; 8];
         for k in 0..8 {
-            r[k] = f(self.0[k], o.0[k]);
+            r[k] = if f(self.0[k], o.0[k]) { u32::MAX } else { 0 };
         }
         M8(r)
     }
@@ -298,7 +302,7 @@ impl F8 {
 impl M8 {
     #[inline(always)]
     fn and(self, o: M8) -> M8 {
-        let mut r = [false; 8];
+        let mut r = [0; 8];
         for k in 0..8 {
             r[k] = self.0[k] & o.0[k];
         }
@@ -309,7 +313,7 @@ impl M8 {
     fn select(self, yes: F8, no: F8) -> F8 {
         let mut r = [0.0; 8];
         for k in 0..8 {
-            r[k] = if self.0[k] { yes.0[k] } else { no.0[k] };
+            r[k] = f32::from_bits((self.0[k] & yes.0[k].to_bits()) | (!self.0[k] & no.0[k].to_bits()));
         }
         F8(r)
     }
