@@ -536,6 +536,12 @@ impl DynGrid {
 
     /// Rebuilds from (item, centre, half-extent) triples; no allocation once warm.
     pub(crate) fn rebuild(&mut self, entries: impl Iterator<Item = (u32, Point2<Real>, Real)> + Clone) {
+        self.rebuild_as(entries, None);
+    }
+
+    /// [`Self::rebuild`] in the layout `dense` names, or (`None`) the one that suits the count:
+    /// cell starts for every cell while the bodies are at least one per 16 cells, else rows.
+    fn rebuild_as(&mut self, entries: impl Iterator<Item = (u32, Point2<Real>, Real)> + Clone, dense: Option<bool>) {
         let n_cells = self.spec.nx * self.spec.ny;
         self.cell_of_item.clear();
         self.max_half = 0.0;
@@ -544,7 +550,7 @@ impl DynGrid {
             self.max_half = self.max_half.max(half);
         }
         let count = self.cell_of_item.len();
-        self.dense = n_cells <= 16 * count.max(1);
+        self.dense = dense.unwrap_or(n_cells <= 16 * count.max(1));
         if self.dense {
             self.start.clear();
             self.start.resize(n_cells + 1, 0);
@@ -689,6 +695,68 @@ mod tests {
                     assert!(found.contains(i), "body {i} at {c} missed");
                 }
             }
+        }
+    }
+
+    proptest::proptest! {
+        /// Both layouts of the robot grid answer a query with the same bodies in the same
+        /// order (by cell, then as inserted), bodies off the grid included.
+        #[test]
+        fn both_robot_grid_layouts_answer_alike(
+            bodies in proptest::collection::vec((-5.0f64..45.0, -5.0f64..35.0, 0.1f64..1.5), 0..120),
+            (qx, qy, qw, qh) in (-5.0f64..45.0, -5.0f64..35.0, 0.0f64..12.0, 0.0f64..12.0),
+        ) {
+            let spec = GridSpec::covering(Point2::new(0.0, 0.0), Point2::new(40.0, 30.0), 2.0);
+            let pts: Vec<(u32, Point2<Real>, Real)> =
+                bodies.iter().enumerate().map(|(i, &(x, y, h))| (i as u32, Point2::new(x, y), h)).collect();
+            let (lo, hi) = (Point2::new(qx, qy), Point2::new(qx + qw, qy + qh));
+            let mut answers = Vec::new();
+            for dense in [true, false] {
+                let mut g = DynGrid::new(spec);
+                g.rebuild_as(pts.iter().copied(), Some(dense));
+                let mut found = Vec::new();
+                g.query(lo, hi, |i| found.push(i));
+                answers.push(found);
+            }
+            proptest::prop_assert_eq!(&answers[0], &answers[1]);
+        }
+
+        /// A query over a box of wall cells takes every edge listed in those cells exactly
+        /// once, from the entries alone.
+        #[test]
+        fn a_box_of_wall_cells_takes_each_of_its_edges_once(
+            walls in proptest::collection::vec((1.0f64..38.0, 1.0f64..28.0, 0.2f64..14.0, 0.2f64..9.0), 1..8),
+            (qx, qy, qw, qh) in (-2.0f64..42.0, -2.0f64..32.0, 0.0f64..20.0, 0.0f64..20.0),
+        ) {
+            let walls: Vec<Wall> = walls
+                .iter()
+                .map(|&(x, y, w, h)| Wall {
+                    corners: vec![
+                        Point2::new(x, y),
+                        Point2::new((x + w).min(39.5), y),
+                        Point2::new((x + w).min(39.5), (y + h).min(29.5)),
+                        Point2::new(x, (y + h).min(29.5)),
+                    ],
+                    height_m: 1.0,
+                })
+                .collect();
+            let mut l = lab(walls);
+            (l.width_m, l.height_m) = (40.0, 30.0);
+            let s = StaticIndex::build(&l, 4.0).expect("valid");
+            let (x0, y0, x1, y1) = s.spec.cell_range(Point2::new(qx, qy), Point2::new(qx + qw, qy + qh));
+            let (mut taken, mut listed) = (Vec::new(), std::collections::BTreeSet::new());
+            for iy in y0..=y1 {
+                for ix in x0..=x1 {
+                    for &e in s.edges_in(iy * s.spec.nx + ix) {
+                        listed.insert(e.index());
+                        if e.first_in(ix, iy, x0, y0) {
+                            taken.push(e.index());
+                        }
+                    }
+                }
+            }
+            taken.sort_unstable();
+            proptest::prop_assert_eq!(taken, listed.into_iter().collect::<Vec<_>>());
         }
     }
 }
