@@ -199,6 +199,9 @@ pub struct Robot {
     reach: Real,
     /// Radius around the centre of movement that every sensor's origin lies within.
     sensor_radius: Real,
+    /// Whether some sensor's cone is wider than 180° (measured on the scalar path, which
+    /// reads the candidate segments in f64).
+    any_wide: bool,
     encoder_travel: [Real; 2],
     history: VecDeque<SensorReadings>,
     say: Option<Message>,
@@ -631,6 +634,7 @@ impl World {
             sensor_count: specs.len(),
             reach,
             sensor_radius,
+            any_wide: sensors[..specs.len()].iter().any(|s| s.wide),
             encoder_travel: [0.0; 2],
             history: VecDeque::new(),
             say: None,

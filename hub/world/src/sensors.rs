@@ -21,7 +21,8 @@ struct Scene<'a> {
 
 /// Candidate segments for one robot's proximity sensors.
 struct Candidates<'a> {
-    /// Copies of the wall and body edges some sensor may see, dense for the per-sensor loops.
+    /// Copies of the wall and body edges some sensor may see, dense for the per-sensor loops;
+    /// kept only for a robot with a cone wider than 180° (the scalar path reads them).
     segments: &'a mut Vec<Segment>,
     /// The same, relative to the robot and in f32.
     local: &'a mut Vec<LocalSegment>,
@@ -182,7 +183,9 @@ impl Scene<'_> {
                     }
                     let e = &s.edges[entry.index()];
                     if visible_from(&e.seg, pos, inner, reach) {
-                        cands.segments.push(e.seg);
+                        if r.any_wide {
+                            cands.segments.push(e.seg);
+                        }
                         cands.local.push(LocalSegment::new(&e.seg, pos));
                     }
                 }
@@ -201,7 +204,9 @@ impl Scene<'_> {
                     let seg =
                         Segment::with_normal(g.corners[k], g.corners[(k + 1) % 4], g.normals[k], g.inv_len2[k & 1]);
                     if visible_from(&seg, pos, inner, reach) {
-                        cands.segments.push(seg);
+                        if r.any_wide {
+                            cands.segments.push(seg);
+                        }
                         cands.local.push(LocalSegment::new(&seg, pos));
                     }
                 }

@@ -173,6 +173,29 @@ fn narrow_cones_see_only_what_is_inside_them() {
 }
 
 #[test]
+fn a_cone_wider_than_half_a_turn_sees_walls_and_robots_beside_a_narrow_one() {
+    // Sensor 0 looks back over 270° (everything but the 90° ahead), sensor 1 ahead over 60°:
+    // the wide one is measured on its own path, which needs the candidate edges in full.
+    let sensors = vec![ProximitySpec::deg(0.0, 0.0, 180.0, 270.0), ProximitySpec::deg(0.5, 0.0, 0.0, 60.0)];
+    for with_b in [false, true] {
+        let mut w = world(empty_lab(20.0, 8.0), quiet());
+        let a = w.add_robot(RobotSpec::at(3.0, 4.0, 0.0).sensors(sensors.clone())).expect("valid");
+        if with_b {
+            // Heading +y with half-height 0.3: its right side is the face x = 1.5.
+            w.add_robot(RobotSpec::at(1.2, 4.0, 90.0).body(1.0, 0.6, 0.5)).expect("valid");
+        }
+        w.step(&[], 0.1);
+        let d = w.robot(a).expect("alive").readings.proximity().to_vec();
+        // Without B the nearest wall in the wide cone is x = 0, 3 m behind; with B, its face.
+        let behind = if with_b { 1.5 } else { 3.0 };
+        assert!(close(d[0], behind, 1e-9), "{d:?}");
+        // The narrow cone ahead meets the side walls along its edges, 4 / sin 30° = 8 m away,
+        // or reads its range if that is shorter.
+        assert!(close(d[1], w.params().proximity_range_m.min(8.0), 1e-3), "{d:?}");
+    }
+}
+
+#[test]
 fn other_robots_are_seen_by_proximity_sensors() {
     let mut w = world(empty_lab(20.0, 8.0), quiet());
     let a = w.add_robot(RobotSpec::at(3.0, 4.0, 0.0)).expect("valid");
