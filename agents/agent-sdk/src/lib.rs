@@ -541,6 +541,17 @@ impl Drop for Agent {
     }
 }
 
+/// Waits until `fd` is readable or `timeout` passes (a signal also ends the wait); whether it
+/// became readable.
+fn wait_readable(fd: i32, timeout: Duration) -> bool {
+    let mut pfd = libc::pollfd { fd, events: libc::POLLIN, revents: 0 };
+    let ms = timeout.as_millis().min(i32::MAX as u128) as i32;
+    #[allow(unsafe_code)]
+    // SAFETY: one live pollfd for the duration of the call.
+    let n = unsafe { libc::poll(&mut pfd, 1, ms) };
+    n > 0 && pfd.revents != 0
+}
+
 impl std::fmt::Debug for Agent {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.debug_struct("Agent")
@@ -699,8 +710,12 @@ impl Agent {
             // and its reading.
             let arrived = match wait {
                 Wait::Blocking => {
-                    let mut rung = false;
-                    match self.tick_listener.timed_wait(|_| rung = true, LIVENESS_SLICE) {
+                    // poll(2) on the listener's socket, then a non-blocking drain: the socket
+                    // stays non-blocking. iceoryx2's own timed wait switches it to blocking
+                    // and sets a receive timeout (three syscalls), and its drain switches it
+                    // back (two more), on every tick.
+                    let rung = wait_readable(self.tick_fd(), LIVENESS_SLICE);
+                    match self.tick_listener.try_wait(|_| {}) {
                         Ok(_) => {}
                         // Any signal cuts the wait short (SIGSTOP/SIGCONT, a debugger); a
                         // termination request is caught by the check below, anything else is
