@@ -80,6 +80,11 @@ pub struct HubArgs {
     /// where handing out work would cost more than it saves).
     #[arg(long, default_value_t = world::PARALLEL_MIN_ROBOTS)]
     pub parallel_min_robots: usize,
+    /// Lock-step: how long the hub spins for the agents' answers before it sleeps, while
+    /// every agent it waits for can have a core of its own (0: never spin). A fast agent's
+    /// answer then costs no wake-up of the hub.
+    #[arg(long, default_value_t = crate::ANSWER_SPIN_US, value_parser = clap::builder::RangedU64ValueParser::<u64>::new().range(0..=100_000))]
+    pub answer_spin_us: u64,
 }
 
 /// Builds the hub's configuration from the command line.
@@ -134,6 +139,7 @@ pub fn config(args: &HubArgs) -> anyhow::Result<HubConfig> {
         record: args.record.clone(),
         threads: args.threads,
         parallel_min_robots: args.parallel_min_robots,
+        answer_spin: Duration::from_micros(args.answer_spin_us),
     })
 }
 

@@ -53,6 +53,10 @@ pub struct RunArgs {
     /// The fewest robots the hub spreads a step over threads for (0: any world).
     #[arg(long, default_value_t = world::PARALLEL_MIN_ROBOTS)]
     pub parallel_min_robots: usize,
+    /// Lock-step: how long (µs) the hub spins for its agents' answers before it sleeps, while
+    /// each agent it waits for can have a core (0: never); timing only, never the run.
+    #[arg(long, default_value_t = hub::ANSWER_SPIN_US, value_parser = clap::builder::RangedU64ValueParser::<u64>::new().range(0..=100_000))]
+    pub answer_spin_us: u64,
 }
 
 /// Options of `iwsim demo`.

@@ -1173,6 +1173,8 @@ pub fn run(args: &RunArgs) -> anyhow::Result<ExitCode> {
             args.threads.to_string(),
             "--parallel-min-robots".into(),
             args.parallel_min_robots.to_string(),
+            "--answer-spin-us".into(),
+            args.answer_spin_us.to_string(),
         ],
     };
     let Some(seeds) = &args.seeds else {
