@@ -252,8 +252,11 @@ pub fn run(cfg: HubConfig) -> Result<HubOutcome, HubError> {
     let mut registered_at: Option<Instant> = None;
     let mut last_published: Option<u64> = None;
     let cores = threads_for(0);
-    // The tick the hub last spun for answers on.
+    // The tick the hub last spun for answers on, and how long the last lock-step answers took
+    // to come in after their tick was published.
     let mut spun_on: Option<u64> = None;
+    let mut last_answer_wait: Option<Duration> = None;
+    let mut published_at = Instant::now();
 
     tracing::info!(
         "hub serving session {} ({:?}, lab {:?}, {} grid slots)",
@@ -277,7 +280,11 @@ pub fn run(cfg: HubConfig) -> Result<HubOutcome, HubError> {
                 core.prime_sensors();
             }
             let recorded = recording.is_some().then_some(&mut states);
-            publish_tick(&core, &ports.world_pub, &agents, &mut ports.roster, recorded)?;
+            // Agents may spin for the next tick while the step leaves them a core: it runs on
+            // one thread.
+            let agents_spin = spins_for_answers(&cfg, &core, cores) && !core.world().steps_on_threads();
+            let spin_us = if agents_spin { cfg.answer_spin.as_micros() as u32 } else { 0 };
+            publish_tick(&core, &ports.world_pub, &agents, &mut ports.roster, recorded, spin_us)?;
             ports.roster.publish_if_changed(|| core.robot_sensors())?;
             if core.has_chairs() {
                 let count = core.chair_states().count();
@@ -292,7 +299,8 @@ pub fn run(cfg: HubConfig) -> Result<HubOutcome, HubError> {
             // (a command, an agent joining) must not push it back, or lock-step could hang.
             if last_published != Some(core.world().tick()) {
                 last_published = Some(core.world().tick());
-                deadline_at = Instant::now() + cfg.deadline;
+                published_at = Instant::now();
+                deadline_at = published_at + cfg.deadline;
                 if let Some(rec) = &mut recording {
                     rec.world(core.world().tick(), &states, &ports.roster.scratch);
                 }
@@ -330,11 +338,12 @@ pub fn run(cfg: HubConfig) -> Result<HubOutcome, HubError> {
         // tens of microseconds away, and a wake-up from poll(2) would add as much again. Spin
         // on the actions port, which needs no syscall, for a bounded time first.
         // Once per tick at most: an agent slower than the spin is then waited for asleep.
-        let spin = !cfg.answer_spin.is_zero()
-            && core.mode() == Mode::LockStep
+        // Only while the answers have been coming within the spin: an agent (or a UDP client
+        // behind the bridge) slower than that would only lose the core the hub spins on.
+        let spin = spun_on != Some(core.world().tick())
+            && last_answer_wait.is_none_or(|w| w <= cfg.answer_spin)
             && core.may_step()
-            && spun_on != Some(core.world().tick())
-            && (1..cores).contains(&core.barrier_size())
+            && spins_for_answers(&cfg, &core, cores)
             && !core.all_answered();
         let timeout = if spin {
             spun_on = Some(core.world().tick());
@@ -547,6 +556,9 @@ pub fn run(cfg: HubConfig) -> Result<HubOutcome, HubError> {
             };
             if step {
                 first_step.get_or_insert_with(Instant::now);
+                if core.mode() == Mode::LockStep {
+                    last_answer_wait = Some(now.saturating_duration_since(published_at));
+                }
                 core.step();
                 publish = true;
                 if core.mode() == Mode::RealTime {
@@ -562,7 +574,7 @@ pub fn run(cfg: HubConfig) -> Result<HubOutcome, HubError> {
     // Interrupted: tell everyone the run is over before the services go away.
     if outcome.interrupted {
         core.command(Command::Stop, 0);
-        let _ = publish_tick(&core, &ports.world_pub, &agents, &mut ports.roster, None);
+        let _ = publish_tick(&core, &ports.world_pub, &agents, &mut ports.roster, None, 0);
         let _ = ports.tick_notifier.notify();
     }
     // An agent reads the final tick from the hub's shared memory, which goes when the hub does:
@@ -604,6 +616,14 @@ pub fn run(cfg: HubConfig) -> Result<HubOutcome, HubError> {
     Ok(outcome)
 }
 
+/// Whether waiting for lock-step answers may spin: while every agent the hub waits for can have
+/// a core of its own (the hub has another), so spinning takes no core a process needs. Both the
+/// hub (for answers) and its agents (for the next tick, told by `TickHeader::spin_us`) then spin
+/// for at most `cfg.answer_spin` before they sleep.
+fn spins_for_answers(cfg: &HubConfig, core: &HubCore, cores: usize) -> bool {
+    !cfg.answer_spin.is_zero() && core.mode() == Mode::LockStep && (1..cores).contains(&core.barrier_size())
+}
+
 /// Writes the world's changes since the last call to the recording's replay journal.
 fn record_changes(core: &mut HubCore, rec: &mut Recorder, journal: &mut Vec<recorder::journal::Event>) {
     core.take_journal(journal);
@@ -622,6 +642,7 @@ fn publish_tick(
     agents: &BTreeMap<u32, AgentPorts>,
     roster: &mut ports::Roster,
     recorded: Option<&mut Vec<RobotState>>,
+    spin_us: u32,
 ) -> Result<(), HubError> {
     let header = core.world_header();
     let mut sample = world_pub.loan_slice_uninit(core.robot_count()).map_err(ipc("loan a world snapshot"))?;
@@ -647,6 +668,8 @@ fn publish_tick(
             run_state: header.run_state,
             count: count as u32,
             t_pub_ns: 0,
+            spin_us,
+            reserved: 0,
         };
         let mut sample = ports::fill(sample, core.agent_blocks(id).map(|r| core.sensor_block(r)));
         // Stamped last, so the latency figure starts at the send itself.

@@ -406,6 +406,7 @@ pub fn serve(recording: &Recording, options: &ServeOptions) -> Result<Served, Re
                         run_state: header.run_state,
                         count: 0,
                         t_pub_ns: ipc_services::monotonic_ns(),
+                        ..TickHeader::default()
                     };
                     sample.send().map_err(ipc("send sensor blocks"))?;
                 }

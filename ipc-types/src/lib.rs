@@ -423,7 +423,7 @@ impl SensorBlock {
 /// The header of the sensor blocks a hub sends an agent each tick.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable, ZeroCopySend, Default)]
-#[type_name("iwsim::TickHeader.v1")]
+#[type_name("iwsim::TickHeader.v2")]
 pub struct TickHeader {
     /// The tick.
     pub tick: u64,
@@ -435,8 +435,14 @@ pub struct TickHeader {
     pub count: u32,
     /// CLOCK_MONOTONIC nanoseconds when the hub published this tick (for latency figures).
     pub t_pub_ns: u64,
+    /// Microseconds an agent may spin for its next tick after answering this one before it
+    /// sleeps: non-zero in lock-step while every agent the hub waits for can have a core of
+    /// its own (then a spinning agent takes no core another process needs); 0 otherwise.
+    pub spin_us: u32,
+    /// Zero.
+    pub reserved: u32,
 }
-const _: () = assert!(core::mem::size_of::<TickHeader>() == 32);
+const _: () = assert!(core::mem::size_of::<TickHeader>() == 40);
 const _: () = assert!(core::mem::align_of::<TickHeader>() == 8);
 
 /// `ActionBlock::flags`: set the motor powers.

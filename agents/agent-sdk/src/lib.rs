@@ -710,11 +710,18 @@ impl Agent {
             // and its reading.
             let arrived = match wait {
                 Wait::Blocking => {
-                    // poll(2) on the listener's socket, then a non-blocking drain: the socket
-                    // stays non-blocking. iceoryx2's own timed wait switches it to blocking
-                    // and sets a receive timeout (three syscalls), and its drain switches it
-                    // back (two more), on every tick.
-                    let rung = wait_readable(self.tick_fd(), LIVENESS_SLICE);
+                    // The hub says when spinning takes no core another process needs (lock-step,
+                    // fewer agents than cores): then look for the sample for a while first, with
+                    // no syscall, so a tick that comes within the spin costs no wake-up.
+                    let spin = Duration::from_micros(u64::from(self.last_header.spin_us));
+                    if !spin.is_zero() && self.sample_within(spin) {
+                        continue;
+                    }
+                    // Drain the rings already read, look once more (a sample whose ring was
+                    // just drained is found here), then sleep in poll(2) until the next ring.
+                    // The socket stays non-blocking throughout: iceoryx2's own timed wait
+                    // switches it to blocking and sets a receive timeout (three syscalls),
+                    // and its drain switches it back (two more), on every tick.
                     match self.tick_listener.try_wait(|_| {}) {
                         Ok(_) => {}
                         // Any signal cuts the wait short (SIGSTOP/SIGCONT, a debugger); a
@@ -723,7 +730,10 @@ impl Agent {
                         Err(ListenerWaitError::InterruptSignal) => {}
                         Err(e) => return Err(AgentError::Ipc(format!("wait for a tick: {e:?}"))),
                     }
-                    rung
+                    if self.take_sensors()? {
+                        return self.tick_from_last();
+                    }
+                    wait_readable(self.tick_fd(), LIVENESS_SLICE)
                 }
                 Wait::BusyPoll => {
                     // Spin on receive itself, as a bare subscriber would: the sample is read
@@ -828,6 +838,22 @@ impl Agent {
     /// hand with another set of robots: the hub re-publishes the tick when this agent's robot
     /// joins (or leaves), and while a run waits for its Start that is the only way a robot
     /// registered after the first gets its readings.
+    /// Spins for at most `spin` until a sensor sample waits to be taken; whether one does.
+    fn sample_within(&self, spin: Duration) -> bool {
+        let Some(sub) = &self.sensors else { return false };
+        let until = Instant::now() + spin;
+        loop {
+            // An error is left for `take_sensors` to report.
+            if sub.has_samples().unwrap_or(true) {
+                return true;
+            }
+            if Instant::now() >= until {
+                return false;
+            }
+            std::hint::spin_loop();
+        }
+    }
+
     fn take_sensors(&mut self) -> Result<bool, AgentError> {
         let Some(sub) = &self.sensors else { return Ok(false) };
         let mut fresh = false;

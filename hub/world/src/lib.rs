@@ -552,6 +552,11 @@ impl World {
         self.parallel_min = robots;
     }
 
+    /// Whether the next step spreads over threads (else it runs on the calling thread).
+    pub fn steps_on_threads(&self) -> bool {
+        self.pool.is_some() && self.live >= self.parallel_min.max(1)
+    }
+
     /// How this step's per-robot phases are split: `None` on the calling thread, else the pool
     /// and the slots per chunk.
     fn chunking(&self) -> Chunking {
