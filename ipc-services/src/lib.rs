@@ -761,6 +761,28 @@ mod tests {
     }
 
     #[test]
+    fn every_event_service_carries_one_event_id_and_a_ring_drains_as_one() {
+        // A listener's drain visits every event id the service allows; iwsim rings only id 0.
+        use iceoryx2::prelude::PortFactory;
+        let session = unique_session("event-ids");
+        let _release = ReleaseOnDrop(session.clone());
+        let node = session.node("hub").expect("a node");
+        for svc in [
+            session.tick_event(&node, Role::Hub).expect("the tick event"),
+            session.hub_event(&node, Role::Hub).expect("the hub's doorbell"),
+        ] {
+            assert_eq!(svc.static_config().event_id_max_value(), 0);
+            let listener = svc.listener_builder().create().expect("a listener");
+            let notifier = svc.notifier_builder().create().expect("a notifier");
+            notifier.notify().expect("rung");
+            notifier.notify().expect("rung again");
+            let mut ids = Vec::new();
+            listener.try_wait(|e| ids.push((e.id.as_value(), e.count))).expect("drained");
+            assert_eq!(ids, [(0, 2)], "two rings of id 0, drained as one activation that counts both");
+        }
+    }
+
+    #[test]
     fn the_hub_is_found_by_its_node_name() {
         let session = unique_session("hub-pid");
         let _release = ReleaseOnDrop(session.clone());
