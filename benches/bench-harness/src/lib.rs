@@ -262,6 +262,11 @@ fn hub_latency(samples: u64, busy: bool) -> anyhow::Result<Percentiles> {
         s("--wait-agents"),
         s("1"),
         s("--no-noise"),
+        // Like the raw driver, the hub sleeps until the agent answers, and it tells a blocking
+        // agent to sleep for its tick too (a lock-step hub with one agent on two cores would
+        // otherwise have both spin): this compares the same waits.
+        s("--answer-spin-us"),
+        s("0"),
         s("--json"),
     ])?;
     let mut agent_args =
