@@ -390,6 +390,31 @@ fn run_chunks<A: Send, B: Send, S: Send>(
     }
 }
 
+/// Runs `f`, a sequential part of a parallel step (on one of the pool's threads), while the
+/// pool's other threads spin instead of going to sleep: a sleeping thread takes tens of
+/// microseconds to wake for the next phase on a VM whose idle vCPU halts, which at 1,000 robots
+/// cost a quarter of what the second thread saves.
+fn sequential<R: Send>(chunking: &Chunking, f: impl FnOnce() -> R + Send) -> R {
+    let Some((pool, _)) = chunking else { return f() };
+    let done = std::sync::atomic::AtomicBool::new(false);
+    let spin = || {
+        while !done.load(std::sync::atomic::Ordering::Acquire) {
+            std::hint::spin_loop();
+        }
+    };
+    pool.install(|| {
+        let (r, ()) = rayon::join(
+            || {
+                let r = f();
+                done.store(true, std::sync::atomic::Ordering::Release);
+                r
+            },
+            spin,
+        );
+        r
+    })
+}
+
 /// How a step's per-robot phases are split: `None` on the calling thread, else the pool and
 /// the slots per chunk (see [`World::chunking`]).
 type Chunking = Option<(std::sync::Arc<rayon::ThreadPool>, usize)>;
@@ -779,7 +804,7 @@ impl World {
         self.drive(dt, chunking);
         self.resolve_collisions(stats, chunking);
         self.commit(dt, chunking);
-        self.deliver_messages(stats);
+        sequential(chunking, || self.deliver_messages(stats));
         self.sense_with(false, chunking);
     }
 
@@ -834,14 +859,16 @@ impl World {
         // Index every robot by the box that holds both its current and its next pose: the
         // collision phase tests against both, and the sensors see the committed one, which is
         // one of the two.
-        let motion = &self.motion;
-        self.dyn_grid.rebuild(motion.iter().enumerate().filter(|(_, m)| m.alive).map(|(i, m)| {
-            let min = Point2::new(m.cur_min.x.min(m.next_min.x), m.cur_min.y.min(m.next_min.y));
-            let max = Point2::new(m.cur_max.x.max(m.next_max.x), m.cur_max.y.max(m.next_max.y));
-            let centre = nalgebra::center(&min, &max);
-            let half = (max.x - min.x).max(max.y - min.y) / 2.0;
-            (i as u32, centre, half)
-        }));
+        let (motion, dyn_grid) = (&self.motion, &mut self.dyn_grid);
+        sequential(chunking, || {
+            dyn_grid.rebuild(motion.iter().enumerate().filter(|(_, m)| m.alive).map(|(i, m)| {
+                let min = Point2::new(m.cur_min.x.min(m.next_min.x), m.cur_min.y.min(m.next_min.y));
+                let max = Point2::new(m.cur_max.x.max(m.next_max.x), m.cur_max.y.max(m.next_max.y));
+                let centre = nalgebra::center(&min, &max);
+                let half = (max.x - min.x).max(max.y - min.y) / 2.0;
+                (i as u32, centre, half)
+            }))
+        });
     }
 
     /// One robot's motor filter and next pose, from its committed geometry `g`; `key` names
