@@ -251,7 +251,8 @@ pub fn run(cfg: HubConfig) -> Result<HubOutcome, HubError> {
     // When the last robot was registered, while the republication it asks for is pending.
     let mut registered_at: Option<Instant> = None;
     let mut last_published: Option<u64> = None;
-    let cores = threads_for(0);
+    // Cores for the hub and its agents: a recording's writer thread keeps one busy.
+    let cores = threads_for(0).saturating_sub(recording.is_some() as usize);
     // The tick the hub last spun for answers on, and how long the last lock-step answers took
     // to come in after their tick was published.
     let mut spun_on: Option<u64> = None;
@@ -617,7 +618,8 @@ pub fn run(cfg: HubConfig) -> Result<HubOutcome, HubError> {
 }
 
 /// Whether waiting for lock-step answers may spin: while every agent the hub waits for can have
-/// a core of its own (the hub has another), so spinning takes no core a process needs. Both the
+/// a core of its own (the hub has another, and a recording's writer a third), so spinning takes
+/// no core a process needs. Both the
 /// hub (for answers) and its agents (for the next tick, told by `TickHeader::spin_us`) then spin
 /// for at most `cfg.answer_spin` before they sleep.
 fn spins_for_answers(cfg: &HubConfig, core: &HubCore, cores: usize) -> bool {

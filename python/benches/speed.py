@@ -9,7 +9,8 @@ to a row, driving east at constant powers) and is timed by the hub itself: ticks
 - python env: ``iwsim.env.ChairsParallelEnv``, one step() per tick, all chairs' observations
   built and their actions checked, rewards judged by the env's observer;
 - rust sdk: ``iwsim agent wheelchair --robots N`` (the Rust SDK, one process), as agents run by
-  default: it sleeps until the hub rings;
+  default: it sleeps until the hub rings (in lock-step with fewer agents than cores, after
+  spinning as long as the hub's tick header allows);
 - rust sdk busy-poll: the same with ``--busy-poll``, spinning on the tick as the env's step
   does for up to half a millisecond before it sleeps (shown so the comparison is fair both ways);
 - python udp: one Python process with one UDP socket per chair, as a Ciber-Rato client has,
