@@ -337,10 +337,10 @@ pub fn run(cfg: HubConfig) -> Result<HubOutcome, HubError> {
         }
         // Lock-step with every agent on a core of its own (the hub on another): the answer is
         // tens of microseconds away, and a wake-up from poll(2) would add as much again. Spin
-        // on the actions port, which needs no syscall, for a bounded time first.
-        // Once per tick at most: an agent slower than the spin is then waited for asleep.
-        // Only while the answers have been coming within the spin: an agent (or a UDP client
-        // behind the bridge) slower than that would only lose the core the hub spins on.
+        // on the actions port, which needs no syscall, for a bounded time first: at most once
+        // a tick (an agent slower than the spin is then waited for asleep), and only while
+        // answers have been coming within the spin (an agent, or a UDP client behind the
+        // bridge, slower than that would only lose the core the hub spins on).
         let spin = spun_on != Some(core.world().tick())
             && last_answer_wait.is_none_or(|w| w <= cfg.answer_spin)
             && core.may_step()
@@ -619,9 +619,8 @@ pub fn run(cfg: HubConfig) -> Result<HubOutcome, HubError> {
 
 /// Whether waiting for lock-step answers may spin: while every agent the hub waits for can have
 /// a core of its own (the hub has another, and a recording's writer a third), so spinning takes
-/// no core a process needs. Both the
-/// hub (for answers) and its agents (for the next tick, told by `TickHeader::spin_us`) then spin
-/// for at most `cfg.answer_spin` before they sleep.
+/// no core a process needs. Both the hub (for answers) and its agents (for the next tick, told
+/// by `TickHeader::spin_us`) then spin for at most `cfg.answer_spin` before they sleep.
 fn spins_for_answers(cfg: &HubConfig, core: &HubCore, cores: usize) -> bool {
     !cfg.answer_spin.is_zero() && core.mode() == Mode::LockStep && (1..cores).contains(&core.barrier_size())
 }
