@@ -76,7 +76,9 @@ const ANSWER_TIMEOUT: Duration = Duration::from_secs(5);
 /// How `wait_tick` waits.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Wait {
-    /// Sleep until the hub rings the tick (the default: costs no CPU while waiting).
+    /// Sleep until the hub rings the tick (the default: costs no CPU while waiting). When the
+    /// hub's last tick header allows it (`spin_us`: lock-step, fewer agents than cores, a
+    /// one-thread step), spin that long first, on a core no other process needs.
     Blocking,
     /// Spin on shared memory: lowest latency, one core busy. Only sensible when processes ≤
     /// cores.
