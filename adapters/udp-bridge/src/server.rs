@@ -293,21 +293,6 @@ fn honoured(requested: &[String], limit: u32) -> &[String] {
     &requested[..requested.len().min(limit as usize)]
 }
 
-/// The measures of one robot for one tick.
-pub fn measures(
-    b: &SensorBlock,
-    tick: u64,
-    state: RunState,
-    ir_ids: &[u32],
-    leds: [bool; 3],
-    map: &Map,
-    requested: &[String],
-) -> MeasuresData {
-    let mut m = MeasuresData::default();
-    measures_into(&mut m, b, tick, state, ir_ids, leds, map, requested);
-    m
-}
-
 /// Whether `request` names sensor `prefix` + `id` (`IRSensor3`), as `format!("{prefix}{id}")`
 /// would spell it, without making that string.
 fn names_numbered(request: &str, prefix: &str, id: usize) -> bool {
@@ -317,9 +302,9 @@ fn names_numbered(request: &str, prefix: &str, id: usize) -> bool {
     })
 }
 
-/// [`measures`] into `m`, reusing its lists: a bridge keeps one between robots and ticks, so
-/// a tick's Measures allocate nothing once warm.
-#[allow(clippy::too_many_arguments)] // measures' arguments and the one it fills
+/// The measures of one robot for one tick, into `m`, reusing its lists: a bridge keeps one
+/// between robots and ticks, so a tick's Measures allocate nothing once warm.
+#[allow(clippy::too_many_arguments)] // a robot's block, its tick and its requests, and `m`
 pub fn measures_into(
     m: &mut MeasuresData,
     b: &SensorBlock,
@@ -1166,7 +1151,9 @@ mod measures_tests {
         };
         for (ids, tick) in [(&[0u32, 1, 2][..], 7), (&[2, 0][..], 8), (&[5][..], 9)] {
             measures_into(&mut kept, &b, tick, RunState::Running, ids, [true, false, false], &map, &[]);
-            assert_eq!(kept, measures(&b, tick, RunState::Running, ids, [true, false, false], &map, &[]));
+            let mut fresh = MeasuresData::default();
+            measures_into(&mut fresh, &b, tick, RunState::Running, ids, [true, false, false], &map, &[]);
+            assert_eq!(kept, fresh);
         }
     }
 }

@@ -585,10 +585,10 @@ impl World {
     /// How this step's per-robot phases are split: `None` on the calling thread, else the pool
     /// and the slots per chunk.
     fn chunking(&self) -> Chunking {
-        let pool = self.pool.as_ref()?;
-        if self.live < self.parallel_min.max(1) {
+        if !self.steps_on_threads() {
             return None;
         }
+        let pool = self.pool.as_ref()?;
         let chunks = self.threads * CHUNKS_PER_THREAD;
         Some((pool.clone(), self.slots.len().div_ceil(chunks).max(1)))
     }
