@@ -5,50 +5,24 @@
 //! every viewer each cycle; a silent robot is never removed and keeps its powers.
 
 use std::net::{SocketAddr, UdpSocket};
-use std::sync::mpsc::Receiver;
 use std::time::{Duration, Instant};
 
-use super::common::{Proc, session, text};
-
-/// A hub and a bridge on a free port, with every line the bridge prints on stderr.
-fn hub_and_bridge(s: &str, hub_args: &[&str], bridge_args: &[&str]) -> (Proc, Proc, SocketAddr, Receiver<String>) {
-    let mut args = vec!["hub", "--session", s];
-    args.extend_from_slice(hub_args);
-    let hub = Proc::spawn(&args);
-    let mut bargs = vec!["udp", "--session", s, "--port", "0"];
-    bargs.extend_from_slice(bridge_args);
-    let mut bridge = Proc::spawn(&bargs);
-    let lines = bridge.stderr_lines();
-    let deadline = Instant::now() + Duration::from_secs(20);
-    let addr = loop {
-        let line = lines
-            .recv_timeout(deadline.saturating_duration_since(Instant::now()))
-            .expect("the bridge announces its port within 20 s");
-        if let Some(rest) = line.split("registrations on ").nth(1) {
-            break rest.trim().parse().expect("address");
-        }
-    };
-    (hub, bridge, addr, lines)
-}
+use super::common::{Lines, Proc, hub_and_logged_bridge as hub_and_bridge, session, text};
 
 /// Waits for the hub and the bridge to exit cleanly; returns the hub's stdout and the
 /// bridge's closing line (its counters).
-fn ended(hub: Proc, bridge: Proc, lines: &Receiver<String>) -> (String, String) {
+fn ended(hub: Proc, bridge: Proc, lines: &Lines) -> (String, String) {
     let h = hub.wait(Duration::from_secs(30));
     assert!(h.status.success(), "hub: {}", text(&h.stderr));
     let b = bridge.wait(Duration::from_secs(10));
-    assert!(b.status.success(), "the bridge failed");
-    let mut last = String::new();
-    while let Ok(line) = lines.recv_timeout(Duration::from_secs(10)) {
-        if line.contains("run over") {
-            last = line;
-        }
-    }
+    let said = lines.to_end(Duration::from_secs(10));
+    assert!(b.status.success(), "the bridge failed: {said:?}");
+    let last = said.into_iter().rfind(|l| l.contains("run over")).unwrap_or_default();
     (text(&h.stdout), last)
 }
 
 /// Stops the run as a user does and waits for both processes to exit.
-fn stop(s: &str, hub: Proc, bridge: Proc, lines: &Receiver<String>) -> String {
+fn stop(s: &str, hub: Proc, bridge: Proc, lines: &Lines) -> String {
     assert_eq!(agent_sdk::control(s, ipc_types::Command::Stop, 0).expect("hub answers").status, 0);
     ended(hub, bridge, lines).1
 }

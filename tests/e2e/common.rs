@@ -1,9 +1,10 @@
 //! Helpers shared by the end-to-end tests: unique sessions, child processes that die with
 //! the test, and reading the hub's JSON summary.
 
-use std::io::Read;
+use std::io::{BufRead as _, BufReader, Read};
 use std::process::{Child, Command, Output, Stdio};
 use std::sync::atomic::{AtomicU32, Ordering};
+use std::sync::mpsc::{Receiver, RecvTimeoutError};
 use std::time::{Duration, Instant};
 
 use agent_sdk::Observer;
@@ -71,23 +72,7 @@ impl Proc {
     /// Waits until the process prints a stderr line containing `marker` and returns what
     /// follows it on that line; stderr keeps being drained afterwards.
     pub fn announced(&mut self, marker: &str, timeout: Duration) -> String {
-        use std::io::BufRead;
-        let stderr = self.0.as_mut().and_then(|c| c.stderr.take()).expect("piped stderr");
-        let (tx, rx) = std::sync::mpsc::channel();
-        std::thread::spawn(move || {
-            for line in std::io::BufReader::new(stderr).lines().map_while(Result::ok) {
-                let _ = tx.send(line);
-            }
-        });
-        let deadline = Instant::now() + timeout;
-        loop {
-            let line = rx
-                .recv_timeout(deadline.saturating_duration_since(Instant::now()))
-                .unwrap_or_else(|_| panic!("no line with {marker:?} within {timeout:?}"));
-            if let Some(rest) = line.split(marker).nth(1) {
-                return rest.trim().to_owned();
-            }
-        }
+        self.stderr_lines().said(marker, timeout)
     }
 
     pub fn stderr_now(&mut self) -> String {
@@ -163,18 +148,114 @@ pub fn assert_no_shared_memory_left(s: &str) {
 }
 
 impl Proc {
-    /// Takes the process's stderr: its lines, as they come, on a channel (drained on a thread
-    /// until the process exits).
-    pub fn stderr_lines(&mut self) -> std::sync::mpsc::Receiver<String> {
-        use std::io::BufRead;
-        let stderr = self.0.as_mut().and_then(|c| c.stderr.take()).expect("piped stderr");
+    /// Takes the process's stderr: its lines, as they come (drained on a thread until the
+    /// process closes it).
+    pub fn stderr_lines(&mut self) -> Lines {
+        Lines::read(self.0.as_mut().and_then(|c| c.stderr.take()).expect("piped stderr"))
+    }
+
+    /// Takes the process's stdout, as [`Proc::stderr_lines`] does its stderr.
+    pub fn stdout_lines(&mut self) -> Lines {
+        Lines::read(self.0.as_mut().and_then(|c| c.stdout.take()).expect("piped stdout"))
+    }
+}
+
+/// What [`Lines::next_by`] got.
+pub enum Next {
+    Line(String),
+    /// End of file: the writer closed the pipe and every line has been received.
+    End,
+    TimedOut,
+}
+
+/// A child's output, line by line, read on a thread as the child writes it.
+///
+/// Its channel closes only when the reader has reached end of file, that is when the child
+/// (and whatever inherited the pipe) closed it. A process that has exited may still have
+/// lines in the pipe that the reader has not forwarded yet: what it said in the end is
+/// [`Lines::to_end`], never a look at what has arrived so far.
+pub struct Lines(Receiver<String>);
+
+impl Lines {
+    pub fn read(from: impl Read + Send + 'static) -> Self {
         let (tx, rx) = std::sync::mpsc::channel();
         std::thread::spawn(move || {
-            for line in std::io::BufReader::new(stderr).lines().map_while(Result::ok) {
+            // Read to the end even when no one listens any more: a process whose stderr
+            // closed would fail (or die of SIGPIPE) on its next line.
+            for line in BufReader::new(from).lines().map_while(Result::ok) {
                 let _ = tx.send(line);
             }
         });
-        rx
+        Self(rx)
+    }
+
+    /// The next line, waiting at most until `deadline`.
+    pub fn next_by(&self, deadline: Instant) -> Next {
+        match self.0.recv_timeout(deadline.saturating_duration_since(Instant::now())) {
+            Ok(line) => Next::Line(line),
+            Err(RecvTimeoutError::Disconnected) => Next::End,
+            Err(RecvTimeoutError::Timeout) => Next::TimedOut,
+        }
+    }
+
+    /// Waits for a line containing `marker`; returns what follows it on that line.
+    pub fn said(&self, marker: &str, timeout: Duration) -> String {
+        let deadline = Instant::now() + timeout;
+        loop {
+            match self.next_by(deadline) {
+                Next::Line(line) => {
+                    if let Some(rest) = line.split(marker).nth(1) {
+                        return rest.trim().to_owned();
+                    }
+                }
+                Next::End => panic!("no line with {marker:?}: the output ended"),
+                Next::TimedOut => panic!("no line with {marker:?} within {timeout:?}"),
+            }
+        }
+    }
+
+    /// Reads until every marker has been seen (in any order); returns what was read.
+    pub fn wait_for_all(&self, markers: &[&str], timeout: Duration) -> Vec<String> {
+        let deadline = Instant::now() + timeout;
+        let mut seen: Vec<String> = Vec::new();
+        while !markers.iter().all(|m| seen.iter().any(|l| l.contains(m))) {
+            match self.next_by(deadline) {
+                Next::Line(line) => seen.push(line),
+                end => panic!(
+                    "no lines with all of {markers:?} ({}); read:\n{}",
+                    if matches!(end, Next::End) {
+                        "the output ended".to_owned()
+                    } else {
+                        format!("within {timeout:?}")
+                    },
+                    seen.join("\n")
+                ),
+            }
+        }
+        seen
+    }
+
+    /// Every line still to come, up to end of file: call it once the process has exited (or
+    /// is about to), and it returns all it said.
+    ///
+    /// # Panics
+    /// When the pipe is still open after `timeout` (something still holds it).
+    pub fn to_end(&self, timeout: Duration) -> Vec<String> {
+        let deadline = Instant::now() + timeout;
+        let mut rest = Vec::new();
+        loop {
+            match self.next_by(deadline) {
+                Next::Line(line) => rest.push(line),
+                Next::End => return rest,
+                Next::TimedOut => panic!("the output did not end within {timeout:?}; read:\n{}", rest.join("\n")),
+            }
+        }
+    }
+
+    /// What has arrived so far, without waiting: only for a failure message about a process
+    /// that is still running, never for what a finished process said (see [`Lines::to_end`]).
+    pub fn so_far(&self) -> Vec<String> {
+        self.0.try_iter().collect()
     }
 }
 
@@ -222,4 +303,22 @@ pub fn truth(recording: &std::path::Path) -> std::collections::BTreeMap<String, 
     })
     .expect("the recording replays");
     out
+}
+
+/// A hub (with `hub_args`) and a UDP bridge (with `bridge_args`) on a free port in session
+/// `s`; returns both, the bridge's registration address and every line it prints on stderr.
+pub fn hub_and_logged_bridge(
+    s: &str,
+    hub_args: &[&str],
+    bridge_args: &[&str],
+) -> (Proc, Proc, std::net::SocketAddr, Lines) {
+    let mut args = vec!["hub", "--session", s];
+    args.extend_from_slice(hub_args);
+    let hub = Proc::spawn(&args);
+    let mut bargs = vec!["udp", "--session", s, "--port", "0"];
+    bargs.extend_from_slice(bridge_args);
+    let mut bridge = Proc::spawn(&bargs);
+    let lines = bridge.stderr_lines();
+    let addr = lines.said("registrations on ", Duration::from_secs(20)).parse().expect("address");
+    (hub, bridge, addr, lines)
 }

@@ -3,7 +3,6 @@
 //! once; `--session` lets another process attach; and every command README shows exists.
 
 use std::path::{Path, PathBuf};
-use std::sync::mpsc::Receiver;
 use std::time::{Duration, Instant};
 
 use records::summary::RunSummary;
@@ -36,19 +35,6 @@ fn still_chair(x: f64) -> String {
     format!("[[agents]]\nkind = \"wheelchair\"\noptions = {{ pose = [{x}, 6.1, 0.0], powers = [0.0, 0.0] }}\n")
 }
 
-/// Reads `lines` until every marker has been seen (in any order); returns what was read.
-fn wait_for_lines(lines: &Receiver<String>, markers: &[&str], timeout: Duration) -> Vec<String> {
-    let deadline = Instant::now() + timeout;
-    let mut seen = Vec::new();
-    while !markers.iter().all(|m| seen.iter().any(|l: &String| l.contains(m))) {
-        match lines.recv_timeout(deadline.saturating_duration_since(Instant::now())) {
-            Ok(line) => seen.push(line),
-            Err(_) => panic!("no lines with all of {markers:?} within {timeout:?}; read:\n{}", seen.join("\n")),
-        }
-    }
-    seen
-}
-
 /// Asserts that nothing of the runner `pid`'s sessions is left: no process and no file.
 fn assert_nothing_of_run_left(pid: u32) {
     let prefix = format!("run-{pid}-");
@@ -78,12 +64,12 @@ fn interrupt_a_run(tag: &str, extra: &[&str], viewer: bool, signal: &str, name: 
     if viewer {
         markers.push("open http://");
     }
-    wait_for_lines(&lines, &markers, Duration::from_secs(60));
+    lines.wait_for_all(&markers, Duration::from_secs(60));
     assert!(!processes_with_argument(&format!("run-{pid}-")).is_empty(), "the run's processes are found");
     run.signal(signal);
     let output = run.wait(Duration::from_secs(30));
     let stdout = text(&output.stdout);
-    let stderr: Vec<String> = lines.try_iter().collect();
+    let stderr = lines.to_end(Duration::from_secs(10));
     assert_eq!(output.status.code(), Some(code), "{stdout}\n{}", stderr.join("\n"));
     assert!(stderr.iter().any(|l| l.contains(&format!("iwsim run: {name} received"))), "{stderr:?}");
     assert!(stdout.contains(&format!("FAIL: interrupted by {name}")), "{stdout}");
@@ -171,7 +157,7 @@ fn a_run_with_a_session_name_can_be_watched_from_another_process() {
         Proc::spawn(&["run", &scenario, "--headless", "--session", &name, "--out", out.to_str().expect("utf-8")]);
     let lines = run.stderr_lines();
     // The runner says when it starts the agents (what a_faulty_lab… looks for in vain).
-    wait_for_lines(&lines, &["starting 1 agent(s)", "wheelchair: agent"], Duration::from_secs(60));
+    lines.wait_for_all(&["starting 1 agent(s)", "wheelchair: agent"], Duration::from_secs(60));
     let mut observer = agent_sdk::Observer::connect_within(&name, "e2e-runner-watch", Duration::from_secs(10))
         .expect("an observer joins the run's session");
     let start = Instant::now();
@@ -237,4 +223,29 @@ fn every_iwsim_command_in_the_readme_takes_the_options_it_shows() {
         }
     }
     assert!(refused.is_empty(), "{}", refused.join("\n"));
+}
+
+/// README's test command, from "The two commands": the `cargo test` line of its first code
+/// block that has one.
+fn readme_test_command(readme: &str) -> String {
+    let section = readme.split("## The two commands").nth(1).expect("README has \"The two commands\"");
+    let line = section.lines().find(|l| l.trim_start().starts_with("cargo test")).expect("a cargo test line");
+    line.split(" #").next().unwrap_or_default().trim().to_owned()
+}
+
+#[test]
+fn ci_runs_the_readme_test_command_and_a_failure_hides_no_other_test_binary() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let readme = std::fs::read_to_string(root.join("README.md")).expect("README");
+    let ci = std::fs::read_to_string(root.join(".ci/run")).expect(".ci/run");
+    let command = readme_test_command(&readme);
+    // cargo stops at the first failing test binary unless told otherwise.
+    assert!(command.split_whitespace().any(|w| w == "--no-fail-fast"), "README's test command: {command}");
+    // CI runs the same command, only with the lock file enforced.
+    let ci_line = ci.lines().rfind(|l| l.trim_start().starts_with("cargo test")).expect("CI runs cargo test");
+    let mut ci_words: Vec<&str> = ci_line.split_whitespace().filter(|w| *w != "--locked").collect();
+    let mut words: Vec<&str> = command.split_whitespace().collect();
+    ci_words.sort_unstable();
+    words.sort_unstable();
+    assert_eq!(ci_words, words, ".ci/run's `{ci_line}` is README's `{command}`");
 }

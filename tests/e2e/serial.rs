@@ -6,12 +6,11 @@
 
 use std::io::{BufRead as _, BufReader, Seek as _, SeekFrom};
 use std::path::{Path, PathBuf};
-use std::sync::mpsc::Receiver;
 use std::time::{Duration, Instant};
 
 use serde_json::Value;
 
-use crate::common::{Proc, assert_no_shared_memory_left, session, wait_for_tick};
+use crate::common::{Lines, Next, Proc, assert_no_shared_memory_left, session, wait_for_tick};
 
 /// The board must be stopped within this much of the cause (issue 13).
 const STOP_WITHIN_NS: u64 = 300_000_000;
@@ -91,9 +90,9 @@ struct Rig {
     dir: PathBuf,
     hub: Option<Proc>,
     emulator: Option<Proc>,
-    emulator_out: Receiver<String>,
+    emulator_out: Lines,
     adapter: Option<Proc>,
-    adapter_log: Receiver<String>,
+    adapter_log: Lines,
     controller: Option<Proc>,
     truth: Truth,
     robot: u32,
@@ -134,9 +133,9 @@ impl Rig {
             START,
         ]);
         let adapter_log = adapter.stderr_lines();
-        let robot = said(&adapter_log, "is robot ", Duration::from_secs(30));
+        let robot = adapter_log.said("is robot ", Duration::from_secs(30));
         let robot: u32 = robot.split_whitespace().next().and_then(|w| w.parse().ok()).expect("robot id");
-        said(&adapter_log, "the link is up", Duration::from_secs(30));
+        adapter_log.said("the link is up", Duration::from_secs(30));
         Self {
             s,
             dir,
@@ -207,7 +206,7 @@ impl Drop for Rig {
 
 /// Starts an emulator on `link`, logging its truth to `truth`; returns it and its stdout's
 /// lines (read on a thread, so its last line can be written whenever it exits).
-fn start_emulator(link: &Path, truth: &Path, extra: &[&str]) -> (Proc, Receiver<String>) {
+fn start_emulator(link: &Path, truth: &Path, extra: &[&str]) -> (Proc, Lines) {
     let _ = std::fs::remove_file(truth);
     let mut args = vec![
         "chair-emulator",
@@ -222,33 +221,17 @@ fn start_emulator(link: &Path, truth: &Path, extra: &[&str]) -> (Proc, Receiver<
     ];
     args.extend_from_slice(extra);
     let mut emulator = Proc::spawn(&args);
-    let stdout = emulator.0.as_mut().and_then(|c| c.stdout.take()).expect("stdout");
-    let (tx, rx) = std::sync::mpsc::channel();
-    std::thread::spawn(move || {
-        for line in BufReader::new(stdout).lines().map_while(Result::ok) {
-            let _ = tx.send(line);
-        }
-    });
-    let first = rx.recv_timeout(Duration::from_secs(30)).expect("the emulator's first line");
+    let out = emulator.stdout_lines();
+    let first = match out.next_by(Instant::now() + Duration::from_secs(30)) {
+        Next::Line(line) => line,
+        _ => panic!("the emulator said nothing within 30 s"),
+    };
     let pty =
         first.strip_prefix("chair-emulator: ").unwrap_or_else(|| panic!("the emulator names its pty first: {first:?}"));
     assert!(pty.starts_with("/dev/pts/"), "a pseudo-terminal: {first:?}");
     let target = std::fs::read_link(link).expect("the link points at the pty");
     assert_eq!(target.to_str(), Some(pty), "--link points at the printed pty");
-    (emulator, rx)
-}
-
-/// Waits for a stderr line containing `marker`; returns what follows it.
-fn said(lines: &Receiver<String>, marker: &str, timeout: Duration) -> String {
-    let deadline = Instant::now() + timeout;
-    loop {
-        let line = lines
-            .recv_timeout(deadline.saturating_duration_since(Instant::now()))
-            .unwrap_or_else(|_| panic!("no line with {marker:?} within {timeout:?}"));
-        if let Some(rest) = line.split(marker).nth(1) {
-            return rest.trim().to_owned();
-        }
-    }
+    (emulator, out)
 }
 
 fn dist(a: [f64; 3], x: f64, y: f64) -> f64 {
@@ -344,7 +327,7 @@ fn every_way_the_chair_can_lose_its_driver_stops_it_within_300_ms() {
     assert!(
         after.iter().all(|v| v["event"] != "motors_zero" && (v.get("x").is_none() || driving(v))),
         "the garbage burst changed what the chair does: {after:?}\nthe adapter said: {:?}",
-        rig.adapter_log.try_iter().collect::<Vec<_>>()
+        rig.adapter_log.so_far()
     );
 
     // The cable is pulled (the emulator dies) and plugged back (a new emulator on the same
@@ -352,7 +335,7 @@ fn every_way_the_chair_can_lose_its_driver_stops_it_within_300_ms() {
     // with no jump in the hub's pose.
     let before = rig.hub_pose();
     rig.emulator.as_mut().expect("emulator").kill9();
-    said(&rig.adapter_log, "went away", Duration::from_secs(10));
+    rig.adapter_log.said("went away", Duration::from_secs(10));
     let truth_path = rig.dir.join("truth-2.jsonl");
     let (emulator, out) = start_emulator(&rig.link(), &truth_path, &[]);
     rig.emulator = Some(emulator);
@@ -367,7 +350,7 @@ fn every_way_the_chair_can_lose_its_driver_stops_it_within_300_ms() {
     rig.truth.wait_for(0, Duration::from_secs(5), "the board's latched stop", |v| v["event"] == "estop");
     // The adapter and the controller leave on their own: the session is gone.
     let adapter = rig.adapter.take().expect("adapter").wait(Duration::from_secs(20));
-    let said: Vec<String> = rig.adapter_log.try_iter().collect();
+    let said = rig.adapter_log.to_end(Duration::from_secs(10));
     assert!(!adapter.status.success(), "an adapter whose hub died says so in its status: {said:?}");
     let controller = rig.controller.take().expect("controller").wait(Duration::from_secs(20));
     assert!(!controller.status.success(), "the controller's hub died");
@@ -375,7 +358,8 @@ fn every_way_the_chair_can_lose_its_driver_stops_it_within_300_ms() {
     emulator.signal("TERM");
     let out = emulator.wait(Duration::from_secs(10));
     assert!(out.status.success(), "the emulator stops cleanly on SIGTERM: {}", String::from_utf8_lossy(&out.stderr));
-    let summary: Vec<String> = rig.emulator_out.try_iter().collect();
+    // Its last line may still be in the pipe when it has exited: read to the end of it.
+    let summary = rig.emulator_out.to_end(Duration::from_secs(10));
     assert!(
         summary.last().is_some_and(|l| l.contains("frames ok")),
         "the emulator's last line counts frames: {summary:?}"

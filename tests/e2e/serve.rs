@@ -138,7 +138,7 @@ fn a_served_replay_shows_the_recorded_run_bit_for_bit_obeys_commands_and_takes_n
     o.close();
 
     let out = replay.wait(WAIT);
-    let err: Vec<String> = stderr.try_iter().collect();
+    let err = stderr.to_end(Duration::from_secs(10));
     assert!(out.status.success(), "{err:?}");
     assert!(text(&out.stdout).contains("served 100 ticks"), "{}", text(&out.stdout));
     assert_no_shared_memory_left(&s);

@@ -8,7 +8,7 @@ use world::map::{NoiseParams, Params, builtin};
 use world::math::Pose;
 use world::{Action, RobotSpec, World};
 
-use super::common::{Proc, session, text};
+use super::common::{Proc, hub_and_logged_bridge, session, text};
 
 /// Stops the hub the way a user does and checks the hub and the bridge exit cleanly,
 /// leaving nothing of the session in /dev/shm.
@@ -34,14 +34,7 @@ fn ends_cleanly(s: &str, hub: Proc, bridge: Proc) {
 
 /// Starts a hub and a bridge on a free port; returns them and the registration address.
 fn hub_and_bridge(s: &str, hub_args: &[&str], bridge_args: &[&str]) -> (Proc, Proc, SocketAddr) {
-    let mut args = vec!["hub", "--session", s];
-    args.extend_from_slice(hub_args);
-    let hub = Proc::spawn(&args);
-    let mut bargs = vec!["udp", "--session", s, "--port", "0"];
-    bargs.extend_from_slice(bridge_args);
-    let mut bridge = Proc::spawn(&bargs);
-    // The bridge says where it listens on its first line.
-    let addr = bridge.announced("registrations on ", Duration::from_secs(20)).parse().expect("address");
+    let (hub, bridge, addr, _) = hub_and_logged_bridge(s, hub_args, bridge_args);
     (hub, bridge, addr)
 }
 
@@ -359,38 +352,10 @@ fn a_viewer_sees_robots_driven_over_shared_memory() {
     assert!(agent.wait(Duration::from_secs(10)).status.success());
 }
 
-/// Like [`hub_and_bridge`], but keeps every line the bridge prints on stderr.
-fn hub_and_logged_bridge(s: &str, hub_args: &[&str]) -> (Proc, Proc, SocketAddr, std::sync::mpsc::Receiver<String>) {
-    let mut args = vec!["hub", "--session", s];
-    args.extend_from_slice(hub_args);
-    let hub = Proc::spawn(&args);
-    let mut bridge = Proc::spawn(&["udp", "--session", s, "--port", "0"]);
-    let lines = bridge.stderr_lines();
-    let deadline = Instant::now() + Duration::from_secs(20);
-    let addr = loop {
-        let line = lines
-            .recv_timeout(deadline.saturating_duration_since(Instant::now()))
-            .expect("the bridge announces its port within 20 s");
-        if let Some(rest) = line.split("registrations on ").nth(1) {
-            break rest.trim().parse().expect("address");
-        }
-    };
-    (hub, bridge, addr, lines)
-}
-
-/// Every line still to come from a process's stderr, until it closes.
-fn rest_of(lines: &std::sync::mpsc::Receiver<String>) -> Vec<String> {
-    let mut rest = Vec::new();
-    while let Ok(line) = lines.recv_timeout(Duration::from_secs(10)) {
-        rest.push(line);
-    }
-    rest
-}
-
 #[test]
 fn a_flood_of_junk_is_counted_in_full_but_logged_in_a_few_lines() {
     let s = session("udp-flood");
-    let (hub, bridge, reg, lines) = hub_and_logged_bridge(&s, &["--cycle-ms", "20", "--no-noise"]);
+    let (hub, bridge, reg, lines) = hub_and_logged_bridge(&s, &["--cycle-ms", "20", "--no-noise"], &[]);
     // A panel paces the flood: the bridge reads each socket in order, so once the panel's
     // own datagram is answered, every junk datagram sent before it to that socket was read
     // (and none was lost to a full receive buffer).
@@ -418,7 +383,7 @@ fn a_flood_of_junk_is_counted_in_full_but_logged_in_a_few_lines() {
     assert!(c.register(reg, r#"<Robot Name="after" Id="1"/>"#).contains("Status=\"Ok\""));
     assert!(c.next("Measures").contains("<Measures Time="));
     stop(&s, hub, bridge);
-    let logged = rest_of(&lines);
+    let logged = lines.to_end(Duration::from_secs(10));
     let bytes: usize = logged.iter().map(|l| l.len() + 1).sum();
     assert!(bytes < 64 * 1024, "{bytes} bytes of stderr for a flood, e.g. {:?}", &logged[..logged.len().min(5)]);
     let last = logged.iter().find(|l| l.contains("run over")).expect("the counters are printed");

@@ -3,13 +3,12 @@
 
 use std::io::{Read, Write};
 use std::net::{SocketAddr, TcpStream};
-use std::sync::mpsc::Receiver;
 use std::time::{Duration, Instant};
 
 use tungstenite::Message;
 use viewer::frame;
 
-use super::common::{Proc, session, text};
+use super::common::{Lines, Proc, session, text};
 
 fn start(s: &str, view_args: &[&str]) -> (Proc, Proc, Proc, SocketAddr) {
     let (hub, agent, view, addr, _) = start_lines(s, view_args);
@@ -17,7 +16,7 @@ fn start(s: &str, view_args: &[&str]) -> (Proc, Proc, Proc, SocketAddr) {
 }
 
 /// As [`start`], with the viewer's stderr lines after its first.
-fn start_lines(s: &str, view_args: &[&str]) -> (Proc, Proc, Proc, SocketAddr, Receiver<String>) {
+fn start_lines(s: &str, view_args: &[&str]) -> (Proc, Proc, Proc, SocketAddr, Lines) {
     let hub = Proc::spawn(&["hub", "--session", s, "--cycle-ms", "10", "--no-noise"]);
     let agent = Proc::spawn(&[
         "agent",
@@ -40,16 +39,8 @@ fn start_lines(s: &str, view_args: &[&str]) -> (Proc, Proc, Proc, SocketAddr, Re
 }
 
 /// What follows `marker` on the next line of `lines` that has it (within 20 s).
-fn said(lines: &Receiver<String>, marker: &str) -> String {
-    let deadline = Instant::now() + Duration::from_secs(20);
-    loop {
-        let line = lines
-            .recv_timeout(deadline.saturating_duration_since(Instant::now()))
-            .unwrap_or_else(|_| panic!("no line with {marker:?} within 20 s"));
-        if let Some(rest) = line.split(marker).nth(1) {
-            return rest.trim().to_owned();
-        }
-    }
+fn said(lines: &Lines, marker: &str) -> String {
+    lines.said(marker, Duration::from_secs(20))
 }
 
 fn get(addr: SocketAddr, path: &str) -> String {
@@ -445,9 +436,8 @@ fn udp_viewers_control_the_run_only_with_allow_control() {
         obs.close();
         assert_eq!(agent_sdk::control(&s, ipc_types::Command::Stop, 0).expect("hub answers").status, 0);
         let b = bridge.wait(Duration::from_secs(10));
-        // The process is gone: its stderr's lines are all on the channel or about to be.
-        let err: Vec<String> = lines.iter().collect();
-        let err = err.join("\n");
+        // The process is gone: read its stderr to the end.
+        let err = lines.to_end(Duration::from_secs(10)).join("\n");
         assert!(b.status.success(), "bridge: {err}");
         let ignored = if allow { 0 } else { 3 };
         assert!(err.contains(&format!("{ignored} viewer commands ignored")), "{err}");
