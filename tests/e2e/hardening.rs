@@ -154,3 +154,63 @@ fn sigterm_to_a_lock_step_hub_and_its_bridge_leaves_nothing_behind() {
     bridge.wait(Duration::from_secs(10));
     assert_no_shared_memory_left(&s);
 }
+
+/// The peak resident set (`VmHWM`) of process `pid`, KiB.
+fn peak_rss_kib(pid: u32) -> u64 {
+    let status = std::fs::read_to_string(format!("/proc/{pid}/status")).expect("the process is alive");
+    let line = status.lines().find_map(|l| l.strip_prefix("VmHWM:")).expect("VmHWM");
+    line.trim().trim_end_matches("kB").trim().parse().expect("a number of kB")
+}
+
+#[test]
+fn a_navigator_on_a_10_km_lab_plans_within_64_mib() {
+    // The largest lab a hub accepts, with one wall across the chair's way: the navigator's
+    // grids cover where the chair may go (its start and checkpoints and a reach round them),
+    // not 10 km × 10 km, which would take tens of gigabytes at 5 cm a cell.
+    let dir = std::env::temp_dir().join(format!("iwsim-e2e-10km-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("temp dir");
+    let lab = dir.join("lab.xml");
+    std::fs::write(
+        &lab,
+        r#"<Lab Name="ten km" Width="10000" Height="10000">
+<Wall Height="1"><Corner X="5004" Y="4999.5"/><Corner X="5004.5" Y="4999.5"/><Corner X="5004.5" Y="5000.2"/><Corner X="5004" Y="5000.2"/></Wall>
+</Lab>
+"#,
+    )
+    .expect("lab written");
+    let s = session("nav-10km");
+    let lab = lab.to_str().expect("utf-8");
+    let hub = Proc::spawn(&["hub", "--session", &s, "--lab", lab, "--lockstep", "--wait-agents", "1", "--no-noise"]);
+    let mut nav = Proc::spawn(&[
+        "agent",
+        "navigator",
+        "--session",
+        &s,
+        "--connect-timeout",
+        "20",
+        "--pose",
+        "5000,5000,0",
+        "--checkpoint",
+        "5000,5000",
+        "--checkpoint",
+        "5008,5000",
+        "--checkpoint",
+        "5012,5003,0.3",
+    ]);
+    let said = nav.stderr_lines();
+    // Past the wall and on to the last leg: every grid it plans on has been built.
+    said.said("reached checkpoint 2", Duration::from_secs(60));
+    said.said("to checkpoint 3", Duration::from_secs(20));
+    let kib = peak_rss_kib(nav.pid());
+    assert!(kib < 64 * 1024, "the navigator's peak resident set is {kib} KiB");
+    said.said("reached checkpoint 3", Duration::from_secs(60));
+    assert_eq!(agent_sdk::control(&s, ipc_types::Command::Stop, 0).expect("the hub answers").status, 0);
+    assert!(hub.wait(Duration::from_secs(20)).status.success());
+    assert!(
+        nav.wait(Duration::from_secs(20)).status.success(),
+        "all checkpoints reached: {:?}",
+        said.to_end(Duration::from_secs(5))
+    );
+    assert_no_shared_memory_left(&s);
+    let _ = std::fs::remove_dir_all(dir);
+}

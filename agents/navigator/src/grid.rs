@@ -5,9 +5,12 @@
 use crate::geom::{Cone, Footprint, Pose, V2, point_segment_distance};
 use crate::map::NavMap;
 
-/// A uniform grid over `[0, nx·cell] × [0, ny·cell]`.
+/// A uniform grid over `origin + [0, nx·cell] × [0, ny·cell]`.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct GridSpec {
+    /// The corner of cell (0, 0), lab coordinates (a multiple of `cell`, so grids over
+    /// different areas of one lab share their cell boundaries).
+    pub origin: V2,
     /// Cell side, metres.
     pub cell: f64,
     /// Cells along x.
@@ -19,7 +22,14 @@ pub struct GridSpec {
 impl GridSpec {
     /// The grid of `cell`-sized cells that covers a `width` × `height` lab.
     pub fn covering(width: f64, height: f64, cell: f64) -> Self {
-        Self { cell, nx: (width / cell).ceil().max(1.0) as usize, ny: (height / cell).ceil().max(1.0) as usize }
+        Self::covering_area(&Area::lab(width, height), cell)
+    }
+
+    /// The grid of `cell`-sized cells that covers `area`.
+    pub fn covering_area(area: &Area, cell: f64) -> Self {
+        let origin = V2::new((area.lo.x / cell).floor() * cell, (area.lo.y / cell).floor() * cell);
+        let n = |from: f64, to: f64| ((to - from) / cell).ceil().max(1.0) as usize;
+        Self { origin, cell, nx: n(origin.x, area.hi.x), ny: n(origin.y, area.hi.y) }
     }
 
     /// Number of cells.
@@ -34,7 +44,7 @@ impl GridSpec {
 
     /// The cell holding `p`, if inside the grid.
     pub fn cell_of(&self, p: V2) -> Option<(usize, usize)> {
-        let (fx, fy) = (p.x / self.cell, p.y / self.cell);
+        let (fx, fy) = ((p.x - self.origin.x) / self.cell, (p.y - self.origin.y) / self.cell);
         if !(fx >= 0.0 && fy >= 0.0) {
             return None;
         }
@@ -47,12 +57,12 @@ impl GridSpec {
         let clamp = |v: f64, n: usize| {
             if v.is_finite() { (v / self.cell).floor().clamp(0.0, (n - 1) as f64) as usize } else { 0 }
         };
-        (clamp(p.x, self.nx), clamp(p.y, self.ny))
+        (clamp(p.x - self.origin.x, self.nx), clamp(p.y - self.origin.y, self.ny))
     }
 
     /// The centre of a cell.
     pub fn center(&self, ix: usize, iy: usize) -> V2 {
-        V2::new((ix as f64 + 0.5) * self.cell, (iy as f64 + 0.5) * self.cell)
+        V2::new(self.origin.x + (ix as f64 + 0.5) * self.cell, self.origin.y + (iy as f64 + 0.5) * self.cell)
     }
 
     /// The linear index of a cell.
@@ -73,6 +83,63 @@ impl GridSpec {
     }
 }
 
+/// The part of the lab the navigator's grids cover: the whole lab when it is small enough,
+/// else the box round the chair's start and checkpoints grown by [`Area::REACH_M`]
+/// ([`Area::around`]), so memory grows with where the chair may go, not with the lab.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Area {
+    /// Lower-left corner, lab coordinates.
+    pub lo: V2,
+    /// Upper-right corner.
+    pub hi: V2,
+}
+
+impl Area {
+    /// How far beyond its start and checkpoints a chair may plan, metres.
+    pub const REACH_M: f64 = 15.0;
+    /// A lab of at most this many square metres is covered whole (1,000,000 cells of 5 cm:
+    /// every built-in map, and a building's floor of 50 m × 50 m).
+    pub const WHOLE_LAB_M2: f64 = 2_500.0;
+
+    /// The whole of a `width` × `height` lab.
+    pub fn lab(width: f64, height: f64) -> Self {
+        Self { lo: V2::new(0.0, 0.0), hi: V2::new(width, height) }
+    }
+
+    /// The whole lab if it is small, else the box round `points` grown by `reach`, within
+    /// the lab.
+    pub fn around(width: f64, height: f64, points: impl IntoIterator<Item = V2>, reach: f64) -> Self {
+        let lab = Self::lab(width, height);
+        if width * height <= Self::WHOLE_LAB_M2 {
+            return lab;
+        }
+        let (mut lo, mut hi) = (V2::new(f64::INFINITY, f64::INFINITY), V2::new(f64::NEG_INFINITY, f64::NEG_INFINITY));
+        for p in points.into_iter().filter(|p| p.x.is_finite() && p.y.is_finite()) {
+            lo = V2::new(lo.x.min(p.x), lo.y.min(p.y));
+            hi = V2::new(hi.x.max(p.x), hi.y.max(p.y));
+        }
+        if lo.x > hi.x {
+            // No point to centre on: a box of the reach's size in the lab's corner.
+            return Self { lo: lab.lo, hi: V2::new((2.0 * reach).min(width), (2.0 * reach).min(height)) };
+        }
+        let clip = |v: f64, max: f64| v.clamp(0.0, max);
+        Self {
+            lo: V2::new(clip(lo.x - reach, width), clip(lo.y - reach, height)),
+            hi: V2::new(clip(hi.x + reach, width), clip(hi.y + reach, height)),
+        }
+    }
+
+    /// Whether `p` lies in the area.
+    pub fn contains(&self, p: V2) -> bool {
+        p.x >= self.lo.x && p.y >= self.lo.y && p.x <= self.hi.x && p.y <= self.hi.y
+    }
+
+    /// Whether the box `lo`–`hi` meets the area.
+    pub fn meets(&self, lo: V2, hi: V2) -> bool {
+        lo.x <= self.hi.x && lo.y <= self.hi.y && hi.x >= self.lo.x && hi.y >= self.lo.y
+    }
+}
+
 /// The known walls and the lab's border, rasterised: a cell is occupied when a wall covers its
 /// centre or an outline passes through it. Built once per map.
 #[derive(Debug, Clone)]
@@ -87,7 +154,13 @@ pub struct StaticRaster {
 impl StaticRaster {
     /// Rasterises the map's known walls (scenario obstacles are left out).
     pub fn new(map: &NavMap, cell: f64) -> Self {
-        let spec = GridSpec::covering(map.width_m, map.height_m, cell);
+        Self::within(map, cell, &Area::lab(map.width_m, map.height_m))
+    }
+
+    /// Rasterises the map's known walls within `area`, whose edges count as the lab's border:
+    /// the chair plans nowhere beyond them.
+    pub fn within(map: &NavMap, cell: f64, area: &Area) -> Self {
+        let spec = GridSpec::covering_area(area, cell);
         let mut occ = vec![false; spec.len()];
         let touch = cell * std::f64::consts::FRAC_1_SQRT_2;
         for wall in map.known_walls() {
@@ -96,6 +169,9 @@ impl StaticRaster {
             for c in &wall.corners {
                 lo = V2::new(lo.x.min(c.x), lo.y.min(c.y));
                 hi = V2::new(hi.x.max(c.x), hi.y.max(c.y));
+            }
+            if !area.meets(lo - V2::new(cell, cell), hi + V2::new(cell, cell)) {
+                continue;
             }
             let (xs, ys) = spec.range(lo - V2::new(cell, cell), hi + V2::new(cell, cell));
             for iy in ys {
@@ -107,11 +183,12 @@ impl StaticRaster {
                 }
             }
         }
-        // The border: every cell whose centre is within a cell of the lab's edge.
+        // The border: every cell whose centre is within a cell of the area's edge.
         for iy in 0..spec.ny {
             for ix in 0..spec.nx {
                 let p = spec.center(ix, iy);
-                if p.x < cell || p.y < cell || p.x > map.width_m - cell || p.y > map.height_m - cell {
+                if p.x < area.lo.x + cell || p.y < area.lo.y + cell || p.x > area.hi.x - cell || p.y > area.hi.y - cell
+                {
                     occ[spec.index(ix, iy)] = true;
                 }
             }
@@ -510,9 +587,10 @@ pub struct Buckets {
 }
 
 impl Buckets {
-    /// Buckets `count` items over a lab, each listed in every bucket its box `(lo, hi)` meets.
-    pub fn build(width: f64, height: f64, cell: f64, count: usize, bounds: impl Fn(usize) -> (V2, V2)) -> Self {
-        let spec = GridSpec::covering(width, height, cell);
+    /// Buckets `count` items over `area`, each listed in every bucket its box `(lo, hi)`
+    /// meets (an item beyond the area in the edge buckets nearest to it).
+    pub fn build(area: &Area, cell: f64, count: usize, bounds: impl Fn(usize) -> (V2, V2)) -> Self {
+        let spec = GridSpec::covering_area(area, cell);
         let mut counts = vec![0u32; spec.len() + 1];
         let each = |k: usize, f: &mut dyn FnMut(usize)| {
             let (lo, hi) = bounds(k);
@@ -562,7 +640,7 @@ mod tests {
 
     #[test]
     fn the_distance_field_is_euclidean() {
-        let spec = GridSpec { cell: 0.1, nx: 20, ny: 10 };
+        let spec = GridSpec { origin: V2::new(0.0, 0.0), cell: 0.1, nx: 20, ny: 10 };
         let mut occ = vec![false; spec.len()];
         occ[spec.index(5, 5)] = true;
         let d = distance_field(&spec, &occ);
@@ -582,6 +660,28 @@ mod tests {
         assert!(!r.occupied_at(V2::new(3.2, 1.5)), "scenario obstacles are for the sensors to find");
         assert!(r.occupied_at(V2::new(0.01, 1.5)) && r.occupied_at(V2::new(2.0, 2.99)));
         assert!((r.distance_at(V2::new(1.5, 1.5)) - 0.4).abs() < 0.06);
+    }
+
+    #[test]
+    fn a_large_lab_is_covered_only_round_the_route_and_alike_there() {
+        let mut map = NavMap::empty(200.0, 100.0);
+        map.walls.push(MapWall::rectangle(120.0, 50.0, 120.3, 52.0, false));
+        let small = Area::around(40.0, 50.0, [V2::new(1.0, 1.0)], Area::REACH_M);
+        assert_eq!(small, Area::lab(40.0, 50.0), "a small lab is covered whole");
+        let area = Area::around(200.0, 100.0, [V2::new(115.0, 51.0), V2::new(125.0, 51.0)], 5.0);
+        assert_eq!((area.lo, area.hi), (V2::new(110.0, 46.0), V2::new(130.0, 56.0)));
+        let whole = StaticRaster::new(&map, 0.05);
+        let part = StaticRaster::within(&map, 0.05, &area);
+        assert!(part.spec.len() * 40 < whole.spec.len(), "{} cells of {}", part.spec.len(), whole.spec.len());
+        // Inside the area (off its edges) the two rasters agree cell for cell.
+        for k in 0..2000 {
+            let p = V2::new(110.2 + (k % 50) as f64 * 0.39, 46.2 + (k / 50) as f64 * 0.24);
+            assert_eq!(part.occupied_at(p), whole.occupied_at(p), "at {p:?}");
+        }
+        assert!(part.occupied_at(V2::new(120.1, 51.0)), "the wall");
+        // Its edges, and everything beyond, are walls to the planner.
+        assert!(part.occupied_at(V2::new(110.01, 51.0)) && part.occupied_at(V2::new(100.0, 51.0)));
+        assert!(!whole.occupied_at(V2::new(100.0, 51.0)));
     }
 
     #[test]

@@ -4,13 +4,15 @@
 //! read?").
 
 use crate::geom::{BodyFrame, Cone, Footprint, Pose, Seg, V2};
-use crate::grid::{Buckets, EvidenceParams, GridSpec, Observation, SensedLayer, StaticRaster};
+use crate::grid::{Area, Buckets, EvidenceParams, GridSpec, Observation, SensedLayer, StaticRaster};
 use crate::map::NavMap;
 
 /// Cell side of the grids, metres.
 pub const CELL_M: f64 = 0.05;
 /// Bucket side of the segment and point indexes, metres.
 const BUCKET_M: f64 = 0.5;
+/// Farther than any proximity sensor reads, metres (the hub's cones reach a few metres).
+const SENSOR_REACH_M: f64 = 10.0;
 /// A sensed obstacle cell counts as a disc this wide around its centre.
 pub const SENSED_RADIUS_M: f64 = CELL_M / 2.0;
 
@@ -19,6 +21,8 @@ pub const SENSED_RADIUS_M: f64 = CELL_M / 2.0;
 pub struct WorldModel {
     /// The map from the hub.
     pub map: NavMap,
+    /// The part of the lab the grids cover.
+    pub area: Area,
     /// The chair's rectangle.
     pub footprint: Footprint,
     segs: Vec<Seg>,
@@ -51,6 +55,13 @@ pub struct WorldModel {
 impl WorldModel {
     /// The model of a map for a chair of this footprint, with nothing sensed yet.
     pub fn new(map: NavMap, footprint: Footprint) -> Self {
+        let area = Area::lab(map.width_m, map.height_m);
+        Self::within(map, footprint, area)
+    }
+
+    /// As [`WorldModel::new`], with grids and indexes over `area` only (the chair stays in
+    /// it: its edges are walls to the planner).
+    pub fn within(map: NavMap, footprint: Footprint, area: Area) -> Self {
         // Long walls are cut into bucket-sized pieces, so a query meets only the pieces near
         // it, not the whole wall once per bucket.
         let segs: Vec<Seg> = map
@@ -64,17 +75,27 @@ impl WorldModel {
                     Seg::new(s.a + (s.b - s.a) * t0, s.a + (s.b - s.a) * t1)
                 })
             })
+            // Pieces farther beyond the area than a sensor reaches matter to no query the
+            // chair makes (it stays in the area).
+            .filter(|s| {
+                let grow = V2::new(SENSOR_REACH_M, SENSOR_REACH_M);
+                area.meets(
+                    V2::new(s.a.x.min(s.b.x), s.a.y.min(s.b.y)) - grow,
+                    V2::new(s.a.x.max(s.b.x), s.a.y.max(s.b.y)) + grow,
+                )
+            })
             .collect();
-        let seg_index = Buckets::build(map.width_m, map.height_m, BUCKET_M, segs.len(), |k| {
+        let seg_index = Buckets::build(&area, BUCKET_M, segs.len(), |k| {
             let s = segs[k];
             (V2::new(s.a.x.min(s.b.x), s.a.y.min(s.b.y)), V2::new(s.a.x.max(s.b.x), s.a.y.max(s.b.y)))
         });
-        let statics = StaticRaster::new(&map, CELL_M);
+        let statics = StaticRaster::within(&map, CELL_M, &area);
         let sensed = SensedLayer::new(statics.spec, EvidenceParams::default());
-        let point_index = Buckets::build(map.width_m, map.height_m, BUCKET_M, 0, |_| (V2::default(), V2::default()));
+        let point_index = Buckets::build(&area, BUCKET_M, 0, |_| (V2::default(), V2::default()));
         let plan_evidence = sensed.params.occupied_above;
         Self {
             map,
+            area,
             footprint,
             segs,
             seg_index,
@@ -199,8 +220,7 @@ impl WorldModel {
             self.points.push(p);
         }
         let pts = &self.points;
-        self.point_index =
-            Buckets::build(self.map.width_m, self.map.height_m, BUCKET_M, pts.len(), |k| (pts[k], pts[k]));
+        self.point_index = Buckets::build(&self.area, BUCKET_M, pts.len(), |k| (pts[k], pts[k]));
         true
     }
 

@@ -72,6 +72,9 @@ struct Outcome {
     max_position_error_m: f64,
     /// Likewise for the heading, degrees.
     max_heading_error_deg: f64,
+    /// For each checkpoint the navigator said it reached, how far the chair truly was from
+    /// its centre then, metres (the judge counts it only within its radius).
+    reached_true_m: Vec<f64>,
 }
 
 /// The map exactly as the hub publishes it (`hub::core::pack_map`): walls from `obstacle_from`
@@ -194,6 +197,7 @@ fn simulate(s: &Scenario, seed: u64) -> Outcome {
     let limit = (s.time_limit_s / 0.1).round() as u64;
     let mut last_plans = 0;
     let (mut max_position_error, mut max_heading_error) = (0.0f64, 0.0f64);
+    let mut reached_true_m = Vec::new();
     for tick in 0..=limit {
         let robot = world.robot(handle).expect("the chair");
         min_clearance = min_clearance.min(clearance(&lab, &fp, robot));
@@ -237,6 +241,12 @@ fn simulate(s: &Scenario, seed: u64) -> Outcome {
         if out.events.iter().any(|e| matches!(e, NavEvent::Finished { .. })) {
             finished_at = Some(time_s);
         }
+        for e in &out.events {
+            if let NavEvent::Reached { index, .. } = e {
+                let c = &s.checkpoints[*index];
+                reached_true_m.push((robot.pose.x - c.x).hypot(robot.pose.y - c.y));
+            }
+        }
         // After the end, keep stepping a little with the powers it sends (zero): the chair
         // must come to rest without touching anything.
         if let Some(t) = finished_at
@@ -259,6 +269,7 @@ fn simulate(s: &Scenario, seed: u64) -> Outcome {
         expansions: nav.stats().expansions,
         max_position_error_m: max_position_error,
         max_heading_error_deg: max_heading_error,
+        reached_true_m,
     }
 }
 
@@ -306,7 +317,7 @@ fn simulate_seeds(s: &Scenario, seeds: std::ops::RangeInclusive<u64>) -> Vec<Out
     out.sort_by_key(|o| o.seed);
     for o in &out {
         eprintln!(
-            "{}: seed {:2}: {} of {} checkpoints, t {:.1} s, {} contacts, min clearance {:.3} m, end ({:.2}, {:.2}), {} plans, {} expansions, pose error up to {:.3} m / {:.1}°",
+            "{}: seed {:2}: {} of {} checkpoints, t {:.1} s, {} contacts, min clearance {:.3} m, end ({:.2}, {:.2}), {} plans, {} expansions, pose error up to {:.3} m / {:.1}°, checkpoints counted up to {:.3} m off in truth",
             s.map,
             o.seed,
             o.reached,
@@ -319,7 +330,8 @@ fn simulate_seeds(s: &Scenario, seeds: std::ops::RangeInclusive<u64>) -> Vec<Out
             o.plans,
             o.expansions,
             o.max_position_error_m,
-            o.max_heading_error_deg
+            o.max_heading_error_deg,
+            o.reached_true_m.iter().copied().fold(0.0, f64::max)
         );
     }
     out
@@ -360,6 +372,10 @@ mod untuned_maps {
         for o in outcomes {
             assert!(o.finished && o.reached == s.checkpoints.len(), "seed {} did not arrive: {o:?}", o.seed);
             assert_eq!(o.contacts, 0, "seed {} touched something: {o:?}", o.seed);
+            // What the navigator counted, the judge counts too: it was truly inside each.
+            for (k, (d, c)) in o.reached_true_m.iter().zip(&s.checkpoints).enumerate() {
+                assert!(*d <= c.radius, "seed {}: checkpoint {} counted {d:.3} m from its centre", o.seed, k + 1);
+            }
             let last = s.checkpoints[s.checkpoints.len() - 1];
             assert!((o.end - V2::new(last.x, last.y)).norm() <= 0.25, "seed {} stopped at {:?}", o.seed, o.end);
         }
@@ -390,6 +406,24 @@ mod untuned_maps {
             ..Scenario::route("maze", [1.0, 13.0, 0.0], &[[1.0, 13.0, 0.5], [13.0, 9.0, 0.5], [25.0, 7.0, 0.5]], 300.0)
         };
         check(&s, 1..=2);
+    }
+
+    /// Checkpoints of 0.3 m on the way across the maze: the navigator counts one only well
+    /// inside it by its own pose, so the chair passes each inside in truth too (it once
+    /// passed them along their edge, and the judge missed some by millimetres).
+    #[test]
+    fn small_checkpoints_on_the_way_are_passed_inside_in_truth() {
+        let s = Scenario {
+            body: Body { width_m: 1.0, height_m: 0.6, com: 0.5 },
+            ..Scenario::route(
+                "maze",
+                [1.0, 13.0, 0.0],
+                &[[1.0, 13.0, 0.3], [7.0, 13.0, 0.3], [13.0, 9.0, 0.3], [19.0, 9.0, 0.3], [25.0, 7.0, 0.3]],
+                300.0,
+            )
+        };
+        // Seed 3 counted checkpoint 2 at 0.302 m in truth under the old rule.
+        check(&s, 1..=4);
     }
 
     /// The west-door route again, the pose from GPS alone: an indoor positioning system of
