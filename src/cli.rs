@@ -80,7 +80,7 @@ pub enum MapCommand {
     /// Validates a lab, grid or parameters XML file (or `builtin:NAME`): prints a summary, or
     /// the error with its line and column.
     Check {
-        /// The file, or builtin:liacc, builtin:thesis, builtin:maze.
+        /// The file, or builtin:liacc, builtin:thesis, builtin:maze, builtin:ward.
         file: String,
     },
 }

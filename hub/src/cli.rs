@@ -20,7 +20,7 @@ pub const MAX_DEADLINE_MS: u64 = 86_400_000;
 /// Options of `iwsim hub`.
 #[derive(Debug, clap::Args, Clone)]
 pub struct HubArgs {
-    /// Lab file, or builtin:liacc, builtin:thesis, builtin:maze.
+    /// Lab file, or builtin:liacc, builtin:thesis, builtin:maze, builtin:ward.
     #[arg(long, default_value = "builtin:liacc")]
     pub lab: String,
     /// Grid file (start poses); a built-in lab brings its own grid.

@@ -74,6 +74,32 @@ fn builtin_door_lets_the_chair_through_for_every_seed() {
 }
 
 #[test]
+fn chairs_placed_on_the_ward_by_the_seed_each_reach_their_own_goal() {
+    // `--chairs 2` on the ward: two navigators with goals of their own, placed by seed 1; the
+    // judge reads each chair's route from the placement (its goal), the same for the same seed.
+    let dir = out_dir("ward-crowd");
+    let d = dir.to_str().expect("utf-8");
+    let args = ["run", "builtin:ward", "--chairs", "2", "--lockstep", "--headless", "--seed", "1", "--out", d];
+    let (ok, out, err) = iwsim(&args, Duration::from_secs(120));
+    assert!(ok, "{out}\n{err}");
+    let s = summary(&dir);
+    assert!(s.passed && s.failures.is_empty(), "{s:?}");
+    assert_eq!(s.robots.len(), 2, "{s:?}");
+    // Each chair's checkpoints: its start, then its goal, which is its route.
+    assert_eq!(s.checkpoints.len(), 4);
+    for (k, name) in ["chair1", "chair2"].into_iter().enumerate() {
+        let r = robot(&s, name);
+        assert_eq!((r.route.clone(), r.checkpoints_reached, r.collisions), (vec![2 * k + 2], 1, 0), "{r:?}");
+        let goal = &s.checkpoints[2 * k + 1];
+        let end = r.final_pose;
+        assert!((end[0] - goal.x).hypot(end[1] - goal.y) <= goal.radius, "{name} ended at {end:?}, goal {goal:?}");
+    }
+    let (ok, _, err) = iwsim(&["run", "builtin:ward", "--chairs", "0", "--headless"], Duration::from_secs(10));
+    assert!(!ok && err.contains("--chairs"), "{err}");
+    let _ = std::fs::remove_dir_all(dir);
+}
+
+#[test]
 fn the_same_seed_in_lock_step_gives_the_same_run() {
     // The door (a door agent and a scripted chair) and the corridor swap (two navigators
     // that talk to each other, so message order counts too).

@@ -8,7 +8,8 @@ use clap::Args;
 #[derive(Debug, Args, Clone)]
 pub struct RunArgs {
     /// The scenario: a TOML file, or builtin:dynamics, builtin:slalom, builtin:door,
-    /// builtin:corridor-swap, builtin:demo, builtin:slalom-real, builtin:slalom-augmented.
+    /// builtin:corridor-swap, builtin:demo, builtin:slalom-real, builtin:slalom-augmented,
+    /// builtin:ward.
     pub scenario: String,
     /// Step as fast as the agents allow (deterministic) instead of in real time.
     #[arg(long)]
@@ -22,6 +23,10 @@ pub struct RunArgs {
     /// A batch of runs, one per seed, A..B inclusive (headless), with a table at the end.
     #[arg(long, value_name = "A..B")]
     pub seeds: Option<String>,
+    /// Place this many navigator chairs, each with its own goal, seeded by the run's seed (the
+    /// scenario's [crowd], or one of this size with its defaults, on the scenario's lab).
+    #[arg(long, value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..=crate::crowd::Crowd::MAX_CHAIRS as u64))]
+    pub chairs: Option<usize>,
     /// Where logs, the recording (run.mcap) and summary.json go (default runs/<scenario>; a batch uses seed-N/ below it).
     #[arg(long)]
     pub out: Option<PathBuf>,

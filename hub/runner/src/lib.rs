@@ -14,6 +14,7 @@
 
 pub mod args;
 pub mod chair;
+pub mod crowd;
 pub mod demo;
 pub mod run;
 pub mod scenario;

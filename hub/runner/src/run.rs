@@ -1157,6 +1157,11 @@ pub fn run(args: &RunArgs) -> anyhow::Result<ExitCode> {
         })?;
         chair.localise = false;
     }
+    if let Some(n) = args.chairs {
+        let crowd = scenario.crowd.get_or_insert_with(|| crate::crowd::Crowd::of(n));
+        crowd.chairs = n;
+        crowd.check().map_err(|e| anyhow::anyhow!("--chairs {n}: {e}"))?;
+    }
     if let Some(session) = &args.session {
         ipc_services::Session::new(session)?;
     }
@@ -1186,6 +1191,7 @@ pub fn run(args: &RunArgs) -> anyhow::Result<ExitCode> {
             scenario.seconds,
             if opts.lockstep { "lock-step" } else { "real time" }
         );
+        let scenario = scenario.populated(seed).map_err(|e| anyhow::anyhow!("scenario {}: {e}", scenario.name))?;
         let end = run_once(&scenario, seed, &out, &opts, &signals)?;
         print_summary(&end.summary, end.chair.as_ref(), &out);
         return Ok(exit_code(&end));
@@ -1210,7 +1216,9 @@ pub fn run(args: &RunArgs) -> anyhow::Result<ExitCode> {
     let mut pose_errors: Vec<f64> = Vec::new();
     for seed in seeds {
         let dir = out.join(format!("seed-{seed}"));
-        let end = run_once(&scenario, seed, &dir, &RunOptions { verbose: false, ..opts.clone() }, &signals)?;
+        let placed =
+            scenario.populated(seed).map_err(|e| anyhow::anyhow!("scenario {}, seed {seed}: {e}", scenario.name))?;
+        let end = run_once(&placed, seed, &dir, &RunOptions { verbose: false, ..opts.clone() }, &signals)?;
         if end.interrupted.is_some() {
             // The batch stops with the run it was in: that run's partial summary, and where
             // the finished ones are.

@@ -70,6 +70,7 @@ pub const BUILTINS: &[(&str, &str)] = &[
     ("demo", include_str!("../scenarios/demo.toml")),
     ("slalom-real", include_str!("../scenarios/slalom-real.toml")),
     ("slalom-augmented", include_str!("../scenarios/slalom-augmented.toml")),
+    ("ward", include_str!("../scenarios/ward.toml")),
 ];
 
 /// A scenario file.
@@ -105,7 +106,8 @@ pub struct Scenario {
     /// Static obstacles (checked as they are read; whether they fit the lab, the hub checks).
     #[serde(default)]
     pub obstacles: Vec<Obstacle>,
-    /// Agent processes.
+    /// Agent processes (a `[crowd]` adds its chairs' navigators to these).
+    #[serde(default)]
     pub agents: Vec<AgentSpec>,
     /// Checkpoint numbers each robot must reach, in order.
     #[serde(default)]
@@ -116,6 +118,9 @@ pub struct Scenario {
     /// A physical chair (the chair emulator, through the serial adapter) in the run.
     #[serde(default)]
     pub chair: Option<ChairSpec>,
+    /// Many navigator chairs placed by the run's seed, each with its goals ([`crate::crowd`]).
+    #[serde(default)]
+    pub crowd: Option<crate::crowd::Crowd>,
     /// The directory relative paths are read from (not in the file).
     #[serde(skip)]
     pub base: PathBuf,
@@ -365,8 +370,11 @@ impl Scenario {
         if s.cycle_ms == 0 {
             return Err(bad("cycle_ms must be at least 1".into()));
         }
-        if s.agents.is_empty() {
-            return Err(bad("no [[agents]]: a run needs at least one".into()));
+        if s.agents.is_empty() && s.crowd.is_none() {
+            return Err(bad("no [[agents]] and no [crowd]: a run needs at least one agent".into()));
+        }
+        if let Some(crowd) = &s.crowd {
+            crowd.check().map_err(bad)?;
         }
         for (robot, route) in &s.routes {
             if let Some(n) = route.iter().find(|&&n| n == 0 || n > s.checkpoints.len()) {
@@ -448,6 +456,46 @@ impl Scenario {
         } else {
             self.base.join(spec).display().to_string()
         }
+    }
+
+    /// The scenario with its crowd placed for `seed` (itself when it has none): per chair
+    /// `chairN` a navigator from its start through its goals, a checkpoint at its start and one
+    /// at each goal, the goals as its route, and every chair expected to finish it.
+    ///
+    /// # Errors
+    /// When the lab cannot be read or has no room for the crowd.
+    pub fn populated(&self, seed: u64) -> Result<Scenario, String> {
+        let Some(crowd) = &self.crowd else { return Ok(self.clone()) };
+        let lab = world::map::builtin::load_lab_spec(&self.lab_spec()).map_err(|e| format!("{}: {e}", self.lab))?;
+        let trips = crate::crowd::place(&lab, crowd, seed)?;
+        let mut s = self.clone();
+        for (k, t) in trips.iter().enumerate() {
+            let name = format!("chair{}", k + 1);
+            let mut points = vec![[t.start[0], t.start[1]]];
+            points.extend(&t.goals);
+            let mut route = Vec::new();
+            for (j, p) in points.iter().enumerate() {
+                s.checkpoints.push(Checkpoint { x: p[0], y: p[1], radius: crowd.radius_m });
+                if j > 0 {
+                    route.push(s.checkpoints.len());
+                }
+            }
+            let mut options = toml::Table::new();
+            options.insert("name".into(), name.clone().into());
+            let start: Vec<toml::Value> = t.start.iter().map(|&v| toml::Value::Float(v)).collect();
+            options.insert("pose".into(), toml::Value::Array(start));
+            let cps = points
+                .iter()
+                .map(|p| {
+                    toml::Value::Array(vec![toml::Value::Float(p[0]), toml::Value::Float(p[1]), crowd.radius_m.into()])
+                })
+                .collect();
+            options.insert("checkpoint".into(), toml::Value::Array(cps));
+            s.agents.push(AgentSpec { kind: "navigator".into(), options, config: None });
+            s.routes.insert(name.clone(), route);
+            s.expect.robots.entry(name).or_default().route = true;
+        }
+        Ok(s)
     }
 
     /// Ticks in the run.

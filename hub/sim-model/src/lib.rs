@@ -255,3 +255,42 @@ mod tests {
         assert!((cone_range([0.0, 0.0], 0.0, PI / 2.0, a, b, 10.0) - 5f64.sqrt()).abs() < 1e-12);
     }
 }
+
+/// Distance from `p` to the segment `a`–`b`, metres.
+pub fn point_segment_distance(p: [f64; 2], a: [f64; 2], b: [f64; 2]) -> f64 {
+    let d = [b[0] - a[0], b[1] - a[1]];
+    let len2 = d[0] * d[0] + d[1] * d[1];
+    let t = if len2 > 0.0 { (((p[0] - a[0]) * d[0] + (p[1] - a[1]) * d[1]) / len2).clamp(0.0, 1.0) } else { 0.0 };
+    (p[0] - (a[0] + t * d[0])).hypot(p[1] - (a[1] + t * d[1]))
+}
+
+/// Whether `p` lies inside the simple polygon `corners` (either winding; a point on an edge
+/// may count either way).
+pub fn point_in_polygon(p: [f64; 2], corners: &[[f64; 2]]) -> bool {
+    let mut inside = false;
+    for (i, a) in corners.iter().enumerate() {
+        let b = corners[(i + 1) % corners.len()];
+        if (a[1] > p[1]) != (b[1] > p[1]) && p[0] < a[0] + (p[1] - a[1]) / (b[1] - a[1]) * (b[0] - a[0]) {
+            inside = !inside;
+        }
+    }
+    inside
+}
+
+#[cfg(test)]
+mod geometry_tests {
+    use super::*;
+
+    #[test]
+    fn distances_to_a_segment_and_points_in_a_polygon() {
+        assert_eq!(point_segment_distance([0.5, 1.0], [0.0, 0.0], [1.0, 0.0]), 1.0);
+        assert_eq!(point_segment_distance([4.0, 4.0], [0.0, 0.0], [1.0, 0.0]), 5.0, "past the end: to the end");
+        assert_eq!(point_segment_distance([3.0, 4.0], [0.0, 0.0], [0.0, 0.0]), 5.0, "a point segment");
+        let l = [[0.0, 0.0], [2.0, 0.0], [2.0, 1.0], [1.0, 1.0], [1.0, 2.0], [0.0, 2.0]];
+        assert!(point_in_polygon([0.5, 1.5], &l) && point_in_polygon([1.5, 0.5], &l));
+        assert!(!point_in_polygon([1.5, 1.5], &l), "the notch of the L");
+        let mut cw = l;
+        cw.reverse();
+        assert!(point_in_polygon([0.5, 1.5], &cw) && !point_in_polygon([1.5, 1.5], &cw));
+    }
+}

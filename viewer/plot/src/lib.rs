@@ -75,7 +75,7 @@ pub struct PlotArgs {
     /// logs, `trajectories.svg` beside the first].
     #[arg(long, value_name = "FILE.svg")]
     pub out: Option<PathBuf>,
-    /// Lab drawn under the trajectory: builtin:liacc, builtin:thesis, builtin:maze or a lab
+    /// Lab drawn under the trajectory: builtin:liacc, builtin:thesis, builtin:maze, builtin:ward or a lab
     /// file [default: the recording's lab, or the `lab` of summary.json beside the log, else
     /// none].
     #[arg(long)]

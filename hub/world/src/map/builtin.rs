@@ -6,6 +6,8 @@
 //!   walls, one of them L-shaped).
 //! - `maze`: a 28 m × 14 m maze of 2 m cells in Ciber-Rato's `<Row Pos Pattern>` shorthand,
 //!   with one beacon and one target.
+//! - `ward`: a hospital ward of iwsim's own (40 m × 14 m): a 2 m corridor with eight rooms on
+//!   each side, each through a 1 m doorway; for many chairs sharing one building.
 //!
 //! The XML files live in `hub/world/maps/`; they are compiled in, so the binary needs no data files.
 
@@ -15,7 +17,7 @@ use super::xml::{parse_grid, parse_grid_for, parse_lab, read_text};
 use super::{Grid, Lab, Map, MapLoadError};
 
 /// Names of the built-in maps; the first is the default world.
-pub const NAMES: &[&str] = &["liacc", "thesis", "maze"];
+pub const NAMES: &[&str] = &["liacc", "thesis", "maze", "ward"];
 
 /// Prefix that names a built-in map in a spec, as in `builtin:liacc`.
 pub const PREFIX: &str = "builtin:";
@@ -26,6 +28,8 @@ const THESIS_LAB: &str = include_str!("../../maps/thesis-lab.xml");
 const THESIS_GRID: &str = include_str!("../../maps/thesis-grid.xml");
 const MAZE_LAB: &str = include_str!("../../maps/maze-lab.xml");
 const MAZE_GRID: &str = include_str!("../../maps/maze-grid.xml");
+const WARD_LAB: &str = include_str!("../../maps/ward-lab.xml");
+const WARD_GRID: &str = include_str!("../../maps/ward-grid.xml");
 
 /// The lab XML of a built-in map.
 pub fn lab_xml(name: &str) -> Option<&'static str> {
@@ -33,6 +37,7 @@ pub fn lab_xml(name: &str) -> Option<&'static str> {
         "liacc" => Some(LIACC_LAB),
         "thesis" => Some(THESIS_LAB),
         "maze" => Some(MAZE_LAB),
+        "ward" => Some(WARD_LAB),
         _ => None,
     }
 }
@@ -43,6 +48,7 @@ pub fn grid_xml(name: &str) -> Option<&'static str> {
         "liacc" => Some(LIACC_GRID),
         "thesis" => Some(THESIS_GRID),
         "maze" => Some(MAZE_GRID),
+        "ward" => Some(WARD_GRID),
         _ => None,
     }
 }

@@ -1,0 +1,291 @@
+//! Many chairs on any map: `[crowd]` in a scenario (or `iwsim run --chairs N`) places N
+//! navigator chairs, each with its own goals, seeded by the run's seed.
+//!
+//! The floor is sampled on a grid: a cell's clearance is its centre's distance to the nearest
+//! wall or the lab's border (0 inside a wall). A chair may start or stop where the clearance
+//! lets it turn on the spot ([`Crowd::clearance_m`]); it can pass where the clearance is
+//! more than half its width, so a start and its goals lie in one region connected by such
+//! cells (a flood fill): every trip is one a chair fits through, doorways included. Starts
+//! are [`Crowd::min_separation_m`] apart, and so are goals (a chair that has arrived stands
+//! there), and each goal is at least [`Crowd::min_trip_m`] from where the chair comes from.
+
+use serde::Deserialize;
+use world::map::Lab;
+use world::rng::Rng;
+
+/// What `[crowd]` asks for.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Crowd {
+    /// How many chairs (navigators named chair1, chair2, …).
+    pub chairs: usize,
+    /// Goals per chair, visited in order (a tour); the last is where it stops.
+    #[serde(default = "one")]
+    pub tour: usize,
+    /// Starts, and goals, at least this far apart, metres.
+    #[serde(default = "two")]
+    pub min_separation_m: f64,
+    /// Free floor at least this far round a start or goal, metres: room to turn on the spot.
+    #[serde(default = "turn_room")]
+    pub clearance_m: f64,
+    /// A goal at least this far (straight line) from the chair's start or previous goal.
+    #[serde(default = "trip")]
+    pub min_trip_m: f64,
+    /// A checkpoint's radius, metres.
+    #[serde(default = "half")]
+    pub radius_m: f64,
+}
+
+fn one() -> usize {
+    1
+}
+fn two() -> f64 {
+    2.0
+}
+fn turn_room() -> f64 {
+    0.9
+}
+fn trip() -> f64 {
+    6.0
+}
+fn half() -> f64 {
+    0.5
+}
+
+impl Crowd {
+    /// `n` chairs with every other choice at its default.
+    pub fn of(n: usize) -> Self {
+        Self {
+            chairs: n,
+            tour: one(),
+            min_separation_m: two(),
+            clearance_m: turn_room(),
+            min_trip_m: trip(),
+            radius_m: half(),
+        }
+    }
+
+    /// The most chairs a crowd may have (the hub's agent limit is per process; each chair is
+    /// one navigator process).
+    pub const MAX_CHAIRS: usize = 100;
+
+    /// Checks the values; says which is wrong.
+    pub fn check(&self) -> Result<(), String> {
+        if !(1..=Self::MAX_CHAIRS).contains(&self.chairs) {
+            return Err(format!("crowd.chairs = {}: from 1 to {}", self.chairs, Self::MAX_CHAIRS));
+        }
+        if !(1..=20).contains(&self.tour) {
+            return Err(format!("crowd.tour = {}: from 1 to 20 goals", self.tour));
+        }
+        for (key, v, lo, hi) in [
+            ("min_separation_m", self.min_separation_m, 0.0, 100.0),
+            ("clearance_m", self.clearance_m, 0.3, 10.0),
+            ("min_trip_m", self.min_trip_m, 0.0, 1000.0),
+            ("radius_m", self.radius_m, 0.05, 5.0),
+        ] {
+            if !(v >= lo && v <= hi) {
+                return Err(format!("crowd.{key} = {v}: from {lo} to {hi}"));
+            }
+        }
+        Ok(())
+    }
+}
+
+/// One chair's place in a crowd.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Trip {
+    /// Start pose: x, y metres, heading degrees.
+    pub start: [f64; 3],
+    /// Goals in order: x, y metres.
+    pub goals: Vec<[f64; 2]>,
+}
+
+/// Half the Intellwheels chair's width and a little: where the clearance is more, its
+/// centre line can pass (a 1 m doorway has 0.5 m in its middle).
+const PASS_M: f64 = 0.4;
+/// Tries per chair before the crowd is given up.
+const TRIES: usize = 20_000;
+/// The floor is sampled on at most this many cells (a larger lab on coarser ones).
+const MAX_CELLS: f64 = 2.0e6;
+
+/// The sampled floor of a lab.
+struct Floor {
+    cell: f64,
+    nx: usize,
+    ny: usize,
+    /// Clearance per cell, metres.
+    clear: Vec<f32>,
+    /// Connected region per cell (cells a chair can pass), `u32::MAX` for none.
+    region: Vec<u32>,
+}
+
+impl Floor {
+    fn of(lab: &Lab) -> Self {
+        let cell = 0.1f64.max((lab.width_m * lab.height_m / MAX_CELLS).sqrt());
+        let nx = (lab.width_m / cell).floor().max(1.0) as usize;
+        let ny = (lab.height_m / cell).floor().max(1.0) as usize;
+        let polygons: Vec<Vec<[f64; 2]>> =
+            lab.walls.iter().map(|w| w.corners.iter().map(|c| [c.x, c.y]).collect()).collect();
+        let mut edges: Vec<([f64; 2], [f64; 2])> = Vec::new();
+        for poly in &polygons {
+            for (i, &a) in poly.iter().enumerate() {
+                edges.push((a, poly[(i + 1) % poly.len()]));
+            }
+        }
+        let mut clear = vec![0f32; nx * ny];
+        for iy in 0..ny {
+            for ix in 0..nx {
+                let p = [(ix as f64 + 0.5) * cell, (iy as f64 + 0.5) * cell];
+                let border = p[0].min(p[1]).min(lab.width_m - p[0]).min(lab.height_m - p[1]);
+                let c = if polygons.iter().any(|poly| sim_model::point_in_polygon(p, poly)) {
+                    0.0
+                } else {
+                    edges.iter().map(|&(a, b)| sim_model::point_segment_distance(p, a, b)).fold(border, f64::min)
+                };
+                clear[iy * nx + ix] = c as f32;
+            }
+        }
+        let mut region = vec![u32::MAX; nx * ny];
+        let mut next = 0u32;
+        let mut stack = Vec::new();
+        for first in 0..nx * ny {
+            if region[first] != u32::MAX || f64::from(clear[first]) <= PASS_M {
+                continue;
+            }
+            region[first] = next;
+            stack.push(first);
+            while let Some(i) = stack.pop() {
+                let (ix, iy) = (i % nx, i / nx);
+                let around = [
+                    (ix > 0).then(|| i - 1),
+                    (ix + 1 < nx).then_some(i + 1),
+                    (iy > 0).then(|| i - nx),
+                    (iy + 1 < ny).then_some(i + nx),
+                ];
+                for j in around.into_iter().flatten() {
+                    if region[j] == u32::MAX && f64::from(clear[j]) > PASS_M {
+                        region[j] = next;
+                        stack.push(j);
+                    }
+                }
+            }
+            next += 1;
+        }
+        Self { cell, nx, ny, clear, region }
+    }
+
+    fn centre(&self, i: usize) -> [f64; 2] {
+        [((i % self.nx) as f64 + 0.5) * self.cell, ((i / self.nx) as f64 + 0.5) * self.cell]
+    }
+}
+
+fn dist(a: [f64; 2], b: [f64; 2]) -> f64 {
+    (a[0] - b[0]).hypot(a[1] - b[1])
+}
+
+/// Places `crowd` on `lab`, the same for the same seed.
+///
+/// # Errors
+/// When the lab has no room for that many chairs and goals as asked (saying how many fit).
+pub fn place(lab: &Lab, crowd: &Crowd, seed: u64) -> Result<Vec<Trip>, String> {
+    crowd.check()?;
+    let floor = Floor::of(lab);
+    let spots: Vec<usize> =
+        (0..floor.nx * floor.ny).filter(|&i| f64::from(floor.clear[i]) >= crowd.clearance_m).collect();
+    if spots.is_empty() {
+        return Err(format!(
+            "no floor of lab {:?} has {} m clear round it for a chair to turn",
+            lab.name, crowd.clearance_m
+        ));
+    }
+    // A stream of its own, apart from the world's noise streams for the same seed.
+    let mut rng = Rng::seed_from_u64(seed ^ 0x6372_6f77_645f_7631);
+    let pick = |rng: &mut Rng| spots[(rng.next_u64() % spots.len() as u64) as usize];
+    let mut trips: Vec<Trip> = Vec::with_capacity(crowd.chairs);
+    let mut goals_taken: Vec<[f64; 2]> = Vec::new();
+    for n in 0..crowd.chairs {
+        let short = |what: &str| {
+            format!(
+                "lab {:?} has room for {n} chair(s) of {} with {what} (min_separation_m {}, clearance_m {}, min_trip_m {})",
+                lab.name, crowd.chairs, crowd.min_separation_m, crowd.clearance_m, crowd.min_trip_m
+            )
+        };
+        let start = (0..TRIES)
+            .map(|_| pick(&mut rng))
+            .find(|&i| {
+                let p = floor.centre(i);
+                trips.iter().all(|t| dist([t.start[0], t.start[1]], p) >= crowd.min_separation_m)
+                    && goals_taken.iter().all(|&g| dist(g, p) >= crowd.min_separation_m)
+            })
+            .ok_or_else(|| short("a start"))?;
+        let region = floor.region[start];
+        let s = floor.centre(start);
+        let mut goals = Vec::with_capacity(crowd.tour);
+        let mut from = s;
+        for _ in 0..crowd.tour {
+            let g = (0..TRIES)
+                .map(|_| pick(&mut rng))
+                .find(|&i| {
+                    let p = floor.centre(i);
+                    floor.region[i] == region
+                        && dist(p, from) >= crowd.min_trip_m
+                        && trips.iter().all(|t| dist([t.start[0], t.start[1]], p) >= crowd.min_separation_m)
+                        && goals_taken.iter().all(|&g| dist(g, p) >= crowd.min_separation_m)
+                })
+                .ok_or_else(|| short("its goals"))?;
+            from = floor.centre(g);
+            goals.push(from);
+        }
+        // Only the last goal is where it stands for good; earlier ones are passed.
+        goals_taken.extend(goals.last().copied());
+        let heading = (rng.next_u64() % 8) as f64 * 45.0 - 180.0;
+        trips.push(Trip { start: [s[0], s[1], heading], goals });
+    }
+    Ok(trips)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use world::map::builtin;
+
+    #[test]
+    fn a_crowd_on_the_ward_is_seeded_separated_and_reachable() {
+        let lab = builtin::map("ward").expect("built in").lab;
+        let crowd = Crowd { tour: 2, ..Crowd::of(20) };
+        let a = place(&lab, &crowd, 7).expect("twenty chairs fit the ward");
+        assert_eq!(a, place(&lab, &crowd, 7).expect("again"), "the same seed, the same crowd");
+        assert_ne!(a, place(&lab, &crowd, 8).expect("another"), "another seed, another crowd");
+        let floor = Floor::of(&lab);
+        let at = |p: [f64; 2]| (p[1] / floor.cell) as usize * floor.nx + (p[0] / floor.cell) as usize;
+        for (k, t) in a.iter().enumerate() {
+            let s = [t.start[0], t.start[1]];
+            assert!(f64::from(floor.clear[at(s)]) >= 0.9);
+            let mut from = s;
+            for &g in &t.goals {
+                assert_eq!(floor.region[at(g)], floor.region[at(s)], "chair {k}: goal {g:?} reachable");
+                assert!(dist(g, from) >= 6.0 && f64::from(floor.clear[at(g)]) >= 0.9);
+                from = g;
+            }
+            for u in &a[k + 1..] {
+                assert!(dist(s, [u.start[0], u.start[1]]) >= 2.0, "starts apart");
+                let stop = |t: &Trip| *t.goals.last().expect("a goal");
+                assert!(dist(stop(t), stop(u)) >= 2.0, "stops apart");
+            }
+        }
+        // The ward's rooms and corridor are one region: its doorways let a chair through.
+        let regions: std::collections::BTreeSet<u32> =
+            floor.region.iter().copied().filter(|&r| r != u32::MAX).collect();
+        assert_eq!(regions.len(), 1, "{regions:?}");
+    }
+
+    #[test]
+    fn a_crowd_too_large_for_the_lab_is_refused_saying_how_many_fit() {
+        let lab = builtin::map("thesis").expect("built in").lab;
+        let crowd = Crowd { min_separation_m: 6.0, ..Crowd::of(30) };
+        let err = place(&lab, &crowd, 1).expect_err("thirty chairs 6 m apart do not fit 28 m x 14 m");
+        assert!(err.contains("has room for") && err.contains("of 30"), "{err}");
+        let err = place(&lab, &Crowd::of(0), 1).expect_err("no chairs");
+        assert!(err.contains("crowd.chairs = 0"), "{err}");
+    }
+}
