@@ -93,7 +93,16 @@ fn chairs_placed_on_the_ward_by_the_seed_each_reach_their_own_goal() {
         let goal = &s.checkpoints[2 * k + 1];
         let end = r.final_pose;
         assert!((end[0] - goal.x).hypot(end[1] - goal.y) <= goal.radius, "{name} ended at {end:?}, goal {goal:?}");
+        // The traffic measures, from the record: arrived, never touching, kept apart.
+        assert!(r.arrived && (r.contacts_chair, r.contacts_wall, r.contacts_obstacle) == (0, 0, 0), "{r:?}");
+        assert!(r.min_clearance_chair_m.is_some_and(|m| m > 0.0), "{r:?}");
+        assert!(r.min_clearance_wall_m.is_some_and(|m| m > 0.0), "{r:?}");
     }
+    let t = s.traffic.as_ref().expect("two chairs on routes: the traffic is measured");
+    let last = s.robots.iter().filter_map(|r| r.time_s).fold(0.0, f64::max);
+    assert_eq!((t.chairs, t.arrived, t.success_rate, t.deadlocks), (2, 2, 1.0, 0), "{t:?}");
+    assert!(t.makespan_s.is_some_and(|m| (m - last).abs() < 0.06), "{t:?} (last arrival {last})");
+    assert!(out.contains("traffic: 2/2 arrived (100 %)"), "{out}");
     let (ok, _, err) = iwsim(&["run", "builtin:ward", "--chairs", "0", "--headless"], Duration::from_secs(10));
     assert!(!ok && err.contains("--chairs"), "{err}");
     let _ = std::fs::remove_dir_all(dir);

@@ -107,6 +107,9 @@ fn drive(agent: &mut Agent, args: &NavigatorArgs) -> anyhow::Result<ExitCode> {
     let mut contacts = 0u32;
     let mut last_time = 0.0;
     let mut mode_checked = false;
+    // Each tick's planning and control time, µs: the navigator's cost, which must not grow
+    // when chairs meet (a lock-step run waits for it).
+    let mut tick_us: Vec<u32> = Vec::new();
     while let Some(tick) = agent.wait_tick(Wait::Blocking)? {
         let time_s = tick.tick as f64 * cycle_s;
         last_time = time_s;
@@ -130,7 +133,9 @@ fn drive(agent: &mut Agent, args: &NavigatorArgs) -> anyhow::Result<ExitCode> {
         }
         contacts = block.collision_count;
         let input = Input::from_block(block, time_s);
+        let started = std::time::Instant::now();
         let out = pilot.tick(&input, block.messages().map(|(_, m)| m));
+        tick_us.push(u32::try_from(started.elapsed().as_micros()).unwrap_or(u32::MAX));
         for e in &out.events {
             report(name, &checkpoints, e);
         }
@@ -156,6 +161,9 @@ fn drive(agent: &mut Agent, args: &NavigatorArgs) -> anyhow::Result<ExitCode> {
         contacts = block.collision_count;
     }
     logs.finish(agent)?;
+    if let Some(cost) = TickCost::of(&mut tick_us) {
+        agent_sdk::report!("navigator {name}: {cost}");
+    }
     let nav = pilot.navigator();
     let reached = nav.next_checkpoint().min(checkpoints.len());
     if nav.finished() {
@@ -206,5 +214,55 @@ fn report(name: &str, checkpoints: &[Checkpoint], e: &NavEvent) {
         NavEvent::Blocked { index, reason } => {
             agent_sdk::report!("navigator {name}: no way to checkpoint {} just now ({reason}); waiting", index + 1)
         }
+    }
+}
+
+/// What the navigator's ticks cost: the time of planning and control per tick (wall time of
+/// computation alone, no waiting), as percentiles.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TickCost {
+    /// Ticks measured.
+    pub ticks: usize,
+    /// Median, µs.
+    pub p50_us: u32,
+    /// 99th percentile, µs.
+    pub p99_us: u32,
+    /// The slowest tick, µs.
+    pub max_us: u32,
+}
+
+impl TickCost {
+    /// The percentiles of `us` (sorted in place); `None` when empty.
+    pub fn of(us: &mut [u32]) -> Option<Self> {
+        if us.is_empty() {
+            return None;
+        }
+        us.sort_unstable();
+        let at = |q: f64| us[((us.len() - 1) as f64 * q).round() as usize];
+        Some(Self { ticks: us.len(), p50_us: at(0.5), p99_us: at(0.99), max_us: us[us.len() - 1] })
+    }
+}
+
+impl std::fmt::Display for TickCost {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "planning and control per tick: p50 {} µs, p99 {} µs, max {} µs over {} ticks",
+            self.p50_us, self.p99_us, self.max_us, self.ticks
+        )
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::TickCost;
+
+    #[test]
+    fn tick_cost_percentiles() {
+        let mut us: Vec<u32> = (1..=100).rev().collect();
+        let c = TickCost::of(&mut us).expect("ticks");
+        assert_eq!((c.ticks, c.p50_us, c.p99_us, c.max_us), (100, 51, 99, 100));
+        assert_eq!(TickCost::of(&mut []), None);
+        assert!(c.to_string().contains("p50 51 µs, p99 99 µs"), "{c}");
     }
 }

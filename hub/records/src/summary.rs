@@ -57,6 +57,54 @@ pub struct RobotSummary {
     pub rise_time_s: f64,
     /// Final pose: x, y metres, heading degrees (written to 0.1 mm and 0.01°).
     pub final_pose: [f64; 3],
+    /// Whether it has a route and reached every checkpoint of it.
+    #[serde(default)]
+    pub arrived: bool,
+    /// Its body's least distance to a wall or the lab's border, metres (to the millimetre).
+    #[serde(default)]
+    pub min_clearance_wall_m: Option<f64>,
+    /// Its body's least distance to another robot's, metres (`null`: it was alone).
+    #[serde(default)]
+    pub min_clearance_chair_m: Option<f64>,
+    /// Contacts with another robot (the nearest thing when the contact began).
+    #[serde(default)]
+    pub contacts_chair: u64,
+    /// Contacts with a wall or the border.
+    #[serde(default)]
+    pub contacts_wall: u64,
+    /// Contacts with a scenario obstacle.
+    #[serde(default)]
+    pub contacts_obstacle: u64,
+    /// Seconds it stood still (under 2 cm/s) with its route not finished (to 0.1 s).
+    #[serde(default)]
+    pub still_s: f64,
+}
+
+/// Many robots in one run, measured as the field measures multi-robot navigation: present in
+/// a summary when two or more robots have routes.
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+pub struct TrafficSummary {
+    /// Robots with a route.
+    pub chairs: usize,
+    /// Of them, those that finished it.
+    pub arrived: usize,
+    /// `arrived / chairs`.
+    pub success_rate: f64,
+    /// When the last of them finished, seconds (`null` unless all did).
+    pub makespan_s: Option<f64>,
+    /// Their finishing times added up, a robot that did not finish counting the whole run.
+    pub sum_of_times_s: f64,
+    /// Times a set of robots stood still short of their goals for 20 s, each within 1.5 m of
+    /// another of them.
+    pub deadlocks: u64,
+    /// Arrivals per minute of the run.
+    pub throughput_per_min: f64,
+    /// Contacts between robots, with walls and with obstacles, over all of them.
+    pub contacts_chair: u64,
+    /// See `contacts_chair`.
+    pub contacts_wall: u64,
+    /// See `contacts_chair`.
+    pub contacts_obstacle: u64,
 }
 
 /// One run's outcome, as `summary.json` holds it.
@@ -84,6 +132,9 @@ pub struct RunSummary {
     pub checkpoints: Vec<Checkpoint>,
     /// Robots, by name.
     pub robots: Vec<RobotSummary>,
+    /// The run's traffic, when two or more robots have routes.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub traffic: Option<TrafficSummary>,
 }
 
 impl RunSummary {
@@ -98,6 +149,15 @@ impl RunSummary {
             r.rise_time_s = round_to(r.rise_time_s, 2);
             let [x, y, h] = r.final_pose;
             r.final_pose = [round_to(x, 4), round_to(y, 4), round_to(h, 2)];
+            r.min_clearance_wall_m = r.min_clearance_wall_m.map(|v| round_to(v, 3));
+            r.min_clearance_chair_m = r.min_clearance_chair_m.map(|v| round_to(v, 3));
+            r.still_s = round_to(r.still_s, 1);
+        }
+        if let Some(t) = &mut s.traffic {
+            t.success_rate = round_to(t.success_rate, 4);
+            t.makespan_s = t.makespan_s.map(|v| round_to(v, 1));
+            t.sum_of_times_s = round_to(t.sum_of_times_s, 1);
+            t.throughput_per_min = round_to(t.throughput_per_min, 3);
         }
         crate::to_json(&s) + "\n"
     }
@@ -238,7 +298,9 @@ mod tests {
                 top_speed_mps: 0.490_049,
                 rise_time_s: 1.199_9,
                 final_pose: [20.123_456, 6.1, -0.004_9],
+                ..Default::default()
             }],
+            traffic: None,
         }
     }
 
@@ -252,7 +314,8 @@ mod tests {
                 r#""obstacles":[[17.0,6.1,17.6,6.4,1.0]],"checkpoints":[[10.0,6.1,0.5]],"robots":[{"name":"chair1","#,
                 r#""log":"chair1.csv","route":[1],"checkpoints_reached":1,"checkpoints_total":1,"reached_at_s":[12.3],"#,
                 r#""time_s":12.3,"collisions":1,"ticks":900,"distance_m":12.346,"top_speed_mps":0.49,"#,
-                r#""rise_time_s":1.2,"final_pose":[20.1235,6.1,-0.0]}]}"#,
+                r#""rise_time_s":1.2,"final_pose":[20.1235,6.1,-0.0],"arrived":false,"min_clearance_wall_m":null,"#,
+                r#""min_clearance_chair_m":null,"contacts_chair":0,"contacts_wall":0,"contacts_obstacle":0,"still_s":0.0}]}"#,
                 "\n"
             )
         );

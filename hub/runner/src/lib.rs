@@ -16,6 +16,7 @@ pub mod args;
 pub mod chair;
 pub mod crowd;
 pub mod demo;
+pub mod metrics;
 pub mod run;
 pub mod scenario;
 pub mod signals;

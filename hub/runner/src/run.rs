@@ -22,6 +22,8 @@ use std::time::{Duration, Instant};
 
 use anyhow::Context as _;
 use records::outcome::HubOutcome;
+
+use crate::metrics;
 pub use records::summary::{RobotSummary, RunSummary};
 
 use crate::args::RunArgs;
@@ -57,6 +59,7 @@ impl Judge {
                 top_speed_mps: 0.0,
                 rise_time_s: 0.0,
                 final_pose: [0.0; 3],
+                ..Default::default()
             },
             armed: false,
             speeds: Vec::new(),
@@ -117,6 +120,8 @@ pub struct Judged {
     pub state_hash: records::outcome::StateHash,
     /// Where a cut-short recording ends.
     pub truncated: Option<String>,
+    /// The run's traffic, with two or more robots on routes.
+    pub traffic: Option<records::summary::TrafficSummary>,
 }
 
 /// Replays a run's recording and measures every robot from the truth it holds (never from
@@ -125,21 +130,52 @@ pub struct Judged {
 pub fn judge_recording(path: &Path, scenario: &Scenario, logs: &Path) -> anyhow::Result<Judged> {
     let recording = recorder::Recording::open(path).with_context(|| format!("reading {}", path.display()))?;
     let dt = recording.start.dt_s;
-    let mut judges: std::collections::BTreeMap<String, Judge> = std::collections::BTreeMap::new();
+    let mut judges: std::collections::BTreeMap<String, (usize, Judge)> = std::collections::BTreeMap::new();
+    let start = &recording.start;
+    let shape = |corners: &mut dyn Iterator<Item = [f64; 2]>| metrics::Shape::new(corners.collect());
+    let fixed = metrics::Fixed::new(
+        start.lab.walls.iter().map(|w| shape(&mut w.corners.iter().map(|c| [c.x, c.y]))).collect(),
+        start.obstacle_from,
+        start.lab.width_m,
+        start.lab.height_m,
+    );
+    let mut traffic = metrics::Traffic::new(fixed);
+    let mut seen = Vec::new();
     let replayed = hub::replay::replay_observed(&recording, false, None, |stage| {
         let t = stage.world().tick() as f64 * dt;
+        seen.clear();
         for id in stage.ids() {
             let Some(r) = stage.robot(id) else { continue };
-            let judge = judges.entry(r.spec.name.clone()).or_insert_with(|| {
+            let next = judges.len();
+            let (index, judge) = judges.entry(r.spec.name.clone()).or_insert_with(|| {
                 let log = format!("{}.csv", records::log::file_stem(&r.spec.name));
                 let log = if logs.join(&log).exists() { log } else { String::new() };
-                Judge::new(&r.spec.name, scenario.routes.get(&r.spec.name).map_or(&[], Vec::as_slice), log)
+                (next, Judge::new(&r.spec.name, scenario.routes.get(&r.spec.name).map_or(&[], Vec::as_slice), log))
             });
             judge.observe(scenario, t, [r.pose.x, r.pose.y, r.pose.heading_deg()], r.collision_count);
+            let s = &judge.s;
+            seen.push(metrics::Seen {
+                index: *index,
+                body: shape(&mut r.corners().iter().map(|c| [c.x, c.y])),
+                pos: [r.pose.x, r.pose.y],
+                contacts: r.collision_count,
+                routed: !s.route.is_empty(),
+                arrived: !s.route.is_empty() && s.checkpoints_reached == s.checkpoints_total,
+            });
         }
+        traffic.observe(t, &seen);
     })?;
+    let robots: Vec<RobotSummary> = judges
+        .into_values()
+        .map(|(index, judge)| {
+            let mut r = judge.finish();
+            traffic.fill(index, &mut r);
+            r
+        })
+        .collect();
     Ok(Judged {
-        robots: judges.into_values().map(Judge::finish).collect(),
+        traffic: traffic.summary(&robots),
+        robots,
         ticks: replayed.outcome.ticks,
         state_hash: replayed.outcome.state_hash,
         truncated: replayed.truncated,
@@ -957,8 +993,10 @@ pub fn run_once(
     };
     // The record is the judge: the hub's truth, replayed; never what the agents wrote.
     let mut failures = Vec::new();
+    let mut traffic = None;
     let robots = match judge_recording(&recording, scenario, out) {
         Ok(judged) => {
+            traffic = judged.traffic;
             if let Some(lost) = &judged.truncated {
                 failures.push(format!("{}: {lost}", recording.display()));
             } else if interrupted.is_none() && judged.state_hash != hub_outcome.state_hash {
@@ -1008,6 +1046,7 @@ pub fn run_once(
         obstacles: scenario.obstacles.clone(),
         checkpoints: scenario.checkpoints.clone(),
         robots,
+        traffic,
     };
     let text = chair::summary_json(&summary, chair_summary.as_ref()).context("writing summary.json")?;
     std::fs::write(out.join("summary.json"), text)?;
@@ -1110,6 +1149,9 @@ pub fn print_summary(s: &RunSummary, chair: Option<&ChairSummary>, out: &Path) {
     if let Some(c) = chair {
         println!("  {}", c.line());
     }
+    if let Some(t) = &s.traffic {
+        print_traffic(s, t);
+    }
     if s.passed {
         println!("  expected outcome: PASS");
     } else {
@@ -1118,6 +1160,40 @@ pub fn print_summary(s: &RunSummary, chair: Option<&ChairSummary>, out: &Path) {
         }
     }
     println!("  logs, the recording (run.mcap) and summary.json in {}", out.display());
+}
+
+/// The traffic of a run of many chairs: per robot its clearances, contacts by kind and time
+/// stood still short of its goal, then the run's measures.
+fn print_traffic(s: &RunSummary, t: &records::summary::TrafficSummary) {
+    let m = |v: Option<f64>| v.map_or("-".to_owned(), |v| format!("{v:.3}"));
+    println!(
+        "  {:<10} {:>8} {:>13} {:>13} {:>24} {:>8}",
+        "robot", "arrived", "clear wall m", "clear chair m", "contacts chair/wall/obst", "still s"
+    );
+    for r in s.robots.iter().filter(|r| !r.route.is_empty()) {
+        println!(
+            "  {:<10} {:>8} {:>13} {:>13} {:>24} {:>8.1}",
+            r.name,
+            if r.arrived { "yes" } else { "NO" },
+            m(r.min_clearance_wall_m),
+            m(r.min_clearance_chair_m),
+            format!("{}/{}/{}", r.contacts_chair, r.contacts_wall, r.contacts_obstacle),
+            r.still_s
+        );
+    }
+    println!(
+        "  traffic: {}/{} arrived ({:.0} %), makespan {}, sum of times {:.1} s, {} deadlock(s), {:.2} arrivals/min, contacts {} chair-chair, {} wall, {} obstacle",
+        t.arrived,
+        t.chairs,
+        t.success_rate * 100.0,
+        t.makespan_s.map_or("- (not all arrived)".to_owned(), |v| format!("{v:.1} s")),
+        t.sum_of_times_s,
+        t.deadlocks,
+        t.throughput_per_min,
+        t.contacts_chair,
+        t.contacts_wall,
+        t.contacts_obstacle
+    );
 }
 
 /// A run's exit code: 0 when the expected outcome holds, 1 when not, and 128 + the signal's
