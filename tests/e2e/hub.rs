@@ -245,9 +245,12 @@ fn registering_many_robots_republishes_the_world_once_not_once_per_robot() {
     assert!(out.status.success(), "{}", text(&out.stderr));
     let outcome = HubOutcome::from_stdout(&text(&out.stdout)).expect("the hub's JSON line");
     assert_eq!((outcome.ticks, outcome.robots.len()), (0, N));
-    // One republication per registration (the O(N²) set-up) would be at least N; registrations
-    // settle into a few (one, when the agent is never held up for 2 ms between two).
-    assert!(outcome.snapshots <= (N / 20) as u64, "{} snapshots published for {N} registrations", outcome.snapshots);
+    // One republication per registration (the O(N²) set-up) would be at least N (603 with it
+    // put back); registrations settle into a few: one, when the agent is never held up for
+    // 2 ms between two. On a loaded machine the agent is descheduled for longer now and then
+    // (32 pauses among 600 beside two busy loops), each a republication: a quarter of N
+    // tells the two apart whatever the load.
+    assert!(outcome.snapshots <= (N / 4) as u64, "{} snapshots published for {N} registrations", outcome.snapshots);
 }
 
 #[test]
