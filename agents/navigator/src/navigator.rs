@@ -209,6 +209,12 @@ const DOCK_M: f64 = 0.9;
 /// A final stop farther than this from the checkpoint is planned again (twice at most).
 const DOCK_AGAIN_M: f64 = 0.3;
 
+/// Ticks before a failed plan is tried again, by how many failed in a row before it.
+const PLAN_BACKOFF: [u64; 3] = [10, 20, 40];
+/// One search may spend this many times the hybrid search's expansion limit over all its
+/// margins: what is not found within that is not found this time.
+const SEARCH_BUDGET: usize = 2;
+
 /// Counters for logs and tests.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub struct NavStats {
@@ -242,6 +248,8 @@ pub struct Navigator {
     plan_after: u64,
     last_tick: u64,
     blocked_since: Option<u64>,
+    /// Plans failed in a row: each waits twice as long before the next ([`PLAN_BACKOFF`]).
+    plan_failures: u32,
     hybrid: HybridParams,
     track_params: TrackerParams,
     stats: NavStats,
@@ -281,6 +289,7 @@ impl Navigator {
             plan_after: 0,
             last_tick: 0,
             blocked_since: None,
+            plan_failures: 0,
             hybrid: HybridParams::default(),
             track_params,
             stats: NavStats::default(),
@@ -595,11 +604,16 @@ impl Navigator {
                 self.install(&outcome);
                 self.path_kind = kind;
                 self.blocked_since = None;
+                self.plan_failures = 0;
                 self.plan_after = tick + 2;
             }
             Err(e) => {
                 self.tracker = None;
-                self.plan_after = tick + 10;
+                // A search that finds nothing costs the most (every margin to its budget):
+                // while the way stays shut, look again less and less often, so a chair that
+                // waits for others costs a lock-step run little.
+                self.plan_after = tick + PLAN_BACKOFF[(self.plan_failures as usize).min(PLAN_BACKOFF.len() - 1)];
+                self.plan_failures += 1;
                 self.model.sensed.fade(0.4);
                 if self.blocked_since.is_none() {
                     self.blocked_since = Some(tick);
@@ -670,8 +684,10 @@ impl Navigator {
         attempts.extend(margins.iter().enumerate().map(|(k, &(m, e))| (&self.hybrid, k, m, e)));
         let model = &mut self.model;
         let stats = &mut self.stats;
+        let budget = SEARCH_BUDGET * self.hybrid.max_expansions;
+        let mut spent = 0;
         for (params, level, margin, sensed_extra) in attempts {
-            if best.is_some() && level == 0 {
+            if best.is_some() && level == 0 || spent >= budget {
                 break;
             }
             stats.plans += 1;
@@ -681,6 +697,7 @@ impl Navigator {
             match result {
                 Ok(outcome) => {
                     stats.expansions += outcome.expansions as u64;
+                    spent += outcome.expansions;
                     let end = outcome.path().last().map_or(start.pos(), |p| p.pose.pos());
                     let miss = (end - cp.pos).norm();
                     if best.as_ref().is_none_or(|(_, b)| miss < b - 0.05) {
@@ -699,6 +716,7 @@ impl Navigator {
                     stats.failed_plans += 1;
                     if let PathSearchError::Exhausted { expansions } = e {
                         stats.expansions += expansions as u64;
+                        spent += expansions;
                     }
                     let stop = matches!(e, PathSearchError::NoRoute { .. });
                     failure = e;
