@@ -9,7 +9,7 @@ use crate::map::NavMap;
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct GridSpec {
     /// The corner of cell (0, 0), lab coordinates (a multiple of `cell`, so grids over
-    /// different areas of one lab share their cell boundaries).
+    /// different areas of one lab share their cell boundaries, up to rounding).
     pub origin: V2,
     /// Cell side, metres.
     pub cell: f64,

@@ -209,10 +209,12 @@ const DOCK_M: f64 = 0.9;
 /// A final stop farther than this from the checkpoint is planned again (twice at most).
 const DOCK_AGAIN_M: f64 = 0.3;
 
-/// Ticks before a failed plan is tried again, by how many failed in a row before it.
+/// Ticks before a failed plan is tried again, by how many failed in a row before it (1, 2,
+/// then 4 s at the usual 100 ms tick).
 const PLAN_BACKOFF: [u64; 3] = [10, 20, 40];
-/// One search may spend this many times the hybrid search's expansion limit over all its
-/// margins: what is not found within that is not found this time.
+/// One search tries no narrower margin once it has spent this many times the hybrid search's
+/// expansion limit (each kind of search its own: forwards only for the final stop, then with
+/// turns): what is not found within that is not found this time.
 const SEARCH_BUDGET: usize = 2;
 
 /// Counters for logs and tests.
@@ -379,6 +381,7 @@ impl Navigator {
             self.mode = Mode::Plan;
             self.tracker = None;
             self.plan_after = self.last_tick;
+            self.plan_failures = 0;
         }
     }
 
@@ -558,6 +561,7 @@ impl Navigator {
             self.next += 1;
             self.tracker = None;
             self.plan_after = input.tick;
+            self.plan_failures = 0;
             self.blocked_since = None;
             if last {
                 self.finished = true;
@@ -644,7 +648,9 @@ impl Navigator {
         // is docked at near its centre (its plan may end anywhere in it, but it counts only
         // within the inner disc; see `check_checkpoints`).
         let (accept, stop_within, weight) = if !last {
-            (0.8 * cp.inner_m(), 0.8 * cp.inner_m(), 1.0)
+            // Never narrower than a cell, so some cell's centre seeds the search.
+            let through = (0.8 * cp.inner_m()).max(0.75 * crate::model::CELL_M);
+            (through, through, 1.0)
         } else if approach {
             (cp.radius_m, 0.0, 1.0)
         } else {
@@ -687,8 +693,14 @@ impl Navigator {
         let budget = SEARCH_BUDGET * self.hybrid.max_expansions;
         let mut spent = 0;
         for (params, level, margin, sensed_extra) in attempts {
-            if best.is_some() && level == 0 || spent >= budget {
+            if best.is_some() && level == 0 {
                 break;
+            }
+            if level == 0 {
+                // A new kind of search: its own budget.
+                spent = 0;
+            } else if spent >= budget {
+                continue;
             }
             stats.plans += 1;
             model.sensed_extra = sensed_extra;

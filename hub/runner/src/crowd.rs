@@ -2,9 +2,10 @@
 //! navigator chairs, each with its own goals, seeded by the run's seed.
 //!
 //! The floor is sampled on a grid: a cell's clearance is its centre's distance to the nearest
-//! wall or the lab's border (0 inside a wall). A chair may start or stop where the clearance
-//! lets it turn on the spot ([`Crowd::clearance_m`]); it can pass where the clearance is
-//! more than half its width, so a start and its goals lie in one region connected by such
+//! wall, scenario obstacle or the lab's border (0 inside one). A chair may start or stop where
+//! the clearance lets it turn on the spot ([`Crowd::clearance_m`]); it can pass where the
+//! clearance is more than half its width (plus half a cell, what the clearance may drop
+//! between two cells' centres), so a start and its goals lie in one region connected by such
 //! cells (a flood fill): every trip is one a chair fits through, doorways included. Starts
 //! are [`Crowd::min_separation_m`] apart, and so are goals (a chair that has arrived stands
 //! there), and each goal is at least [`Crowd::min_trip_m`] from where the chair comes from.
@@ -25,7 +26,8 @@ pub struct Crowd {
     /// Starts, and goals, at least this far apart, metres.
     #[serde(default = "two")]
     pub min_separation_m: f64,
-    /// Free floor at least this far round a start or goal, metres: room to turn on the spot.
+    /// Free floor at least this far round a start or goal, metres: room to turn on the spot
+    /// (the Intellwheels chair's corners are 0.94 m from its centre of movement).
     #[serde(default = "turn_room")]
     pub clearance_m: f64,
     /// A goal at least this far (straight line) from the chair's start or previous goal.
@@ -43,7 +45,7 @@ fn two() -> f64 {
     2.0
 }
 fn turn_room() -> f64 {
-    0.9
+    1.0
 }
 fn trip() -> f64 {
     6.0
@@ -79,7 +81,7 @@ impl Crowd {
         }
         for (key, v, lo, hi) in [
             ("min_separation_m", self.min_separation_m, 0.0, 100.0),
-            ("clearance_m", self.clearance_m, 0.3, 10.0),
+            ("clearance_m", self.clearance_m, 0.5, 10.0),
             ("min_trip_m", self.min_trip_m, 0.0, 1000.0),
             ("radius_m", self.radius_m, 0.05, 5.0),
         ] {
@@ -100,11 +102,13 @@ pub struct Trip {
     pub goals: Vec<[f64; 2]>,
 }
 
-/// Half the Intellwheels chair's width and a little: where the clearance is more, its
-/// centre line can pass (a 1 m doorway has 0.5 m in its middle).
-const PASS_M: f64 = 0.4;
-/// Tries per chair before the crowd is given up.
-const TRIES: usize = 20_000;
+/// Half the Intellwheels chair's width (0.325 m) and a little: where the clearance is more
+/// (plus half a cell), its centre line can pass (a 1 m doorway has 0.5 m in its middle).
+const PASS_M: f64 = 0.34;
+/// Starts tried per chair, and goals tried per start, before the crowd is given up.
+const START_TRIES: usize = 200;
+/// Cells drawn per start or goal looked for.
+const TRIES: usize = 5_000;
 /// The floor is sampled on at most this many cells (a larger lab on coarser ones).
 const MAX_CELLS: f64 = 2.0e6;
 
@@ -120,12 +124,14 @@ struct Floor {
 }
 
 impl Floor {
-    fn of(lab: &Lab) -> Self {
+    /// The floor of `lab` with `boxes` (x0, y0, x1, y1: the scenario's obstacles) on it.
+    fn of(lab: &Lab, boxes: &[[f64; 4]]) -> Self {
         let cell = 0.1f64.max((lab.width_m * lab.height_m / MAX_CELLS).sqrt());
         let nx = (lab.width_m / cell).floor().max(1.0) as usize;
         let ny = (lab.height_m / cell).floor().max(1.0) as usize;
-        let polygons: Vec<Vec<[f64; 2]>> =
+        let mut polygons: Vec<Vec<[f64; 2]>> =
             lab.walls.iter().map(|w| w.corners.iter().map(|c| [c.x, c.y]).collect()).collect();
+        polygons.extend(boxes.iter().map(|&[x0, y0, x1, y1]| vec![[x0, y0], [x1, y0], [x1, y1], [x0, y1]]));
         let mut edges: Vec<([f64; 2], [f64; 2])> = Vec::new();
         for poly in &polygons {
             for (i, &a) in poly.iter().enumerate() {
@@ -148,8 +154,9 @@ impl Floor {
         let mut region = vec![u32::MAX; nx * ny];
         let mut next = 0u32;
         let mut stack = Vec::new();
+        let pass = PASS_M + cell / 2.0;
         for first in 0..nx * ny {
-            if region[first] != u32::MAX || f64::from(clear[first]) <= PASS_M {
+            if region[first] != u32::MAX || f64::from(clear[first]) <= pass {
                 continue;
             }
             region[first] = next;
@@ -163,7 +170,7 @@ impl Floor {
                     (iy + 1 < ny).then_some(i + nx),
                 ];
                 for j in around.into_iter().flatten() {
-                    if region[j] == u32::MAX && f64::from(clear[j]) > PASS_M {
+                    if region[j] == u32::MAX && f64::from(clear[j]) > pass {
                         region[j] = next;
                         stack.push(j);
                     }
@@ -183,15 +190,17 @@ fn dist(a: [f64; 2], b: [f64; 2]) -> f64 {
     (a[0] - b[0]).hypot(a[1] - b[1])
 }
 
-/// Places `crowd` on `lab`, the same for the same seed.
+/// Places `crowd` on `lab`, with the scenario's obstacles `boxes` (x0, y0, x1, y1) on the
+/// floor and the robots already at `taken` kept clear of; the same for the same seed.
 ///
 /// # Errors
 /// When the lab has no room for that many chairs and goals as asked (saying how many fit).
-pub fn place(lab: &Lab, crowd: &Crowd, seed: u64) -> Result<Vec<Trip>, String> {
+pub fn place(lab: &Lab, boxes: &[[f64; 4]], taken: &[[f64; 2]], crowd: &Crowd, seed: u64) -> Result<Vec<Trip>, String> {
     crowd.check()?;
-    let floor = Floor::of(lab);
-    let spots: Vec<usize> =
-        (0..floor.nx * floor.ny).filter(|&i| f64::from(floor.clear[i]) >= crowd.clearance_m).collect();
+    let floor = Floor::of(lab, boxes);
+    let spots: Vec<usize> = (0..floor.nx * floor.ny)
+        .filter(|&i| f64::from(floor.clear[i]) >= crowd.clearance_m && floor.region[i] != u32::MAX)
+        .collect();
     if spots.is_empty() {
         return Err(format!(
             "no floor of lab {:?} has {} m clear round it for a chair to turn",
@@ -202,42 +211,49 @@ pub fn place(lab: &Lab, crowd: &Crowd, seed: u64) -> Result<Vec<Trip>, String> {
     let mut rng = Rng::seed_from_u64(seed ^ 0x6372_6f77_645f_7631);
     let pick = |rng: &mut Rng| spots[(rng.next_u64() % spots.len() as u64) as usize];
     let mut trips: Vec<Trip> = Vec::with_capacity(crowd.chairs);
-    let mut goals_taken: Vec<[f64; 2]> = Vec::new();
+    let mut starts: Vec<[f64; 2]> = taken.to_vec();
+    let mut stops: Vec<[f64; 2]> = Vec::new();
+    let apart = |p: [f64; 2], from: &[[f64; 2]]| from.iter().all(|&q| dist(p, q) >= crowd.min_separation_m);
     for n in 0..crowd.chairs {
-        let short = |what: &str| {
-            format!(
-                "lab {:?} has room for {n} chair(s) of {} with {what} (min_separation_m {}, clearance_m {}, min_trip_m {})",
-                lab.name, crowd.chairs, crowd.min_separation_m, crowd.clearance_m, crowd.min_trip_m
-            )
-        };
-        let start = (0..TRIES)
-            .map(|_| pick(&mut rng))
-            .find(|&i| {
-                let p = floor.centre(i);
-                trips.iter().all(|t| dist([t.start[0], t.start[1]], p) >= crowd.min_separation_m)
-                    && goals_taken.iter().all(|&g| dist(g, p) >= crowd.min_separation_m)
-            })
-            .ok_or_else(|| short("a start"))?;
-        let region = floor.region[start];
-        let s = floor.centre(start);
-        let mut goals = Vec::with_capacity(crowd.tour);
-        let mut from = s;
-        for _ in 0..crowd.tour {
-            let g = (0..TRIES)
+        let mut placed = None;
+        for _ in 0..START_TRIES {
+            let Some(start) = (0..TRIES)
                 .map(|_| pick(&mut rng))
-                .find(|&i| {
+                .find(|&i| apart(floor.centre(i), &starts) && apart(floor.centre(i), &stops))
+            else {
+                break;
+            };
+            let region = floor.region[start];
+            let s = floor.centre(start);
+            let mut goals = Vec::with_capacity(crowd.tour);
+            let mut from = s;
+            for _ in 0..crowd.tour {
+                let found = (0..TRIES).map(|_| pick(&mut rng)).find(|&i| {
                     let p = floor.centre(i);
                     floor.region[i] == region
                         && dist(p, from) >= crowd.min_trip_m
-                        && trips.iter().all(|t| dist([t.start[0], t.start[1]], p) >= crowd.min_separation_m)
-                        && goals_taken.iter().all(|&g| dist(g, p) >= crowd.min_separation_m)
-                })
-                .ok_or_else(|| short("its goals"))?;
-            from = floor.centre(g);
-            goals.push(from);
+                        && apart(p, &starts)
+                        && apart(p, &stops)
+                        && dist(p, s) >= crowd.min_separation_m
+                });
+                let Some(g) = found else { break };
+                from = floor.centre(g);
+                goals.push(from);
+            }
+            if goals.len() == crowd.tour {
+                placed = Some((s, goals));
+                break;
+            }
         }
+        let Some((s, goals)) = placed else {
+            return Err(format!(
+                "lab {:?} has room for {n} chair(s) of {} with their goals (min_separation_m {}, clearance_m {}, min_trip_m {})",
+                lab.name, crowd.chairs, crowd.min_separation_m, crowd.clearance_m, crowd.min_trip_m
+            ));
+        };
+        starts.push(s);
         // Only the last goal is where it stands for good; earlier ones are passed.
-        goals_taken.extend(goals.last().copied());
+        stops.extend(goals.last().copied());
         let heading = (rng.next_u64() % 8) as f64 * 45.0 - 180.0;
         trips.push(Trip { start: [s[0], s[1], heading], goals });
     }
@@ -253,18 +269,18 @@ mod tests {
     fn a_crowd_on_the_ward_is_seeded_separated_and_reachable() {
         let lab = builtin::map("ward").expect("built in").lab;
         let crowd = Crowd { tour: 2, ..Crowd::of(20) };
-        let a = place(&lab, &crowd, 7).expect("twenty chairs fit the ward");
-        assert_eq!(a, place(&lab, &crowd, 7).expect("again"), "the same seed, the same crowd");
-        assert_ne!(a, place(&lab, &crowd, 8).expect("another"), "another seed, another crowd");
-        let floor = Floor::of(&lab);
+        let a = place(&lab, &[], &[], &crowd, 7).expect("twenty chairs fit the ward");
+        assert_eq!(a, place(&lab, &[], &[], &crowd, 7).expect("again"), "the same seed, the same crowd");
+        assert_ne!(a, place(&lab, &[], &[], &crowd, 8).expect("another"), "another seed, another crowd");
+        let floor = Floor::of(&lab, &[]);
         let at = |p: [f64; 2]| (p[1] / floor.cell) as usize * floor.nx + (p[0] / floor.cell) as usize;
         for (k, t) in a.iter().enumerate() {
             let s = [t.start[0], t.start[1]];
-            assert!(f64::from(floor.clear[at(s)]) >= 0.9);
+            assert!(f64::from(floor.clear[at(s)]) >= 1.0);
             let mut from = s;
             for &g in &t.goals {
                 assert_eq!(floor.region[at(g)], floor.region[at(s)], "chair {k}: goal {g:?} reachable");
-                assert!(dist(g, from) >= 6.0 && f64::from(floor.clear[at(g)]) >= 0.9);
+                assert!(dist(g, from) >= 6.0 && f64::from(floor.clear[at(g)]) >= 1.0);
                 from = g;
             }
             for u in &a[k + 1..] {
@@ -283,9 +299,24 @@ mod tests {
     fn a_crowd_too_large_for_the_lab_is_refused_saying_how_many_fit() {
         let lab = builtin::map("thesis").expect("built in").lab;
         let crowd = Crowd { min_separation_m: 6.0, ..Crowd::of(30) };
-        let err = place(&lab, &crowd, 1).expect_err("thirty chairs 6 m apart do not fit 28 m x 14 m");
+        let err = place(&lab, &[], &[], &crowd, 1).expect_err("thirty chairs 6 m apart do not fit 28 m x 14 m");
         assert!(err.contains("has room for") && err.contains("of 30"), "{err}");
-        let err = place(&lab, &Crowd::of(0), 1).expect_err("no chairs");
+        let err = place(&lab, &[], &[], &Crowd::of(0), 1).expect_err("no chairs");
         assert!(err.contains("crowd.chairs = 0"), "{err}");
+    }
+
+    #[test]
+    fn obstacles_and_robots_already_there_are_kept_clear_of() {
+        let lab = builtin::map("ward").expect("built in").lab;
+        // A box filling the west half of the corridor, and a robot in every south room.
+        let boxes = [[0.0, 6.0, 20.0, 8.0]];
+        let taken: Vec<[f64; 2]> = (0..8).map(|k| [k as f64 * 5.0 + 2.5, 3.0]).collect();
+        let trips = place(&lab, &boxes, &taken, &Crowd::of(8), 3).expect("the north rooms and the corridor's east");
+        for t in &trips {
+            for p in std::iter::once([t.start[0], t.start[1]]).chain(t.goals.iter().copied()) {
+                assert!(!(p[0] < 21.0 && (5.0..=9.0).contains(&p[1])), "{p:?} on or beside the box");
+                assert!(taken.iter().all(|&q| dist(p, q) >= 2.0), "{p:?} near a robot already there");
+            }
+        }
     }
 }

@@ -145,16 +145,18 @@ impl RobotMetrics {
 pub struct Traffic {
     fixed: Fixed,
     robots: Vec<RobotMetrics>,
-    /// Deadlocks found, and whether one is going on (counted once).
+    /// Deadlocks found.
     deadlocks: u64,
-    in_deadlock: bool,
+    /// The robots (their indices) in a deadlock at the last tick: a group counts once, when it
+    /// forms.
+    deadlocked: Vec<usize>,
     last_t: f64,
 }
 
 impl Traffic {
     /// A run in a lab of these fixed things.
     pub fn new(fixed: Fixed) -> Self {
-        Self { fixed, robots: Vec::new(), deadlocks: 0, in_deadlock: false, last_t: 0.0 }
+        Self { fixed, robots: Vec::new(), deadlocks: 0, deadlocked: Vec::new(), last_t: 0.0 }
     }
 
     /// The robots in the world at `t` seconds.
@@ -166,12 +168,10 @@ impl Traffic {
         self.last_t = t;
         for (k, s) in seen.iter().enumerate() {
             let (wall, obstacle) = self.fixed.clearances(&s.body);
-            let chair = seen
-                .iter()
-                .enumerate()
-                .filter(|&(j, o)| j != k && s.body.box_gap(&o.body) < 5.0)
-                .map(|(_, o)| s.body.distance(&o.body))
-                .fold(f64::INFINITY, f64::min);
+            // The nearest other robot (a box farther than the nearest so far cannot be nearer).
+            let chair = seen.iter().enumerate().filter(|&(j, _)| j != k).fold(f64::INFINITY, |best, (_, o)| {
+                if s.body.box_gap(&o.body) >= best { best } else { best.min(s.body.distance(&o.body)) }
+            });
             let m = &mut self.robots[s.index];
             m.min_wall = m.min_wall.min(wall);
             m.min_chair = m.min_chair.min(chair);
@@ -205,13 +205,36 @@ impl Traffic {
         let stuck: Vec<usize> = (0..seen.len())
             .filter(|&k| self.robots[seen[k].index].still_since.is_some_and(|t0| t - t0 >= DEADLOCK_S))
             .collect();
-        let blocked = stuck
-            .iter()
-            .any(|&k| stuck.iter().any(|&j| j != k && seen[k].body.distance(&seen[j].body) <= DEADLOCK_NEAR_M));
-        if blocked && !self.in_deadlock {
-            self.deadlocks += 1;
+        // Groups of them, each robot within reach of another of its group.
+        let mut group: Vec<usize> = (0..stuck.len()).collect();
+        fn root(group: &mut [usize], mut a: usize) -> usize {
+            while group[a] != a {
+                group[a] = group[group[a]];
+                a = group[a];
+            }
+            a
         }
-        self.in_deadlock = blocked;
+        for a in 0..stuck.len() {
+            for b in a + 1..stuck.len() {
+                if seen[stuck[a]].body.distance(&seen[stuck[b]].body) <= DEADLOCK_NEAR_M {
+                    let (ra, rb) = (root(&mut group, a), root(&mut group, b));
+                    group[ra] = rb;
+                }
+            }
+        }
+        let mut now = Vec::new();
+        for r in 0..stuck.len() {
+            let members: Vec<usize> =
+                (0..stuck.len()).filter(|&m| root(&mut group, m) == r).map(|m| seen[stuck[m]].index).collect();
+            if members.len() < 2 {
+                continue;
+            }
+            if members.iter().all(|m| !self.deadlocked.contains(m)) {
+                self.deadlocks += 1;
+            }
+            now.extend(members);
+        }
+        self.deadlocked = now;
     }
 
     /// Writes the measures of robot `k` (its [`Seen::index`]) into its summary.
@@ -299,6 +322,15 @@ mod tests {
         assert!((r[1].min_clearance_wall_m.expect("walls") - 1.0).abs() < 1e-9, "the border below, 1 m off");
         // Moving apart ends it; a chair that arrived is never stuck.
         t.observe(30.0, &[seen(0, 3.0, 1, true), seen(1, 6.9, 1, false)]);
-        assert!(!t.in_deadlock);
+        assert!(t.deadlocked.is_empty());
+        // Two jams apart from each other, one forming while the other lasts: two more.
+        for k in 0..300 {
+            let mut all = vec![seen(2, 1.0, 0, false), seen(3, 2.1, 0, false)];
+            if k >= 50 {
+                all.extend([seen(4, 11.0, 0, false), seen(5, 12.1, 0, false)]);
+            }
+            t.observe(40.0 + k as f64 * 0.1, &all);
+        }
+        assert_eq!(t.deadlocks, 3);
     }
 }

@@ -467,10 +467,23 @@ impl Scenario {
     pub fn populated(&self, seed: u64) -> Result<Scenario, String> {
         let Some(crowd) = &self.crowd else { return Ok(self.clone()) };
         let lab = world::map::builtin::load_lab_spec(&self.lab_spec()).map_err(|e| format!("{}: {e}", self.lab))?;
-        let trips = crate::crowd::place(&lab, crowd, seed)?;
+        let boxes: Vec<[f64; 4]> = self.obstacles.iter().map(|o| [o.x0, o.y0, o.x1, o.y1]).collect();
+        // Robots the scenario starts itself, where it says.
+        let taken: Vec<[f64; 2]> = self
+            .agents
+            .iter()
+            .filter_map(|a| a.options.get("pose").and_then(toml::Value::as_array))
+            .filter_map(|p| Some([number(p.first()?)?, number(p.get(1)?)?]))
+            .collect();
+        let trips = crate::crowd::place(&lab, &boxes, &taken, crowd, seed)?;
         let mut s = self.clone();
-        for (k, t) in trips.iter().enumerate() {
-            let name = format!("chair{}", k + 1);
+        // chair1, chair2, …, skipping names the scenario's own robots have.
+        let used = |name: &str| {
+            self.agent_of(name).is_some() || self.routes.contains_key(name) || self.expect.robots.contains_key(name)
+        };
+        let mut names = (1..).map(|k| format!("chair{k}")).filter(|n| !used(n));
+        for t in &trips {
+            let name = names.next().unwrap_or_default();
             let mut points = vec![[t.start[0], t.start[1]]];
             points.extend(&t.goals);
             let mut route = Vec::new();
@@ -502,6 +515,11 @@ impl Scenario {
     pub fn ticks(&self) -> u64 {
         (self.seconds * 1000.0 / self.cycle_ms as f64).round().max(1.0) as u64
     }
+}
+
+/// A TOML number, integer or float.
+fn number(v: &toml::Value) -> Option<f64> {
+    v.as_float().or_else(|| v.as_integer().map(|i| i as f64))
 }
 
 /// Turns an agent's options into command-line flags (see the module documentation).
@@ -640,5 +658,24 @@ mod tests {
         assert!(msg.contains("line 5") && msg.contains("positive radius"), "{msg}");
         let msg = parse("[[checkpoints]]\nx = 1\ny = 2\nr = 1\n").expect_err("unknown key").to_string();
         assert!(msg.contains("unknown field `r`"), "{msg}");
+    }
+
+    #[test]
+    fn a_crowd_beside_a_scenarios_own_chairs_takes_other_names_and_keeps_their_routes() {
+        let mut s = Scenario::load("builtin:corridor-swap").expect("built in");
+        s.crowd = Some(crate::crowd::Crowd::of(2));
+        let p = s.populated(4).expect("room for two more");
+        let names: Vec<&str> =
+            p.agents.iter().filter_map(|a| a.options.get("name").and_then(toml::Value::as_str)).collect();
+        assert_eq!(names, ["chair1", "chair2", "chair3", "chair4"]);
+        assert_eq!((p.routes["chair1"].clone(), p.routes["chair2"].clone()), (vec![2], vec![1]), "theirs kept");
+        assert_eq!((p.routes["chair3"].clone(), p.routes["chair4"].clone()), (vec![4], vec![6]));
+        assert_eq!(p.checkpoints.len(), 2 + 4);
+        // Nobody starts on the swap's chairs (14.5, 6) and (24.5, 6).
+        for a in &p.agents[2..] {
+            let pose = a.options["pose"].as_array().expect("a pose");
+            let (x, y) = (number(&pose[0]).expect("x"), number(&pose[1]).expect("y"));
+            assert!([(14.5, 6.0), (24.5, 6.0)].iter().all(|&(u, v)| (x - u).hypot(y - v) >= 2.0), "{x}, {y}");
+        }
     }
 }
