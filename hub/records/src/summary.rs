@@ -80,6 +80,13 @@ pub struct RobotSummary {
     pub still_s: f64,
 }
 
+impl RobotSummary {
+    /// Whether it has a route and has reached every checkpoint of it.
+    pub fn finished_route(&self) -> bool {
+        !self.route.is_empty() && self.checkpoints_reached == self.checkpoints_total
+    }
+}
+
 /// Many robots in one run, measured as the field measures multi-robot navigation: present in
 /// a summary when two or more robots have routes.
 #[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]

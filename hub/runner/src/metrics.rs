@@ -24,7 +24,8 @@ pub struct Shape {
 
 impl Shape {
     /// The shape with these corners.
-    pub fn new(corners: Vec<[f64; 2]>) -> Self {
+    pub fn new(corners: impl IntoIterator<Item = [f64; 2]>) -> Self {
+        let corners: Vec<[f64; 2]> = corners.into_iter().collect();
         let mut lo = [f64::INFINITY; 2];
         let mut hi = [f64::NEG_INFINITY; 2];
         for c in &corners {
@@ -240,7 +241,7 @@ impl Traffic {
     /// Writes the measures of robot `k` (its [`Seen::index`]) into its summary.
     pub fn fill(&self, k: usize, r: &mut RobotSummary) {
         let Some(m) = self.robots.get(k) else { return };
-        r.arrived = !r.route.is_empty() && r.checkpoints_reached == r.checkpoints_total;
+        r.arrived = r.finished_route();
         r.min_clearance_wall_m = m.min_wall.is_finite().then_some(m.min_wall);
         r.min_clearance_chair_m = m.min_chair.is_finite().then_some(m.min_chair);
         r.contacts_chair = m.contacts_chair;

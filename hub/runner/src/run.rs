@@ -22,12 +22,11 @@ use std::time::{Duration, Instant};
 
 use anyhow::Context as _;
 use records::outcome::HubOutcome;
-
-use crate::metrics;
 pub use records::summary::{RobotSummary, RunSummary};
 
 use crate::args::RunArgs;
 use crate::chair::{self, ChairSummary};
+use crate::metrics;
 use crate::scenario::{ChairSpec, Scenario, option_flags};
 use crate::signals::{Signal, Signals};
 
@@ -132,9 +131,8 @@ pub fn judge_recording(path: &Path, scenario: &Scenario, logs: &Path) -> anyhow:
     let dt = recording.start.dt_s;
     let mut judges: std::collections::BTreeMap<String, (usize, Judge)> = std::collections::BTreeMap::new();
     let start = &recording.start;
-    let shape = |corners: &mut dyn Iterator<Item = [f64; 2]>| metrics::Shape::new(corners.collect());
     let fixed = metrics::Fixed::new(
-        start.lab.walls.iter().map(|w| shape(&mut w.corners.iter().map(|c| [c.x, c.y]))).collect(),
+        start.lab.walls.iter().map(|w| metrics::Shape::new(w.corners.iter().map(|c| [c.x, c.y]))).collect(),
         start.obstacle_from,
         start.lab.width_m,
         start.lab.height_m,
@@ -156,11 +154,11 @@ pub fn judge_recording(path: &Path, scenario: &Scenario, logs: &Path) -> anyhow:
             let s = &judge.s;
             seen.push(metrics::Seen {
                 index: *index,
-                body: shape(&mut r.corners().iter().map(|c| [c.x, c.y])),
+                body: metrics::Shape::new(r.corners().iter().map(|c| [c.x, c.y])),
                 pos: [r.pose.x, r.pose.y],
                 contacts: r.collision_count,
                 routed: !s.route.is_empty(),
-                arrived: !s.route.is_empty() && s.checkpoints_reached == s.checkpoints_total,
+                arrived: s.finished_route(),
             });
         }
         traffic.observe(t, &seen);
