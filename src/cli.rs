@@ -33,6 +33,9 @@ pub enum Command {
     /// Joins a physical wheelchair to a hub over its board's serial port (RS232): the chair
     /// becomes a Real robot that the agent registering the same name drives.
     Serial(serial_bridge::SerialArgs),
+    /// Resumes a physical chair after a stop: its adapter holds every stop until this word
+    /// (or `iwsim serial --auto-resume`), and drives it again once every cause has cleared.
+    Resume(crate::resume::ResumeArgs),
     /// A stand-in for a physical wheelchair and its acquisition board on a pseudo-terminal:
     /// a simulated chair in its own room, with a real chair's imperfections.
     ChairEmulator(chair_emulator::EmulatorArgs),

@@ -4,6 +4,7 @@
 
 pub mod cli;
 pub mod mapcheck;
+pub mod resume;
 mod stop_on_signals;
 
 use std::process::ExitCode;
@@ -55,6 +56,7 @@ pub fn run(cli: Cli) -> anyhow::Result<ExitCode> {
             serial_bridge::run(args, &never)?;
             Ok(ExitCode::SUCCESS)
         }
+        Command::Resume(args) => resume::resume(&args),
         Command::ChairEmulator(args) => {
             let stop = stop_on_signals::install()?;
             chair_emulator::run(args, stop)?;

@@ -7,12 +7,12 @@ use std::collections::{BTreeMap, BTreeSet};
 use bytemuck::Zeroable;
 use ipc_types::{
     ACT_GHOST, ACT_LINK_DOWN, ACT_MOTORS, ACT_POSE, ACT_REAL, ACT_SAY, ActionBlock, CHAIR_CONTROLLED, CHAIR_GHOST,
-    CHAIR_LINK_UP, COLLISION, ChairState, Command, DRIVE_CONTROLLED, DRIVE_FRESH, FixedName, HAS_COMPASS, HAS_GPS,
-    HAS_GROUND, HubParams, InboxEntry, MAP_BEACON, MAP_CHECKPOINT, MAP_CORNER, MAP_GRID, MAP_TARGET, MAP_WALL,
-    MAX_AGENTS, MAX_INBOX_MESSAGES, MAX_PROXIMITY, MAX_ROBOTS, MapHeader, MapItem, REG_CHAIR, REG_DISC, REG_HAS_POSE,
-    ROBOT_COLLISION, ROBOT_DISC, ROBOT_FROZEN, ROBOT_LAGGING, Refusal, RobotKind as WireKind, RobotRegistration,
-    RobotSensors, RobotState, RunState, SENSOR_BEACON, SENSOR_COLLISION, SENSOR_COMPASS, SENSOR_GPS, SENSOR_GROUND,
-    SENSOR_OBSTACLE, SensorBlock, SensorGeometry, SensorMode, WorldHeader,
+    CHAIR_LINK_UP, COLLISION, ChairState, Command, DRIVE_CONTROLLED, DRIVE_FRESH, DRIVE_RESUMES_SHIFT, FixedName,
+    HAS_COMPASS, HAS_GPS, HAS_GROUND, HubParams, InboxEntry, MAP_BEACON, MAP_CHECKPOINT, MAP_CORNER, MAP_GRID,
+    MAP_TARGET, MAP_WALL, MAX_AGENTS, MAX_INBOX_MESSAGES, MAX_PROXIMITY, MAX_ROBOTS, MapHeader, MapItem, REG_CHAIR,
+    REG_DISC, REG_HAS_POSE, ROBOT_COLLISION, ROBOT_DISC, ROBOT_FROZEN, ROBOT_LAGGING, Refusal, RobotKind as WireKind,
+    RobotRegistration, RobotSensors, RobotState, RunState, SENSOR_BEACON, SENSOR_COLLISION, SENSOR_COMPASS, SENSOR_GPS,
+    SENSOR_GROUND, SENSOR_OBSTACLE, SensorBlock, SensorGeometry, SensorMode, WorldHeader,
 };
 
 use recorder::journal::{Event, RecordedAction, RunStart};
@@ -113,6 +113,8 @@ struct ChairLink {
     real_encoders: Option<[i64; 2]>,
     ghost: Option<[f64; 3]>,
     link_up: bool,
+    /// The operator's resume requests so far (wrapping), published in `drive_flags`.
+    resumes: u16,
 }
 
 impl ChairLink {
@@ -126,6 +128,7 @@ impl ChairLink {
             real_encoders: None,
             ghost: None,
             link_up: false,
+            resumes: 0,
         }
     }
 
@@ -658,6 +661,11 @@ impl HubCore {
                 }
                 None => return 2,
             },
+            Command::ResumeChair => match self.robots.get_mut(&robot_id) {
+                Some(RobotEntry { chair: Some(c), .. }) => c.resumes = c.resumes.wrapping_add(1),
+                Some(_) => return 3,
+                None => return 2,
+            },
             _ => return 3,
         }
         0
@@ -816,6 +824,7 @@ impl HubCore {
                 b.drive = c.drive.map(|v| v as f32);
                 b.drive_flags = DRIVE_CONTROLLED | (c.drive_tick.is_some_and(|t| t + 1 >= tick) as u32 * DRIVE_FRESH);
             }
+            b.drive_flags |= u32::from(c.resumes) << DRIVE_RESUMES_SHIFT;
         }
         b
     }
@@ -1379,6 +1388,11 @@ mod tests {
         let b = c.sensor_block(id);
         assert_eq!((b.drive, b.drive_flags), ([0.0, 0.0], 0));
         assert_eq!(c.robot_count(), 1);
+        // The operator's resume requests reach the adapter as a count, controlled or not.
+        assert_eq!(c.command(Command::ResumeChair, id), 0);
+        assert_eq!(c.command(Command::ResumeChair, id), 0);
+        assert_eq!(ipc_types::drive_resumes(c.sensor_block(id).drive_flags), 2);
+        assert_eq!(c.command(Command::ResumeChair, 99), 2, "no such robot");
         let chair = c.chair_states().next().expect("one chair");
         assert_eq!((chair.controller, chair.flags & CHAIR_CONTROLLED), (0, 0));
         assert_eq!(chair.ghost, [10.6, 6.0, 2.0]);
@@ -1516,6 +1530,9 @@ mod tests {
         assert_eq!(c.command(Command::Pause, 0), 0);
         assert_eq!(c.state(), RunState::Paused);
         assert_eq!(c.command(Command::RemoveRobot, 42), 2);
+        let agent = c.hello(7).expect("room");
+        let (robot, _) = c.register(agent, &RobotRegistration::new("r1")).expect("registered");
+        assert_eq!(c.command(Command::ResumeChair, robot), 3, "a simulated robot has no latch to resume");
         c.command(Command::Stop, 0);
         assert_eq!(c.state(), RunState::Finished);
         assert!(!c.may_step());

@@ -341,6 +341,15 @@ pub const DRIVE_CONTROLLED: u32 = 1;
 /// so `drive` is current; without it the powers are stale and the adapter must stop the chair
 /// once they have been for 200 ms.
 pub const DRIVE_FRESH: u32 = 1 << 1;
+/// `SensorBlock::drive_flags`: bits 16–31 count the operator's resume requests for this chair
+/// ([`Command::ResumeChair`]), wrapping. A count, not a one-tick bit: an adapter that misses a
+/// block still sees that the count moved, and a block read twice is not a second request.
+pub const DRIVE_RESUMES_SHIFT: u32 = 16;
+
+/// The operator's resume requests counted in `drive_flags` (see [`DRIVE_RESUMES_SHIFT`]).
+pub fn drive_resumes(drive_flags: u32) -> u16 {
+    (drive_flags >> DRIVE_RESUMES_SHIFT) as u16
+}
 
 /// One message heard: who said it and where its bytes are in `SensorBlock::inbox_bytes`.
 #[repr(C)]
@@ -857,6 +866,9 @@ pub enum Command {
     Stop = 3,
     /// Remove robot `robot_id`.
     RemoveRobot = 4,
+    /// The operator resumes physical chair `robot_id` after a latched stop: its adapter drives
+    /// it again only on this word (or with `--auto-resume`), once every cause has cleared.
+    ResumeChair = 5,
 }
 
 impl Command {
@@ -868,6 +880,7 @@ impl Command {
             2 => Some(Self::Step),
             3 => Some(Self::Stop),
             4 => Some(Self::RemoveRobot),
+            5 => Some(Self::ResumeChair),
             _ => None,
         }
     }

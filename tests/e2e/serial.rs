@@ -10,7 +10,7 @@ use std::time::{Duration, Instant};
 
 use serde_json::Value;
 
-use crate::common::{Lines, Next, Proc, assert_no_shared_memory_left, session, wait_for_tick};
+use crate::common::{Lines, Next, Proc, assert_no_shared_memory_left, session, text, wait_for_tick};
 
 /// The board must be stopped within this much of the cause (issue 13).
 const STOP_WITHIN_NS: u64 = 300_000_000;
@@ -154,9 +154,40 @@ impl Rig {
     /// chair) and waits until the board applies its powers.
     fn control(&mut self) {
         let since = now_ns();
+        self.spawn_controller();
+        self.truth.wait_for(since, Duration::from_secs(30), "the controller's powers at the board", driving);
+    }
+
+    fn spawn_controller(&mut self) {
         self.controller =
             Some(Proc::spawn(&["agent", "wheelchair", "--session", &self.s, "--name", "chair", "--powers", "0.4,0.4"]));
-        self.truth.wait_for(since, Duration::from_secs(30), "the controller's powers at the board", driving);
+    }
+
+    /// The operator's `iwsim resume chair1`, as a user types it; what it printed.
+    fn resume(&self) -> String {
+        let out = Proc::spawn(&["resume", "chair1", "--session", &self.s]).wait(Duration::from_secs(30));
+        assert!(out.status.success(), "iwsim resume: {:?} {}", out.status, text(&out.stderr));
+        text(&out.stdout)
+    }
+
+    /// After a stop whose causes have all cleared: the adapter says the chair is held, the
+    /// board gets no power for half a second of its own clock, and the operator's resume
+    /// drives it again (issue 27, fault 8: the adapter used to drive on by itself).
+    fn held_until_resumed(&mut self, what: &str) {
+        self.adapter_log.said("stays stopped until the operator resumes it", Duration::from_secs(20));
+        let since = now_ns();
+        let board_ms = |v: &Value| v.get("x").and(v["board_ms"].as_f64());
+        let first = self.truth.wait_for(since, Duration::from_secs(10), what, |v| board_ms(v).is_some());
+        let from = board_ms(&first).expect("a step");
+        self.truth.wait_for(since, Duration::from_secs(10), what, |v| board_ms(v).is_some_and(|t| t >= from + 500.0));
+        let driven: Vec<&Value> =
+            self.truth.lines.iter().filter(|v| v["t_ns"].as_u64().is_some_and(|t| t >= since) && driving(v)).collect();
+        assert!(driven.is_empty(), "{what}: the chair drove on before the operator resumed it: {driven:?}");
+        let said = self.resume();
+        assert!(said.contains("asked to resume chair1"), "{said:?}");
+        let since = now_ns();
+        self.truth.wait_for(since, Duration::from_secs(10), &format!("{what}: driving after iwsim resume"), driving);
+        self.adapter_log.said("resuming after the stop", Duration::from_secs(10));
     }
 
     /// Runs `cause` while the chair drives, and returns how long after it the board's motors
@@ -294,23 +325,25 @@ fn the_bridge_drives_the_emulated_chair_and_its_pose_in_the_hub_follows() {
 fn every_way_the_chair_can_lose_its_driver_stops_it_within_300_ms() {
     let mut rig = Rig::start("serial-safety");
 
-    // The controller stops answering (SIGSTOP), then comes back: the chair drives again.
+    // The controller stops answering (SIGSTOP). A resume asked meanwhile is refused, not kept
+    // for later; when it comes back, the chair stays stopped until the operator resumes it.
     rig.stop_after("the controller stopped (SIGSTOP)", |r| r.controller.as_ref().expect("controller").signal("STOP"));
-    let since = now_ns();
+    rig.resume();
+    rig.adapter_log.said("resume refused: the controlling agent stopped answering", Duration::from_secs(10));
     rig.controller.as_ref().expect("controller").signal("CONT");
-    rig.truth.wait_for(since, Duration::from_secs(10), "driving again after SIGCONT", driving);
+    rig.held_until_resumed("the controller back after SIGCONT");
 
     // The controller dies.
     rig.stop_after("the controller killed (SIGKILL)", |r| r.controller.as_mut().expect("controller").kill9());
     // The hub watches agents' pids, so the dead controller lets go at once; a new one attaches.
-    rig.control();
+    rig.spawn_controller();
+    rig.held_until_resumed("a new controller attached");
 
     // The board's transmit line breaks: the adapter hears nothing for 200 ms and stops the
-    // chair (the board still receives). When the line mends, the chair drives again.
+    // chair (the board still receives). When the line mends, the operator resumes it.
     rig.stop_after("the board went silent (TX muted)", |r| r.signal_emulator("USR1"));
-    let since = now_ns();
     rig.signal_emulator("USR1");
-    rig.truth.wait_for(since, Duration::from_secs(10), "driving again after the line mends", driving);
+    rig.held_until_resumed("the board's line mended");
 
     // A burst of garbage, corrupt and truncated frames from the board changes nothing: the
     // chair keeps its powers for the next second of board time.
@@ -341,7 +374,7 @@ fn every_way_the_chair_can_lose_its_driver_stops_it_within_300_ms() {
     rig.emulator = Some(emulator);
     rig.emulator_out = out;
     rig.truth = Truth::new(truth_path);
-    rig.truth.wait_for(0, Duration::from_secs(20), "the new board driven after reconnecting", driving);
+    rig.held_until_resumed("the cable plugged back");
     let after = rig.hub_pose();
     assert!(dist(after, before[0], before[1]) < 0.5, "the odometry jumped on reconnect: {before:?} → {after:?}");
 

@@ -45,6 +45,10 @@ pub struct LinkConfig {
     pub hub_ticks_per_m: f64,
     /// Where the chair starts: x, y metres, heading degrees.
     pub start_pose: [f64; 3],
+    /// The chair's name in the hub (for the operator's resume command).
+    pub robot: String,
+    /// Resume after a stop as soon as every cause has cleared (see [`Safety::with_auto_resume`]).
+    pub auto_resume: bool,
 }
 
 /// What the adapter did, for its report at exit.
@@ -64,6 +68,8 @@ pub struct Outcome {
     pub writes_dropped: u64,
     /// Each stop: why, and the last hub tick seen when it began.
     pub stops: Vec<(StopCause, u64)>,
+    /// Stops lifted (by the operator, or `--auto-resume`).
+    pub resumes: u32,
     /// Times the port came back after going away.
     pub reconnects: u32,
 }
@@ -75,7 +81,7 @@ impl std::fmt::Display for Outcome {
             f,
             "{} ticks; {} frames from the board, dropped: {} crc, {} malformed, {} oversize, {} bad version, {} \
              unknown type, {} bad length, {} invalid field ({} missed by sequence number, {} unexpected); {} \
-             commands dropped on a full port; {} stops",
+             commands dropped on a full port; {} stops, {} resumed",
             self.ticks,
             s.frames,
             s.crc_errors,
@@ -88,7 +94,8 @@ impl std::fmt::Display for Outcome {
             s.missed,
             self.unexpected_frames,
             self.writes_dropped,
-            self.stops.len()
+            self.stops.len(),
+            self.resumes
         )?;
         for (cause, tick) in &self.stops {
             write!(f, "; at tick {tick}: {cause}")?;
@@ -129,8 +136,9 @@ impl BoardLink {
     /// Takes over an open port and says Hello to its board.
     pub fn new(cfg: LinkConfig, port: Port) -> BoardLink {
         let hello = Hello { sample_period_ms: if cfg.stepped { hello_period(cfg.cycle_ms) } else { 0 } };
-        let safety =
-            Safety::new(Duration::ZERO, cfg.stepped, hello).with_cycle(Duration::from_millis(u64::from(cfg.cycle_ms)));
+        let safety = Safety::new(Duration::ZERO, cfg.stepped, hello)
+            .with_cycle(Duration::from_millis(u64::from(cfg.cycle_ms)))
+            .with_auto_resume(cfg.auto_resume);
         let odometry = WheelOdometry::new(cfg.start_pose, chair::BODY[1], chair::WHEEL_RADIUS_M);
         let mut link = BoardLink {
             cfg,
@@ -442,7 +450,16 @@ impl BoardLink {
                     "iwsim serial: no StopAck within 1 s for the stop ({cause}); the board's watchdog holds the motors"
                 ),
                 Output::Resume(cause) => {
-                    agent_sdk::report!("iwsim serial: cleared ({cause}); saying Hello to resume");
+                    agent_sdk::report!("iwsim serial: resuming after the stop ({cause})");
+                    self.outcome.resumes += 1;
+                }
+                Output::AwaitingResume(cause) => agent_sdk::report!(
+                    "iwsim serial: every cause of the stop ({cause}) has cleared; the chair stays stopped until \
+                     the operator resumes it (`iwsim resume {} --session …`, or `r` in `iwsim agent teleop`)",
+                    self.cfg.robot
+                ),
+                Output::ResumeRefused(cause) => {
+                    agent_sdk::report!("iwsim serial: resume refused: {cause}; ask again once it has cleared")
                 }
                 Output::BoardReady => agent_sdk::report!("iwsim serial: the board answered; the link is up"),
             }

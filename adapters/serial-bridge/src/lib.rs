@@ -93,6 +93,11 @@ pub struct SerialArgs {
     /// walls (see `localise`), so the pose drifts as the wheels slip.
     #[arg(long)]
     pub odometry_only: bool,
+    /// Drive on after a stop as soon as every cause has cleared. Without it a stop latches
+    /// until the operator resumes the chair (`iwsim resume NAME`, or `r` in teleop): for
+    /// emulated chairs and tests, never for a chair with someone in it.
+    #[arg(long)]
+    pub auto_resume: bool,
 }
 
 /// `--mode`: the chair's sensor mode (thesis §5.4.3).
@@ -210,14 +215,17 @@ fn serve(agent: &mut Agent, port: Port, args: &SerialArgs, stop: &AtomicBool) ->
         cycle_ms: map.header.cycle_ms,
         hub_ticks_per_m: map.header.params.encoder_ticks_per_m,
         start_pose: args.pose,
+        robot: name.to_owned(),
+        auto_resume: args.auto_resume,
     };
     agent_sdk::report!(
-        "iwsim serial: chair {name} is robot {id} in session {:?} ({:?} sensors{}, {}), starting at {:?}",
+        "iwsim serial: chair {name} is robot {id} in session {:?} ({:?} sensors{}, {}), starting at {:?}; {}",
         args.hub.session,
         args.mode.wire(),
         if args.stepped { ", stepped board" } else { "" },
         if args.odometry_only { "odometry pose" } else { "odometry map-matched to the walls" },
-        args.pose
+        args.pose,
+        if args.auto_resume { "stops lift when their causes clear" } else { "stops latch until the operator resumes" }
     );
     let mut board = BoardLink::new(cfg, port);
     if !args.odometry_only {
@@ -391,6 +399,7 @@ mod tests {
             pose,
             stepped: false,
             odometry_only: false,
+            auto_resume: false,
         };
         let long = "x".repeat(40);
         for (robot, pose, option) in

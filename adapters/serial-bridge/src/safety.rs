@@ -10,8 +10,15 @@
 //! down. A stop is sent only while the chair may be moving by our command (we sent motor
 //! powers since the last Hello or stop), except at shutdown, which always sends one: before
 //! any motor command the board holds its motors at zero on its own (a Hello zeroes them, its
-//! watchdog needs MotorPowers to let them turn). When every cause has cleared and the
-//! controller answers again, a Hello clears the board's latched stop and driving resumes.
+//! watchdog needs MotorPowers to let them turn).
+//!
+//! A stop latches: when every cause has cleared and the controller answers again, the chair
+//! stays stopped until the operator resumes it (`iwsim resume`, teleop's `r` key: the hub's
+//! `ResumeChair` count in the chair's block), as wheelchair safety practice has it — a chair
+//! that drives off on its own when a stalled program recovers surprises its occupant. Then a
+//! Hello clears the board's latched stop and driving resumes. `--auto-resume` (emulated chairs,
+//! tests) resumes as soon as every cause has cleared. A resume asked while a cause holds is
+//! refused, not kept for later: it never takes effect at a moment nobody chose.
 
 use std::fmt;
 use std::time::Duration;
@@ -95,8 +102,15 @@ pub enum Output {
     StopAcked(StopCause),
     /// No StopAck came within 1 s; the board's own watchdog is the remaining guard.
     StopUnacknowledged(StopCause),
-    /// Every cause of the last stop has cleared: a Hello is on its way to clear the latch.
+    /// The chair was resumed after this stop (by the operator, or `--auto-resume`): a Hello
+    /// clears the board's latch if it holds one, then driving resumes.
     Resume(StopCause),
+    /// Every cause of this stop has cleared; the chair stays stopped until the operator
+    /// resumes it. Said once per stop.
+    AwaitingResume(StopCause),
+    /// The operator asked to resume while this cause still holds: refused (ask again once it
+    /// has cleared).
+    ResumeRefused(StopCause),
     /// The board answered the Hello: the link is up.
     BoardReady,
 }
@@ -140,6 +154,17 @@ pub struct Safety {
     stopping: Option<Stopping>,
     /// The stop the board holds latched (until a Hello's BoardInfo).
     latched: Option<StopCause>,
+    /// The stop the host holds until a resume, whatever became of the board's latch (a new
+    /// port's Hello clears that one, and must not drive the chair on by itself).
+    held: Option<StopCause>,
+    /// Resume as soon as every cause has cleared, without the operator's word.
+    auto_resume: bool,
+    /// The hub's count of resume requests at the last tick (`None` before the first).
+    resumes_seen: Option<u16>,
+    /// A resume request not yet honoured or refused.
+    resume_asked: bool,
+    /// `AwaitingResume` was said for the stop held.
+    awaiting_said: bool,
     motor_fault: bool,
     /// The board sent a SimTruth: it is the chair emulator.
     emulated: bool,
@@ -171,6 +196,11 @@ impl Safety {
             engaged: false,
             stopping: None,
             latched: None,
+            held: None,
+            auto_resume: false,
+            resumes_seen: None,
+            resume_asked: false,
+            awaiting_said: false,
             motor_fault: false,
             emulated: false,
             shutdown: None,
@@ -186,6 +216,13 @@ impl Safety {
     pub fn with_cycle(mut self, cycle: Duration) -> Safety {
         self.hub_quiet_after = QUIET.max(cycle + TICK_SLACK);
         self.controller_quiet_after = CONTROLLER_QUIET.max(2 * cycle + TICK_SLACK);
+        self
+    }
+
+    /// Resumes after a stop as soon as every cause has cleared, without the operator's word:
+    /// for emulated chairs and tests, never for a chair with someone in it.
+    pub fn with_auto_resume(mut self, auto_resume: bool) -> Safety {
+        self.auto_resume = auto_resume;
         self
     }
 
@@ -263,8 +300,16 @@ impl Safety {
     }
 
     /// A hub tick with the chair's `drive` powers and `DRIVE_*` flags: sends the motor powers
-    /// when driving is safe, a Hello when a stop's causes have cleared, else a Heartbeat.
+    /// when driving is safe, a Hello when a stop was resumed and the board holds its latch,
+    /// else a Heartbeat.
     pub fn tick(&mut self, now: Duration, drive: [f32; 2], drive_flags: u32) {
+        let resumes = ipc_types::drive_resumes(drive_flags);
+        // A count that moved since the last tick is a request; the first tick sets the count
+        // (requests made before this adapter ran were not for the stop it holds).
+        if self.resumes_seen.is_some_and(|seen| seen != resumes) {
+            self.resume_asked = true;
+        }
+        self.resumes_seen = Some(resumes);
         // DRIVE_FRESH in this tick's block says the controller answered the *previous* tick,
         // so its last sign of life is dated from when that tick came, not this one: a
         // controller that stops right after answering is then stopped 200 ms later, not
@@ -281,16 +326,37 @@ impl Safety {
         if !self.port_open || self.shutdown.is_some() {
             return;
         }
-        let clear = fresh && self.fault(now).is_none() && self.stopping.is_none();
+        let fault = self.fault(now);
+        if self.resume_asked {
+            match (self.held, fault) {
+                // Nothing to resume.
+                (None, _) => self.resume_asked = false,
+                (Some(_), Some(f)) => {
+                    self.resume_asked = false;
+                    self.out.push(Output::ResumeRefused(f));
+                }
+                // Kept while only the stop's repeats or the controller's next answer are
+                // awaited: each ends within a second, as a resume or a fault.
+                (Some(_), None) => {}
+            }
+        }
+        let clear = fresh && fault.is_none() && self.stopping.is_none();
+        if clear && let Some(cause) = self.held {
+            if self.auto_resume || self.resume_asked {
+                self.held = None;
+                self.resume_asked = false;
+                self.out.push(Output::Resume(cause));
+            } else if !self.awaiting_said {
+                self.awaiting_said = true;
+                self.out.push(Output::AwaitingResume(cause));
+            }
+        }
+        let clear = clear && self.held.is_none();
         if clear && self.board_known && self.hello_due.is_none() && self.latched.is_none() {
             let [left_permille, right_permille] = drive.map(permille);
             self.send(Message::MotorPowers(MotorPowers { left_permille, right_permille }));
             self.engaged = true;
-        } else if clear
-            && self.hello_due.is_none()
-            && let Some(cause) = self.latched
-        {
-            self.out.push(Output::Resume(cause));
+        } else if clear && self.hello_due.is_none() && self.latched.is_some() {
             self.say_hello(now);
         } else {
             self.send(Message::Heartbeat);
@@ -414,6 +480,8 @@ impl Safety {
 
     fn start_stop(&mut self, now: Duration, cause: StopCause) {
         self.engaged = false;
+        self.held = Some(cause);
+        self.awaiting_said = false;
         self.out.push(Output::Stop(cause));
         if self.port_open {
             self.send_stop(cause);
@@ -691,8 +759,8 @@ mod tests {
     }
 
     #[test]
-    fn after_a_stop_whose_cause_cleared_a_hello_clears_the_latch_and_driving_resumes() {
-        let mut s = driving(500);
+    fn with_auto_resume_a_stop_whose_cause_cleared_is_followed_by_a_hello_and_driving() {
+        let mut s = driving(500).with_auto_resume(true);
         s.frame(ms(600), &Message::Sample(Sample::default()));
         s.tick(ms(600), [0.5, 0.5], DRIVE_CONTROLLED);
         s.poll(ms(710));
@@ -740,8 +808,111 @@ mod tests {
         s.port_opened(ms(450));
         assert_eq!(sends(&mut s), vec![Message::Hello(Hello::default())]);
         s.frame(ms(460), &info());
+        // The new board's latch is clear, but the stop is the host's to lift.
         s.tick(ms(500), [0.5, 0.5], CF);
+        assert_eq!(
+            s.drain().collect::<Vec<_>>(),
+            vec![Output::BoardReady, Output::AwaitingResume(StopCause::PortGone), Output::Send(Message::Heartbeat)]
+        );
+        s.tick(ms(600), [0.5, 0.5], CF | RESUME);
+        assert_eq!(
+            s.drain().collect::<Vec<_>>(),
+            vec![Output::Resume(StopCause::PortGone), Output::Send(powers(500, 500))],
+            "resumed: the board was said Hello when the port opened, so it drives at once"
+        );
+    }
+
+    /// A block saying the operator asked for one resume (the hub's count moved from 0 to 1).
+    const RESUME: u32 = 1 << ipc_types::DRIVE_RESUMES_SHIFT;
+
+    #[test]
+    fn a_stop_whose_causes_cleared_holds_the_chair_until_the_operator_resumes_it() {
+        // A controller that stopped answering is stopped (acknowledged at 720 ms), and answers
+        // again from 800 ms.
+        let mut s = driving(500);
+        s.frame(ms(600), &Message::Sample(Sample::default()));
+        s.tick(ms(600), [0.5, 0.5], DRIVE_CONTROLLED);
+        s.poll(ms(710));
+        assert!(s.drain().any(|o| o == Output::Stop(StopCause::ControllerQuiet)));
+        s.frame(ms(720), &Message::StopAck(StopAck::default()));
+        s.drain().for_each(drop);
+        // Every cause has cleared, for as long as you like: the chair is not driven, and the
+        // wait is said once.
+        let mut out = Vec::new();
+        for t in (800..3000).step_by(100) {
+            s.frame(ms(t), &Message::Sample(Sample::default()));
+            s.tick(ms(t), [0.5, 0.5], CF);
+            s.poll(ms(t + 50));
+            out.extend(s.drain());
+        }
+        assert_eq!(out.iter().filter(|o| **o == Output::AwaitingResume(StopCause::ControllerQuiet)).count(), 1);
+        assert!(
+            out.iter().all(|o| matches!(o, Output::AwaitingResume(_) | Output::Send(Message::Heartbeat))),
+            "nothing but heartbeats while held: {out:?}"
+        );
+        // The operator's word: Hello clears the board's latch, then the powers flow.
+        s.frame(ms(3000), &Message::Sample(Sample::default()));
+        s.tick(ms(3000), [0.5, 0.5], CF | RESUME);
+        assert_eq!(
+            s.drain().collect::<Vec<_>>(),
+            vec![Output::Resume(StopCause::ControllerQuiet), Output::Send(Message::Hello(Hello::default()))]
+        );
+        s.frame(ms(3010), &info());
+        s.frame(ms(3100), &Message::Sample(Sample::default()));
+        s.tick(ms(3100), [0.5, 0.5], CF | RESUME);
         assert_eq!(sends(&mut s), vec![powers(500, 500)]);
+    }
+
+    #[test]
+    fn a_resume_asked_while_a_cause_holds_is_refused_and_not_kept_for_later() {
+        let mut s = driving(500);
+        s.frame(ms(600), &Message::Sample(Sample::default()));
+        s.tick(ms(600), [0.0, 0.0], 0);
+        assert!(s.drain().any(|o| o == Output::Stop(StopCause::ControllerLost)));
+        s.frame(ms(610), &Message::StopAck(StopAck::default()));
+        // Asked while no agent controls the chair: refused.
+        s.frame(ms(700), &Message::Sample(Sample::default()));
+        s.tick(ms(700), [0.0, 0.0], RESUME);
+        let out: Vec<Output> = s.drain().collect();
+        assert!(out.contains(&Output::ResumeRefused(StopCause::ControllerLost)), "{out:?}");
+        // A controller attaches (the count stays where it was): still held.
+        for t in (800..1500).step_by(100) {
+            s.frame(ms(t), &Message::Sample(Sample::default()));
+            s.tick(ms(t), [0.5, 0.5], CF | RESUME);
+        }
+        let out: Vec<Output> = s.drain().collect();
+        assert!(
+            !out.iter()
+                .any(|o| matches!(o, Output::Resume(_) | Output::Send(Message::MotorPowers(_) | Message::Hello(_)))),
+            "a refused resume came back by itself: {out:?}"
+        );
+        assert!(out.contains(&Output::AwaitingResume(StopCause::ControllerLost)), "{out:?}");
+        // Asked again, now that it has cleared.
+        s.tick(ms(1500), [0.5, 0.5], CF | (2 * RESUME));
+        assert!(s.drain().any(|o| o == Output::Resume(StopCause::ControllerLost)));
+    }
+
+    #[test]
+    fn requests_made_before_the_adapter_started_are_not_a_resume() {
+        let mut s = Safety::new(ms(0), false, Hello::default());
+        s.port_opened(ms(0));
+        s.frame(ms(0), &info());
+        // The hub's count is already 5 at the first tick: nothing to compare it with.
+        for t in (0..=500).step_by(100) {
+            s.frame(ms(t), &Message::Sample(Sample::default()));
+            s.tick(ms(t), [0.5, 0.5], CF | (5 * RESUME));
+        }
+        s.frame(ms(600), &Message::Sample(Sample::default()));
+        s.tick(ms(600), [0.5, 0.5], DRIVE_CONTROLLED | (5 * RESUME));
+        s.poll(ms(710));
+        s.frame(ms(720), &Message::StopAck(StopAck::default()));
+        s.drain().for_each(drop);
+        s.frame(ms(800), &Message::Sample(Sample::default()));
+        s.tick(ms(800), [0.5, 0.5], CF | (5 * RESUME));
+        assert_eq!(
+            s.drain().collect::<Vec<_>>(),
+            vec![Output::AwaitingResume(StopCause::ControllerQuiet), Output::Send(Message::Heartbeat)]
+        );
     }
 
     #[test]

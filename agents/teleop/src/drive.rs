@@ -51,7 +51,7 @@ impl Drive {
         STEPS[self.step]
     }
 
-    /// Applies a key; whether anything changed. [`Key::Quit`] changes nothing here.
+    /// Applies a key; whether anything changed. [`Key::Quit`] and [`Key::Resume`] change nothing here.
     pub fn apply(&mut self, key: Key) -> bool {
         let before = *self;
         let step = self.step();
@@ -63,7 +63,7 @@ impl Drive {
             Key::Stop => (self.speed, self.turn) = (0.0, 0.0),
             Key::StepUp => self.step = (self.step + 1).min(STEPS.len() - 1),
             Key::StepDown => self.step = self.step.saturating_sub(1),
-            Key::Quit => {}
+            Key::Quit | Key::Resume => {}
         }
         *self != before
     }

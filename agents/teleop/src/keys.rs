@@ -23,6 +23,8 @@ pub enum Key {
     StepUp,
     /// `-` (or `_`): a smaller step.
     StepDown,
+    /// `r`: ask the hub to resume a physical chair after a latched stop.
+    Resume,
     /// `q`, Ctrl-C or Ctrl-D: leave.
     Quit,
 }
@@ -136,6 +138,7 @@ impl KeyParser {
             b' ' => Some(Key::Stop),
             b'+' | b'=' => Some(Key::StepUp),
             b'-' | b'_' => Some(Key::StepDown),
+            b'r' | b'R' => Some(Key::Resume),
             b'q' | b'Q' | 0x03 | 0x04 => Some(Key::Quit),
             _ => None,
         }

@@ -61,6 +61,8 @@ Keys:
   Right or d    steer right: -1 step of turn
   space         stop: speed and turn to 0
   + / -         larger / smaller step (0.01 … 0.5; starts at 0.1)
+  r             resume a physical chair after a stop: its adapter holds every stop until
+                the operator's word, and drives on once every cause has cleared
   q or Ctrl-C   quit (the chair leaves the world)
 
 Wheel powers are speed - turn (left) and speed + turn (right), each clamped to [-1, 1].
@@ -101,6 +103,8 @@ pub struct KeysOutcome {
     pub changed: bool,
     /// The driver asked to leave; keys after the quit key were not applied.
     pub quit: bool,
+    /// The driver asked to resume the chair after a stop (`r`).
+    pub resume: bool,
 }
 
 /// The teleop without I/O: key bytes in, motor actions out.
@@ -112,12 +116,21 @@ pub struct Teleop {
     keys: Vec<Key>,
     tick: Option<Tick>,
     block: Option<SensorBlock>,
+    notice: Option<String>,
 }
 
 impl Teleop {
     /// A stopped chair with robot id `robot_id`.
     pub fn new(robot_id: u32) -> Self {
-        Self { robot_id, drive: Drive::new(), parser: KeyParser::new(), keys: Vec::new(), tick: None, block: None }
+        Self {
+            robot_id,
+            drive: Drive::new(),
+            parser: KeyParser::new(),
+            keys: Vec::new(),
+            tick: None,
+            block: None,
+            notice: None,
+        }
     }
 
     /// Applies the keys in `bytes` (a read from the keyboard; sequences may be split across
@@ -127,11 +140,14 @@ impl Teleop {
         self.keys.clear();
         self.parser.feed(bytes, &mut self.keys);
         for &k in &self.keys {
-            if k == Key::Quit {
-                out.quit = true;
-                break;
+            match k {
+                Key::Quit => {
+                    out.quit = true;
+                    break;
+                }
+                Key::Resume => out.resume = true,
+                _ => out.changed |= self.drive.apply(k),
             }
-            out.changed |= self.drive.apply(k);
         }
         out
     }
@@ -184,7 +200,13 @@ impl Teleop {
             tick: self.tick,
             block: self.block.as_ref(),
             drive: &self.drive,
+            notice: self.notice.as_deref(),
         }
+    }
+
+    /// Shows what the last resume request came to.
+    pub fn set_notice(&mut self, notice: String) {
+        self.notice = Some(notice);
     }
 }
 
@@ -310,6 +332,16 @@ impl Drop for Display {
     }
 }
 
+/// Asks the hub to resume chair `robot_id` after a latched stop; says what came of it.
+fn resume(session: &str, robot_id: u32) -> String {
+    match agent_sdk::control(session, ipc_types::Command::ResumeChair, robot_id) {
+        Ok(a) if a.status == 0 => "resume asked: the chair drives on once every cause of its stop has cleared".into(),
+        Ok(a) if a.status == 3 => "resume: this robot is simulated, it has no stop to resume".into(),
+        Ok(a) => format!("resume refused by the hub (status {})", a.status),
+        Err(e) => format!("resume not sent: {e}"),
+    }
+}
+
 /// Runs the agent until the driver quits, the run ends or the hub goes away (an error).
 pub fn run(args: &TeleopArgs) -> anyhow::Result<ExitCode> {
     let mut agent =
@@ -385,6 +417,11 @@ fn drive_loop(
                     if keys.quit {
                         return Ok(End::Quit);
                     }
+                    if keys.resume {
+                        teleop.set_notice(resume(agent.session(), teleop.robot_id));
+                        display.dirty = true;
+                        display.urgent = true;
+                    }
                     if keys.changed {
                         display.dirty = true;
                         display.urgent = true;
@@ -440,7 +477,7 @@ mod tests {
     fn every_running_tick_is_answered_with_the_current_powers() {
         let mut t = Teleop::new(4);
         assert_eq!(t.on_tick(tick(1, RunState::Running), &[]), Some(ActionBlock::motors(4, 0.0, 0.0)));
-        assert_eq!(t.on_keys(b"\x1b[A\x1b[A"), KeysOutcome { changed: true, quit: false });
+        assert_eq!(t.on_keys(b"\x1b[A\x1b[A"), KeysOutcome { changed: true, quit: false, resume: false });
         assert_eq!(t.on_tick(tick(2, RunState::Running), &[]), Some(ActionBlock::motors(4, 0.2, 0.2)));
         t.on_keys(b"\x1b[C");
         assert_eq!(t.on_tick(tick(3, RunState::Paused), &[]), Some(ActionBlock::motors(4, 0.3, 0.1)));
@@ -459,9 +496,21 @@ mod tests {
     #[test]
     fn keys_after_quit_are_not_applied() {
         let mut t = Teleop::new(1);
-        assert_eq!(t.on_keys(b"wqw"), KeysOutcome { changed: true, quit: true });
+        assert_eq!(t.on_keys(b"wqw"), KeysOutcome { changed: true, quit: true, resume: false });
         assert_eq!(t.drive().speed(), 0.1);
-        assert_eq!(t.on_keys(b"\x03"), KeysOutcome { changed: false, quit: true });
+        assert_eq!(t.on_keys(b"\x03"), KeysOutcome { changed: false, quit: true, resume: false });
+    }
+
+    #[test]
+    fn r_asks_to_resume_and_changes_nothing_of_the_drive() {
+        let mut t = Teleop::new(1);
+        t.on_keys(b"ww");
+        assert_eq!(t.on_keys(b"r"), KeysOutcome { changed: false, quit: false, resume: true });
+        assert_eq!(t.drive().speed(), 0.2);
+        t.set_notice("resume asked".into());
+        let s = t.status("chair1", "demo");
+        assert!(view::screen_lines(&s).iter().any(|l| l == "resume asked"));
+        assert!(view::status_line(&s).ends_with("| resume asked"));
     }
 
     #[test]

@@ -17,7 +17,7 @@ const BAR_WIDTH: usize = 20;
 /// The key help, as shown under the status block.
 pub const KEY_HELP: [&str; 2] = [
     "keys: Up/w faster  Down/s slower/reverse  Left/a Right/d steer",
-    "      space stop  +/- step size  q or Ctrl-C quit",
+    "      space stop  +/- step size  r resume after a stop  q or Ctrl-C quit",
 ];
 
 /// Everything the display shows.
@@ -35,6 +35,8 @@ pub struct Status<'a> {
     pub block: Option<&'a SensorBlock>,
     /// The driver's command.
     pub drive: &'a Drive,
+    /// What the last resume request (`r`) came to, if one was made.
+    pub notice: Option<&'a str>,
 }
 
 fn run_state(s: RunState) -> &'static str {
@@ -111,6 +113,9 @@ pub fn screen_lines(s: &Status) -> Vec<String> {
             ));
         }
     }
+    if let Some(n) = s.notice {
+        lines.push(n.to_owned());
+    }
     lines.extend(KEY_HELP.iter().map(|s| s.to_string()));
     lines
 }
@@ -142,6 +147,9 @@ pub fn status_line(s: &Status) -> String {
             if b.present & COLLISION != 0 { "yes" } else { "no" },
             b.collision_count
         );
+    }
+    if let Some(n) = s.notice {
+        let _ = write!(line, " | {n}");
     }
     line
 }
@@ -232,6 +240,7 @@ mod tests {
             tick: Some(Tick { tick: 42, sim_time_s: 4.2, run_state: RunState::Running, latency_ns: 0 }),
             block: b,
             drive: d,
+            notice: None,
         }
     }
 

@@ -74,6 +74,9 @@ pub fn adapter_args(spec: &ChairSpec, mode: ChairMode, session: &str, stepped: b
         pose(spec.pose),
         "--session".to_owned(),
         session.to_owned(),
+        // The runner's chair is always its own emulator, with nobody in it: a stop lifts when
+        // its causes clear, as a scripted run needs (a real chair waits for `iwsim resume`).
+        "--auto-resume".to_owned(),
     ];
     if stepped {
         args.push("--stepped".to_owned());
@@ -367,7 +370,7 @@ mod tests {
         let args = adapter_args(&spec, ChairMode::Virtual, "s1", false, Path::new("out/chair.pty"));
         assert_eq!(
             args.join(" "),
-            "serial --device out/chair.pty --robot chair1 --mode virtual --pose 10,6.1,0 --session s1"
+            "serial --device out/chair.pty --robot chair1 --mode virtual --pose 10,6.1,0 --session s1 --auto-resume"
         );
         let raw = ChairSpec { localise: false, ..spec.clone() };
         let args = adapter_args(&raw, ChairMode::Real, "s1", true, Path::new("l"));
