@@ -70,6 +70,7 @@ pub mod pose;
 pub mod sensors;
 pub mod track;
 pub mod traffic;
+pub mod zones;
 
 use agent_sdk::cli::{CommonArgs, RobotArgs};
 

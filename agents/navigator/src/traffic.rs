@@ -19,6 +19,18 @@
 //! Nothing is decided on one side alone: the chair with the right of way does not move
 //! towards the other before it has heard that the other is out of the way. This module is
 //! the rule and its state; [`crate::pilot`] carries it out with the navigator.
+//!
+//! **One-lane zones** (doorways and other narrows, [`crate::zones`]) are claimed before they
+//! are entered: the message then ends in `w SINCE ZONES` (wanted since SINCE, simulated
+//! tenths of a second) or `h ZONES` (held), each zone named by its centre in centimetres
+//! (`1250,595`). A chair claims every zone on its way up to the next place where it can stand
+//! without being in one, all at once, and enters only once it holds them: it has wanted them
+//! for [`CLAIM_SETTLE_S`] (so a claim made at the same moment has been heard) and no peer
+//! heard in the last [`CLAIM_FRESH_S`] holds one of them or wanted one earlier (ties: the name
+//! that sorts first). First come, first served: no zone is held by a chair that waits for
+//! another, so claims alone make no deadlock. A claim lapses when its chair falls silent;
+//! a chair that says nothing (a teleop, a Ciber-Rato robot) claims nothing and is only an
+//! obstacle its sensors find.
 
 use crate::geom::{Footprint, Pose};
 
@@ -39,6 +51,44 @@ const PASSED_M: f64 = 1.4;
 const MAX_BODY_M: f64 = 5.0;
 /// Nor places farther from the origin than this, metres.
 const MAX_COORD_M: f64 = 10_000.0;
+/// A zone is entered only after it has been wanted this long, seconds: two ticks at 100 ms,
+/// so that a claim made at the same tick elsewhere has been heard (messages arrive a tick
+/// after they are said).
+pub const CLAIM_SETTLE_S: f64 = 0.25;
+/// A peer's claim counts while it was heard within this many seconds (claims are said every
+/// tick).
+pub const CLAIM_FRESH_S: f64 = 1.0;
+/// At most this many zones in one claim.
+pub const MAX_CLAIM_ZONES: usize = 4;
+
+/// A claim on one-lane zones, as said.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Claim {
+    /// Held (entered or about to be), not only wanted.
+    pub hold: bool,
+    /// Since when they are wanted, simulated seconds (to a tenth).
+    pub since_s: f64,
+    /// The zones, by centre.
+    pub zones: Vec<crate::geom::V2>,
+}
+
+impl Claim {
+    fn words(&self) -> String {
+        let zones: Vec<String> =
+            self.zones.iter().map(|z| format!("{},{}", (z.x * 100.0).round(), (z.y * 100.0).round())).collect();
+        if self.hold {
+            format!(" h {}", zones.join(" "))
+        } else {
+            format!(" w {} {}", (self.since_s * 10.0).round(), zones.join(" "))
+        }
+    }
+
+    /// Whether `self` goes before `other` for a zone both want: the earlier claim, then the
+    /// name that sorts first.
+    fn before(&self, name: &str, other: &Claim, other_name: &str) -> bool {
+        (self.since_s, name) < (other.since_s, other_name)
+    }
+}
 
 /// What a navigator says it is doing.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -78,11 +128,19 @@ pub struct Peer {
     pub footprint: Footprint,
     /// When we heard it, seconds.
     pub heard_s: f64,
+    /// Its claim on one-lane zones, if any.
+    pub claim: Option<Claim>,
 }
 
 /// The message a navigator says about itself (at most 100 bytes for names up to 40).
 pub fn encode(name: &str, pose: Pose, state: State, body: &crate::Body) -> String {
-    format!(
+    encode_claim(name, pose, state, body, None)
+}
+
+/// [`encode`] with a claim on zones; the caller checks that it fits in a message (a name
+/// longer than about 20 bytes with a claim of several zones does not).
+pub fn encode_claim(name: &str, pose: Pose, state: State, body: &crate::Body, claim: Option<&Claim>) -> String {
+    let mut m = format!(
         "nav {name} {:.3} {:.3} {:.1} {} {:.2} {:.2} {:.2}",
         pose.x,
         pose.y,
@@ -91,7 +149,11 @@ pub fn encode(name: &str, pose: Pose, state: State, body: &crate::Body) -> Strin
         body.width_m,
         body.height_m,
         body.com
-    )
+    );
+    if let Some(c) = claim {
+        m.push_str(&c.words());
+    }
+    m
 }
 
 /// Reads another navigator's message; `None` for anything else (other agents' messages,
@@ -113,6 +175,26 @@ pub fn decode(bytes: &[u8], heard_s: f64) -> Option<Peer> {
         _ => return None,
     };
     let (length, width, com) = (num(w.next())?, num(w.next())?, num(w.next())?);
+    let claim = match w.next() {
+        None => None,
+        Some(kind @ ("w" | "h")) => {
+            let since_s = if kind == "w" { num(w.next())? / 10.0 } else { 0.0 };
+            let mut zones = Vec::new();
+            for z in w.by_ref() {
+                let (x, y) = z.split_once(',')?;
+                let (x, y) = (num(Some(x))? / 100.0, num(Some(y))? / 100.0);
+                if !(x.abs() <= MAX_COORD_M && y.abs() <= MAX_COORD_M) || zones.len() == MAX_CLAIM_ZONES {
+                    return None;
+                }
+                zones.push(crate::geom::V2::new(x, y));
+            }
+            if zones.is_empty() {
+                return None;
+            }
+            Some(Claim { hold: kind == "h", since_s, zones })
+        }
+        Some(_) => return None,
+    };
     // Anything may say anything (the UDP bridge relays remote agents): only bodies and places
     // a chair could have are believed, so that no message can make the planner's work or
     // memory blow up.
@@ -128,6 +210,7 @@ pub fn decode(bytes: &[u8], heard_s: f64) -> Option<Peer> {
         state,
         footprint: Footprint::of_body(length, width, com),
         heard_s,
+        claim,
     })
 }
 
@@ -167,6 +250,10 @@ pub struct Traffic {
     role: Role,
     /// Peers we have already met; not met again until they are far away.
     crossed: Vec<String>,
+    /// Our claim on one-lane zones.
+    claim: Option<Claim>,
+    /// Standing still until the zones claimed are ours.
+    zone_waiting: bool,
 }
 
 fn along(me: Pose, other: Pose) -> f64 {
@@ -184,7 +271,79 @@ fn facing(a: Pose, b: Pose) -> bool {
 impl Traffic {
     /// The rule for the navigator called `name`.
     pub fn new(name: &str) -> Self {
-        Self { name: name.to_owned(), peers: Vec::new(), role: Role::Free, crossed: Vec::new() }
+        Self {
+            name: name.to_owned(),
+            peers: Vec::new(),
+            role: Role::Free,
+            crossed: Vec::new(),
+            claim: None,
+            zone_waiting: false,
+        }
+    }
+
+    /// Our claim on one-lane zones, as we say it.
+    pub fn claim(&self) -> Option<&Claim> {
+        self.claim.as_ref()
+    }
+
+    /// Claims the zones named by `zones` (their centres; `zone_of` says which of our zones a
+    /// centre names, ours or a peer's) at `now_s`, or keeps the claim already made on them;
+    /// whether we hold them and may go in. `inside`: the chair is already in one of them, so
+    /// a hold it has is kept whatever a peer says (backing out would block both).
+    pub fn want_zones(
+        &mut self,
+        zones: &[crate::geom::V2],
+        zone_of: impl Fn(crate::geom::V2) -> Option<usize>,
+        now_s: f64,
+        inside: bool,
+    ) -> bool {
+        let zones = &zones[..zones.len().min(MAX_CLAIM_ZONES)];
+        let ids: Vec<usize> = zones.iter().filter_map(|&z| zone_of(z)).collect();
+        let same = self.claim.as_ref().is_some_and(|c| {
+            c.zones.len() == ids.len() && c.zones.iter().all(|&z| zone_of(z).is_some_and(|k| ids.contains(&k)))
+        });
+        if !same {
+            // Simulated time to a tenth of a second, as said.
+            let since_s = (now_s * 10.0).round() / 10.0;
+            self.claim = Some(Claim { hold: false, since_s, zones: zones.to_vec() });
+        }
+        let Some(mine) = self.claim.clone() else { return false };
+        let name = self.name.as_str();
+        let conflict = self.peers.iter().any(|p| {
+            let Some(c) = p.claim.as_ref().filter(|_| now_s - p.heard_s <= CLAIM_FRESH_S) else { return false };
+            let shared = c.zones.iter().any(|&z| zone_of(z).is_some_and(|k| ids.contains(&k)));
+            shared && ((c.hold && !(mine.hold && inside)) || (!mine.hold && c.before(&p.name, &mine, name)))
+        });
+        let claim = self.claim.as_mut().expect("made above");
+        if conflict {
+            claim.hold = false;
+        } else if claim.hold || now_s - claim.since_s >= CLAIM_SETTLE_S - 1e-9 {
+            claim.hold = true;
+        }
+        claim.hold
+    }
+
+    /// Lets go of the zones claimed.
+    pub fn release_zones(&mut self) {
+        self.claim = None;
+        self.zone_waiting = false;
+    }
+
+    /// Says whether we stand still waiting for zones (we then say `wait`: plan round us).
+    pub fn set_zone_waiting(&mut self, waiting: bool) {
+        self.zone_waiting = waiting;
+    }
+
+    /// The peer that holds (or wanted first) a zone of our claim, for the user.
+    pub fn zone_blocker(&self, zone_of: impl Fn(crate::geom::V2) -> Option<usize>) -> Option<&str> {
+        let mine = self.claim.as_ref()?;
+        let ids: Vec<usize> = mine.zones.iter().filter_map(|&z| zone_of(z)).collect();
+        self.peers
+            .iter()
+            .find(|p| {
+                p.claim.as_ref().is_some_and(|c| c.zones.iter().any(|&z| zone_of(z).is_some_and(|k| ids.contains(&k))))
+            })
+            .map(|p| p.name.as_str())
     }
 
     /// What we say we are doing.
@@ -193,6 +352,7 @@ impl Traffic {
             Role::PullingOver { .. } => State::Pull,
             Role::Parked { .. } => State::Park,
             Role::Waiting { .. } => State::Wait,
+            _ if self.zone_waiting => State::Wait,
             _ => State::Go,
         }
     }
@@ -329,6 +489,7 @@ impl Traffic {
 mod tests {
     use super::*;
     use crate::Body;
+    use crate::geom::V2;
 
     fn pose(x: f64, y: f64, deg: f64) -> Pose {
         Pose { x, y, theta: deg.to_radians() }
@@ -365,6 +526,86 @@ mod tests {
             assert_eq!(decode(junk, 0.0), None, "{junk:?}");
         }
         assert!(encode(&"n".repeat(40), pose(-100.0, -100.0, -179.9), State::Park, &BODY).len() <= 100);
+    }
+
+    #[test]
+    fn claims_round_trip_and_bad_claims_are_junk() {
+        let c = Claim { hold: false, since_s: 15.3, zones: vec![V2::new(12.5, 5.95), V2::new(12.5, 8.05)] };
+        let m = encode_claim("chair2", pose(20.0, 6.0, 180.0), State::Wait, &BODY, Some(&c));
+        assert_eq!(m, "nav chair2 20.000 6.000 180.0 wait 1.10 0.65 0.80 w 153 1250,595 1250,805");
+        assert_eq!(decode(m.as_bytes(), 1.0).expect("decodes").claim, Some(c));
+        let h = Claim { hold: true, since_s: 0.0, zones: vec![V2::new(2.5, 6.0)] };
+        let m = encode_claim("chair2", pose(20.0, 6.0, 180.0), State::Go, &BODY, Some(&h));
+        assert!(m.ends_with(" h 250,600"), "{m}");
+        assert_eq!(decode(m.as_bytes(), 1.0).expect("decodes").claim, Some(h));
+        for junk in [
+            &b"nav a 1 2 3 go 1 1 0.5 h"[..],
+            b"nav a 1 2 3 go 1 1 0.5 w 10",
+            b"nav a 1 2 3 go 1 1 0.5 h 1,2 3",
+            b"nav a 1 2 3 go 1 1 0.5 h 1,x",
+            b"nav a 1 2 3 go 1 1 0.5 h 1e12,0",
+            b"nav a 1 2 3 go 1 1 0.5 h 1,1 2,2 3,3 4,4 5,5",
+            b"nav a 1 2 3 go 1 1 0.5 x 1,1",
+        ] {
+            assert_eq!(decode(junk, 0.0), None, "{:?}", std::str::from_utf8(junk));
+        }
+    }
+
+    /// Zones numbered by the integer part of their centre's x (a stand-in for the map's).
+    fn zone_of(z: V2) -> Option<usize> {
+        Some(z.x as usize)
+    }
+
+    /// What `t` says at `now`, heard by `other`.
+    fn tell(t: &Traffic, other: &mut Traffic, at: Pose, now: f64) {
+        let m = encode_claim(&t.name, at, t.state(), &BODY, t.claim());
+        other.hear(m.as_bytes(), now);
+    }
+
+    #[test]
+    fn of_two_chairs_claiming_a_zone_at_once_the_first_name_goes_and_the_other_after_it_left() {
+        let door = [V2::new(12.5, 6.0)];
+        let (pa, pb) = (pose(12.5, 4.0, 90.0), pose(11.0, 7.0, 0.0));
+        let mut a = Traffic::new("chair1");
+        let mut b = Traffic::new("chair2");
+        let mut entered = (None, None);
+        for k in 0..30 {
+            let now = f64::from(k) * 0.1;
+            let ga = a.want_zones(&door, zone_of, now, false);
+            let gb = b.want_zones(&door, zone_of, now, false);
+            assert!(!(ga && gb), "both hold the doorway at {now}");
+            if ga && entered.0.is_none() {
+                entered.0 = Some(now);
+            }
+            if gb && entered.1.is_none() {
+                entered.1 = Some(now);
+            }
+            // Messages arrive a tick after they are said.
+            tell(&a, &mut b, pa, now + 0.1);
+            tell(&b, &mut a, pb, now + 0.1);
+            if now >= 2.0 {
+                a.release_zones();
+            }
+        }
+        let (ta, tb) = (entered.0.expect("chair1 went in"), entered.1.expect("chair2 went in after"));
+        assert!(ta <= 0.3 + 1e-9, "chair1 waited only for the settling: {ta}");
+        assert!(tb > 2.0, "chair2 waited until chair1 had let go: {tb}");
+    }
+
+    #[test]
+    fn the_earlier_claim_goes_first_whatever_the_names_and_a_silent_claim_lapses() {
+        let door = [V2::new(7.5, 6.0)];
+        let mut late = Traffic::new("chair1");
+        let mut early = Traffic::new("chair9");
+        assert!(!early.want_zones(&door, zone_of, 1.0, false));
+        tell(&early, &mut late, pose(7.5, 4.0, 90.0), 1.1);
+        assert!(!late.want_zones(&door, zone_of, 1.1, false));
+        assert!(early.want_zones(&door, zone_of, 1.3, false), "settled, nobody before it");
+        tell(&early, &mut late, pose(7.5, 4.0, 90.0), 1.4);
+        assert!(!late.want_zones(&door, zone_of, 1.5, false), "chair9 wanted it first");
+        // chair9 falls silent inside (crashed, its messages lost): its claim lapses after 1 s.
+        assert!(!late.want_zones(&door, zone_of, 2.4, false));
+        assert!(late.want_zones(&door, zone_of, 2.5, false), "a claim not heard for 1 s lapses");
     }
 
     #[test]
