@@ -65,6 +65,7 @@ fn config(args: &NavigatorArgs, header: &ipc_types::MapHeader) -> anyhow::Result
         pose_source: args.pose_source,
         encoder_ticks_per_m: ticks_per_m,
         margin_m: defaults.margin_m,
+        keep_right: args.keep_right,
     })
 }
 
@@ -104,6 +105,9 @@ fn drive(agent: &mut Agent, args: &NavigatorArgs) -> anyhow::Result<ExitCode> {
     let mut logs = RobotLogs::new(args.common.log.as_deref());
     logs.add(id, name);
     let mut pilot = Pilot::new(name, Navigator::new(map, cfg));
+    if args.zone_claims {
+        pilot = pilot.with_zone_claims();
+    }
     let mut contacts = 0u32;
     let mut last_time = 0.0;
     let mut mode_checked = false;

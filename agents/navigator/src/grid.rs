@@ -149,6 +149,42 @@ pub struct StaticRaster {
     occ: Vec<bool>,
     /// Distance from each cell's centre to the nearest occupied cell's centre, metres.
     dist: Vec<f32>,
+    /// Per cell, free cells from it to the first occupied one in each of 8 directions (k·45°),
+    /// capped at 255: how wide a passage is across any heading, for [`StaticRaster::off_lane`].
+    runs: Vec<[u8; 8]>,
+}
+
+/// The 8 directions of [`StaticRaster`]'s runs, as cell steps.
+const DIRS: [(isize, isize); 8] = [(1, 0), (1, 1), (0, 1), (-1, 1), (-1, 0), (-1, -1), (0, -1), (1, -1)];
+
+/// Passages between these widths (metres, wall to wall) have two lanes, one each way.
+const TWO_LANES_M: (f64, f64) = (1.5, 3.2);
+
+/// Free runs from each cell in each direction of [`DIRS`]: one linear pass per direction,
+/// visiting each cell after its neighbour in that direction.
+fn free_runs(spec: &GridSpec, occ: &[bool]) -> Vec<[u8; 8]> {
+    let (nx, ny) = (spec.nx, spec.ny);
+    let mut runs = vec![[0u8; 8]; nx * ny];
+    for (k, &(dx, dy)) in DIRS.iter().enumerate() {
+        for j in 0..ny {
+            let y = if dy > 0 { ny - 1 - j } else { j };
+            for i in 0..nx {
+                let x = if dx > 0 { nx - 1 - i } else { i };
+                let c = y * nx + x;
+                if occ[c] {
+                    continue;
+                }
+                let (px, py) = (x as isize + dx, y as isize + dy);
+                let next = if px < 0 || py < 0 || px >= nx as isize || py >= ny as isize {
+                    0
+                } else {
+                    runs[py as usize * nx + px as usize][k]
+                };
+                runs[c][k] = next.saturating_add(1);
+            }
+        }
+    }
+    runs
 }
 
 impl StaticRaster {
@@ -194,7 +230,28 @@ impl StaticRaster {
             }
         }
         let dist = distance_field(&spec, &occ);
-        Self { spec, occ, dist }
+        let runs = free_runs(&spec, &occ);
+        Self { spec, occ, dist, runs }
+    }
+
+    /// How far left of its lane a chair at `pose` drives, metres: in a passage two lanes wide
+    /// (wall to wall across the heading between 1.5 and 3.2 m, [`TWO_LANES_M`]), by how much the
+    /// free width on its right exceeds a quarter of the passage's (the middle of the right
+    /// lane). Zero right of that line, in rooms, halls and one-lane narrows. Traffic keeps
+    /// right, so that chairs meeting in a corridor pass each other without a word.
+    pub fn off_lane(&self, pose: &crate::geom::Pose) -> f64 {
+        let Some((ix, iy)) = self.spec.cell_of(pose.pos()) else { return 0.0 };
+        let runs = &self.runs[self.spec.index(ix, iy)];
+        let dir = |angle: f64| (angle / std::f64::consts::FRAC_PI_4).round().rem_euclid(8.0) as usize;
+        let (right, left) =
+            (dir(pose.theta - std::f64::consts::FRAC_PI_2), dir(pose.theta + std::f64::consts::FRAC_PI_2));
+        let step = |k: usize| if k % 2 == 1 { self.spec.cell * std::f64::consts::SQRT_2 } else { self.spec.cell };
+        let (r, l) = (f64::from(runs[right]) * step(right), f64::from(runs[left]) * step(left));
+        let width = r + l;
+        if width < TWO_LANES_M.0 || width > TWO_LANES_M.1 || runs[right] == u8::MAX || runs[left] == u8::MAX {
+            return 0.0;
+        }
+        (r - width / 4.0).max(0.0)
     }
 
     /// Whether a cell is occupied.

@@ -111,6 +111,9 @@ pub struct HybridParams {
     pub horizon_m: f64,
     /// Poses are checked at most this far apart (the body's farthest corner), metres.
     pub check_step_m: f64,
+    /// Cost per metre driven per metre left of the lane's middle, in two-lane passages
+    /// ([`crate::grid::StaticRaster::off_lane`]): chairs keep right. 0 (the default) is off.
+    pub keep_right: f64,
 }
 
 impl Default for HybridParams {
@@ -134,6 +137,7 @@ impl Default for HybridParams {
             heuristic_weight: 1.25,
             horizon_m: 7.0,
             check_step_m: 0.05,
+            keep_right: 0.0,
         }
     }
 }
@@ -331,6 +335,9 @@ pub fn plan(
                     break;
                 }
                 cost += per_m * (len + turn * 0.3);
+            }
+            if params.keep_right > 0.0 && len > 0.0 {
+                cost += params.keep_right * len * model.statics.off_lane(&pose);
             }
             let (d0, d1) = (n.motion.direction(), m.direction());
             if d0 != 0 && d1 != 0 && d0 != d1 {

@@ -146,6 +146,21 @@ pub struct NavigatorArgs {
     /// be registered first.
     #[arg(long = "sensors", visible_alias = "mode", value_enum, default_value_t = Mode::Virtual)]
     pub mode: Mode,
+    /// Claim doorways and other one-lane zones by message before entering them, first come
+    /// first served (beyond the thesis; off by default while it is tuned for many chairs).
+    #[arg(long)]
+    pub zone_claims: bool,
+    /// Keep right in two-lane corridors: the planner's cost per metre driven per metre left
+    /// of the lane's middle (0: off, the default while it is tuned for many chairs).
+    #[arg(long, value_name = "COST", default_value_t = 0.0, value_parser = parse_keep_right)]
+    pub keep_right: f64,
+}
+
+fn parse_keep_right(s: &str) -> Result<f64, String> {
+    match s.parse::<f64>() {
+        Ok(v) if v.is_finite() && (0.0..=100.0).contains(&v) => Ok(v),
+        _ => Err(format!("{s:?}: a cost from 0 to 100")),
+    }
 }
 
 fn parse_checkpoint(s: &str) -> Result<records::places::Checkpoint, String> {

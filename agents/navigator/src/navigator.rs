@@ -102,6 +102,10 @@ pub struct NavConfig {
     pub pose_source: PoseSourceKind,
     /// Wheel-encoder ticks per metre of wheel travel.
     pub encoder_ticks_per_m: f64,
+    /// Keep right in two-lane corridors: the planner's cost per metre driven per metre left
+    /// of the lane's middle ([`HybridParams::keep_right`]); 0 is off, the default while the
+    /// many-chair traffic rule is tuned (issue 26).
+    pub keep_right: f64,
 }
 
 impl NavConfig {
@@ -124,6 +128,7 @@ impl NavConfig {
             proximity_latency: 0,
             pose_source: PoseSourceKind::Odometry,
             encoder_ticks_per_m: sim_model::encoder_ticks_per_m(1024.0, 0.17),
+            keep_right: 0.0,
         }
     }
 }
@@ -275,6 +280,7 @@ impl Navigator {
         let pose_src = pose_source(cfg.pose_source, cfg.start, cfg.encoder_ticks_per_m, cfg.body.height_m);
         let drive = Drive::new(cfg.max_speed_mps, cfg.body.height_m, cfg.accel_curve);
         let track_params = TrackerParams::default();
+        let hybrid = HybridParams { keep_right: cfg.keep_right, ..HybridParams::default() };
         Self {
             pose: cfg.start,
             cfg,
@@ -292,7 +298,7 @@ impl Navigator {
             last_tick: 0,
             blocked_since: None,
             plan_failures: 0,
-            hybrid: HybridParams::default(),
+            hybrid,
             track_params,
             stats: NavStats::default(),
             mode: Mode::Plan,
@@ -383,6 +389,11 @@ impl Navigator {
             self.plan_after = self.last_tick;
             self.plan_failures = 0;
         }
+    }
+
+    /// Whether its last search for a way on found none (it waits to look again).
+    pub fn blocked(&self) -> bool {
+        self.blocked_since.is_some() && self.tracker.is_none()
     }
 
     /// Whether it is standing still on request.

@@ -3,11 +3,12 @@
 //! carry that out, and says where it is. Without I/O: the agent feeds it from a hub, the
 //! tests from the world model in-process.
 
-use crate::geom::{Footprint, Pose};
+use crate::geom::{Footprint, Pose, V2};
 use crate::manoeuvre;
 use crate::navigator::{NavEvent, Navigator};
 use crate::sensors::Input;
-use crate::traffic::{self, Decision, MEET_M, State, Traffic};
+use crate::traffic::{self, Decision, MAX_CLAIM_ZONES, MEET_M, State, Traffic};
+use crate::zones::Zones;
 
 /// Speed of the pull-over, m/s: a little below cruising, a few metres from another chair.
 const PULL_OVER_SPEED: f64 = 0.25;
@@ -17,6 +18,18 @@ const SAY_EVERY_FAR: u64 = 5;
 /// ...and every tick when one is within this distance, metres (its readings of us are
 /// matched to what we say).
 const NEAR_M: f64 = MEET_M + 3.0;
+/// One-lane zones this far ahead on the path are claimed, metres: far enough that the claim
+/// has settled before the chair must stop for it.
+const CLAIM_AHEAD_M: f64 = 3.0;
+/// Zones on the path with less than this between them (path length, metres) are claimed
+/// together: there is no room to wait between them out of both.
+const WAIT_ROOM_M: f64 = 2.0;
+/// A chair waiting for a zone stops with its front this far short of it, metres: out of the
+/// way of a chair turning out of it.
+const STOP_SHORT_M: f64 = 0.8;
+/// The way out of a zone must be clear of waiting chairs for this far (path length, metres)
+/// before the chair goes in: a chair never stands in a zone waiting for room beyond it.
+const EXIT_ROOM_M: f64 = 1.6;
 
 /// What a tick produced.
 #[derive(Debug, Clone, PartialEq)]
@@ -40,12 +53,132 @@ pub struct Pilot {
     said: Option<State>,
     /// "No room to pull over" was said (once per search).
     no_room_said: bool,
+    /// The map's one-lane zones: none unless the zone rule is on ([`Pilot::with_zone_claims`]).
+    zones: Zones,
+    /// Zones ahead that we wait for: their centres, and how far ahead along the path the first
+    /// one began when we stopped.
+    zone_wait: Option<Vec<V2>>,
+    /// "Cannot say the claim" was logged.
+    claim_too_long_said: bool,
 }
 
 impl Pilot {
     /// A pilot called `name` (as it registered with the hub) for `nav`.
     pub fn new(name: &str, nav: Navigator) -> Self {
-        Self { name: name.to_owned(), traffic: Traffic::new(name), nav, said: None, no_room_said: false }
+        Self {
+            name: name.to_owned(),
+            traffic: Traffic::new(name),
+            nav,
+            said: None,
+            no_room_said: false,
+            zones: Zones::none(),
+            zone_wait: None,
+            claim_too_long_said: false,
+        }
+    }
+
+    /// Turns the zone rule on: doorways and other one-lane zones of the map
+    /// ([`crate::zones`]) are claimed by message before they are entered ([`Traffic::want_zones`]).
+    pub fn with_zone_claims(mut self) -> Self {
+        self.zones = Zones::find(&self.nav.model().statics, &self.nav.model().footprint);
+        self
+    }
+
+    /// The map's one-lane zones (none while the zone rule is off).
+    pub fn zones(&self) -> &Zones {
+        &self.zones
+    }
+
+    /// The zones the chair's body is in, at `pose`.
+    fn zones_under(&self, pose: Pose) -> Vec<usize> {
+        let fp = self.nav.model().footprint;
+        let (c, s) = (pose.theta.cos(), pose.theta.sin());
+        let mut out = Vec::new();
+        for (a, b) in [(0.0, 0.0), (fp.front, fp.half), (fp.front, -fp.half), (-fp.rear, fp.half), (-fp.rear, -fp.half)]
+        {
+            let p = V2::new(pose.x + a * c - b * s, pose.y + a * s + b * c);
+            if let Some(z) = self.zones.at(p)
+                && !out.contains(&z)
+            {
+                out.push(z);
+            }
+        }
+        out
+    }
+
+    /// Whether the way out of `ids` along the path (the first [`EXIT_ROOM_M`] after the last
+    /// of them) is clear of chairs that stand waiting. A waiting chair that wants the same
+    /// zones is in the queue behind us and is no obstacle to wait for.
+    fn way_out_clear(&self, ids: &[usize]) -> bool {
+        let own = self.nav.model().footprint;
+        let zones = &self.zones;
+        let waiting: Vec<_> = self
+            .traffic
+            .peers()
+            .iter()
+            .filter(|p| p.state == State::Wait)
+            .filter(|p| {
+                !p.claim
+                    .as_ref()
+                    .is_some_and(|c| c.zones.iter().any(|&z| zones.named(z).is_some_and(|k| ids.contains(&k))))
+            })
+            .collect();
+        if waiting.is_empty() {
+            return true;
+        }
+        let mut out_for: Option<f64> = None;
+        let mut last = None::<V2>;
+        for p in self.nav.path() {
+            let in_ids = zones.at(p.pos()).is_some_and(|k| ids.contains(&k));
+            if let (Some(d), Some(l)) = (out_for.as_mut(), last) {
+                *d += (p.pos() - l).norm();
+            }
+            last = Some(p.pos());
+            if in_ids {
+                out_for = Some(0.0);
+                continue;
+            }
+            let Some(d) = out_for else { continue };
+            if d > EXIT_ROOM_M {
+                break;
+            }
+            if waiting.iter().any(|w| (w.pose.pos() - p.pos()).norm() < own.half + w.footprint.half + 0.3) {
+                return false;
+            }
+        }
+        true
+    }
+
+    /// The zones to claim on the path ahead: the first within [`CLAIM_AHEAD_M`] and those
+    /// that follow it closer than [`WAIT_ROOM_M`]; and how far ahead the first begins.
+    fn zones_ahead(&self, me: Pose) -> Option<(Vec<usize>, f64)> {
+        let mut group: Vec<usize> = self.zones_under(me);
+        let mut first_at = if group.is_empty() { None } else { Some(0.0) };
+        let mut along = 0.0;
+        let mut last = me.pos();
+        let mut gap_from = if group.is_empty() { None } else { Some(0.0) };
+        for p in self.nav.path() {
+            along += (p.pos() - last).norm();
+            last = p.pos();
+            if first_at.is_none() && along > CLAIM_AHEAD_M {
+                return None;
+            }
+            match self.zones.at(p.pos()) {
+                Some(z) => {
+                    if group.len() < MAX_CLAIM_ZONES && !group.contains(&z) {
+                        group.push(z);
+                    }
+                    first_at.get_or_insert(along);
+                    gap_from = Some(along);
+                }
+                None => {
+                    if gap_from.is_some_and(|g| along - g > WAIT_ROOM_M) {
+                        break;
+                    }
+                }
+            }
+        }
+        first_at.map(|at| (group, at))
     }
 
     /// The name it goes by.
@@ -89,12 +222,21 @@ impl Pilot {
         if !matches!(decision, Decision::PullOver(_)) {
             self.no_room_said = false;
         }
+        // A chair that yields to another head-on goes nowhere until the other has passed: its
+        // claim on zones would make the other wait for it (the two rules would then wait for
+        // each other), so it lets them go and claims again when it drives on.
+        if matches!(self.traffic.state(), State::Pull | State::Park) && self.traffic.claim().is_some() {
+            self.traffic.release_zones();
+            self.zone_wait = None;
+        }
         match decision {
             Decision::Go => {
-                if !self.nav.manoeuvring() && self.nav.holding() {
-                    notes.push(format!("going on at t {now:.1} s"));
+                if self.zone_gate(me, now, &mut notes) {
+                    if !self.nav.manoeuvring() && self.nav.holding() {
+                        notes.push(format!("going on at t {now:.1} s"));
+                    }
+                    self.nav.resume();
                 }
-                self.nav.resume();
             }
             Decision::Hold => {
                 let pulling = self.traffic.state() == State::Pull;
@@ -143,11 +285,112 @@ impl Pilot {
         let out = self.nav.act(input);
         let state = if self.nav.finished() { State::Park } else { self.traffic.state() };
         let near = self.traffic.peers().iter().any(|p| (p.pose.pos() - me.pos()).norm() < NEAR_M);
-        let say = (near || input.tick.is_multiple_of(SAY_EVERY_FAR) || self.said != Some(state))
-            .then(|| traffic::encode(&self.name, self.nav.pose(), state, &self.nav.config().body));
+        let claiming = self.traffic.claim().is_some();
+        let say =
+            (near || claiming || input.tick.is_multiple_of(SAY_EVERY_FAR) || self.said != Some(state)).then(|| {
+                let body = &self.nav.config().body;
+                let m = traffic::encode_claim(&self.name, self.nav.pose(), state, body, self.traffic.claim());
+                if m.len() <= ipc_types::MESSAGE_BYTES {
+                    return m;
+                }
+                if !std::mem::replace(&mut self.claim_too_long_said, true) {
+                    notes.push(format!(
+                        "the name {:?} is too long to say a claim on doorways in {} bytes; claims go unsaid",
+                        self.name,
+                        ipc_types::MESSAGE_BYTES
+                    ));
+                }
+                traffic::encode(&self.name, self.nav.pose(), state, body)
+            });
         if say.is_some() {
             self.said = Some(state);
         }
         PilotOutput { powers: out.powers, say, events: out.events, notes }
     }
+
+    /// The one-lane zone rule for a chair free to drive: claims the zones ahead, releases
+    /// those left behind, and stops short of zones it does not hold. Whether it may drive.
+    fn zone_gate(&mut self, me: Pose, now: f64, notes: &mut Vec<String>) -> bool {
+        if self.zones.all().is_empty() {
+            return true;
+        }
+        let under = self.zones_under(me);
+        // A chair that finds no way on while outside the zones it holds lets them go: it
+        // may be stuck for long (behind a chair that waits for those very zones), and a
+        // hold nobody uses blocks the queue.
+        if self.nav.blocked()
+            && let Some(c) = self.traffic.claim().filter(|c| c.hold)
+            && !c.zones.iter().any(|&z| self.zones.named(z).is_some_and(|k| under.contains(&k)))
+        {
+            let first = c.zones[0];
+            self.traffic.release_zones();
+            notes.push(format!("no way on at t {now:.1} s; the doorway at {} is let go", place(first)));
+        }
+        // In a zone we hold: keep the claim as it is until the body is out of it (a claim
+        // changed on the way would be a new one, last in the queue, on a zone we are in).
+        if let Some(c) = self.traffic.claim().filter(|c| c.hold)
+            && c.zones.iter().any(|&z| self.zones.named(z).is_some_and(|k| under.contains(&k)))
+        {
+            return true;
+        }
+        // Waiting (the path is gone while the navigator holds): the zones stay those we
+        // stopped for. Driving: those ahead on the path.
+        let ahead = match &self.zone_wait {
+            Some(centres) => {
+                let ids: Vec<usize> = centres.iter().filter_map(|&c| self.zones.named(c)).collect();
+                Some((ids, 0.0))
+            }
+            None => self.zones_ahead(me),
+        };
+        let Some((ids, first_at)) = ahead.filter(|(ids, _)| !ids.is_empty()) else {
+            // Nothing ahead on a known path: a claim is let go once the body is out of its
+            // zones (while a new path is being planned, nothing is known ahead).
+            let known = !self.nav.path().is_empty() || self.nav.finished();
+            if known && under.is_empty() && self.traffic.claim().is_some() {
+                self.traffic.release_zones();
+            }
+            return true;
+        };
+        let centres: Vec<V2> = ids.iter().map(|&k| self.zones.all()[k].centre).collect();
+        let inside = ids.iter().any(|k| under.contains(k));
+        // While waiting, the path is gone: the way out is judged again once we drive.
+        let clear = self.zone_wait.is_some() || self.way_out_clear(&ids);
+        let zones = &self.zones;
+        let go = self.traffic.want_zones(&centres, |c| zones.named(c), now, inside, clear);
+        if go {
+            self.zone_wait = None;
+            self.traffic.set_zone_waiting(false);
+            return true;
+        }
+        if inside {
+            // Already in a zone nobody let us have (a new path through it, a start in it):
+            // backing out would block it more; the safety layer keeps the distance.
+            return true;
+        }
+        // Not ours: drive on until the front would be in it, then stand.
+        let stop_at = self.nav.model().footprint.front + STOP_SHORT_M;
+        if self.zone_wait.is_none() && first_at > stop_at {
+            return true;
+        }
+        if self.zone_wait.is_none() {
+            let zones = &self.zones;
+            let why = match self.traffic.zone_blocker(|c| zones.named(c)) {
+                Some(by) => Some(format!("{by} has it")),
+                None if !clear => Some("a chair waits beyond it".to_owned()),
+                // Only the claim settling: a moment, not worth a line.
+                None => None,
+            };
+            if let Some(why) = why {
+                notes.push(format!("waiting at t {now:.1} s for the doorway at {} ({why})", place(centres[0])));
+            }
+            self.zone_wait = Some(centres);
+        }
+        self.traffic.set_zone_waiting(true);
+        self.nav.hold();
+        false
+    }
+}
+
+fn place(p: V2) -> String {
+    format!("({:.1}, {:.1})", p.x, p.y)
 }

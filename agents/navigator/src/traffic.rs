@@ -289,13 +289,16 @@ impl Traffic {
     /// Claims the zones named by `zones` (their centres; `zone_of` says which of our zones a
     /// centre names, ours or a peer's) at `now_s`, or keeps the claim already made on them;
     /// whether we hold them and may go in. `inside`: the chair is already in one of them, so
-    /// a hold it has is kept whatever a peer says (backing out would block both).
+    /// a hold it has is kept whatever a peer says (backing out would block both). `may_enter`:
+    /// the way out beyond them is clear; if not, the claim keeps its place in the queue but
+    /// holds nothing (a chair never stands in a zone waiting for room beyond it).
     pub fn want_zones(
         &mut self,
         zones: &[crate::geom::V2],
         zone_of: impl Fn(crate::geom::V2) -> Option<usize>,
         now_s: f64,
         inside: bool,
+        may_enter: bool,
     ) -> bool {
         let zones = &zones[..zones.len().min(MAX_CLAIM_ZONES)];
         let ids: Vec<usize> = zones.iter().filter_map(|&z| zone_of(z)).collect();
@@ -315,7 +318,7 @@ impl Traffic {
             shared && ((c.hold && !(mine.hold && inside)) || (!mine.hold && c.before(&p.name, &mine, name)))
         });
         let claim = self.claim.as_mut().expect("made above");
-        if conflict {
+        if conflict || (!may_enter && !inside) {
             claim.hold = false;
         } else if claim.hold || now_s - claim.since_s >= CLAIM_SETTLE_S - 1e-9 {
             claim.hold = true;
@@ -571,8 +574,8 @@ mod tests {
         let mut entered = (None, None);
         for k in 0..30 {
             let now = f64::from(k) * 0.1;
-            let ga = a.want_zones(&door, zone_of, now, false);
-            let gb = b.want_zones(&door, zone_of, now, false);
+            let ga = a.want_zones(&door, zone_of, now, false, true);
+            let gb = b.want_zones(&door, zone_of, now, false, true);
             assert!(!(ga && gb), "both hold the doorway at {now}");
             if ga && entered.0.is_none() {
                 entered.0 = Some(now);
@@ -597,15 +600,15 @@ mod tests {
         let door = [V2::new(7.5, 6.0)];
         let mut late = Traffic::new("chair1");
         let mut early = Traffic::new("chair9");
-        assert!(!early.want_zones(&door, zone_of, 1.0, false));
+        assert!(!early.want_zones(&door, zone_of, 1.0, false, true));
         tell(&early, &mut late, pose(7.5, 4.0, 90.0), 1.1);
-        assert!(!late.want_zones(&door, zone_of, 1.1, false));
-        assert!(early.want_zones(&door, zone_of, 1.3, false), "settled, nobody before it");
+        assert!(!late.want_zones(&door, zone_of, 1.1, false, true));
+        assert!(early.want_zones(&door, zone_of, 1.3, false, true), "settled, nobody before it");
         tell(&early, &mut late, pose(7.5, 4.0, 90.0), 1.4);
-        assert!(!late.want_zones(&door, zone_of, 1.5, false), "chair9 wanted it first");
+        assert!(!late.want_zones(&door, zone_of, 1.5, false, true), "chair9 wanted it first");
         // chair9 falls silent inside (crashed, its messages lost): its claim lapses after 1 s.
-        assert!(!late.want_zones(&door, zone_of, 2.4, false));
-        assert!(late.want_zones(&door, zone_of, 2.5, false), "a claim not heard for 1 s lapses");
+        assert!(!late.want_zones(&door, zone_of, 2.4, false, true));
+        assert!(late.want_zones(&door, zone_of, 2.5, false, true), "a claim not heard for 1 s lapses");
     }
 
     #[test]

@@ -9,8 +9,12 @@
 //! nearest to it along the free cells, and a cell beside one of another core is on a passage's
 //! *boundary* (a doorway's threshold, the middle of a long narrow corridor). A zone is such a
 //! boundary with the cells within reach of it: at least [`MOUTH_M`], and as far as the
-//! passage is deep (a long narrow corridor is covered to both mouths). Zones that touch are
-//! one zone.
+//! passage is deep (a long narrow corridor is covered to both mouths); and, on each side,
+//! the room a chair needs to turn into or out of it: every cell within the chair's reach (its
+//! farthest corner from the axle, plus a little) of the wide place's cell nearest to the
+//! passage, where a chair coming out pivots. A doorway onto a 2 m corridor thus takes in the
+//! corridor's whole width before it (a chair turning out of it sweeps both lanes), and two
+//! doorways face to face are one zone, a junction. Zones that touch are one zone.
 //!
 //! A room corner is no narrow: however close its walls, only one core reaches it.
 
@@ -26,6 +30,8 @@ pub const MOUTH_M: f64 = 0.8;
 /// A wide place smaller than this many square metres is not a core (a nook between
 /// furniture is no place to pass).
 const MIN_CORE_M2: f64 = 0.05;
+/// Added to the chair's reach round a passage's pivot, metres.
+const PIVOT_SLACK_M: f64 = 0.1;
 
 /// One zone.
 #[derive(Debug, Clone, PartialEq)]
@@ -60,6 +66,38 @@ fn neighbours(spec: &GridSpec, i: usize) -> impl Iterator<Item = (usize, u32)> +
     })
 }
 
+/// On each side of a passage (each core whose cells are nearest its boundary), the core cell
+/// nearest to the boundary: found by a search from the boundary over free cells, at most
+/// `limit` (hundredths of a cell) plus a little deep.
+fn pivots(spec: &GridSpec, boundary: &[usize], core: &[u32], depth: &[u32], limit: u32) -> Vec<usize> {
+    let mut seen: std::collections::HashMap<usize, u32> = boundary.iter().map(|&i| (i, 0)).collect();
+    let mut heap: BinaryHeap<Reverse<(u32, usize)>> = boundary.iter().map(|&i| Reverse((0, i))).collect();
+    let mut found: Vec<(u32, usize)> = Vec::new();
+    while let Some(Reverse((d, i))) = heap.pop() {
+        if seen.get(&i).is_some_and(|&s| d > s) {
+            continue;
+        }
+        if core[i] != u32::MAX {
+            if !found.iter().any(|&(c, _)| c == core[i]) {
+                found.push((core[i], i));
+            }
+            continue;
+        }
+        for (j, c) in neighbours(spec, i) {
+            let nd = d + c;
+            // Free cells only (those with a depth), and not beyond the passage's reach.
+            if depth[j] == u32::MAX || nd > limit + 200 {
+                continue;
+            }
+            if seen.get(&j).is_none_or(|&s| nd < s) {
+                seen.insert(j, nd);
+                heap.push(Reverse((nd, j)));
+            }
+        }
+    }
+    found.into_iter().map(|(_, i)| i).collect()
+}
+
 fn find(parent: &mut [usize], mut k: usize) -> usize {
     while parent[k] != k {
         parent[k] = parent[parent[k]];
@@ -69,15 +107,23 @@ fn find(parent: &mut [usize], mut k: usize) -> usize {
 }
 
 impl Zones {
+    /// No zones at all (the zone rule off): every place is in none.
+    pub fn none() -> Zones {
+        let spec = GridSpec { origin: V2::new(0.0, 0.0), cell: 1.0, nx: 1, ny: 1 };
+        Zones { spec, label: Vec::new(), zones: Vec::new() }
+    }
+
     /// Twice a chair's width plus a gap of 0.3 m, halved: the clearance a cell needs for two
     /// chairs `half` wide each side of the axle to pass there.
     pub fn wide_radius(half: f64) -> f64 {
         2.0 * half + 0.15
     }
 
-    /// The zones of `statics` for chairs `half` wide each side of the axle (whose axle stands
-    /// only where the walls are at least `half` away).
-    pub fn find(statics: &StaticRaster, half: f64) -> Zones {
+    /// The zones of `statics` for chairs of footprint `fp` (whose axle stands only where the
+    /// walls are at least `fp.half` away).
+    pub fn find(statics: &StaticRaster, fp: &crate::geom::Footprint) -> Zones {
+        let half = fp.half;
+        let pivot_r = fp.reach() + PIVOT_SLACK_M;
         let spec = statics.spec;
         let dist = statics.distances();
         let n = spec.len();
@@ -176,13 +222,25 @@ impl Zones {
         let mut parent: Vec<usize> = (0..passages.len()).collect();
         let mut reach = vec![u32::MAX; n];
         let mut grown = vec![u32::MAX; n];
+        let pivot_limit = (pivot_r / cell * 100.0) as u32;
         for (k, cells) in passages.iter().enumerate() {
             let deepest = cells.iter().map(|&i| depth[i]).max().unwrap_or(0);
-            let limit = ((MOUTH_M / cell * 100.0) as u32).max(deepest);
+            let mouth = ((MOUTH_M / cell * 100.0) as u32).max(deepest);
+            // Growth runs to `limit`; each seed starts as far short of it as it reaches.
+            let limit = mouth.max(pivot_limit);
             heap.clear();
             for &i in cells {
-                reach[i] = 0;
-                heap.push(Reverse((0u32, i)));
+                reach[i] = limit - mouth;
+                heap.push(Reverse((limit - mouth, i)));
+            }
+            // The pivots: on each side, the core cell nearest the passage. Growing from a
+            // pivot starts `limit - pivot_limit` short, so it reaches `pivot_r` round it.
+            for p in pivots(&spec, cells, &core, &depth, mouth) {
+                let start = limit.saturating_sub(pivot_limit);
+                if start < reach[p] {
+                    reach[p] = start;
+                    heap.push(Reverse((start, p)));
+                }
             }
             let mut touched = Vec::new();
             while let Some(Reverse((d, i))) = heap.pop() {
@@ -220,7 +278,12 @@ impl Zones {
                     continue;
                 }
                 number[root] = zones.len() as u16;
-                zones.push((V2::new(0.0, 0.0), 0, V2::new(f64::INFINITY, f64::INFINITY), V2::new(-f64::INFINITY, -f64::INFINITY)));
+                zones.push((
+                    V2::new(0.0, 0.0),
+                    0,
+                    V2::new(f64::INFINITY, f64::INFINITY),
+                    V2::new(-f64::INFINITY, -f64::INFINITY),
+                ));
             }
             let z = number[root];
             label[i] = z + 1;
@@ -234,10 +297,30 @@ impl Zones {
                 e.1 += 1;
             }
         }
-        let zones = zones
+        let mut zones: Vec<Zone> = zones
             .into_iter()
             .map(|(sum, count, lo, hi)| Zone { centre: sum * (1.0 / count.max(1) as f64), lo, hi })
             .collect();
+        // The centre is the boundary cell nearest the boundary's mean: a point in the zone
+        // (two merged doorways' mean may lie between them, outside both).
+        let mut best = vec![(f64::INFINITY, V2::new(0.0, 0.0)); zones.len()];
+        for i in 0..n {
+            if passage[i] == u32::MAX || label[i] == 0 {
+                continue;
+            }
+            let z = usize::from(label[i] - 1);
+            let (ix, iy) = spec.coords(i);
+            let p = spec.center(ix, iy);
+            let d = (p - zones[z].centre).norm();
+            if d < best[z].0 {
+                best[z] = (d, p);
+            }
+        }
+        for (z, (d, p)) in zones.iter_mut().zip(best) {
+            if d.is_finite() {
+                z.centre = p;
+            }
+        }
         Zones { spec, label, zones }
     }
 
@@ -249,7 +332,7 @@ impl Zones {
     /// The zone holding `p`, if any.
     pub fn at(&self, p: V2) -> Option<usize> {
         let (ix, iy) = self.spec.cell_of(p)?;
-        let l = self.label[self.spec.index(ix, iy)];
+        let l = *self.label.get(self.spec.index(ix, iy))?;
         (l > 0).then(|| usize::from(l - 1))
     }
 
@@ -265,7 +348,10 @@ mod tests {
     use crate::map::{MapWall, NavMap};
     use crate::model::CELL_M;
 
-    const HALF: f64 = 0.325;
+    /// The Intellwheels chair: 1.1 m long, 0.65 m wide, axle at 0.8 of its length.
+    fn fp() -> crate::geom::Footprint {
+        crate::Body::INTELLWHEELS.footprint()
+    }
 
     /// Two 6 m × 6 m rooms side by side, joined by a 1 m doorway in a 0.2 m wall.
     fn two_rooms() -> NavMap {
@@ -278,7 +364,7 @@ mod tests {
     #[test]
     fn a_doorway_between_two_rooms_is_one_zone_and_the_rooms_corners_are_none() {
         let statics = StaticRaster::new(&two_rooms(), CELL_M);
-        let zones = Zones::find(&statics, HALF);
+        let zones = Zones::find(&statics, &fp());
         assert_eq!(zones.all().len(), 1, "{:?}", zones.all());
         let z = &zones.all()[0];
         assert!((z.centre.x - 6.1).abs() < 0.3 && (z.centre.y - 3.0).abs() < 0.2, "{z:?}");
@@ -296,7 +382,7 @@ mod tests {
         let mut map = NavMap::empty(18.0, 6.0);
         map.walls.push(MapWall::rectangle(6.0, 0.0, 12.0, 2.4, false));
         map.walls.push(MapWall::rectangle(6.0, 3.6, 12.0, 6.0, false));
-        let zones = Zones::find(&StaticRaster::new(&map, CELL_M), HALF);
+        let zones = Zones::find(&StaticRaster::new(&map, CELL_M), &fp());
         assert_eq!(zones.all().len(), 1, "{:?}", zones.all());
         for x in [6.2, 7.0, 9.0, 11.0, 11.8] {
             assert_eq!(zones.at(V2::new(x, 3.0)), Some(0), "x = {x}");
@@ -317,15 +403,21 @@ mod tests {
         }
         map.walls.push(MapWall::rectangle(4.95, 0.0, 5.05, 5.9, false));
         map.walls.push(MapWall::rectangle(4.95, 8.1, 5.05, 14.0, false));
-        let zones = Zones::find(&StaticRaster::new(&map, CELL_M), HALF);
-        assert_eq!(zones.all().len(), 4, "{:?}", zones.all());
-        for (x, y) in [(2.5, 5.95), (7.5, 5.95), (2.5, 8.05), (7.5, 8.05)] {
-            let z = zones.at(V2::new(x, y)).unwrap_or_else(|| panic!("the doorway at {x}, {y}: {:?}", zones.all()));
-            // A doorway's zone takes in the lane on its own side, not the far one.
-            let (near, far) = if y < 7.0 { (6.5, 7.6) } else { (7.5, 6.4) };
-            assert_eq!(zones.at(V2::new(x, near)), Some(z), "the near lane at {x}");
-            assert_ne!(zones.at(V2::new(x, far)), Some(z), "the far lane at {x}");
+        let zones = Zones::find(&StaticRaster::new(&map, CELL_M), &fp());
+        // Doorways face to face are one junction with the corridor's width between them (a
+        // chair turning out of either sweeps both lanes); the corridor between junctions is
+        // in none.
+        assert_eq!(zones.all().len(), 2, "{:?}", zones.all());
+        for x in [2.5, 7.5] {
+            let z = zones.at(V2::new(x, 5.95)).unwrap_or_else(|| panic!("the doorway at {x}: {:?}", zones.all()));
+            for y in [5.5, 6.4, 7.0, 7.6, 8.05, 8.5] {
+                assert_eq!(zones.at(V2::new(x, y)), Some(z), "({x}, {y})");
+            }
+            let zone = &zones.all()[z];
+            assert!(zone.hi.x - zone.lo.x < 2.8, "a junction no wider than a turn needs: {zone:?}");
         }
-        assert_eq!(zones.at(V2::new(5.0, 7.0)), None, "the corridor between doorways");
+        for y in [6.4, 7.0, 7.6] {
+            assert_eq!(zones.at(V2::new(5.0, y)), None, "the corridor between junctions at y {y}");
+        }
     }
 }

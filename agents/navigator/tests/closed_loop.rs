@@ -549,8 +549,14 @@ mod corridor_swap {
     }
 
     fn simulate(chairs: &[Chair], seconds: f64, seed: u64) -> Swap {
+        simulate_on("liacc", chairs, seconds, seed, false)
+    }
+
+    /// As [`simulate`], on built-in map `map`, with the zone rule on when `zone_claims` (a
+    /// ward junction test with it comes with the rule's tuning, issue 26).
+    fn simulate_on(map: &str, chairs: &[Chair], seconds: f64, seed: u64, zone_claims: bool) -> Swap {
         let trace = std::env::var_os("NAV_TRACE").is_some();
-        let lab = builtin::map("liacc").expect("a built-in map").lab.clone();
+        let lab = builtin::map(map).expect("a built-in map").lab.clone();
         let params = Params::default();
         assert!(params.noise.encoder_slip_frac > 0.0, "the wheels slip");
         let mut world = World::new(&lab, params, seed).expect("a valid world");
@@ -570,7 +576,9 @@ mod corridor_swap {
             };
             let handle = world.add_robot(chair_spec(&cfg, c.name)).expect("a valid chair");
             let nav_map = NavMap::from_items(&header, &items).expect("the published map reads back");
-            fleet.push((handle, Pilot::new(c.name, Navigator::new(nav_map, cfg)), None::<f64>));
+            let pilot = Pilot::new(c.name, Navigator::new(nav_map, cfg));
+            let pilot = if zone_claims { pilot.with_zone_claims() } else { pilot };
+            fleet.push((handle, pilot, None::<f64>));
         }
         world.refresh_sensors();
         let mut min_gap = f64::INFINITY;
