@@ -65,9 +65,11 @@ pub struct Pilot {
 impl Pilot {
     /// A pilot called `name` (as it registered with the hub) for `nav`.
     pub fn new(name: &str, nav: Navigator) -> Self {
+        let traffic = Traffic::new(name);
+        let traffic = if nav.config().keep_right > 0.0 { traffic.keeping_right() } else { traffic };
         Self {
             name: name.to_owned(),
-            traffic: Traffic::new(name),
+            traffic,
             nav,
             said: None,
             no_room_said: false,

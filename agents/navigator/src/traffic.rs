@@ -45,6 +45,10 @@ const FORGET_S: f64 = 3.0;
 const WAIT_LIMIT_S: f64 = 40.0;
 /// Two chairs whose lines pass farther apart than their half-widths plus this do not clash.
 const CLASH_SLACK_M: f64 = 0.4;
+/// The same for chairs that keep right ([`Traffic::keeping_right`]): two chairs in the lanes
+/// of a 2 m corridor (1 m apart) pass without a word; in a narrower one they still agree who
+/// pulls over.
+const CLASH_SLACK_LANES_M: f64 = 0.25;
 /// The other has gone past when its axle is this far behind ours, metres.
 const PASSED_M: f64 = 1.4;
 /// Bodies said to be longer or wider than this are not believed, metres.
@@ -254,6 +258,8 @@ pub struct Traffic {
     claim: Option<Claim>,
     /// Standing still until the zones claimed are ours.
     zone_waiting: bool,
+    /// [`CLASH_SLACK_M`], or less for chairs that keep right.
+    clash_slack: f64,
 }
 
 fn along(me: Pose, other: Pose) -> f64 {
@@ -278,7 +284,15 @@ impl Traffic {
             crossed: Vec::new(),
             claim: None,
             zone_waiting: false,
+            clash_slack: CLASH_SLACK_M,
         }
+    }
+
+    /// Chairs keep right in two-lane corridors (`--keep-right`): two in opposite lanes pass
+    /// each other without negotiating.
+    pub fn keeping_right(mut self) -> Self {
+        self.clash_slack = CLASH_SLACK_LANES_M;
+        self
     }
 
     /// Our claim on one-lane zones, as we say it.
@@ -428,12 +442,15 @@ impl Traffic {
                 // No room found yet: look again while the other is still there, and give up
                 // after as long as the other waits (it then goes on regardless).
                 return match self.peer(&peer).cloned() {
-                    Some(p) if now_s - since_s <= WAIT_LIMIT_S => Decision::PullOver(p),
+                    Some(p) if p.state != State::Park && now_s - since_s <= WAIT_LIMIT_S => Decision::PullOver(p),
                     _ => self.finish(peer),
                 };
             }
             Role::Parked { peer } => {
-                return if self.gone_past(me, &peer) { self.finish(peer) } else { Decision::Hold };
+                // Gone past, or standing for good itself (arrived beside us, or parked for a
+                // third chair): it will not pass, so we go on and plan round it.
+                let stands = self.peer(&peer).is_some_and(|p| p.state == State::Park);
+                return if stands || self.gone_past(me, &peer) { self.finish(peer) } else { Decision::Hold };
             }
             Role::Waiting { peer, since_s } => {
                 if self.gone_past(me, &peer) {
@@ -475,7 +492,7 @@ impl Traffic {
                 && along(p.pose, me) > 0.5
                 // Each side measures the other's offset in its own frame; the larger of the
                 // two makes the test the same on both sides.
-                && across(me, p.pose).abs().max(across(p.pose, me).abs()) < own.half + p.footprint.half + CLASH_SLACK_M
+                && across(me, p.pose).abs().max(across(p.pose, me).abs()) < own.half + p.footprint.half + self.clash_slack
         });
         let Some(p) = meeting.cloned() else { return Decision::Go };
         if self.name > p.name {
@@ -648,6 +665,31 @@ mod tests {
         one.hear(&say("chair2", b, State::Go), 9.1);
         assert_eq!(one.decide(past, &fp, 9.2), Decision::Go);
         assert!(!one.negotiating() && !two.negotiating());
+    }
+
+    /// The chair given the way stops for good before it has gone past (its goal was beside
+    /// the yielder, as when two chairs swap rooms): it says `park`, and the yielder goes on
+    /// rather than wait for a pass that never comes.
+    #[test]
+    fn a_yielder_goes_on_when_the_other_stops_for_good_before_passing() {
+        let fp = BODY.footprint();
+        let (a, b) = (pose(15.0, 6.0, 0.0), pose(21.0, 6.0, 180.0));
+        let mut two = Traffic::new("chair2");
+        two.hear(&say("chair1", a, State::Go), 0.0);
+        assert!(matches!(two.decide(b, &fp, 0.1), Decision::PullOver(_)));
+        two.pulling();
+        two.parked();
+        let arrived = pose(20.0, 7.2, 90.0);
+        two.hear(&say("chair1", arrived, State::Go), 5.0);
+        assert_eq!(two.decide(b, &fp, 5.0), Decision::Hold, "still on its way");
+        two.hear(&say("chair1", arrived, State::Park), 6.0);
+        assert_eq!(two.decide(b, &fp, 6.0), Decision::Go, "it stands for good: go on round it");
+        // A yielder still looking for room does not pull over for a chair that stands.
+        let mut three = Traffic::new("chair3");
+        three.hear(&say("chair1", a, State::Go), 0.0);
+        assert!(matches!(three.decide(b, &fp, 0.1), Decision::PullOver(_)));
+        three.hear(&say("chair1", a, State::Park), 0.2);
+        assert_eq!(three.decide(b, &fp, 0.3), Decision::Go);
     }
 
     #[test]

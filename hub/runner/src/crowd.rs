@@ -36,6 +36,10 @@ pub struct Crowd {
     /// A checkpoint's radius, metres.
     #[serde(default = "half")]
     pub radius_m: f64,
+    /// More options for every chair's navigator, as an agent's `options` (e.g.
+    /// `{ zone-claims = true }`); the crowd's own (`name`, `pose`, `checkpoint`) are refused.
+    #[serde(default)]
+    pub options: toml::Table,
 }
 
 fn one() -> usize {
@@ -64,6 +68,7 @@ impl Crowd {
             clearance_m: turn_room(),
             min_trip_m: trip(),
             radius_m: half(),
+            options: toml::Table::new(),
         }
     }
 
@@ -89,7 +94,12 @@ impl Crowd {
                 return Err(format!("crowd.{key} = {v}: from {lo} to {hi}"));
             }
         }
-        Ok(())
+        for key in ["name", "pose", "checkpoint"] {
+            if self.options.contains_key(key) {
+                return Err(format!("crowd.options.{key}: the crowd places its chairs itself"));
+            }
+        }
+        crate::scenario::option_flags(&self.options).map(|_| ()).map_err(|e| format!("crowd.options: {e}"))
     }
 }
 

@@ -493,7 +493,7 @@ impl Scenario {
                     route.push(s.checkpoints.len());
                 }
             }
-            let mut options = toml::Table::new();
+            let mut options = crowd.options.clone();
             options.insert("name".into(), name.clone().into());
             let start: Vec<toml::Value> = t.start.iter().map(|&v| toml::Value::Float(v)).collect();
             options.insert("pose".into(), toml::Value::Array(start));
@@ -677,5 +677,21 @@ mod tests {
             let (x, y) = (number(&pose[0]).expect("x"), number(&pose[1]).expect("y"));
             assert!([(14.5, 6.0), (24.5, 6.0)].iter().all(|&(u, v)| (x - u).hypot(y - v) >= 2.0), "{x}, {y}");
         }
+    }
+
+    #[test]
+    fn a_crowds_options_reach_every_chair_it_places_and_its_own_keys_are_refused() {
+        let text = "name = \"c\"\nlab = \"builtin:ward\"\nseconds = 10\n\n[crowd]\nchairs = 2\n\
+                    options = { zone-claims = true, keep-right = 2.0 }\n";
+        let s = Scenario::parse(text, "c.toml", Path::new(".")).expect("valid");
+        let p = s.populated(1).expect("room");
+        for a in &p.agents {
+            let flags = option_flags(&a.options).expect("flags");
+            assert!(flags.contains(&"--zone-claims".to_owned()), "{flags:?}");
+            assert!(flags.windows(2).any(|w| w == ["--keep-right", "2"]), "{flags:?}");
+        }
+        let bad = text.replace("zone-claims = true", "pose = [1, 2, 3]");
+        let err = Scenario::parse(&bad, "c.toml", Path::new(".")).expect_err("the crowd places its chairs");
+        assert!(err.to_string().contains("crowd.options.pose"), "{err}");
     }
 }
