@@ -10,7 +10,7 @@ fn main() -> ExitCode {
     match iwsim::run(cli) {
         Ok(code) => code,
         Err(err) => {
-            agent_sdk::report!("iwsim: error: {err:#}");
+            agent_sdk::report!("iwsim: error: {}", iwsim::error_chain(&err));
             ExitCode::FAILURE
         }
     }

@@ -36,6 +36,34 @@ fn values_that_cannot_be_honoured_are_refused_with_the_option_and_its_range() {
     }
 }
 
+/// Issue 27, fault 11: `iwsim plot /dev/zero` read until memory ran out, and a FIFO with no
+/// writer given as a lab blocked for ever. Every reader of a user's file now refuses what is
+/// not a regular file, at once and saying what it is (10 s is this test's own bound).
+#[test]
+fn a_device_or_a_pipe_given_as_a_file_is_refused_at_once() {
+    let dir = std::env::temp_dir().join(format!("iwsim-e2e-fifo-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("temp dir");
+    let fifo = dir.join("lab.xml");
+    assert!(Command::new("mkfifo").arg(&fifo).status().expect("mkfifo runs").success());
+    let fifo = fifo.to_str().expect("utf-8");
+    let s = session("fifo-lab");
+    for (args, said) in [
+        (&["plot", "/dev/zero"][..], "/dev/zero: cannot read the log: not a regular file but a device"),
+        (&["plot", fifo][..], "not a regular file but a pipe (FIFO)"),
+        (&["map", "check", fifo][..], "not a regular file but a pipe (FIFO)"),
+        (&["hub", "--session", &s, "--lab", fifo][..], "not a regular file but a pipe (FIFO)"),
+        (&["replay", fifo, "--check"][..], "not a regular file but a pipe (FIFO)"),
+    ] {
+        let (code, stderr) = iwsim(args);
+        assert_ne!(code, Some(0), "{args:?}: {stderr}");
+        assert!(stderr.contains(said), "{args:?}: {stderr}");
+        // Each cause is said once.
+        assert_eq!(stderr.matches("not a regular file").count(), 1, "{args:?}: {stderr}");
+    }
+    std::fs::remove_dir_all(&dir).expect("clean up");
+    assert_no_shared_memory_left(&s);
+}
+
 #[test]
 fn an_agent_whose_stderr_is_closed_finishes_its_run() {
     let s = session("closed-stderr");

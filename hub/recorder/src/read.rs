@@ -6,7 +6,6 @@
 //! what was lost in `truncated`.
 
 use std::collections::BTreeMap;
-use std::fs::File;
 use std::io::Read;
 use std::path::{Path, PathBuf};
 
@@ -275,7 +274,8 @@ fn scan(
     mut on_message: impl FnMut(&str, u64, u64, &[u8]) -> Result<(), RecordingReadError>,
 ) -> Result<Scan, RecordingReadError> {
     let io = |source| RecordingReadError::Io { path: path.into(), source };
-    let mut file = File::open(path).map_err(io)?;
+    // A device or a pipe is refused: a FIFO with no writer would block the open for ever.
+    let mut file = records::files::open_regular(path).map_err(io)?;
     // Whole chunks only: messages of a chunk are used once all of it has arrived, so a cut
     // chunk is dropped whole rather than half-read.
     let mut reader = LinearReader::new_with_options(

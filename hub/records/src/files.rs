@@ -3,7 +3,7 @@
 //!
 //! ```
 //! let err = records::files::read_text(std::path::Path::new("/dev/zero")).unwrap_err();
-//! assert!(matches!(err, records::files::TextReadError::TooLarge { .. }));
+//! assert!(err.to_string().contains("not a regular file"), "{err}");
 //! ```
 
 use std::io::Read;
@@ -37,11 +37,33 @@ pub enum TextReadError {
     },
 }
 
+/// Opens `path` for reading if it is a regular file (or a link to one). A device (`/dev/zero`
+/// would be read until memory runs out), a pipe (opening a FIFO with no writer blocks for
+/// ever) or a directory is refused with an error of kind `InvalidInput` that says what it is.
+pub fn open_regular(path: &Path) -> std::io::Result<std::fs::File> {
+    use std::os::unix::fs::FileTypeExt as _;
+    let kind = std::fs::metadata(path)?.file_type();
+    let what = if kind.is_file() {
+        return std::fs::File::open(path);
+    } else if kind.is_dir() {
+        "a directory"
+    } else if kind.is_fifo() {
+        "a pipe (FIFO)"
+    } else if kind.is_socket() {
+        "a socket"
+    } else if kind.is_char_device() || kind.is_block_device() {
+        "a device"
+    } else {
+        "not a file"
+    };
+    Err(std::io::Error::new(std::io::ErrorKind::InvalidInput, format!("not a regular file but {what}: give a file")))
+}
+
 /// Reads a whole text file, refusing one larger than [`MAX_TEXT_FILE_BYTES`] or not UTF-8.
 pub fn read_text(path: &Path) -> Result<String, TextReadError> {
     let mut bytes = Vec::new();
     // One byte past the cap tells "exactly the cap" from "larger".
-    std::fs::File::open(path)?.take(MAX_TEXT_FILE_BYTES + 1).read_to_end(&mut bytes)?;
+    open_regular(path)?.take(MAX_TEXT_FILE_BYTES + 1).read_to_end(&mut bytes)?;
     if u64::try_from(bytes.len()).unwrap_or(u64::MAX) > MAX_TEXT_FILE_BYTES {
         return Err(TextReadError::TooLarge { max: MAX_TEXT_FILE_BYTES });
     }
@@ -74,9 +96,28 @@ mod tests {
     }
 
     #[test]
-    fn an_endless_file_stops_at_the_cap() {
-        let err = read_text(Path::new("/dev/zero")).expect_err("endless");
+    fn a_file_over_the_cap_stops_at_the_cap() {
+        let path = std::env::temp_dir().join(format!("iwsim-records-big-{}.toml", std::process::id()));
+        std::fs::File::create(&path).and_then(|f| f.set_len(MAX_TEXT_FILE_BYTES + 1)).expect("a sparse file");
+        let err = read_text(&path).expect_err("too large");
+        std::fs::remove_file(&path).expect("clean up");
         assert!(matches!(err, TextReadError::TooLarge { max: MAX_TEXT_FILE_BYTES }), "{err:?}");
+    }
+
+    #[test]
+    fn a_device_a_pipe_or_a_directory_is_refused_at_once() {
+        let fifo = std::env::temp_dir().join(format!("iwsim-records-fifo-{}", std::process::id()));
+        assert!(std::process::Command::new("mkfifo").arg(&fifo).status().expect("mkfifo runs").success());
+        // A FIFO with no writer: opening it would block for ever.
+        let pipe = read_text(&fifo).expect_err("a pipe");
+        std::fs::remove_file(&fifo).expect("clean up");
+        for (err, what) in [
+            (read_text(Path::new("/dev/zero")).expect_err("a device"), "a device"),
+            (pipe, "a pipe (FIFO)"),
+            (read_text(&std::env::temp_dir()).expect_err("a directory"), "a directory"),
+        ] {
+            assert!(err.to_string().contains(&format!("not a regular file but {what}")), "{err}");
+        }
     }
 
     #[test]

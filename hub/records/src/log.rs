@@ -278,10 +278,23 @@ pub enum LogReadError {
     },
 }
 
+/// The largest log read, in bytes (256 MiB: a day of ticks at 10 a second, one robot).
+pub const MAX_LOG_BYTES: u64 = 256 * 1024 * 1024;
+
 impl LogTable {
-    /// Reads the log at `path`.
+    /// Reads the log at `path`: a regular file (a device or a pipe is refused) of at most
+    /// [`MAX_LOG_BYTES`].
     pub fn read(path: &Path) -> Result<Self, LogReadError> {
-        let text = std::fs::read_to_string(path).map_err(|source| LogReadError::Io { path: path.into(), source })?;
+        use std::io::Read as _;
+        let io = |source| LogReadError::Io { path: path.into(), source };
+        let mut bytes = Vec::new();
+        crate::files::open_regular(path).map_err(io)?.take(MAX_LOG_BYTES + 1).read_to_end(&mut bytes).map_err(io)?;
+        if u64::try_from(bytes.len()).unwrap_or(u64::MAX) > MAX_LOG_BYTES {
+            let why = format!("larger than {MAX_LOG_BYTES} bytes: not a robot's log");
+            return Err(io(std::io::Error::new(std::io::ErrorKind::InvalidData, why)));
+        }
+        let text = String::from_utf8(bytes)
+            .map_err(|e| io(std::io::Error::new(std::io::ErrorKind::InvalidData, format!("not UTF-8 text: {e}"))))?;
         Self::parse(&text, path)
     }
 

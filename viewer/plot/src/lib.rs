@@ -120,7 +120,9 @@ pub fn is_recording(path: &Path) -> bool {
         return true;
     }
     let mut magic = [0u8; MCAP_MAGIC.len()];
-    std::fs::File::open(path).and_then(|mut f| std::io::Read::read_exact(&mut f, &mut magic)).is_ok()
+    // Only a regular file is looked into: opening a FIFO with no writer would block for ever
+    // (the reader then says what the path is).
+    records::files::open_regular(path).and_then(|mut f| std::io::Read::read_exact(&mut f, &mut magic)).is_ok()
         && &magic == MCAP_MAGIC
 }
 

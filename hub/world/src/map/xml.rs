@@ -292,7 +292,25 @@ pub const MAX_FILE_BYTES: u64 = 16 * 1024 * 1024;
 pub fn read_text(path: &Path) -> Result<String, MapLoadError> {
     use std::io::Read;
 
+    use std::os::unix::fs::FileTypeExt as _;
+
     let io = |source| MapLoadError::Io { path: path.to_owned(), source };
+    // A FIFO with no writer would block the open for ever, a device be read until the cap:
+    // only regular files (or links to them) are read.
+    let kind = std::fs::metadata(path).map_err(io)?.file_type();
+    if !kind.is_file() {
+        let what = if kind.is_dir() {
+            "a directory"
+        } else if kind.is_fifo() {
+            "a pipe (FIFO)"
+        } else if kind.is_char_device() || kind.is_block_device() {
+            "a device"
+        } else {
+            "not a file"
+        };
+        let why = format!("not a regular file but {what}: give a file");
+        return Err(io(std::io::Error::new(std::io::ErrorKind::InvalidInput, why)));
+    }
     let file = std::fs::File::open(path).map_err(io)?;
     let mut bytes = Vec::new();
     // One byte past the cap tells "exactly the cap" from "larger".
@@ -1632,10 +1650,26 @@ mod tests {
 
     #[test]
     fn a_file_larger_than_the_cap_is_refused_without_reading_it_all() {
-        // /dev/zero never ends: only the cap stops the read.
-        let err = read_text(Path::new("/dev/zero")).expect_err("endless");
+        // A sparse file: 16 MiB and a little of nothing, made at once.
+        let path = std::env::temp_dir().join(format!("iwsim-big-lab-{}.xml", std::process::id()));
+        std::fs::File::create(&path).and_then(|f| f.set_len(MAX_FILE_BYTES + 10)).expect("a sparse file");
+        let err = read_text(&path).expect_err("too large");
+        let _ = std::fs::remove_file(&path);
         assert!(matches!(err, MapLoadError::TooLarge { max: MAX_FILE_BYTES, .. }), "{err:?}");
-        assert!(err.to_string().contains("/dev/zero is larger than 16777216 bytes"), "{err}");
+        assert!(err.to_string().contains("is larger than 16777216 bytes"), "{err}");
+    }
+
+    #[test]
+    fn a_device_or_a_pipe_is_refused_at_once_not_read_for_ever() {
+        // /dev/zero never ends; a FIFO with no writer blocked the open for ever (issue 27).
+        let err = read_text(Path::new("/dev/zero")).expect_err("a device");
+        assert!(err.to_string().contains("not a regular file but a device"), "{err}");
+        let fifo = std::env::temp_dir().join(format!("iwsim-fifo-lab-{}.xml", std::process::id()));
+        let made = std::process::Command::new("mkfifo").arg(&fifo).status().expect("mkfifo runs");
+        assert!(made.success());
+        let err = read_text(&fifo).expect_err("a pipe");
+        let _ = std::fs::remove_file(&fifo);
+        assert!(err.to_string().contains("not a regular file but a pipe (FIFO)"), "{err}");
     }
 
     #[test]
