@@ -3,6 +3,7 @@
 //! once; `--session` lets another process attach; and every command README shows exists.
 
 use std::path::{Path, PathBuf};
+use std::process::Command;
 use std::time::{Duration, Instant};
 
 use records::summary::RunSummary;
@@ -102,6 +103,43 @@ fn sigterm_to_a_lock_step_run_stops_its_hub_and_agents_and_leaves_nothing() {
 #[test]
 fn sighup_to_a_real_time_run_stops_its_hub_and_agents_and_leaves_nothing() {
     interrupt_a_run("sighup-realtime", &[], false, "HUP", "SIGHUP", 129);
+}
+
+/// Issue 27, fault 4: a run whose hub is killed mid-run still writes its summary.json,
+/// partial, saying what ended it and how far the record got (it used to write none).
+#[test]
+fn a_run_whose_hub_is_killed_writes_a_partial_summary_saying_so() {
+    let dir = work_dir("hub-killed");
+    let scenario = scenario(&dir, "builtin:liacc", &still_chair(10.0));
+    let out = dir.join("out");
+    let mut run = Proc::spawn(&["run", &scenario, "--lockstep", "--headless", "--out", out.to_str().expect("utf-8")]);
+    let pid = run.pid();
+    let lines = run.stderr_lines();
+    lines.wait_for_all(&["wheelchair: agent"], Duration::from_secs(60));
+    // Chunks close every simulated second: wait for some to reach the disk.
+    let start = Instant::now();
+    while std::fs::metadata(out.join("run.mcap")).map_or(0, |m| m.len()) < 200_000 {
+        assert!(start.elapsed() < Duration::from_secs(60), "the recording did not grow");
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    let hub = processes_with_argument(&format!("run-{pid}-"))
+        .into_iter()
+        .find(|p| p.contains(" hub "))
+        .and_then(|p| p.split(':').next().map(str::to_owned))
+        .expect("the run's hub");
+    assert!(Command::new("kill").args(["-KILL", &hub]).status().expect("kill runs").success());
+    let output = run.wait(Duration::from_secs(60));
+    let stdout = text(&output.stdout);
+    let stderr = lines.to_end(Duration::from_secs(10)).join("\n");
+    assert_eq!(output.status.code(), Some(1), "{stdout}\n{stderr}");
+    let summary = RunSummary::read(&out.join("summary.json")).unwrap_or_else(|e| panic!("{e}\n{stdout}\n{stderr}"));
+    assert!(!summary.passed, "{summary:?}");
+    assert!(summary.ticks >= 10, "how far the record got: {summary:?}");
+    let ended = summary.failures.iter().find(|f| f.starts_with("ended at tick")).expect("what ended it");
+    assert!(ended.contains("hub"), "{ended}");
+    assert!(stdout.contains("FAIL: ended at tick"), "{stdout}");
+    assert_nothing_of_run_left(pid);
+    let _ = std::fs::remove_dir_all(dir);
 }
 
 #[test]

@@ -978,26 +978,34 @@ pub fn run_once(
         s.release_if_unused();
     }
     let messages: Vec<String> = rx.try_iter().collect();
-    if let Some(failure) = failure {
-        return Err(anyhow::Error::msg(failure))
-            .with_context(|| format!("the run failed; what the processes said:\n{}", messages.join("\n")));
+    // A run that failed (a process it needed died, the hub failed or was killed) still gets
+    // its summary, partial, saying what ended it: the record holds what happened up to there.
+    if let Some(failure) = &failure {
+        ipc_services::report!(
+            "iwsim run: the run failed: {failure}; what the processes said:\n{}",
+            messages.join("\n")
+        );
     }
+    let ended_early = interrupted.is_some() || failure.is_some();
     let hub_out = procs.hub.stdout();
-    let hub_outcome = match HubOutcome::from_stdout(&hub_out) {
-        Ok(o) => o,
-        // An interrupted hub may have had no time to say how far it got.
-        Err(_) if interrupted.is_some() => HubOutcome::default(),
-        Err(e) => return Err(e).context("reading how the hub's run ended"),
+    let hub_said = HubOutcome::from_stdout(&hub_out);
+    let hub_outcome = match &hub_said {
+        Ok(o) => o.clone(),
+        // A hub interrupted or killed may have had no time to say how far it got.
+        Err(_) if ended_early => HubOutcome::default(),
+        Err(e) => return Err(anyhow::anyhow!("{e}")).context("reading how the hub's run ended"),
     };
+    let mut recorded_end = None;
     // The record is the judge: the hub's truth, replayed; never what the agents wrote.
     let mut failures = Vec::new();
     let mut traffic = None;
     let robots = match judge_recording(&recording, scenario, out) {
         Ok(judged) => {
             traffic = judged.traffic;
+            recorded_end = Some((judged.ticks, judged.state_hash));
             if let Some(lost) = &judged.truncated {
                 failures.push(format!("{}: {lost}", recording.display()));
-            } else if interrupted.is_none() && judged.state_hash != hub_outcome.state_hash {
+            } else if !ended_early && judged.state_hash != hub_outcome.state_hash {
                 failures.push(format!(
                     "the record replays to state hash {} but the hub ended on {}",
                     judged.state_hash, hub_outcome.state_hash
@@ -1006,7 +1014,7 @@ pub fn run_once(
             judged.robots
         }
         // A recording cut short by the interruption still says what it can.
-        Err(e) if interrupted.is_some() => {
+        Err(e) if ended_early => {
             failures.push(format!("{e:#}"));
             Vec::new()
         }
@@ -1023,8 +1031,15 @@ pub fn run_once(
         let sim = robot.map_or(0, |r| r.collisions);
         ChairSummary::new(scenario, c.spec, c.spec.mode, c.stepped, sim, robot.map(|r| r.final_pose), &truth)
     });
+    // Where the hub said nothing, the record says how far the run got.
+    let (ticks, state_hash) = match (&hub_said, recorded_end) {
+        (Err(_), Some(end)) => end,
+        _ => (hub_outcome.ticks, hub_outcome.state_hash),
+    };
     if let Some(signal) = interrupted {
-        failures.push(format!("interrupted by {} at tick {}", signal.name(), hub_outcome.ticks));
+        failures.push(format!("interrupted by {} at tick {ticks}", signal.name()));
+    } else if let Some(failure) = failure {
+        failures.push(format!("ended at tick {ticks}: {failure}"));
     } else {
         failures.extend(check(scenario, &robots));
         failures.extend(chair_summary.as_ref().and_then(|c| c.room_failure(scenario.expect.max_collisions)));
@@ -1035,8 +1050,8 @@ pub fn run_once(
     let summary = RunSummary {
         scenario: scenario.name.clone(),
         seed,
-        ticks: hub_outcome.ticks,
-        state_hash: hub_outcome.state_hash,
+        ticks,
+        state_hash,
         wall_s: started.elapsed().as_secs_f64(),
         passed: failures.is_empty(),
         failures,
