@@ -142,6 +142,35 @@ fn a_run_whose_hub_is_killed_writes_a_partial_summary_saying_so() {
     let _ = std::fs::remove_dir_all(dir);
 }
 
+/// Issue 27, fault 2: `iwsim run` killed with SIGKILL (it can forward nothing) used to
+/// orphan its hub and agents, which ran to the end. Each child now gets SIGTERM when the
+/// runner dies, and stops and cleans up as on Ctrl-C.
+#[test]
+fn a_runner_killed_outright_takes_its_hub_and_agents_with_it() {
+    let dir = work_dir("runner-killed");
+    let scenario = scenario(&dir, "builtin:liacc", &still_chair(10.0));
+    let out = dir.join("out");
+    let mut run = Proc::spawn(&["run", &scenario, "--lockstep", "--headless", "--out", out.to_str().expect("utf-8")]);
+    let pid = run.pid();
+    let lines = run.stderr_lines();
+    lines.wait_for_all(&["wheelchair: agent"], Duration::from_secs(60));
+    let prefix = format!("run-{pid}-");
+    assert!(processes_with_argument(&prefix).len() >= 2, "the hub and the agent run");
+    run.kill9();
+    // The children stop on their own (SIGTERM from the kernel): poll until none is left.
+    let start = Instant::now();
+    while !processes_with_argument(&prefix).is_empty() {
+        assert!(
+            start.elapsed() < Duration::from_secs(30),
+            "orphans of the killed runner: {:?}",
+            processes_with_argument(&prefix)
+        );
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    assert_nothing_of_run_left(pid);
+    let _ = std::fs::remove_dir_all(dir);
+}
+
 #[test]
 fn an_agent_that_fails_at_start_up_stops_the_run_at_once() {
     let dir = work_dir("agent-fails");

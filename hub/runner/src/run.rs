@@ -265,6 +265,7 @@ impl Kid {
             Stdio::null()
         });
         crate::signals::unblock_in_child(&mut command);
+        crate::signals::die_with_parent(&mut command);
         let child = command.spawn().with_context(|| format!("starting the {what}"))?;
         Ok(Self { child, what: what.to_owned(), status: None, readers: Vec::new() })
     }
