@@ -146,6 +146,9 @@ pub fn config(args: &HubArgs) -> anyhow::Result<HubConfig> {
 /// `iwsim hub`.
 pub fn run(args: &HubArgs) -> anyhow::Result<ExitCode> {
     let cfg = config(args)?;
+    // A session name iceoryx2 cannot use is the user's mistake: say so before the banner that
+    // would announce a session that never comes up.
+    ipc_services::Session::new(&cfg.session).context("hub")?;
     ipc_services::report!(
         "iwsim hub: session {:?}, lab {:?}, {} mode{}",
         cfg.session,

@@ -64,6 +64,16 @@ fn a_device_or_a_pipe_given_as_a_file_is_refused_at_once() {
     assert_no_shared_memory_left(&s);
 }
 
+/// Issue 27, fault 10: a hub given a session name it cannot use printed its banner (as if the
+/// session were coming up) before the error.
+#[test]
+fn a_hub_with_an_unusable_session_name_says_only_that() {
+    let (code, stderr) = iwsim(&["hub", "--session", "bad/name", "--ticks", "1"]);
+    assert_eq!(code, Some(1), "{stderr}");
+    assert_eq!(stderr.lines().count(), 1, "the error alone: {stderr}");
+    assert!(stderr.contains("session name \"bad/name\" is invalid"), "{stderr}");
+}
+
 #[test]
 fn an_agent_whose_stderr_is_closed_finishes_its_run() {
     let s = session("closed-stderr");
