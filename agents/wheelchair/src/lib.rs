@@ -419,9 +419,17 @@ mod tests {
     use bytemuck::Zeroable as _;
 
     #[test]
-    fn a_config_file_larger_than_the_cap_is_refused() {
-        let err = read_config(Path::new("/dev/zero")).expect_err("endless");
-        assert!(format!("{err:#}").contains("reading /dev/zero: the file is larger than"), "{err:#}");
+    fn a_config_file_larger_than_the_cap_or_not_a_file_is_refused() {
+        let big = std::env::temp_dir().join(format!("iwsim-wheelchair-big-{}.toml", std::process::id()));
+        std::fs::File::create(&big)
+            .and_then(|f| f.set_len(records::files::MAX_TEXT_FILE_BYTES + 1))
+            .expect("a sparse file");
+        let err = read_config(&big).expect_err("too large");
+        std::fs::remove_file(&big).expect("clean up");
+        assert!(format!("{err:#}").contains("the file is larger than"), "{err:#}");
+        // /dev/zero once read until memory ran out.
+        let err = read_config(Path::new("/dev/zero")).expect_err("a device");
+        assert!(format!("{err:#}").contains("reading /dev/zero: not a regular file but a device"), "{err:#}");
     }
 
     #[test]

@@ -567,15 +567,23 @@ mod tests {
     use super::*;
 
     #[test]
-    fn a_scenario_file_larger_than_the_cap_is_refused() {
-        // /dev/zero once read until memory ran out.
-        let err = Scenario::load("/dev/zero").expect_err("endless");
+    fn a_scenario_file_larger_than_the_cap_or_not_a_file_is_refused() {
+        let big = std::env::temp_dir().join(format!("iwsim-scenario-big-{}.toml", std::process::id()));
+        std::fs::File::create(&big)
+            .and_then(|f| f.set_len(records::files::MAX_TEXT_FILE_BYTES + 1))
+            .expect("a sparse file");
+        let name = big.display().to_string();
+        let err = Scenario::load(&name).expect_err("too large");
+        std::fs::remove_file(&big).expect("clean up");
         assert!(
             matches!(&err, ScenarioError::NotText { path, source: records::files::TextReadError::TooLarge { .. } }
-                if path == "/dev/zero"),
+                if *path == name),
             "{err:?}"
         );
-        assert!(err.to_string().starts_with("/dev/zero: the file is larger than 16777216 bytes"), "{err}");
+        assert!(err.to_string().starts_with(&format!("{name}: the file is larger than 16777216 bytes")), "{err}");
+        // /dev/zero once read until memory ran out.
+        let err = Scenario::load("/dev/zero").expect_err("a device");
+        assert!(err.to_string().contains("not a regular file but a device"), "{err}");
     }
 
     #[test]
