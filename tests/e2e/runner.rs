@@ -8,7 +8,9 @@ use std::time::{Duration, Instant};
 
 use records::summary::RunSummary;
 
-use super::common::{Proc, assert_no_shared_memory_left, processes_with_argument, session, shared_memory_files, text};
+use super::common::{
+    Lines, Proc, assert_no_shared_memory_left, processes_with_argument, session, shared_memory_files, text,
+};
 
 /// A fresh directory for one test.
 fn work_dir(tag: &str) -> PathBuf {
@@ -105,17 +107,24 @@ fn sighup_to_a_real_time_run_stops_its_hub_and_agents_and_leaves_nothing() {
     interrupt_a_run("sighup-realtime", &[], false, "HUP", "SIGHUP", 129);
 }
 
+/// A headless lock-step run of one chair standing still for a long time, once its agent
+/// drives: its work dir, its output dir, the runner and its stderr.
+fn long_lock_step_run(tag: &str) -> (PathBuf, PathBuf, Proc, Lines) {
+    let dir = work_dir(tag);
+    let scenario = scenario(&dir, "builtin:liacc", &still_chair(10.0));
+    let out = dir.join("out");
+    let mut run = Proc::spawn(&["run", &scenario, "--lockstep", "--headless", "--out", out.to_str().expect("utf-8")]);
+    let lines = run.stderr_lines();
+    lines.wait_for_all(&["wheelchair: agent"], Duration::from_secs(60));
+    (dir, out, run, lines)
+}
+
 /// Issue 27, fault 4: a run whose hub is killed mid-run still writes its summary.json,
 /// partial, saying what ended it and how far the record got (it used to write none).
 #[test]
 fn a_run_whose_hub_is_killed_writes_a_partial_summary_saying_so() {
-    let dir = work_dir("hub-killed");
-    let scenario = scenario(&dir, "builtin:liacc", &still_chair(10.0));
-    let out = dir.join("out");
-    let mut run = Proc::spawn(&["run", &scenario, "--lockstep", "--headless", "--out", out.to_str().expect("utf-8")]);
+    let (dir, out, run, lines) = long_lock_step_run("hub-killed");
     let pid = run.pid();
-    let lines = run.stderr_lines();
-    lines.wait_for_all(&["wheelchair: agent"], Duration::from_secs(60));
     // Chunks close every simulated second: wait for some to reach the disk.
     let start = Instant::now();
     while std::fs::metadata(out.join("run.mcap")).map_or(0, |m| m.len()) < 200_000 {
@@ -147,13 +156,8 @@ fn a_run_whose_hub_is_killed_writes_a_partial_summary_saying_so() {
 /// runner dies, and stops and cleans up as on Ctrl-C.
 #[test]
 fn a_runner_killed_outright_takes_its_hub_and_agents_with_it() {
-    let dir = work_dir("runner-killed");
-    let scenario = scenario(&dir, "builtin:liacc", &still_chair(10.0));
-    let out = dir.join("out");
-    let mut run = Proc::spawn(&["run", &scenario, "--lockstep", "--headless", "--out", out.to_str().expect("utf-8")]);
+    let (dir, _, mut run, _lines) = long_lock_step_run("runner-killed");
     let pid = run.pid();
-    let lines = run.stderr_lines();
-    lines.wait_for_all(&["wheelchair: agent"], Duration::from_secs(60));
     let prefix = format!("run-{pid}-");
     assert!(processes_with_argument(&prefix).len() >= 2, "the hub and the agent run");
     run.kill9();
