@@ -24,7 +24,7 @@ pub struct ResumeArgs {
 pub fn resume(args: &ResumeArgs) -> anyhow::Result<ExitCode> {
     let session = &args.hub.session;
     let name = format!("iwsim-resume-{}", std::process::id());
-    let mut observer = agent_sdk::Observer::connect_within(session, &name, args.hub.timeout())
+    let mut observer = observer::Observer::connect_within(session, &name, args.hub.timeout())
         .with_context(|| format!("connecting to the hub of session {session:?}"))?;
     let robots = observer.world().map(|(_, robots)| robots);
     observer.close();

@@ -85,6 +85,11 @@ pub struct HubArgs {
     /// answer then costs no wake-up of the hub.
     #[arg(long, default_value_t = crate::ANSWER_SPIN_US, value_parser = clap::builder::RangedU64ValueParser::<u64>::new().range(0..=100_000))]
     pub answer_spin_us: u64,
+    /// A robot name that may register as Real (a physical chair whose adapter pushes its
+    /// pose). Repeatable; without it the hub refuses every Real robot, so no agent can place
+    /// a robot where it likes to probe the world.
+    #[arg(long, value_name = "NAME")]
+    pub real: Vec<String>,
 }
 
 /// Builds the hub's configuration from the command line.
@@ -140,6 +145,7 @@ pub fn config(args: &HubArgs) -> anyhow::Result<HubConfig> {
         threads: args.threads,
         parallel_min_robots: args.parallel_min_robots,
         answer_spin: Duration::from_micros(args.answer_spin_us),
+        real: args.real.clone(),
     })
 }
 

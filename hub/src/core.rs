@@ -168,6 +168,10 @@ pub struct HubCore {
     obstacle_from: usize,
     /// A scenario's checkpoints.
     checkpoints: Vec<Checkpoint>,
+    /// The names a Real robot may have (`--real NAME`); none by default.
+    real_names: BTreeSet<String>,
+    /// Poses pushed for Real robots that their bodies could not have reached (refused).
+    refused_poses: u64,
 }
 
 impl HubCore {
@@ -193,11 +197,25 @@ impl HubCore {
             next_agent_id: 1,
             tick_limit,
             max_robots: MAX_ROBOTS,
+            real_names: BTreeSet::new(),
+            refused_poses: 0,
             pending: Vec::new(),
             single_steps: 0,
             obstacle_from: lab.walls.len(),
             checkpoints: Vec::new(),
         })
+    }
+
+    /// The names a Real robot may register under: a Real robot's agent pushes its pose, so it
+    /// is for the physical chairs a run expects (a scenario's, `--real NAME`), never for any
+    /// agent that asks.
+    pub fn set_real_names(&mut self, names: impl IntoIterator<Item = String>) {
+        self.real_names = names.into_iter().collect();
+    }
+
+    /// Poses pushed for Real robots that were refused because the body could not have got there.
+    pub fn refused_poses(&self) -> u64 {
+        self.refused_poses
     }
 
     /// Lowers how many robots the hub accepts (never above `MAX_ROBOTS`).
@@ -282,6 +300,24 @@ impl HubCore {
         }
         if let Some(taken_back) = self.take_back(agent_id, reg)? {
             return Ok(taken_back);
+        }
+        if WireKind::from_u32(reg.kind) == Some(WireKind::Real) {
+            let name = reg.name.as_str().unwrap_or("");
+            if !self.real_names.contains(name) {
+                let expected = if self.real_names.is_empty() {
+                    "none".to_owned()
+                } else {
+                    self.real_names.iter().map(|n| format!("{n:?}")).collect::<Vec<_>>().join(", ")
+                };
+                return Err(Refused::new(
+                    Refusal::NotAllowed,
+                    format!(
+                        "robot {name:?} may not be Real: a Real robot's agent pushes its pose, so the hub \
+                         takes one only under a name it was told to expect (`iwsim hub --real NAME`, or \
+                         a scenario's real chair); expected: {expected}"
+                    ),
+                ));
+            }
         }
         let chair = if reg.flags & REG_CHAIR != 0 {
             if WireKind::from_u32(reg.kind) != Some(WireKind::Real) {
@@ -609,7 +645,7 @@ impl HubCore {
         waiting_on.peek().is_some() && waiting_on.all(|a| a.answered.is_some_and(|x| x >= t))
     }
 
-    /// Measures every robot where it stands (before the first step), without noise.
+    /// Measures every robot where it stands (before the first step), with the run's noise.
     pub fn prime_sensors(&mut self) {
         self.stage.refresh_sensors();
     }
@@ -679,6 +715,18 @@ impl HubCore {
         let stats = self.stage.step(&self.pending);
         if stats.unknown_robot_actions > 0 || stats.bad_values > 0 {
             tracing::debug!(?stats, "tick {}", self.stage.world().tick());
+        }
+        if stats.refused_poses > 0 {
+            // Said the first time and every thousandth: a broken adapter says it each tick.
+            if self.refused_poses.is_multiple_of(1000) {
+                tracing::warn!(
+                    "tick {}: refused a pose pushed for a Real robot that its body could not have reached \
+                     since its last pose ({} refused so far)",
+                    self.stage.world().tick(),
+                    self.refused_poses + u64::from(stats.refused_poses)
+                );
+            }
+            self.refused_poses += u64::from(stats.refused_poses);
         }
         self.pending.clear();
         if self.tick_limit > 0 && self.stage.world().tick() >= self.tick_limit {
@@ -1338,6 +1386,7 @@ mod tests {
     #[test]
     fn a_controller_attaches_to_a_chair_by_name_and_drives_it_through_its_adapter() {
         let mut c = core(Mode::LockStep);
+        c.set_real_names(["chair1".to_owned()]);
         let adapter = c.hello(1).expect("room");
         let agent = c.hello(2).expect("room");
         let (id, sensors) = c.register(adapter, &chair_reg("chair1", SensorMode::Virtual)).expect("a chair");
@@ -1365,7 +1414,7 @@ mod tests {
         drive.pose = [30.0, 2.0, 0.0];
         c.actions(agent, 0, &[drive]);
         // The adapter's motors are not the chair's.
-        let mut own = report(id, 10.5, [f32::NAN; MAX_PROXIMITY]);
+        let mut own = report(id, 10.1, [f32::NAN; MAX_PROXIMITY]);
         own.flags |= ACT_MOTORS;
         own.motors = [1.0, 1.0];
         c.actions(adapter, 0, &[own]);
@@ -1375,11 +1424,11 @@ mod tests {
         assert_eq!(b.drive_flags, DRIVE_CONTROLLED | DRIVE_FRESH);
         assert_eq!(b.encoder_ticks, [100, 120], "a chair's encoders are its wheels'");
         assert_ne!(b.present & HAS_GPS, 0, "a chair has a fix whatever the hub's GPS setting");
-        assert_eq!((b.gps_x_m, b.gps_y_m, b.gps_heading_deg), (10.5, 6.1, 0.0), "its adapter's pose, exactly");
+        assert_eq!((b.gps_x_m, b.gps_y_m, b.gps_heading_deg), (10.1, 6.1, 0.0), "its adapter's pose, exactly");
         let state = c.robot_states().next().expect("one");
-        assert_eq!((state.x_m, state.y_m), (10.5, 6.1), "the adapter's pose, not the controller's");
+        assert_eq!((state.x_m, state.y_m), (10.1, 6.1), "the adapter's pose, not the controller's");
         // A tick without an answer makes the powers stale.
-        c.actions(adapter, 1, &[report(id, 10.5, [f32::NAN; MAX_PROXIMITY])]);
+        c.actions(adapter, 1, &[report(id, 10.1, [f32::NAN; MAX_PROXIMITY])]);
         c.step();
         c.step();
         assert_eq!(c.sensor_block(id).drive_flags, DRIVE_CONTROLLED, "stale: not fresh");
@@ -1395,7 +1444,7 @@ mod tests {
         assert_eq!(c.command(Command::ResumeChair, 99), 2, "no such robot");
         let chair = c.chair_states().next().expect("one chair");
         assert_eq!((chair.controller, chair.flags & CHAIR_CONTROLLED), (0, 0));
-        assert_eq!(chair.ghost, [10.6, 6.0, 2.0]);
+        assert_eq!(chair.ghost, [10.2, 6.0, 2.0]);
         // And a new controller may attach.
         let next = c.hello(4).expect("room");
         assert_eq!(c.register(next, &RobotRegistration::new("chair1")).expect("attached").0, id);
@@ -1404,6 +1453,7 @@ mod tests {
     #[test]
     fn a_chairs_sensor_mode_picks_real_virtual_or_the_nearer_of_both() {
         let mut c = core(Mode::LockStep);
+        c.set_real_names(["chair1".to_owned()]);
         let adapter = c.hello(1).expect("room");
         let agent = c.hello(2).expect("room");
         let id = c.register(adapter, &chair_reg("chair1", SensorMode::Augmented)).expect("a chair").0;
@@ -1447,6 +1497,18 @@ mod tests {
     fn a_chair_registration_must_be_a_real_robot_with_one_mode() {
         let mut c = core(Mode::LockStep);
         let adapter = c.hello(1).expect("room");
+        // A Real robot (its pose pushed) only under a name the hub expects.
+        let refused = c.register(adapter, &chair_reg("chair1", SensorMode::Real)).expect_err("not expected");
+        assert_eq!(refused.reason, Refusal::NotAllowed);
+        assert!(
+            refused.detail.contains("--real NAME") && refused.detail.contains("expected: none"),
+            "{}",
+            refused.detail
+        );
+        c.set_real_names(["chair2".to_owned()]);
+        let refused = c.register(adapter, &chair_reg("chair1", SensorMode::Real)).expect_err("another name");
+        assert!(refused.detail.contains("expected: \"chair2\""), "{}", refused.detail);
+        c.set_real_names(["chair1".to_owned()]);
         let mut reg = chair_reg("chair1", SensorMode::Real);
         reg.kind = WireKind::Simulated as u32;
         assert_eq!(c.register(adapter, &reg).expect_err("not Real").reason, Refusal::BadParameters);

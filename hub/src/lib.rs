@@ -69,6 +69,8 @@ pub struct HubConfig {
     pub parallel_min_robots: usize,
     /// Lock-step: how long to spin for answers before sleeping (see [`ANSWER_SPIN_US`]).
     pub answer_spin: Duration,
+    /// The names a Real robot (a physical chair, its pose pushed) may register under.
+    pub real: Vec<String>,
 }
 
 /// Why the hub stopped with an error.
@@ -210,13 +212,18 @@ pub fn run(cfg: HubConfig) -> Result<HubOutcome, HubError> {
     let mut core = HubCore::new(&cfg.lab, cfg.grid.clone(), cfg.params.clone(), cfg.seed, cfg.mode, cfg.tick_limit)?;
     core.set_threads(threads_for(cfg.threads), cfg.parallel_min_robots);
     core.set_max_robots(cfg.max_robots);
+    core.set_real_names(cfg.real.iter().cloned());
     core.set_scenario(cfg.obstacle_from, cfg.checkpoints.clone());
     let deadline_ms = cfg.deadline.as_millis().min(u32::MAX as u128) as u32;
     let mut recording = match &cfg.record {
         Some(path) => {
             core.record();
-            let options =
-                RecorderOptions { wall_clock_start: Some(std::time::SystemTime::now()), ..Default::default() };
+            let options = RecorderOptions {
+                wall_clock_start: Some(std::time::SystemTime::now()),
+                // Lock-step keeps no wall-clock deadline: its people channels hold every tick.
+                keep_every_frame: cfg.mode == Mode::LockStep,
+                ..Default::default()
+            };
             let rec = Recorder::create(path, &core.run_start(deadline_ms), options)?;
             tracing::info!("recording the run to {}", path.display());
             Some(rec)

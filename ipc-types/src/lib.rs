@@ -790,6 +790,9 @@ pub enum Refusal {
     Malformed = 8,
     /// The request names an agent id that another process's port said hello for.
     NotYours = 9,
+    /// A Real robot (whose agent pushes its pose) the hub was not told to expect: only the
+    /// names given to `iwsim hub --real NAME` (a scenario's real chairs) may be Real.
+    NotAllowed = 10,
 }
 
 impl Refusal {
@@ -806,6 +809,7 @@ impl Refusal {
             7 => Some(Self::RunStarted),
             8 => Some(Self::Malformed),
             9 => Some(Self::NotYours),
+            10 => Some(Self::NotAllowed),
             _ => None,
         }
     }

@@ -31,6 +31,25 @@ from typing import Callable, Optional
 import numpy as np
 
 from . import CHAIR_BODY, CHAIR_MOTORS, CHAIR_SENSORS, IwsimError, Tick, _iwsim, connect
+from . import referee
+
+def _die_with_parent() -> None:
+    """Run in the hub's child before exec: the kernel sends it SIGTERM when this process dies,
+    however it dies (SIGKILL included), so a killed trainer leaves no hub running with its
+    shared memory. The hub ends on SIGTERM as on a Stop, removing what it made."""
+    import ctypes
+    import signal
+
+    pr_set_pdeathsig = 1
+    try:
+        libc = ctypes.CDLL(None, use_errno=True)
+        libc.prctl(pr_set_pdeathsig, int(signal.SIGTERM), 0, 0, 0)
+    except (OSError, AttributeError):  # pragma: no cover - not Linux: the atexit hook remains
+        return
+    # The parent may have died between fork and prctl: then nobody would send the signal.
+    if os.getppid() == 1:
+        os.kill(os.getpid(), signal.SIGTERM)
+
 
 try:  # the spaces both libraries use
     from gymnasium import Env, spaces
@@ -185,7 +204,9 @@ class ChairsParallelEnv(ParallelEnv):
             args += ["--obstacle", ",".join(map(str, o))]
         for c in s.checkpoints:
             args += ["--checkpoint", ",".join(map(str, c))]
-        self._hub = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
+        self._hub = subprocess.Popen(
+            args, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True, preexec_fn=_die_with_parent
+        )
         self._agent = connect(self._session, "iwsim-env", timeout=20)
         self._ids = {}
         for name, pose in zip(self.possible_agents, self._starts):
@@ -193,7 +214,7 @@ class ChairsParallelEnv(ParallelEnv):
                 name, body=CHAIR_BODY, pose=pose, motors=CHAIR_MOTORS, sensors=CHAIR_SENSORS
             )
         self._id_list = [self._ids[n] for n in self.possible_agents]
-        self._observer = _iwsim.observe(self._session, 20)
+        self._observer = referee.observe(self._session, 20)
         self._agent.ready()
         self._tick = self._agent.wait_tick(timeout=60)
         if self._tick is None:
@@ -210,7 +231,7 @@ class ChairsParallelEnv(ParallelEnv):
         # chairs' observations and the referee's true poses.
         table = self._action_table(actions)
         try:
-            stepped = _iwsim.env_step(self._agent._native, self._observer, self._tick.tick, table.tobytes(),
+            stepped = referee.env_step(self._agent._native, self._observer, self._tick.tick, table.tobytes(),
                                       MAX_RANGE_M, 60, SPIN_S)
         except ValueError:
             # The native side checks every power is finite before anything is sent: name the chair.

@@ -8,15 +8,19 @@
 //! the exceptions) is in `python/iwsim/__init__.py`, which wraps this module; this one stays
 //! small: calls in, checked values out, every SDK error mapped to a typed exception.
 //!
-//! Like every agent, it sees only what an agent may see (sensor blocks of its own robots, the
-//! map without the scenario's obstacles): it links the SDK, never the hub or the world.
+//! Like every agent, the agent API sees only what an agent may see (sensor blocks of its own
+//! robots, the map without the scenario's obstacles): it links the SDK, never the hub or the
+//! world. The truth the envs' referees judge from is in the submodule `referee` (see
+//! [`referee`]), which `iwsim.env` alone imports.
+
+mod referee;
 
 use std::time::{Duration, Instant};
 
 use agent_sdk::{Agent as SdkAgent, AgentError};
 use ipc_types::{ActionBlock, FixedName, RobotRegistration, SensorBlock};
 use pyo3::create_exception;
-use pyo3::exceptions::{PyException, PyKeyError, PyKeyboardInterrupt, PyTimeoutError, PyValueError};
+use pyo3::exceptions::{PyException, PyKeyboardInterrupt, PyTimeoutError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::{PyByteArray, PyBytes};
 
@@ -34,7 +38,7 @@ const WAIT_SLICE: Duration = Duration::from_millis(50);
 const MAX_SPIN: Duration = Duration::from_millis(1);
 
 /// An SDK error as the Python exception a caller can catch by kind.
-fn to_py(e: AgentError) -> PyErr {
+pub(crate) fn to_py(e: AgentError) -> PyErr {
     let text = e.to_string();
     match e {
         AgentError::Services(_) => SessionNotFound::new_err(text),
@@ -46,7 +50,7 @@ fn to_py(e: AgentError) -> PyErr {
     }
 }
 
-fn seconds(what: &str, s: f64) -> PyResult<Duration> {
+pub(crate) fn seconds(what: &str, s: f64) -> PyResult<Duration> {
     Duration::try_from_secs_f64(s)
         .map_err(|_| PyValueError::new_err(format!("{what} must be a finite number of seconds ≥ 0, not {s}")))
 }
@@ -74,7 +78,7 @@ impl std::fmt::Debug for Agent {
 }
 
 impl Agent {
-    fn sdk(&mut self) -> PyResult<&mut SdkAgent> {
+    pub(crate) fn sdk(&mut self) -> PyResult<&mut SdkAgent> {
         self.sdk.as_mut().ok_or_else(|| IwsimError::new_err("the agent is closed"))
     }
 }
@@ -220,7 +224,7 @@ impl Agent {
     /// a sleeping thread wakes, so a process that runs the whole step (an environment) spends a
     /// core for speed. Python's other threads wait meanwhile.
     #[pyo3(signature = (tick, powers, timeout = None, spin = 0.0))]
-    fn step(
+    pub(crate) fn step(
         &mut self,
         py: Python<'_>,
         tick: u64,
@@ -296,135 +300,11 @@ impl Agent {
     }
 }
 
-/// Connects to the hub of `session` as an observer: it sees every robot's true state (for a
-/// referee or a reward, never for the agent under test), and the hub does not count it.
-#[pyfunction]
-#[pyo3(signature = (session, timeout = 5.0))]
-fn observe(session: &str, timeout: f64) -> PyResult<Observer> {
-    let timeout = seconds("timeout", timeout)?;
-    let name = format!("python-observer-{}", std::process::id());
-    agent_sdk::Observer::connect_within(session, &name, timeout).map(|o| Observer { sdk: Some(o) }).map_err(to_py)
-}
-
-/// A read-only view of a session's truth: world snapshots.
-#[pyclass(unsendable, module = "iwsim._iwsim")]
-pub struct Observer {
-    sdk: Option<agent_sdk::Observer>,
-}
-
-impl std::fmt::Debug for Observer {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("Observer").field("open", &self.sdk.is_some()).finish()
-    }
-}
-
-impl Observer {
-    /// Runs `f` on the world at tick `tick` or later, waiting up to `timeout` seconds for it:
-    /// the snapshot is read where the hub wrote it, nothing copied.
-    fn with_world_at<R>(
-        &mut self,
-        py: Python<'_>,
-        tick: u64,
-        timeout: f64,
-        f: impl FnOnce(&ipc_types::WorldHeader, &[ipc_types::RobotState]) -> R,
-    ) -> PyResult<R> {
-        let deadline = Instant::now() + seconds("timeout", timeout)?;
-        let sdk = self.sdk.as_mut().ok_or_else(|| IwsimError::new_err("the observer is closed"))?;
-        let mut f = Some(f);
-        loop {
-            let done = sdk
-                .with_world(|h, robots| if h.tick >= tick { f.take().map(|f| f(h, robots)) } else { None })
-                .map_err(to_py)?;
-            if let Some(done) = done {
-                return Ok(done);
-            }
-            if Instant::now() >= deadline {
-                return Err(PyTimeoutError::new_err(format!("no world of tick {tick} within {timeout} s")));
-            }
-            // The hub publishes a tick's world before it rings the agents, so this is rare
-            // and short: yield rather than sleep a scheduler quantum.
-            py.detach(std::thread::yield_now);
-            py.check_signals()?;
-        }
-    }
-}
-
-#[pymethods]
-impl Observer {
-    /// The world at tick `tick` or later (waiting up to `timeout` seconds for it): (tick,
-    /// [(robot id, x m, y m, heading degrees, collision count)]), in the hub's robot order.
-    #[pyo3(signature = (tick = 0, timeout = 5.0))]
-    fn robots(&mut self, py: Python<'_>, tick: u64, timeout: f64) -> PyResult<RobotStates> {
-        self.with_world_at(py, tick, timeout, |h, robots| {
-            (h.tick, robots.iter().map(|r| (r.id, r.x_m, r.y_m, r.heading_deg, r.collision_count)).collect())
-        })
-    }
-
-    /// The true poses of robots `ids` at tick `tick` or later (waiting up to `timeout`
-    /// seconds), for a referee: (tick, bytes of n rows of (x m, y m, heading degrees,
-    /// collision count) as little-endian float64, in `ids`' order). A robot the world does
-    /// not hold raises `KeyError`.
-    #[pyo3(signature = (tick, ids, timeout = 5.0))]
-    fn poses<'py>(
-        &mut self,
-        py: Python<'py>,
-        tick: u64,
-        ids: Vec<u32>,
-        timeout: f64,
-    ) -> PyResult<(u64, Bound<'py, PyBytes>)> {
-        let (tick, table) =
-            self.with_world_at(py, tick, timeout, |h, robots| (h.tick, pose_table(robots, &ids, h.tick)))?;
-        Ok((tick, PyBytes::new(py, &table?)))
-    }
-
-    /// Stops observing. Closing twice does nothing.
-    fn close(&mut self) {
-        self.sdk = None;
-    }
-}
-
-/// One step of `iwsim.env` in one call: `agent` answers `tick` with `powers` (see
-/// [`Agent::step`]) and waits for the next tick; returns `None` once the run has finished, else
-/// (tick, simulated seconds, the chairs' observations (see [`Agent::observations`]), their
-/// true poses from `observer` at that tick (see [`Observer::poses`]), both in the agent's
-/// registration order). The referee's poses never reach the agent: they go back to the
-/// environment's Python code, which judges rewards from them.
-#[pyfunction]
-#[pyo3(signature = (agent, observer, tick, powers, max_range, timeout = None, spin = 0.0))]
-#[allow(clippy::too_many_arguments)] // Python's keyword arguments, one call per step
-fn env_step<'py>(
-    py: Python<'py>,
-    agent: &Bound<'py, Agent>,
-    observer: &Bound<'py, Observer>,
-    tick: u64,
-    powers: &[u8],
-    max_range: f32,
-    timeout: Option<f64>,
-    spin: f64,
-) -> PyResult<Option<EnvStep<'py>>> {
-    let mut agent = agent.borrow_mut();
-    let Some((tick, sim_time_s)) = agent.step(py, tick, powers, timeout, spin)? else { return Ok(None) };
-    let sdk = agent.sdk()?;
-    let observations = PyByteArray::new(py, &observation_table(sdk, max_range));
-    // The referee reads the snapshot in the hub's shared memory; only the poses asked for leave it.
-    let poses = observer
-        .borrow_mut()
-        .with_world_at(py, tick, timeout.unwrap_or(20.0), |h, robots| pose_table(robots, sdk.robots(), h.tick))??;
-    let poses = PyBytes::new(py, &poses);
-    Ok(Some((tick, sim_time_s, observations, poses)))
-}
-
-/// What [`env_step`] returns.
-type EnvStep<'py> = (u64, f64, Bound<'py, PyByteArray>, Bound<'py, PyBytes>);
-
 /// A proximity cone as Python passes it: x m, y m, direction degrees, opening degrees, range m.
 type Cone = (f64, f64, f64, f64, f64);
 
-/// What [`Observer::robots`] returns.
-type RobotStates = (u64, Vec<(u32, f64, f64, f64, u32)>);
-
 /// The chair observations of an agent's robots (see [`Agent::observations`]).
-fn observation_table(sdk: &SdkAgent, max_range: f32) -> Vec<u8> {
+pub(crate) fn observation_table(sdk: &SdkAgent, max_range: f32) -> Vec<u8> {
     const ROW: usize = ipc_types::MAX_PROXIMITY + 2;
     let blocks = sdk.sensors();
     let mut out = vec![0u8; sdk.robots().len() * ROW * 4];
@@ -447,21 +327,6 @@ fn observation_table(sdk: &SdkAgent, max_range: f32) -> Vec<u8> {
         write_f32s(row, &values);
     }
     out
-}
-
-/// The true poses of robots `ids` in `robots` (see [`Observer::poses`]).
-fn pose_table(robots: &[ipc_types::RobotState], ids: &[u32], tick: u64) -> PyResult<Vec<u8>> {
-    let mut out = vec![0u8; ids.len() * 32];
-    for (k, (row, id)) in out.chunks_exact_mut(32).zip(ids).enumerate() {
-        // The hub keeps robots in registration order: a referee's ids usually line up with it.
-        let r = robots
-            .get(k)
-            .filter(|r| r.id == *id)
-            .or_else(|| robots.iter().find(|r| r.id == *id))
-            .ok_or_else(|| PyKeyError::new_err(format!("robot {id} is not in the world of tick {tick}")))?;
-        write_f64s(row, &[r.x_m, r.y_m, r.heading_deg, f64::from(r.collision_count)]);
-    }
-    Ok(out)
 }
 
 /// One robot's motor powers as an action, refused when not finite (`what` names the robot in
@@ -489,7 +354,7 @@ fn write_f32s(out: &mut [u8], values: &[f32]) {
 }
 
 /// `values` as little-endian bytes into `out` (as long as both are).
-fn write_f64s(out: &mut [u8], values: &[f64]) {
+pub(crate) fn write_f64s(out: &mut [u8], values: &[f64]) {
     for (bytes, v) in out.chunks_exact_mut(8).zip(values) {
         bytes.copy_from_slice(&v.to_le_bytes());
     }
@@ -549,10 +414,11 @@ fn _iwsim(m: &Bound<'_, PyModule>) -> PyResult<()> {
     let py = m.py();
     m.add_function(wrap_pyfunction!(connect, m)?)?;
     m.add_function(wrap_pyfunction!(sensor_block_layout, m)?)?;
-    m.add_function(wrap_pyfunction!(observe, m)?)?;
-    m.add_function(wrap_pyfunction!(env_step, m)?)?;
     m.add_class::<Agent>()?;
-    m.add_class::<Observer>()?;
+    // The truth, for referees only, in a submodule the agent API never imports.
+    let referee = PyModule::new(py, "referee")?;
+    referee::register(&referee)?;
+    m.add_submodule(&referee)?;
     m.add("SENSOR_BLOCK_BYTES", core::mem::size_of::<SensorBlock>())?;
     m.add("MAX_PROXIMITY", ipc_types::MAX_PROXIMITY)?;
     m.add("HAS_COMPASS", ipc_types::HAS_COMPASS)?;

@@ -17,6 +17,27 @@ def test_the_sensor_block_dtype_is_the_rust_layout():
     assert iwsim.SENSOR_BLOCK.fields["tick"][1] == 0
 
 
+def test_the_agent_api_has_no_call_that_returns_the_truth(hub_factory):
+    # The truth is the referee's (iwsim.referee), apart from the agent API: neither the
+    # package nor its native module offers an observer at the top, and an Agent has no call
+    # that returns a true pose.
+    for api in (iwsim, iwsim._iwsim):
+        assert not hasattr(api, "observe") and not hasattr(api, "Observer") and not hasattr(api, "env_step")
+    assert not any("world" in n or "pose" in n or "observe" in n for n in dir(iwsim._iwsim.Agent))
+    # The referee sees the true pose the agent registered.
+    from iwsim import referee
+
+    hub = hub_factory("--lockstep", "--ticks", "5", "--wait-agents", "1", "--no-noise")
+    with iwsim.connect(hub.session, "pytest", timeout=20) as agent:
+        me = agent.register("chair1", body=(1.1, 0.65, 0.8), pose=(10.0, 6.1, 0.0), motors=(0.49, 0.83))
+        judge = referee.observe(hub.session, 20)
+        agent.ready()
+        tick = agent.wait_tick(timeout=20)
+        _, robots = judge.robots(tick.tick, 20)
+        judge.close()
+        assert [(r[0], r[1], r[2]) for r in robots] == [(me, 10.0, 6.1)]
+
+
 def test_a_python_agent_drives_a_chair_in_lock_step_and_reads_its_sensors(hub_factory):
     hub = hub_factory("--lockstep", "--ticks", "30", "--wait-agents", "1", "--no-noise")
     with iwsim.connect(hub.session, "pytest", timeout=20) as agent:

@@ -163,6 +163,7 @@ fn agents_adapters_and_the_viewer_never_link_the_hub_or_the_world() {
             "bench-harness",
             "serial-protocol",
             "chair-emulator",
+            "observer",
         ]
         .contains(&m.as_str());
         assert!(is_client || known_other, "new workspace package {m:?}: add it to ARCHITECTURE.md and to this test");
@@ -460,10 +461,69 @@ fn the_recorder_never_links_the_hub() {
 #[test]
 fn agents_never_name_the_observers_services() {
     // Architecture invariant: agents see only their robots' sensors and the agents' map. No
-    // agent's source names the SDK's Observer (true poses, the scenario's obstacles) or the
-    // world and observer-map services; the UDP bridge does only to serve its viewers.
-    let bad = offending(&["Observer", "observer_map", "service::WORLD", ".world(&"], |r| {
-        !["agents/navigator/", "agents/door/", "agents/wheelchair/", "agents/teleop/"].iter().any(|a| r.starts_with(a))
-    });
+    // source of an agent, of the serial bridge or of the Python agent module names the
+    // observer crate (true poses, the scenario's obstacles) or the world, observer-map and
+    // observer-chairs services; the UDP bridge does only to serve its viewers.
+    let drives_robots = |r: &str| {
+        ["agents/", "adapters/serial-bridge/", "adapters/serial-protocol/"].iter().any(|a| r.starts_with(a))
+            || r == "python/src/lib.rs"
+    };
+    let needles = ["Observer", "observer::", "observer_map", "observer_chairs", "service::WORLD", ".world(&"];
+    let bad = offending(&needles, |r| !drives_robots(r));
     assert!(bad.is_empty(), "agents reading the truth:\n{}", bad.join("\n"));
+}
+
+#[test]
+fn no_agent_and_no_adapter_that_drives_a_real_chair_links_the_observer() {
+    // Architecture invariant: the truth (the `observer` crate) is a capability an agent does
+    // not have: no crate under agents/ links it, nor the serial bridge (it drives a real chair)
+    // nor the chair emulator; the Python package's agent API cannot reach it either (its
+    // referee is a submodule only `iwsim.env` imports, checked below).
+    let g = graph();
+    let agents = ["agent-sdk", "navigator", "door", "teleop", "wheelchair", "serial-bridge", "chair-emulator"];
+    for a in agents {
+        assert_links_none(&g, a, |d| d == "observer", &format!("{a} drives robots and must not link the observer"));
+    }
+    // Every crate under agents/ is in the list: a new agent is checked from its first commit.
+    for entry in std::fs::read_dir(root().join("agents")).expect("agents/") {
+        let dir = entry.expect("an entry").path();
+        let Ok(manifest) = std::fs::read_to_string(dir.join("Cargo.toml")) else { continue };
+        let name = manifest
+            .lines()
+            .find_map(|l| l.strip_prefix("name = ").map(|n| n.trim_matches('"').to_owned()))
+            .expect("a package name");
+        assert!(agents.contains(&name.as_str()), "new agent {name:?}: add it to this test's list");
+    }
+}
+
+#[test]
+fn the_python_agent_api_never_imports_the_referee() {
+    // Architecture invariant: in the Python package, the truth is in `iwsim.referee` (over the
+    // native submodule `_iwsim.referee`); the agent API (`iwsim/__init__.py`) and the example
+    // agents never import it, and `iwsim.env` is the one module that does.
+    let py = root().join("python");
+    let mut files: Vec<PathBuf> = Vec::new();
+    for dir in ["iwsim", "examples"] {
+        for e in std::fs::read_dir(py.join(dir)).expect("python dir").flatten() {
+            if e.path().extension().is_some_and(|x| x == "py") {
+                files.push(e.path());
+            }
+        }
+    }
+    assert!(files.len() >= 4, "the Python package's sources are found: {files:?}");
+    let mut bad = Vec::new();
+    for f in files {
+        let r = rel(&f);
+        if r == "python/iwsim/env.py" || r == "python/iwsim/referee.py" {
+            continue;
+        }
+        let text = std::fs::read_to_string(&f).expect("readable");
+        for (n, line) in text.lines().enumerate() {
+            let code = line.split('#').next().unwrap_or("");
+            if ["referee", "observe(", "env_step"].iter().any(|k| code.contains(k)) {
+                bad.push(format!("{r}:{}: {}", n + 1, line.trim()));
+            }
+        }
+    }
+    assert!(bad.is_empty(), "Python agent code reaching the referee:\n{}", bad.join("\n"));
 }

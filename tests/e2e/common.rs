@@ -7,7 +7,7 @@ use std::sync::atomic::{AtomicU32, Ordering};
 use std::sync::mpsc::{Receiver, RecvTimeoutError};
 use std::time::{Duration, Instant};
 
-use agent_sdk::Observer;
+use observer::Observer;
 
 pub fn session(tag: &str) -> String {
     static N: AtomicU32 = AtomicU32::new(0);

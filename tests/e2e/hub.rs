@@ -216,7 +216,7 @@ fn registering_many_robots_republishes_the_world_once_not_once_per_robot() {
     let s = session("many");
     let hub = Proc::spawn(&["hub", "--session", &s, "--start-on-command", "--json"]);
     let mut agent = Agent::connect_within(&s, "many", Duration::from_secs(20)).expect("hub comes up");
-    let observer = agent_sdk::Observer::connect_within(&s, "many-observer", Duration::from_secs(20)).expect("attach");
+    let observer = observer::Observer::connect_within(&s, "many-observer", Duration::from_secs(20)).expect("attach");
     for i in 0..N {
         let pose = [1.0 + (i % 50) as f64 * 0.3, 1.0 + (i / 50) as f64 * 0.2, 0.0];
         agent.register(&RobotRegistration::new("r").disc(0.2).at(Some(pose))).expect("accepted");
@@ -348,6 +348,8 @@ fn a_real_chair_pushes_its_own_poses_and_the_hub_takes_them() {
         "5",
         "--record",
         rec,
+        "--real",
+        "real",
     ]);
     let agent = Proc::spawn(&[
         "agent",

@@ -202,7 +202,20 @@ fn ghost_share(shot: &Shot, chair: &BenchChair) -> f64 {
 #[test]
 fn the_2d_view_shows_real_and_virtual_readings_and_the_ghost_of_a_chairs_true_pose() {
     let s = session("mixv");
-    let hub = Proc::spawn(&["hub", "--session", &s, "--lab", "builtin:thesis", "--cycle-ms", "20", "--no-noise"]);
+    let hub = Proc::spawn(&[
+        "hub",
+        "--session",
+        &s,
+        "--lab",
+        "builtin:thesis",
+        "--cycle-ms",
+        "20",
+        "--no-noise",
+        "--real",
+        "bench-a",
+        "--real",
+        "bench-b",
+    ]);
     let bench = Bench::start(&s, &[GHOSTED, PLAIN]);
     let mut view = Proc::spawn(&["view", "--session", &s, "--http", "127.0.0.1:0"]);
     // The viewer says `open http://ADDR/`; what follows the marker is the address.

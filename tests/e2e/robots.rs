@@ -5,8 +5,9 @@
 use std::net::{SocketAddr, UdpSocket};
 use std::time::{Duration, Instant};
 
-use agent_sdk::{Agent, AgentError, Observer, control};
+use agent_sdk::{Agent, AgentError, control};
 use ipc_types::{Command as Cmd, ROBOT_FROZEN, Refusal, RobotRegistration, RobotState, SensorSpec};
+use observer::Observer;
 use records::outcome::HubOutcome;
 
 use super::common::{Proc, assert_no_shared_memory_left, session, text, wait_for_tick};

@@ -229,7 +229,7 @@ fn a_run_with_a_session_name_can_be_watched_from_another_process() {
     let lines = run.stderr_lines();
     // The runner says when it starts the agents (what a_faulty_lab… looks for in vain).
     lines.wait_for_all(&["starting 1 agent(s)", "wheelchair: agent"], Duration::from_secs(60));
-    let mut observer = agent_sdk::Observer::connect_within(&name, "e2e-runner-watch", Duration::from_secs(10))
+    let mut observer = observer::Observer::connect_within(&name, "e2e-runner-watch", Duration::from_secs(10))
         .expect("an observer joins the run's session");
     let start = Instant::now();
     let robots = loop {

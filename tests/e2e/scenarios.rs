@@ -5,8 +5,9 @@ use std::path::{Path, PathBuf};
 use std::time::Duration;
 
 use agent_sdk::log::LogTable;
-use agent_sdk::{Agent, Observer, Wait};
+use agent_sdk::{Agent, Wait};
 use ipc_types::{ActionBlock, REG_HAS_POSE, RobotKind, RobotRegistration};
+use observer::Observer;
 use records::summary::{RobotSummary, RunSummary};
 
 use super::common::{Proc, assert_no_shared_memory_left, session, text, truth};
@@ -209,8 +210,19 @@ fn the_door_opens_on_request_stops_on_contact_retries_and_closes() {
     // places by pose: far away, it asks the door to open by message; then it stands in the
     // closing leaf's way; then it leaves.
     let s = session("doorstates");
-    let hub =
-        Proc::spawn(&["hub", "--session", &s, "--lockstep", "--no-noise", "--ticks", "400", "--wait-agents", "2"]);
+    let hub = Proc::spawn(&[
+        "hub",
+        "--session",
+        &s,
+        "--lockstep",
+        "--no-noise",
+        "--ticks",
+        "400",
+        "--wait-agents",
+        "2",
+        "--real",
+        "visitor",
+    ]);
     let door = Proc::spawn(&[
         "agent",
         "door",
@@ -234,14 +246,18 @@ fn the_door_opens_on_request_stops_on_contact_retries_and_closes() {
     let mut reg = RobotRegistration::new("visitor");
     reg.kind = RobotKind::Real as u32;
     reg.flags |= REG_HAS_POSE;
-    reg.pose = [14.0, 6.0, 0.0];
+    // Out of the door's 1 m trigger range, 1.6 m from its hinge.
+    let far = (11.0, 6.2);
+    reg.pose = [far.0, far.1, 0.0];
     (reg.width_m, reg.height_m, reg.com) = (0.6, 0.5, 0.5);
+    // A brisk walker: the hub takes a Real robot's poses only as fast as its body can move.
+    (reg.max_speed_mps, reg.accel_curve) = (3.0, 0.5);
     let id = me.register(&reg).expect("registered");
     me.ready().expect("ready");
-    let far = ActionBlock::pose(id, 14.0, 6.0, 0.0);
     // In the sweep of the closing leaf (the quarter disc west of the hinge and north of the
     // open leaf, which lies along y 5.46 from x 8.45 to 9.44).
-    let in_the_way = ActionBlock::pose(id, 8.9, 6.2, 0.0);
+    let in_the_way = (8.9, 6.2);
+    let mut at = far;
     let mut phase = 0;
     let mut was_open = false;
     let mut in_way_since = 0;
@@ -266,7 +282,12 @@ fn the_door_opens_on_request_stops_on_contact_retries_and_closes() {
         if phase == 1 && t > in_way_since + 60 {
             phase = 2;
         }
-        let mut act = if phase == 1 { in_the_way } else { far };
+        // Walk there at 0.4 m a tick (4 m/s for 0.1 s ticks is within 3 m/s and its slack).
+        let goal = if phase == 1 { in_the_way } else { far };
+        let (dx, dy) = (goal.0 - at.0, goal.1 - at.1);
+        let k = (0.4 / dx.hypot(dy).max(1e-9)).min(1.0);
+        at = (at.0 + k * dx, at.1 + k * dy);
+        let mut act = ActionBlock::pose(id, at.0, at.1, 0.0);
         if t == 5 {
             assert!(act.with_say(b"door open door1"), "message fits");
         }

@@ -211,7 +211,7 @@ impl Rig {
     /// The chair's pose in the hub (its odometry).
     fn hub_pose(&self) -> [f64; 3] {
         let mut obs =
-            agent_sdk::Observer::connect_within(&self.s, "serial-test", Duration::from_secs(10)).expect("observer");
+            observer::Observer::connect_within(&self.s, "serial-test", Duration::from_secs(10)).expect("observer");
         let (_, robots) = obs.world().expect("world");
         obs.close();
         let r = robots.iter().find(|r| r.id == self.robot).expect("the chair is in the world");
@@ -285,7 +285,7 @@ fn the_bridge_drives_the_emulated_chair_and_its_pose_in_the_hub_follows() {
     // The hub's pose is one tick (100 ms, ≤ 5 cm at this speed) behind, plus drift.
     assert!(dist(hub, tx, ty) < 0.15, "odometry {hub:?} vs truth ({tx}, {ty})");
     // The adapter pushes the chair's true pose as its ghost for observers.
-    let mut obs = agent_sdk::Observer::connect_within(&rig.s, "serial-ghost", Duration::from_secs(10)).expect("obs");
+    let mut obs = observer::Observer::connect_within(&rig.s, "serial-ghost", Duration::from_secs(10)).expect("obs");
     let deadline = Instant::now() + Duration::from_secs(10);
     let ghost = loop {
         if let Some((_, chairs)) = obs.try_chairs().expect("chairs")

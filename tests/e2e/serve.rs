@@ -8,8 +8,9 @@ use std::net::{SocketAddr, UdpSocket};
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
-use agent_sdk::{AgentError, Observer};
+use agent_sdk::AgentError;
 use ipc_types::{Command, Refusal, RobotRegistration, RobotState, RunState, WorldHeader};
+use observer::Observer;
 use records::outcome::HubOutcome;
 
 use super::common::{Proc, assert_no_shared_memory_left, session, text, truth};

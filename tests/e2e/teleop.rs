@@ -10,8 +10,9 @@ use std::time::{Duration, Instant};
 
 use ::teleop::pty::Pty;
 use ::teleop::term::local_modes;
-use agent_sdk::{Observer, control};
+use agent_sdk::control;
 use ipc_types::{Command as Cmd, RobotState, WorldHeader};
+use observer::Observer;
 
 use super::common::{Proc, assert_no_shared_memory_left, session, text};
 

@@ -197,6 +197,32 @@ fn a_viewer_gets_the_lab_the_grid_and_every_robot_each_tick() {
 }
 
 #[test]
+fn viewers_are_let_in_only_where_the_bridge_allows_and_no_client_is_real_unasked() {
+    // A viewer sees every robot's true pose: `--viewers off` refuses one even from this
+    // machine, and `--viewer-allow` lets a named address in.
+    let s = session("udp-noview");
+    let (hub, bridge, reg) = hub_and_bridge(&s, &["--cycle-ms", "20"], &["--viewers", "off"]);
+    let mut v = Client::new();
+    assert_eq!(v.register(reg, "<View/>"), "<Reply Status=\"Refused\"></Reply>\n");
+    assert!(v.try_next("Robot", Duration::from_millis(300)).is_none(), "a refused viewer is sent nothing");
+    // Robots still register; one asking to be Real (its client pushing any pose it likes)
+    // is refused by the hub, which expects no Real robot.
+    let mut robot = Client::new();
+    assert!(robot.register(reg, r#"<Robot Name="plain" Id="1"/>"#).contains("Status=\"Ok\""));
+    let mut cheat = Client::new();
+    let reply = cheat.register(reg, r#"<Robot Name="ghost" Id="2" Type="Real"/>"#);
+    assert!(reply.contains("Status=\"Refused\""), "{reply}");
+    stop(&s, hub, bridge);
+
+    let s = session("udp-allowview");
+    let (hub, bridge, reg) =
+        hub_and_bridge(&s, &["--cycle-ms", "20"], &["--viewers", "off", "--viewer-allow", "127.0.0.1"]);
+    let mut v = Client::new();
+    assert!(v.register(reg, "<View/>").starts_with("<Reply Status=\"Ok\">"));
+    stop(&s, hub, bridge);
+}
+
+#[test]
 fn a_datagram_from_a_foreign_port_changes_nothing() {
     let s = session("udp-foreign");
     let (hub, bridge, reg) = hub_and_bridge(&s, &["--cycle-ms", "20", "--no-noise"], &[]);

@@ -350,7 +350,7 @@ fn a_websocket_message_over_the_size_bound_closes_its_connection_only() {
 
 /// Waits for a world snapshot that satisfies `done`; returns it, or the last one seen.
 fn watch(
-    obs: &mut agent_sdk::Observer,
+    obs: &mut observer::Observer,
     timeout: Duration,
     done: impl Fn(&ipc_types::WorldHeader, &[ipc_types::RobotState]) -> bool,
 ) -> (ipc_types::WorldHeader, Vec<ipc_types::RobotState>) {
@@ -384,7 +384,7 @@ fn udp_viewers_control_the_run_only_with_allow_control() {
         let lines = bridge.stderr_lines();
         let reg: SocketAddr = said(&lines, "registrations on ").parse().expect("address");
         let mut obs =
-            agent_sdk::Observer::connect_within(&s, "udp-ctl-test", Duration::from_secs(20)).expect("observer");
+            observer::Observer::connect_within(&s, "udp-ctl-test", Duration::from_secs(20)).expect("observer");
         let (_, robots) = watch(&mut obs, Duration::from_secs(20), |h, r| h.run_state == 1 && r.len() == 2);
         assert_eq!(robots.len(), 2, "both chairs registered");
         let victim = robots[0].id;

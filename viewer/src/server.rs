@@ -24,8 +24,9 @@ use std::sync::{Arc, Condvar, Mutex};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
-use agent_sdk::{AgentError, ControlClient, Observer};
+use agent_sdk::{AgentError, ControlClient};
 use ipc_types::{ChairState, Command, ControlResponse, RunState};
+use observer::Observer;
 use tungstenite::Message;
 use tungstenite::handshake::server::{ErrorResponse, Request, Response};
 use tungstenite::protocol::WebSocketConfig;

@@ -5,7 +5,7 @@ use std::time::Duration;
 
 use agent_sdk::cli::SessionArgs;
 
-use crate::{Bridge, BridgeConfig};
+use crate::{Bridge, BridgeConfig, Viewers};
 
 /// Options of `iwsim udp`.
 #[derive(Debug, clap::Args, Clone)]
@@ -29,6 +29,13 @@ pub struct UdpArgs {
     /// (Ciber-Rato's Viewer sends Start); without it their commands are ignored and counted.
     #[arg(long)]
     pub allow_control: bool,
+    /// Who may register as a viewer or panel, which sees every robot's true pose and the
+    /// scenario's obstacles: loopback (this machine), any, or off.
+    #[arg(long, value_enum, default_value_t = Viewers::Loopback)]
+    pub viewers: Viewers,
+    /// An address that may register as a viewer whatever `--viewers` says. Repeatable.
+    #[arg(long, value_name = "IP")]
+    pub viewer_allow: Vec<std::net::IpAddr>,
 }
 
 /// The shortest `--client-timeout`, seconds: the bridge looks at its clients every 20 ms, and a
@@ -59,6 +66,8 @@ pub fn run(args: &UdpArgs) -> anyhow::Result<ExitCode> {
             .map(|s| Duration::from_secs_f64(s.clamp(MIN_CLIENT_TIMEOUT_S, MAX_CLIENT_TIMEOUT_S))),
         connect_timeout: args.hub.timeout(),
         allow_control: args.allow_control,
+        viewers: args.viewers,
+        viewer_allow: args.viewer_allow.clone(),
     };
     let bridge = Bridge::start(cfg)?;
     agent_sdk::report!(
@@ -68,12 +77,13 @@ pub fn run(args: &UdpArgs) -> anyhow::Result<ExitCode> {
     );
     let counters = bridge.run()?;
     agent_sdk::report!(
-        "iwsim udp: run over ({} malformed, {} foreign, {} refused, {} timed out, {} viewer commands ignored)",
+        "iwsim udp: run over ({} malformed, {} foreign, {} refused, {} timed out, {} viewer commands ignored, {} viewers refused)",
         counters.malformed,
         counters.foreign,
         counters.refused,
         counters.timed_out,
-        counters.ignored_commands
+        counters.ignored_commands,
+        counters.refused_viewers
     );
     Ok(ExitCode::SUCCESS)
 }

@@ -7,4 +7,4 @@ pub mod codec;
 pub mod noise;
 pub mod server;
 
-pub use server::{Bridge, BridgeConfig, BridgeError, Counters};
+pub use server::{Bridge, BridgeConfig, BridgeError, Counters, Viewers};

@@ -23,12 +23,13 @@ use std::time::{Duration, Instant};
 
 use agent_sdk::map::Map;
 use agent_sdk::pending::PendingRequest;
-use agent_sdk::{Agent, AgentError, Observer};
+use agent_sdk::{Agent, AgentError};
 use ipc_types::{
     ACT_MOTORS, ACT_POSE, ActionBlock, COLLISION, Command, HAS_COMPASS, HAS_GPS, HAS_GROUND, LED_END, LED_RETURNING,
     LED_VISITING, REG_HAS_POSE, RobotKind, RunState, SENSOR_BEACON, SENSOR_COLLISION, SENSOR_COMPASS, SENSOR_GPS,
     SENSOR_GROUND, SENSOR_OBSTACLE, SensorBlock, SensorSpec,
 };
+use observer::Observer;
 
 use crate::codec::{self, Actions, MeasuresData, Registration, ReplyParams, RobotType, ViewerCommand, ViewerRobot};
 use crate::noise::NoiseLog;
@@ -53,6 +54,42 @@ pub struct BridgeConfig {
     /// Whether registered viewers and panels may start, pause and stop the run and remove
     /// robots; without it their `<Start/>`, `<Stop/>` and `<Robot Removed>` are ignored.
     pub allow_control: bool,
+    /// Who may register as a viewer or panel (they get every robot's true pose each tick and,
+    /// with `<LabReq/>`, the scenario's obstacles).
+    pub viewers: Viewers,
+    /// Addresses allowed to register as viewers besides those `viewers` lets in.
+    pub viewer_allow: Vec<IpAddr>,
+}
+
+/// Who may register as a Ciber-Rato viewer or panel: a viewer sees the truth (every robot's
+/// pose, the scenario's obstacles), which no robot client gets, so by default only this
+/// machine may.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, clap::ValueEnum)]
+pub enum Viewers {
+    /// Only this machine (loopback addresses), and the `--viewer-allow` list.
+    #[default]
+    Loopback,
+    /// Any address the bridge's socket is reachable from.
+    Any,
+    /// None, apart from the `--viewer-allow` list.
+    Off,
+}
+
+impl Viewers {
+    /// Whether a viewer or panel registering from `peer` is let in.
+    pub fn admits(self, peer: IpAddr, allow: &[IpAddr]) -> bool {
+        // An IPv4 peer on a dual-stack socket comes as ::ffff:a.b.c.d.
+        let peer = match peer {
+            IpAddr::V6(v6) => v6.to_ipv4_mapped().map_or(peer, IpAddr::V4),
+            v4 => v4,
+        };
+        allow.contains(&peer)
+            || match self {
+                Self::Loopback => peer.is_loopback(),
+                Self::Any => true,
+                Self::Off => false,
+            }
+    }
 }
 
 /// Why the bridge stopped.
@@ -84,6 +121,8 @@ pub struct Counters {
     pub timed_out: u64,
     /// Run commands from viewers and panels ignored for want of `--allow-control`.
     pub ignored_commands: u64,
+    /// Viewer and panel registrations refused by `--viewers` (and `--viewer-allow`).
+    pub refused_viewers: u64,
 }
 
 #[derive(Debug)]
@@ -557,6 +596,25 @@ impl Bridge {
                 && let Some(c) = self.clients.iter().find(|c| c.peer == peer && !matches!(c.kind, Kind::Robot(_)))
             {
                 send(&c.socket, peer, &codec::encode_reply_ok(&reply_params(&self.map)));
+                continue;
+            }
+            if matches!(registration, Registration::View | Registration::Panel)
+                && !self.cfg.viewers.admits(peer.ip(), &self.cfg.viewer_allow)
+            {
+                self.counters.refused_viewers += 1;
+                noisy(&mut self.noise, peer, || {
+                    format!(
+                        "viewer registration from {peer} refused: viewers see every robot's true pose, and \
+                         this bridge admits {} (start it with --viewers any or --viewer-allow {} to let it in)",
+                        match self.cfg.viewers {
+                            Viewers::Loopback => "this machine's only",
+                            Viewers::Any => "any",
+                            Viewers::Off => "none",
+                        },
+                        peer.ip()
+                    )
+                });
+                send(&self.reg, peer, &codec::encode_refused());
                 continue;
             }
             if self.clients.len() + self.joining.len() >= MAX_CLIENTS {
@@ -1155,5 +1213,24 @@ mod measures_tests {
             measures_into(&mut fresh, &b, tick, RunState::Running, ids, [true, false, false], &map, &[]);
             assert_eq!(kept, fresh);
         }
+    }
+}
+
+#[cfg(test)]
+mod viewer_tests {
+    use super::*;
+
+    #[test]
+    fn viewers_are_let_in_from_this_machine_only_unless_told_otherwise() {
+        let lan: IpAddr = "192.168.1.20".parse().expect("ip");
+        let mapped: IpAddr = "::ffff:192.168.1.20".parse().expect("ip");
+        let local: IpAddr = "127.0.0.1".parse().expect("ip");
+        let local6: IpAddr = "::1".parse().expect("ip");
+        assert!(Viewers::Loopback.admits(local, &[]) && Viewers::Loopback.admits(local6, &[]));
+        assert!(!Viewers::Loopback.admits(lan, &[]) && !Viewers::Loopback.admits(mapped, &[]));
+        assert!(Viewers::Loopback.admits(lan, &[lan]) && Viewers::Loopback.admits(mapped, &[lan]));
+        assert!(Viewers::Any.admits(lan, &[]));
+        assert!(!Viewers::Off.admits(local, &[]) && Viewers::Off.admits(local, &[local]));
+        assert_eq!(Viewers::default(), Viewers::Loopback);
     }
 }

@@ -23,7 +23,7 @@
 //! noise: proximity, compass, GPS when the run has it, beacons, ground, encoders, the collision
 //! flag, messages heard) and the agents' map (walls, beacons, targets, grid, route — not the
 //! scenario's obstacles, which its sensors must find). Where it truly is, where the other
-//! robots are and where the obstacles stand are for observers ([`Observer`]: viewers,
+//! robots are and where the obstacles stand are for observers (the `observer` crate: viewers,
 //! recorders, referees), and an agent has no call that returns them:
 //!
 //! ```compile_fail,E0599
@@ -51,6 +51,13 @@ pub mod map;
 pub mod odometry;
 pub mod pending;
 
+/// Building blocks for other clients of a hub (the observer crate): newest-sample receiving,
+/// the kept map sample, error mapping. None of them opens a service: what a client may read
+/// is decided by the services it can open.
+pub mod ports {
+    pub use super::{ANSWER_TIMEOUT, ipc, receive_map, receive_newest};
+}
+
 use std::time::{Duration, Instant};
 
 use ipc_services::iceoryx2::node::Node;
@@ -65,13 +72,13 @@ use ipc_services::iceoryx2::sample::Sample;
 use ipc_services::{Role, SLICE_ALLOCATION, ServicesError, Session, Svc};
 use ipc_types::{
     ActionBlock, ActionHeader, MapHeader, MapItem, Refusal, RegisterKind, RegisterRequest, RegisterResponse,
-    RobotRegistration, RobotSensors, RobotState, RunState, SensorBlock, TickHeader, WorldHeader,
+    RobotRegistration, RunState, SensorBlock, TickHeader,
 };
 
 /// How long an agent waits for a tick before it checks the hub is still alive.
 const LIVENESS_SLICE: Duration = Duration::from_millis(100);
 /// How long an answer to a registration may take.
-const ANSWER_TIMEOUT: Duration = Duration::from_secs(5);
+pub const ANSWER_TIMEOUT: Duration = Duration::from_secs(5);
 
 /// How `wait_tick` waits.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -121,7 +128,8 @@ pub enum AgentError {
     Map(#[from] map::MapDecodeError),
 }
 
-fn ipc<E: std::fmt::Debug>(what: &str) -> impl FnOnce(E) -> AgentError + '_ {
+/// Turns an iceoryx2 error met while trying to `what` into [`AgentError::Ipc`].
+pub fn ipc<E: std::fmt::Debug>(what: &str) -> impl FnOnce(E) -> AgentError + '_ {
     move |e| AgentError::Ipc(format!("{what}: {e:?}"))
 }
 
@@ -182,16 +190,13 @@ fn same_robots(ids: &[u32], blocks: &[SensorBlock]) -> bool {
     ids.iter().copied().eq(blocks.iter().map(|b| b.robot_id))
 }
 
-/// A received world snapshot, held in shared memory.
-type WorldSample = Sample<Svc, [RobotState], WorldHeader>;
-
 /// A received sample of an agent's sensor blocks, held in shared memory.
 type SensorSample = Sample<Svc, [SensorBlock], TickHeader>;
 
 /// Receives the newest sample of `sub` into `held`, replacing the one held; true if one came.
 /// A subscriber may borrow one sample at a time, so the held one is let go only when a newer
 /// one is waiting (receiving then fails with `ExceedsMaxBorrows` without taking it).
-fn receive_newest<T: std::fmt::Debug + ZeroCopySend, H: std::fmt::Debug + ZeroCopySend>(
+pub fn receive_newest<T: std::fmt::Debug + ZeroCopySend, H: std::fmt::Debug + ZeroCopySend>(
     sub: &Subscriber<Svc, [T], H>,
     held: &mut Option<Sample<Svc, [T], H>>,
     what: &str,
@@ -207,197 +212,6 @@ fn receive_newest<T: std::fmt::Debug + ZeroCopySend, H: std::fmt::Debug + ZeroCo
             Err(ReceiveError::ExceedsMaxBorrows) if held.is_some() => *held = None,
             Err(e) => return Err(AgentError::Ipc(format!("{what}: {e:?}"))),
         }
-    }
-}
-
-/// The physical chairs' states, with the tick as header.
-type ChairSubscriber = Subscriber<Svc, [ipc_types::ChairState], u64>;
-
-/// A read-only view of a session: world snapshots and the map, with no hello and no robots,
-/// so the hub does not count it as an agent (viewers, loggers).
-pub struct Observer {
-    session: Session,
-    hub_pid: Option<u32>,
-    _node: Node<Svc>,
-    world: Subscriber<Svc, [RobotState], WorldHeader>,
-    sensors: Subscriber<Svc, [RobotSensors], ()>,
-    map_svc: ipc_services::MapService,
-    /// The newest snapshot received, held in shared memory (not copied): what
-    /// [`Observer::with_world`] lends and [`Observer::world`] copies.
-    last_world: Option<WorldSample>,
-    /// The physical chairs' port, opened at the first look (a served replay has none).
-    chairs: Option<(ChairSubscriber, ipc_services::ChairService)>,
-    /// Last, so it runs after every port and the node are gone.
-    _release: ipc_services::SessionRelease,
-}
-
-impl std::fmt::Debug for Observer {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("Observer").field("session", &self.session.name()).finish()
-    }
-}
-
-impl Observer {
-    /// Attaches to the hub serving `session`, waiting up to `timeout` for it to come up.
-    pub fn connect_within(session: &str, name: &str, timeout: Duration) -> Result<Self, AgentError> {
-        let session = Session::new(session)?;
-        // Declared before the node, so a failed attach (no hub) releases the session too.
-        let release = session.release_on_drop();
-        let node = session.node(name)?;
-        let start = Instant::now();
-        let (world_svc, map_svc, sensors_svc) = loop {
-            let opened = (|| {
-                Ok((
-                    session.world(&node, Role::Client)?,
-                    session.observer_map(&node, Role::Client)?,
-                    session.robot_sensors(&node, Role::Client)?,
-                ))
-            })();
-            match opened {
-                Ok(services) => break services,
-                Err(ServicesError::NotRunning { .. }) if start.elapsed() < timeout => {
-                    std::thread::sleep(Duration::from_millis(10));
-                }
-                Err(e) => return Err(e.into()),
-            }
-        };
-        let world = world_svc.subscriber_builder().create().map_err(ipc("create a world subscriber"))?;
-        let sensors = sensors_svc.subscriber_builder().create().map_err(ipc("create a robot-sensors subscriber"))?;
-        // The hub creates its node before its services, so a hub whose services opened is
-        // listed; one that died in between is found dead at the first check.
-        let hub_pid = session.hub_pid();
-        Ok(Self {
-            session,
-            hub_pid,
-            _node: node,
-            world,
-            sensors,
-            map_svc,
-            last_world: None,
-            chairs: None,
-            _release: release,
-        })
-    }
-
-    /// Fails with [`AgentError::HubGone`] once the hub's process has exited (however it ended:
-    /// a SIGKILLed hub publishes no last tick), and with [`AgentError::Interrupted`] on SIGINT
-    /// or SIGTERM.
-    pub fn check_alive(&self) -> Result<(), AgentError> {
-        if self._node.wait(Duration::ZERO).is_err() {
-            return Err(AgentError::Interrupted);
-        }
-        match self.hub_pid {
-            Some(pid) if !ipc_services::process_alive(pid) => {
-                Err(AgentError::HubGone { pid, session: self.session.name().to_owned() })
-            }
-            // No hub node was listed at attach: the hub died before the observer looked.
-            None => Err(AgentError::HubGone { pid: 0, session: self.session.name().to_owned() }),
-            Some(_) => Ok(()),
-        }
-    }
-
-    /// The newest world snapshot if one arrived since the last call, copied out (see
-    /// [`Observer::try_with_world`] to read it in place).
-    pub fn try_world(&mut self) -> Result<Option<(WorldHeader, Vec<RobotState>)>, AgentError> {
-        self.try_with_world(|h, robots| (*h, robots.to_vec()))
-    }
-
-    /// Runs `f` on the newest world snapshot, in the hub's shared memory (nothing is copied),
-    /// if one arrived since the last call; `None` if none did.
-    pub fn try_with_world<R>(
-        &mut self,
-        f: impl FnOnce(&WorldHeader, &[RobotState]) -> R,
-    ) -> Result<Option<R>, AgentError> {
-        if !receive_newest(&self.world, &mut self.last_world, "receive the world")? {
-            return Ok(None);
-        }
-        Ok(self.with_last_world(f))
-    }
-
-    /// Runs `f` on the world snapshot the last call received (held in shared memory, nothing
-    /// copied), without looking for a newer one; `None` before the first.
-    pub fn with_last_world<R>(&self, f: impl FnOnce(&WorldHeader, &[RobotState]) -> R) -> Option<R> {
-        self.last_world.as_ref().map(|s| f(s.user_header(), s.payload()))
-    }
-
-    /// The latest world snapshot: every robot's true state, copied out (see
-    /// [`Observer::with_world`] to read it in place). The first call gets the snapshot the hub
-    /// keeps for late subscribers (waiting up to 5 s for it); later calls return the newest one.
-    pub fn world(&mut self) -> Result<(WorldHeader, Vec<RobotState>), AgentError> {
-        self.with_world(|h, robots| (*h, robots.to_vec()))
-    }
-
-    /// Runs `f` on the latest world snapshot (as [`Observer::world`] finds it) where it lies in
-    /// the hub's shared memory: the header and every robot's true state, with nothing copied.
-    ///
-    /// ```no_run
-    /// let mut observer = agent_sdk::Observer::connect_within("demo", "counter", std::time::Duration::from_secs(5))?;
-    /// let frozen = observer.with_world(|_, robots| robots.iter().filter(|r| r.flags & ipc_types::ROBOT_FROZEN != 0).count())?;
-    /// # let _ = frozen;
-    /// # Ok::<(), agent_sdk::AgentError>(())
-    /// ```
-    pub fn with_world<R>(&mut self, f: impl FnOnce(&WorldHeader, &[RobotState]) -> R) -> Result<R, AgentError> {
-        let start = Instant::now();
-        loop {
-            receive_newest(&self.world, &mut self.last_world, "receive the world")?;
-            if let Some(s) = &self.last_world {
-                return Ok(f(s.user_header(), s.payload()));
-            }
-            self.check_alive()?;
-            if start.elapsed() > ANSWER_TIMEOUT {
-                return Err(AgentError::NoAnswer(self.session.name().to_owned()));
-            }
-            std::thread::sleep(Duration::from_millis(1));
-        }
-    }
-
-    /// Every robot's proximity-sensor geometry, if the hub republished it since the last call
-    /// (it does when the set of robots changes).
-    pub fn try_robot_sensors(&self) -> Result<Option<Vec<RobotSensors>>, AgentError> {
-        let mut newest = None;
-        while let Some(s) = self.sensors.receive().map_err(ipc("receive robot sensors"))? {
-            newest = Some(s.payload().to_vec());
-        }
-        Ok(newest)
-    }
-
-    /// The physical chairs' states (sensor mode, real and virtual readings, the test bench's
-    /// true pose) with their tick, if the hub published them since the last call. `None` too
-    /// when the session has no chair service (a served replay).
-    pub fn try_chairs(&mut self) -> Result<Option<(u64, Vec<ipc_types::ChairState>)>, AgentError> {
-        if self.chairs.is_none() {
-            match self.session.observer_chairs(&self._node, Role::Client) {
-                Ok(svc) => {
-                    let sub = svc.subscriber_builder().create().map_err(ipc("create a chairs subscriber"))?;
-                    self.chairs = Some((sub, svc));
-                }
-                Err(ServicesError::NotRunning { .. }) => return Ok(None),
-                Err(e) => return Err(e.into()),
-            }
-        }
-        let Some((sub, _)) = &self.chairs else { return Ok(None) };
-        let mut newest = None;
-        while let Some(s) = sub.receive().map_err(ipc("receive chair states"))? {
-            newest = Some((*s.user_header(), s.payload().to_vec()));
-        }
-        Ok(newest)
-    }
-
-    /// The observers' map, decoded: the lab with the scenario's obstacles flagged (waits up to
-    /// 5 s for the hub's kept sample).
-    pub fn map(&self) -> Result<map::Map, AgentError> {
-        receive_map(&self.map_svc, &self.session, || Ok(()))
-    }
-
-    /// The session.
-    pub fn session(&self) -> &str {
-        self.session.name()
-    }
-
-    /// Detaches, and removes the session's last file if this was the last process in it
-    /// (dropping the observer does the same).
-    pub fn close(self) {
-        drop(self);
     }
 }
 
@@ -489,7 +303,7 @@ impl ControlClient {
 
 /// Waits up to 5 s for the map sample the hub keeps for late subscribers and decodes it;
 /// `alive` is asked between polls so a caller can give up early when the hub is gone.
-fn receive_map(
+pub fn receive_map(
     svc: &ipc_services::MapService,
     session: &Session,
     mut alive: impl FnMut() -> Result<(), AgentError>,

@@ -212,7 +212,7 @@ pub fn measure_hub_cost(robots: usize, ticks: u64, watcher: Watcher) -> anyhow::
             }
         }
         {
-            let mut obs = agent_sdk::Observer::connect_within(&session, "bench-observer", Duration::from_secs(30))?;
+            let mut obs = observer::Observer::connect_within(&session, "bench-observer", Duration::from_secs(30))?;
             let start = std::time::Instant::now();
             loop {
                 if let Some((_, r)) = obs.try_world()?

@@ -35,11 +35,21 @@ pub struct RecorderOptions {
     /// The wall-clock time the run started, written to a metadata record of its own. `None`
     /// leaves it out, so that two recordings of one lock-step run are identical byte for byte.
     pub wall_clock_start: Option<SystemTime>,
+    /// Wait for the writer thread rather than drop a world frame (lock-step runs: no tick has
+    /// a wall-clock deadline to keep, so the people channels hold every tick); off, a frame
+    /// is dropped and counted when the writer is behind, so a real-time tick never waits.
+    pub keep_every_frame: bool,
 }
 
 impl Default for RecorderOptions {
     fn default() -> Self {
-        Self { queue_len: 256, chunk_bytes: 256 * 1024, chunk_sim_ns: 1_000_000_000, wall_clock_start: None }
+        Self {
+            queue_len: 256,
+            chunk_bytes: 256 * 1024,
+            chunk_sim_ns: 1_000_000_000,
+            wall_clock_start: None,
+            keep_every_frame: false,
+        }
     }
 }
 
@@ -54,7 +64,8 @@ pub struct RecordStats {
     pub messages: u64,
     /// World frames dropped because the writer thread was behind.
     pub dropped_world_frames: u64,
-    /// Times an event found the queue full and the tick waited for the writer thread.
+    /// Times an event (or, keeping every frame, a world frame) found the queue full and the
+    /// tick waited for the writer thread.
     pub replay_stalls: u64,
     /// File size, bytes.
     pub bytes: u64,
@@ -134,6 +145,7 @@ pub struct Recorder {
     thread: Option<JoinHandle<Result<WriterTotals, mcap::McapError>>>,
     dropped_world_frames: u64,
     replay_stalls: u64,
+    keep_every_frame: bool,
 }
 
 /// What the writer thread counts.
@@ -179,6 +191,7 @@ impl Recorder {
             thread: Some(thread),
             dropped_world_frames: 0,
             replay_stalls: 0,
+            keep_every_frame: options.keep_every_frame,
         })
     }
 
@@ -219,7 +232,8 @@ impl Recorder {
     }
 
     /// Records what the world looks like at `tick` (after the step that led to it) for people.
-    /// Dropped, and counted, when the writer thread is behind: the tick never waits for it.
+    /// When the writer thread is behind, dropped and counted (the tick never waits for it), or
+    /// with [`RecorderOptions::keep_every_frame`] waited for (counted as a stall).
     pub fn world(&mut self, tick: u64, states: &[RobotState], sensors: &[RobotSensors]) {
         let Some(jobs) = &self.jobs else { return };
         let mut frame = self.spare_frames.try_recv().unwrap_or_default();
@@ -230,6 +244,12 @@ impl Recorder {
         frame.sensors.extend_from_slice(sensors);
         match jobs.try_send(Job::World(frame)) {
             Ok(()) => {}
+            Err(TrySendError::Full(job)) if self.keep_every_frame => {
+                self.replay_stalls += 1;
+                if jobs.send(job).is_err() {
+                    self.jobs = None;
+                }
+            }
             Err(TrySendError::Full(_)) => self.dropped_world_frames += 1,
             Err(TrySendError::Disconnected(_)) => self.jobs = None,
         }

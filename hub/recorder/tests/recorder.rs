@@ -653,6 +653,21 @@ mod recording {
     }
 
     #[test]
+    fn keeping_every_frame_waits_for_the_writer_and_loses_no_tick() {
+        // What a lock-step hub asks for: the same one-item queue, 2,000 frames as fast as they
+        // come, and every one of them in the file.
+        let dir = scratch("keep");
+        let path = dir.join("run.mcap");
+        let start = run_start();
+        let (calls, _) = simulated_run(&start, 2000);
+        let keep = RecorderOptions { queue_len: 1, keep_every_frame: true, ..Default::default() };
+        let stats = record(&path, &start, &calls, keep);
+        assert_eq!((stats.world_frames, stats.dropped_world_frames), (2000, 0));
+        let track = WorldTrack::open(&path).expect("reads");
+        assert!(track.frames.iter().map(|f| f.tick).eq(1..=2000), "a frame for every tick");
+    }
+
+    #[test]
     fn a_recording_that_cannot_be_created_says_where() {
         let dir = scratch("create");
         let path = dir.join("no-such-dir").join("run.mcap");

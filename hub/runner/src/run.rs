@@ -790,6 +790,10 @@ pub fn run_once(
     for c in &scenario.checkpoints {
         hub_args.extend([s("--checkpoint"), c.to_string()]);
     }
+    if let Some(c) = &chair {
+        // The physical chair is the run's one Real robot: its adapter pushes its pose.
+        hub_args.extend([s("--real"), c.spec.robot.clone()]);
+    }
     hub_args.extend(opts.hub_options.iter().cloned());
     let started = Instant::now();
     let (tx, rx) = std::sync::mpsc::channel::<String>();
@@ -1081,7 +1085,7 @@ fn watch_loop(session: &str, ticks: u64, verbose: bool, chair: Option<&str>, wat
     let stopped = || matches!(stop.recv_timeout(Duration::from_millis(20)), Err(RecvTimeoutError::Disconnected));
     // Short attempts, so that a run that ends before its hub serves does not wait for this.
     let mut obs = loop {
-        match agent_sdk::Observer::connect_within(session, "iwsim-run-progress", Duration::from_millis(100)) {
+        match observer::Observer::connect_within(session, "iwsim-run-progress", Duration::from_millis(100)) {
             Ok(obs) => break obs,
             Err(_) if stopped() => return,
             Err(_) => {}

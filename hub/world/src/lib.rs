@@ -142,6 +142,30 @@ pub struct StepStats {
     pub bad_values: u32,
     /// Messages not delivered to some robot because its inbox was full.
     pub dropped_messages: u32,
+    /// Poses pushed for Real robots that their bodies could not have reached since their last
+    /// pose (refused: the robot stays where it was).
+    pub refused_poses: u32,
+}
+
+/// How far past its top speed a Real robot's pushed pose may be (a pose measured on a physical
+/// chair lags and bunches: its adapter may report two ticks' motion in one).
+const PUSH_SLACK: Real = 1.5;
+/// What a pushed pose may move beyond that, for odometry's own jitter.
+const PUSH_MARGIN_M: Real = 0.05;
+/// What a pushed heading may turn beyond that (radians, 5°).
+const PUSH_MARGIN_RAD: Real = 0.087;
+
+/// Whether a Real robot at `from` could be at `to` after `ticks` ticks of `dt` seconds: its
+/// body moves at most its top speed, and turns at most as fast as its wheels at top speed in
+/// opposite directions turn it. This bounds what an agent pushing poses can probe: without
+/// it, a "real" robot teleported about the lab would map obstacles and other chairs with its
+/// collision flag and proximity readings.
+pub fn reachable_push(spec: &RobotSpec, from: &Pose, to: &Pose, ticks: u64, dt: Real) -> bool {
+    let t = ticks.max(1) as Real * dt * PUSH_SLACK;
+    let v = spec.max_speed_mps.max(0.0);
+    let omega = 2.0 * v / spec.width_m.max(0.1);
+    let turn = (to.theta - from.theta).sin().atan2((to.theta - from.theta).cos()).abs();
+    (to.x - from.x).hypot(to.y - from.y) <= v * t + PUSH_MARGIN_M && turn <= omega * t + PUSH_MARGIN_RAD
 }
 
 /// Why a world could not be built.
@@ -206,6 +230,8 @@ pub struct Robot {
     history: VecDeque<SensorReadings>,
     say: Option<Message>,
     pushed: Option<Pose>,
+    /// The tick of the robot's last accepted pushed pose (or of its arrival).
+    pushed_at: u64,
 }
 
 impl Robot {
@@ -669,6 +695,7 @@ impl World {
             history: VecDeque::new(),
             say: None,
             pushed: None,
+            pushed_at: self.tick,
         };
         let geo = Geo::of(&robot);
         let index = match self.free.pop() {
@@ -752,8 +779,10 @@ impl World {
         !self.body_hits_wall(&BodyGeom::new(spec).placed(&spec.pose))
     }
 
-    /// Measures every robot where it stands, exactly (no noise, no latency, no random draw), so
-    /// readings exist before the first step; stepping measures as usual afterwards.
+    /// Measures every robot where it stands, with the tick's noise and no latency (nothing
+    /// earlier exists to delay), so readings exist before the first step: an agent's first
+    /// sensor block is as noisy as every later one (an exact tick 0 would hand it its true
+    /// start pose through GPS and compass). Stepping measures as usual afterwards.
     pub fn refresh_sensors(&mut self) {
         for (i, slot) in self.slots.iter().enumerate() {
             let Some(r) = &slot.robot else { continue };
@@ -800,7 +829,7 @@ impl World {
     }
 
     fn phases(&mut self, actions: &[Action], dt: Real, stats: &mut StepStats, chunking: &Chunking) {
-        self.apply_actions(actions, stats);
+        self.apply_actions(actions, dt, stats);
         self.drive(dt, chunking);
         self.resolve_collisions(stats, chunking);
         self.commit(dt, chunking);
@@ -808,7 +837,7 @@ impl World {
         self.sense_with(false, chunking);
     }
 
-    fn apply_actions(&mut self, actions: &[Action], stats: &mut StepStats) {
+    fn apply_actions(&mut self, actions: &[Action], dt: Real, stats: &mut StepStats) {
         self.scratch.speakers.clear();
         for a in actions {
             let Some(slot) = self.slots.get_mut(a.robot.index as usize) else {
@@ -827,10 +856,17 @@ impl World {
                 r.motor_in = [clean(l), clean(rr)];
             }
             if let Some(p) = a.pose {
-                if p.is_finite() {
-                    r.pushed = Some(Pose::new(p.x, p.y, p.theta));
-                } else {
+                let p = Pose::new(p.x, p.y, p.theta);
+                if !p.is_finite() {
                     stats.bad_values += 1;
+                } else if r.spec.kind != RobotKind::Real {
+                    // Only Real robots take pushed poses (drive drops it).
+                    r.pushed = Some(p);
+                } else if reachable_push(&r.spec, &r.pose, &p, self.tick - r.pushed_at, dt) {
+                    r.pushed = Some(p);
+                    r.pushed_at = self.tick;
+                } else {
+                    stats.refused_poses += 1;
                 }
             }
             if a.say.is_some() {

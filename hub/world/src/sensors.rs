@@ -46,19 +46,12 @@ fn visible_from(seg: &Segment, centre: Point2<Real>, inner: Real, reach: Real) -
 
 impl World {
     /// Measures every robot on its committed pose and reports through the latency lines;
-    /// `exact` skips noise and latency and draws nothing (used to prime readings before the
-    /// first step). Measuring reads the neighbours only through `geo` and the grids, so each
-    /// robot's readings are written in the same pass.
-    pub(super) fn sense_with(&mut self, exact: bool, chunking: &super::Chunking) {
+    /// `prime` reports straight out instead (readings before the first step, when no earlier
+    /// reading exists to delay), with the same noise as any tick's: the stream is keyed by the
+    /// tick, so priming twice draws the same values. Measuring reads the neighbours only
+    /// through `geo` and the grids, so each robot's readings are written in the same pass.
+    pub(super) fn sense_with(&mut self, prime: bool, chunking: &super::Chunking) {
         let World { statics, dyn_grid, geo, lab, params, slots, seed, scratch, tick, .. } = self;
-        // Noise-free parameters only for priming: a step measures with the world's own.
-        let quiet;
-        let params: &crate::map::Params = if exact {
-            quiet = crate::map::Params { noise: crate::map::NoiseParams::NONE, ..params.clone() };
-            &quiet
-        } else {
-            params
-        };
         let scene = Scene { statics, dyn_grid, geo, lab, params };
         let (seed, tick) = (*seed, *tick);
         let mut units = vec![(); slots.len()]; // zero-sized: never allocates
@@ -69,19 +62,19 @@ impl World {
                 let Some(r) = &mut slot.robot else { continue };
                 let mut rng = Rng::stream(seed, super::stream_key(i, slot.generation), tick, Draw::Sense);
                 let now = scene.measure(i, r, &mut cands, &mut rng, tick);
-                scene.report(r, now, exact);
+                scene.report(r, now, prime);
             }
         });
     }
 }
 
 impl Scene<'_> {
-    /// Puts a robot's readings of this tick through the latency lines (or, `exact`, straight
+    /// Puts a robot's readings of this tick through the latency lines (or, `prime`, straight
     /// out).
-    fn report(&self, r: &mut Robot, now: SensorReadings, exact: bool) {
+    fn report(&self, r: &mut Robot, now: SensorReadings, prime: bool) {
         let lat = self.params.latency;
         let depth = lat.max() as usize;
-        if depth == 0 || exact {
+        if depth == 0 || prime {
             r.readings = now;
             return;
         }

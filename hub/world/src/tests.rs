@@ -319,13 +319,14 @@ fn real_robots_take_pushed_poses_are_never_blocked_and_report_collisions() {
     let mut lab = empty_lab(20.0, 8.0);
     lab.walls.push(rect_wall(6.0, 0.0, 7.0, 8.0, 2.0));
     let mut w = world(lab, quiet());
-    let r = w.add_robot(RobotSpec::at(3.0, 4.0, 0.0).kind(RobotKind::Real)).expect("valid");
-    w.step(&[Action::pose(r, Pose::from_deg(4.0, 4.5, 30.0))], 0.1);
+    let r = w.add_robot(RobotSpec::at(3.0, 4.0, 0.0).motors(1.0, 0.0).kind(RobotKind::Real)).expect("valid");
+    // Ticks of 1 s: at 1 m/s the body can be 1.12 m on, turned 30°.
+    w.step(&[Action::pose(r, Pose::from_deg(4.0, 4.5, 30.0))], 1.0);
     let rb = w.robot(r).expect("alive");
     assert_eq!((rb.pose.x, rb.pose.y), (4.0, 4.5));
     assert!(!rb.collision);
     // Pushed into the wall: it goes there anyway, flagged.
-    w.step(&[Action::pose(r, Pose::from_deg(6.2, 4.0, 0.0))], 0.1);
+    w.step(&[Action::pose(r, Pose::from_deg(6.2, 4.0, 0.0))], 2.0);
     let rb = w.robot(r).expect("alive");
     assert_eq!(rb.pose.x, 6.2);
     assert!(rb.collision && rb.collision_count == 1);
@@ -336,6 +337,28 @@ fn real_robots_take_pushed_poses_are_never_blocked_and_report_collisions() {
     }
     let sx = w.robot(s).expect("alive").pose.x;
     assert!(sx + 0.5 <= 6.2 - 0.5 + 1e-9 && w.robot(s).expect("alive").collision, "{sx}");
+}
+
+#[test]
+fn a_real_robot_cannot_be_pushed_where_its_body_could_not_have_gone() {
+    let mut w = world(empty_lab(20.0, 8.0), quiet());
+    let r = w.add_robot(RobotSpec::at(3.0, 4.0, 0.0).motors(0.8, 0.0).kind(RobotKind::Real)).expect("valid");
+    // 0.8 m/s for 0.1 s is 8 cm: a push 2 m away (an agent probing the lab) is refused and
+    // counted, and the robot stays.
+    let stats = w.step(&[Action::pose(r, Pose::from_deg(5.0, 4.0, 0.0))], 0.1);
+    assert_eq!(stats.refused_poses, 1);
+    assert_eq!(w.robot(r).expect("alive").pose.x, 3.0);
+    // So is a spin of 90° in a tick, in place.
+    let stats = w.step(&[Action::pose(r, Pose::from_deg(3.0, 4.0, 90.0))], 0.1);
+    assert_eq!(stats.refused_poses, 1);
+    // A chair's own pace (9 cm, 5°) goes; after three silent ticks, a pose 3 ticks on does too.
+    let stats = w.step(&[Action::pose(r, Pose::from_deg(3.09, 4.0, 5.0))], 0.1);
+    assert_eq!((stats.refused_poses, w.robot(r).expect("alive").pose.x), (0, 3.09));
+    for _ in 0..3 {
+        w.step(&[], 0.1);
+    }
+    let stats = w.step(&[Action::pose(r, Pose::from_deg(3.49, 4.0, 5.0))], 0.1);
+    assert_eq!((stats.refused_poses, w.robot(r).expect("alive").pose.x), (0, 3.49));
 }
 
 #[test]
@@ -661,16 +684,32 @@ fn a_frozen_robot_stops_at_once_and_stays_an_obstacle() {
 }
 
 #[test]
-fn readings_exist_before_the_first_step_and_priming_draws_nothing() {
-    let mut w = World::new(&empty_lab(10.0, 8.0), Params::default(), 3).expect("valid");
+fn readings_exist_before_the_first_step_as_noisy_as_any_later_and_priming_changes_no_run() {
+    let mut p = Params::default();
+    p.sensors.gps = true;
+    let mut w = World::new(&empty_lab(10.0, 8.0), p.clone(), 3).expect("valid");
     let r = w.add_robot(RobotSpec::at(3.0, 2.0, 0.0)).expect("valid");
     let before = w.state_hash();
     w.refresh_sensors();
     let d = w.robot(r).expect("alive").readings;
-    assert!(close(d.proximity()[2], 1.5, 1e-3), "exact, noise-free: {:?}", d.proximity());
-    assert_eq!(d.compass_deg, Some(0.0));
-    // Same generator state: a primed world and an unprimed one step identically.
-    let mut other = World::new(&empty_lab(10.0, 8.0), Params::default(), 3).expect("valid");
+    // Noisy from tick 0: neither the GPS fix nor the compass hands the agent its true start.
+    let g = d.gps.expect("a fix");
+    let (gx, gy, gh) = (g.x_m, g.y_m, g.heading_deg);
+    assert!((gx, gy) != (3.0, 2.0) && close(gx, 3.0, 2.0) && close(gy, 2.0, 2.0), "{:?}", d.gps);
+    let compass = d.compass_deg.expect("a heading");
+    assert!(compass != 0.0 && gh != 0.0 && compass.abs() < 30.0, "{compass} {gh}");
+    assert!(d.proximity()[2] != 1.5 && close(d.proximity()[2], 1.5, 0.5), "{:?}", d.proximity());
+    // Priming again draws the same (the stream is the tick's).
+    w.refresh_sensors();
+    assert_eq!(w.robot(r).expect("alive").readings, d);
+    // Without noise, priming is exact.
+    let mut q = World::new(&empty_lab(10.0, 8.0), quiet(), 3).expect("valid");
+    let rq = q.add_robot(RobotSpec::at(3.0, 2.0, 0.0)).expect("valid");
+    q.refresh_sensors();
+    let dq = q.robot(rq).expect("alive").readings;
+    assert!(close(dq.proximity()[2], 1.5, 1e-3) && dq.compass_deg == Some(0.0), "{dq:?}");
+    // A primed world and an unprimed one step identically.
+    let mut other = World::new(&empty_lab(10.0, 8.0), p, 3).expect("valid");
     let r2 = other.add_robot(RobotSpec::at(3.0, 2.0, 0.0)).expect("valid");
     w.step(&[Action::motors(r, 1.0, 0.5)], 0.1);
     other.step(&[Action::motors(r2, 1.0, 0.5)], 0.1);
