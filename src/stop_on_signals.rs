@@ -1,4 +1,4 @@
-//! SIGINT and SIGTERM as a flag, for commands that own no iceoryx2 node (whose handlers would
+//! SIGINT, SIGTERM and SIGHUP as a flag, for commands that own no iceoryx2 node (whose handlers would
 //! otherwise catch them) and poll for the end of their work, such as the chair emulator.
 
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -12,7 +12,7 @@ extern "C" fn on_signal(_: libc::c_int) {
 
 /// Installs the handlers and returns the flag they set.
 pub fn install() -> std::io::Result<&'static AtomicBool> {
-    for signo in [libc::SIGINT, libc::SIGTERM] {
+    for signo in [libc::SIGINT, libc::SIGTERM, libc::SIGHUP] {
         // SAFETY: a zeroed sigaction with a handler that only stores to an atomic; SA_RESTART
         // keeps interrupted reads from failing, the command's own polls see the flag.
         #[allow(unsafe_code)]

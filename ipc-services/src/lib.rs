@@ -202,8 +202,9 @@ impl Session {
 
     /// An iceoryx2 node for this process. SIGINT and SIGTERM are caught: `node.wait(0)`
     /// then reports a termination request, so every process stops cleanly and removes what
-    /// it created.
+    /// it created. SIGHUP (a closed terminal or ssh session) is turned into SIGTERM.
     pub fn node(&self, name: &str) -> Result<Node<Svc>, ServicesError> {
+        hangup_as_termination();
         let node_name = NodeName::new(name).map_err(|e| ServicesError::Iceoryx {
             action: "name the node",
             service: name.to_owned(),
@@ -565,6 +566,39 @@ pub fn clean_dead_nodes(session: &Session) -> usize {
         iceoryx2::prelude::CallbackProgression::Continue
     });
     removed
+}
+
+/// Makes SIGHUP end this process as SIGTERM does (iceoryx2 catches only SIGINT and SIGTERM):
+/// a hub, adapter or agent whose terminal closes then stops cleanly, removes its shared
+/// memory, and (the serial bridge) stops its chair, where SIGHUP's default would kill it
+/// where it stands. A SIGHUP the process was told to ignore (`nohup`) stays ignored.
+fn hangup_as_termination() {
+    static ONCE: std::sync::Once = std::sync::Once::new();
+    extern "C" fn on_hangup(_: libc::c_int) {
+        // SAFETY: kill(2) is async-signal-safe; SIGTERM reaches iceoryx2's own handler.
+        #[allow(unsafe_code)]
+        unsafe {
+            libc::kill(libc::getpid(), libc::SIGTERM);
+        }
+    }
+    ONCE.call_once(|| {
+        // SAFETY: reads the current disposition, then installs a handler that only calls
+        // kill(2); the structs are zeroed C structs filled as sigaction(2) documents.
+        #[allow(unsafe_code)]
+        unsafe {
+            let mut old: libc::sigaction = std::mem::zeroed();
+            if libc::sigaction(libc::SIGHUP, std::ptr::null(), &mut old) != 0 || old.sa_sigaction == libc::SIG_IGN {
+                return;
+            }
+            let mut sa: libc::sigaction = std::mem::zeroed();
+            sa.sa_sigaction = on_hangup as *const () as usize;
+            sa.sa_flags = libc::SA_RESTART;
+            libc::sigemptyset(&mut sa.sa_mask);
+            if libc::sigaction(libc::SIGHUP, &sa, std::ptr::null_mut()) != 0 {
+                tracing::debug!("SIGHUP handler not installed: {}", std::io::Error::last_os_error());
+            }
+        }
+    });
 }
 
 #[cfg(test)]

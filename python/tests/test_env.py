@@ -118,3 +118,48 @@ def test_a_swapped_reward_sees_every_chair_at_once_and_a_wrong_shape_is_refused(
             env.step({"chair0": np.array([0.0, 0.0]), "chair1": np.array([0.0, 0.0])})
     finally:
         env.close()
+
+
+def _running(pid: int) -> bool:
+    """Whether process `pid` exists and has not exited (a zombie waiting for its reaper has)."""
+    try:
+        with open(f"/proc/{pid}/stat") as f:
+            return f.read().rsplit(")", 1)[1].split()[0] != "Z"
+    except (FileNotFoundError, ProcessLookupError):
+        return False
+
+
+def test_a_trainer_killed_outright_takes_its_hub_with_it(tmp_path):
+    # SIGKILL runs no atexit hook: the hub's parent-death signal must end it.
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    script = tmp_path / "trainer.py"
+    script.write_text(
+        "import time\n"
+        "from iwsim.env import ChairEnv, Scenario\n"
+        f"s = Scenario.load({str(SLALOM)!r}); s.seconds = 600\n"
+        "env = ChairEnv(s)\n"
+        "env.reset(seed=1)\n"
+        "print(env._env._hub.pid, flush=True)\n"
+        "time.sleep(600)\n"
+    )
+    trainer = subprocess.Popen([sys.executable, str(script)], stdout=subprocess.PIPE, text=True)
+    hub_pid = None
+    try:
+        hub_pid = int(trainer.stdout.readline())
+        assert _running(hub_pid), "the hub runs"
+        trainer.send_signal(signal.SIGKILL)
+        trainer.wait(timeout=20)
+        deadline = time.monotonic() + 20
+        while _running(hub_pid) and time.monotonic() < deadline:
+            time.sleep(0.05)  # polling the process table until the deadline, not a fixed wait
+        assert not _running(hub_pid), "the hub outlived the trainer killed with SIGKILL"
+    finally:
+        if trainer.poll() is None:
+            trainer.kill()
+        if hub_pid is not None and _running(hub_pid):
+            os.kill(hub_pid, signal.SIGKILL)

@@ -193,6 +193,32 @@ fn sigterm_to_a_lock_step_hub_and_its_bridge_leaves_nothing_behind() {
     assert_no_shared_memory_left(&s);
 }
 
+#[test]
+fn sighup_ends_a_hub_and_its_bridge_as_sigterm_does() {
+    // A closed terminal or ssh session sends SIGHUP: the hub and the bridge stop cleanly, the
+    // recording is whole, and nothing is left in /dev/shm (SIGHUP's default killed them
+    // where they stood).
+    let s = session("hup-hub-bridge");
+    let dir = std::env::temp_dir().join(format!("iwsim-e2e-hup-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("a temporary directory");
+    let rec = dir.join("hup.mcap");
+    let rec = rec.to_str().expect("utf-8");
+    let hub = Proc::spawn(&["hub", "--session", &s, "--cycle-ms", "20", "--record", rec]);
+    let mut bridge = Proc::spawn(&["udp", "--session", &s, "--port", "0", "--connect-timeout", "20"]);
+    bridge.announced("registrations on ", Duration::from_secs(20));
+    wait_for_tick(&s, 5, Duration::from_secs(20)).close();
+    hub.signal("HUP");
+    let h = hub.wait(Duration::from_secs(10));
+    assert!(h.status.success(), "the hub ends as on SIGTERM: {:?} {}", h.status, text(&h.stderr));
+    bridge.signal("HUP");
+    let b = bridge.wait(Duration::from_secs(10));
+    assert!(b.status.code().is_some(), "the bridge exits rather than dying of the signal: {:?}", b.status);
+    assert_no_shared_memory_left(&s);
+    let (code, stderr) = iwsim(&["replay", rec, "--check"]);
+    assert_eq!(code, Some(0), "the recording is whole: {stderr}");
+    std::fs::remove_dir_all(&dir).ok();
+}
+
 /// The peak resident set (`VmHWM`) of process `pid`, KiB.
 fn peak_rss_kib(pid: u32) -> u64 {
     let status = std::fs::read_to_string(format!("/proc/{pid}/status")).expect("the process is alive");
