@@ -667,6 +667,14 @@ impl HubCore {
         n
     }
 
+    /// Whether robots are left whose agent died and that no agent has taken back: a lock-step
+    /// hub with no ready agent still steps them at the deadline's pace (frozen where they
+    /// stand until their agent comes back), so a run whose last agent died reaches its end
+    /// instead of waiting for ever.
+    pub fn has_orphans(&self) -> bool {
+        !self.orphans.is_empty()
+    }
+
     /// Whether the run should step now (the caller adds the timing rule of its mode).
     pub fn may_step(&self) -> bool {
         self.state == RunState::Running || (self.state != RunState::Finished && self.single_steps > 0)

@@ -327,7 +327,7 @@ pub fn run(cfg: HubConfig) -> Result<HubOutcome, HubError> {
                 // With no ready agent the deadline means nothing (there is no one to step
                 // without), and once passed it would make every poll return at once: sleep
                 // until a client rings instead.
-                Mode::LockStep if core.ready_agents() == 0 => IDLE_POLL,
+                Mode::LockStep if core.ready_agents() == 0 && !core.has_orphans() => IDLE_POLL,
                 Mode::LockStep => deadline_at.saturating_duration_since(now),
             }
         }
@@ -548,9 +548,13 @@ pub fn run(cfg: HubConfig) -> Result<HubOutcome, HubError> {
                 Mode::RealTime => now >= next_tick_at,
                 Mode::LockStep => {
                     core.all_answered()
-                        || core.ready_agents() > 0 && {
+                        // A dead agent's robots are stepped without it at the deadline, like a
+                        // laggard's, even when it was the last agent.
+                        || (core.ready_agents() > 0 || core.has_orphans()) && {
                             let late = now >= deadline_at;
-                            if late {
+                            if late && core.ready_agents() == 0 {
+                                tracing::debug!("tick {}: no live agent; stepping its robots", core.world().tick());
+                            } else if late {
                                 let n = core.mark_laggards();
                                 tracing::warn!(
                                     "tick {}: {n} agents missed the {:?} deadline",

@@ -146,6 +146,34 @@ fn a_lock_step_hub_with_no_ready_agent_sleeps() {
 }
 
 #[test]
+fn a_lock_step_hub_whose_only_agent_dies_steps_on_at_the_deadlines_pace() {
+    // The agent is killed mid-run: its robot stays, frozen, for a restarted agent to take back,
+    // and the hub steps it at the deadline's pace (so a run with a tick limit reaches its end)
+    // instead of waiting for ever at 0 % CPU (issue 27, fault 1).
+    let s = session("orphan-lockstep");
+    let hub = Proc::spawn(&["hub", "--session", &s, "--lockstep", "--deadline-ms", "100", "--json"]);
+    let agent = Proc::spawn(&["agent", "wheelchair", "--session", &s]);
+    wait_for_tick(&s, 5, Duration::from_secs(20)).close();
+    agent.signal("KILL");
+    agent.wait(Duration::from_secs(10));
+    let mut observer = wait_for_tick(&s, 0, Duration::from_secs(20));
+    let (h, _) = observer.world().expect("the world");
+    let deadline = std::time::Instant::now() + Duration::from_secs(30);
+    let mut now = h.tick;
+    while now < h.tick + 5 && std::time::Instant::now() < deadline {
+        now = observer.with_world(|w, _| w.tick).expect("the world");
+        // Polling the newest tick until the deadline; a short pause keeps a loaded CPU free.
+        std::thread::sleep(Duration::from_millis(5));
+    }
+    observer.close();
+    assert!(now >= h.tick + 5, "the hub stalled at tick {now} after its only agent died");
+    assert_eq!(agent_sdk::control(&s, ipc_types::Command::Stop, 0).expect("the hub answers").status, 0);
+    let out = hub.wait(Duration::from_secs(20));
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    assert_no_shared_memory_left(&s);
+}
+
+#[test]
 fn a_viewer_leaves_when_its_hub_is_killed_and_a_restarted_hub_serves_the_session() {
     let s = session("view-hub-killed");
     let mut hub = Proc::spawn(&["hub", "--session", &s, "--cycle-ms", "20"]);

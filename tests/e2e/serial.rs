@@ -114,7 +114,8 @@ impl Rig {
         let s = session(tag);
         let dir = std::env::temp_dir().join(format!("iwsim-{s}"));
         std::fs::create_dir_all(&dir).expect("temp dir");
-        let hub = Proc::spawn(&["hub", "--session", &s]);
+        // The chair is the one Real robot this hub expects.
+        let hub = Proc::spawn(&["hub", "--session", &s, "--real", "chair1"]);
         wait_for_tick(&s, 1, Duration::from_secs(30)).close();
         let truth_path = dir.join("truth.jsonl");
         let (emulator, emulator_out) = start_emulator(&dir.join("chair.pty"), &truth_path, emulator_extra);
@@ -399,6 +400,29 @@ fn every_way_the_chair_can_lose_its_driver_stops_it_within_300_ms() {
     );
     assert!(!rig.link().exists(), "the emulator removed its link");
     assert_no_shared_memory_left(&rig.s);
+}
+
+#[test]
+fn an_adapter_held_off_the_cpu_for_a_moment_does_not_stop_a_chair_whose_sources_went_on() {
+    // Issue 27, fault 9: on a loaded machine the adapter itself may not run for a while. The
+    // hub, the controller and the board went on meanwhile, so when it runs again it finds them
+    // fresh (their news queued, dated from when it was given) and drives on; the board's own
+    // watchdog covered the gap. It used to take them for quiet and stop the chair.
+    let mut rig = Rig::start("serial-stall");
+    rig.adapter_log.so_far();
+    let since = now_ns();
+    rig.adapter.as_ref().expect("adapter").signal("STOP");
+    let board_ms = |v: &Value| v.get("x").and(v["board_ms"].as_f64());
+    let first = rig.truth.wait_for(since, Duration::from_secs(10), "a board step", |v| board_ms(v).is_some());
+    let from = board_ms(&first).expect("a step");
+    rig.truth.wait_for(since, Duration::from_secs(10), "600 ms of the board's clock", |v| {
+        board_ms(v).is_some_and(|t| t >= from + 600.0)
+    });
+    rig.adapter.as_ref().expect("adapter").signal("CONT");
+    let woke = now_ns();
+    rig.truth.wait_for(woke, Duration::from_secs(10), "the chair driving on after SIGCONT", driving);
+    let said = rig.adapter_log.so_far();
+    assert!(!said.iter().any(|l| l.contains("stopping the chair")), "a spurious stop: {said:?}");
 }
 
 #[test]

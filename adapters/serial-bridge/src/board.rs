@@ -205,11 +205,12 @@ impl BoardLink {
     /// Answers hub tick `tick` for robot `robot_id`, whose sensor block is `block`: forwards
     /// the controller's powers (or a heartbeat), steps a stepped board and waits for its
     /// sample, and returns the pose, real readings and true pose to push.
-    pub fn on_tick(&mut self, tick: u64, robot_id: u32, block: &SensorBlock) -> ActionBlock {
+    /// `age`: how long before now the hub published the tick (its header's time).
+    pub fn on_tick(&mut self, tick: u64, age: Duration, robot_id: u32, block: &SensorBlock) -> ActionBlock {
         self.outcome.ticks += 1;
         self.last_tick = tick;
         self.receive();
-        self.safety.tick(self.now(), block.drive, block.drive_flags);
+        self.safety.tick_aged(self.now(), age, block.drive, block.drive_flags);
         self.apply();
         if self.cfg.stepped {
             self.step();

@@ -43,6 +43,7 @@ pub mod safety;
 
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::Duration;
 
 use agent_sdk::cli::SessionArgs;
 use agent_sdk::{Agent, AgentError};
@@ -242,14 +243,22 @@ fn serve(agent: &mut Agent, port: Port, args: &SerialArgs, stop: &AtomicBool) ->
                 end = Some(give_up(&mut board, e));
             }
         }
-        board.service();
         // A hub that is still there gets its ticks answered even while the chair is being
-        // stopped: in lock-step it waits for us.
+        // stopped: in lock-step it waits for us. The tick waiting is taken before the timers
+        // are checked (in `service`): an adapter the machine's load kept off the CPU for a
+        // while must not take the hub for quiet when its ticks are queued, unread (issue 27,
+        // fault 9: spurious stops under load). The board's frames are read first for the
+        // same reason (`on_tick` and `service` both read before they judge).
         if !matches!(end, Some(Err(_))) {
             match agent.try_tick() {
                 // The block is read where the hub wrote it; only the action leaves the borrow.
                 Ok(Some(tick)) => {
-                    match agent.sensors().iter().find(|b| b.robot_id == id).map(|b| board.on_tick(tick.tick, id, b)) {
+                    match agent
+                        .sensors()
+                        .iter()
+                        .find(|b| b.robot_id == id)
+                        .map(|b| board.on_tick(tick.tick, Duration::from_nanos(tick.latency_ns), id, b))
+                    {
                         Some(action) => {
                             if let Err(e) = agent.send(tick.tick, &[action]) {
                                 end = Some(give_up(&mut board, e));
@@ -272,6 +281,7 @@ fn serve(agent: &mut Agent, port: Port, args: &SerialArgs, stop: &AtomicBool) ->
                 Err(_) => {}
             }
         }
+        board.service();
         if end.is_some() && board.shutdown_done() {
             let outcome = board.outcome();
             agent_sdk::report!("iwsim serial: {outcome}");

@@ -138,6 +138,8 @@ pub struct Safety {
     step_unanswered: bool,
     /// The last tick received, or answered.
     hub_at: Duration,
+    /// The hub's cycle (see [`Safety::with_cycle`]).
+    cycle: Duration,
     /// No tick for longer than this: the hub is quiet.
     hub_quiet_after: Duration,
     /// No news of a controller's answer for longer than this: it is quiet.
@@ -187,6 +189,7 @@ impl Safety {
             last_frame: now,
             step_unanswered: false,
             hub_at: now,
+            cycle: Duration::from_millis(100),
             hub_quiet_after: QUIET,
             controller_quiet_after: CONTROLLER_QUIET,
             holding: false,
@@ -214,6 +217,7 @@ impl Safety {
     /// healthy run is never stopped. The 300 ms stop of the protocol holds for cycles up to
     /// 100 ms, the hub's default.
     pub fn with_cycle(mut self, cycle: Duration) -> Safety {
+        self.cycle = cycle;
         self.hub_quiet_after = QUIET.max(cycle + TICK_SLACK);
         self.controller_quiet_after = CONTROLLER_QUIET.max(2 * cycle + TICK_SLACK);
         self
@@ -303,6 +307,16 @@ impl Safety {
     /// when driving is safe, a Hello when a stop was resumed and the board holds its latch,
     /// else a Heartbeat.
     pub fn tick(&mut self, now: Duration, drive: [f32; 2], drive_flags: u32) {
+        self.tick_aged(now, Duration::ZERO, drive, drive_flags);
+    }
+
+    /// [`Safety::tick`] for a tick the hub published `age` before `now` (its header's time):
+    /// the hub's and the controller's signs of life are dated from when they were given, not
+    /// from when this adapter read them. An adapter the machine's load kept off the CPU for a
+    /// while then finds them as fresh as they are, not quiet (issue 27, fault 9), and a hub
+    /// that really stopped is still found quiet, since its last tick stays old.
+    pub fn tick_aged(&mut self, now: Duration, age: Duration, drive: [f32; 2], drive_flags: u32) {
+        let published = now.saturating_sub(age).max(self.hub_at);
         let resumes = ipc_types::drive_resumes(drive_flags);
         // A count that moved since the last tick is a request; the first tick sets the count
         // (requests made before this adapter ran were not for the stop it holds).
@@ -314,7 +328,9 @@ impl Safety {
         // so its last sign of life is dated from when that tick came, not this one: a
         // controller that stops right after answering is then stopped 200 ms later, not
         // 300 ms (a whole cycle of news lag added).
-        let previous_tick = std::mem::replace(&mut self.hub_at, now);
+        // With ticks skipped while this adapter was held up, the previous tick it read is older
+        // than the hub's previous tick, which came about a cycle before this one.
+        let previous_tick = std::mem::replace(&mut self.hub_at, published).max(published.saturating_sub(self.cycle));
         self.controlled = drive_flags & DRIVE_CONTROLLED != 0;
         let fresh = self.controlled && drive_flags & DRIVE_FRESH != 0;
         self.holding = self.stepped;
@@ -623,6 +639,27 @@ mod tests {
             assert_eq!(sends(&mut s).last(), Some(&Message::Heartbeat));
         }
         assert_eq!(first_stop(&mut s, 1000, 3000), None, "the hub went quiet, but we never drove");
+    }
+
+    #[test]
+    fn an_adapter_held_off_the_cpu_dates_ticks_from_their_publication_and_stops_nothing() {
+        // Driving until 1000 ms; then this adapter is kept off the CPU for 600 ms while the hub,
+        // the controller and the board go on. Waking at 1600 ms it reads the board's queued
+        // frames and the newest tick, published 40 ms before: nothing went quiet.
+        let mut s = driving(1000);
+        for t in (1100..=1600).step_by(100) {
+            s.frame(ms(t), &Message::Sample(Sample::default()));
+        }
+        s.tick_aged(ms(1600), ms(40), [0.5, 0.5], CF);
+        s.poll(ms(1600));
+        let out: Vec<Output> = s.drain().collect();
+        assert!(!out.iter().any(|o| matches!(o, Output::Stop(_))), "a spurious stop: {out:?}");
+        assert_eq!(out.last(), Some(&Output::Send(powers(500, 500))), "{out:?}");
+        // A hub that really stopped at 1000 ms still stops the chair within 300 ms (its last
+        // news of the controller goes stale first).
+        let mut h = driving(1000);
+        let (at, cause, _) = first_stop(&mut h, 1010, 1600).expect("a stop");
+        assert!(at <= 1300 && matches!(cause, StopCause::HubQuiet | StopCause::ControllerQuiet), "{at} {cause:?}");
     }
 
     #[test]
