@@ -139,12 +139,27 @@ pub fn wait_for_tick(session: &str, tick: u64, timeout: Duration) -> Observer {
 /// them, whatever way it ended).
 pub fn assert_no_shared_memory_left(s: &str) {
     let prefix = format!("iwsim_{s}_");
-    let left: Vec<String> = std::fs::read_dir("/dev/shm")
-        .expect("/dev/shm")
-        .filter_map(|e| e.ok().map(|e| e.file_name().to_string_lossy().into_owned()))
-        .filter(|n| n.starts_with(&prefix))
-        .collect();
+    let named = |dir: &str| -> Vec<String> {
+        std::fs::read_dir(dir)
+            .into_iter()
+            .flatten()
+            .filter_map(|e| e.ok().map(|e| e.file_name().to_string_lossy().into_owned()))
+            .filter(|n| n.starts_with(&prefix))
+            .map(|n| format!("{dir}/{n}"))
+            .collect()
+    };
+    let left = named("/dev/shm");
     assert!(left.is_empty(), "left in /dev/shm: {left:?}");
+    // iceoryx2's files outside /dev/shm (issue 27, fault 10): nodes' monitors and details, and
+    // event sockets, under its root, /tmp/iceoryx2.
+    let mut files = named("/tmp/iceoryx2");
+    files.extend(named("/tmp/iceoryx2/nodes"));
+    for node in std::fs::read_dir("/tmp/iceoryx2/nodes").into_iter().flatten().flatten() {
+        if node.path().is_dir() {
+            files.extend(named(&node.path().to_string_lossy()));
+        }
+    }
+    assert!(files.is_empty(), "left in /tmp/iceoryx2: {files:?}");
 }
 
 impl Proc {

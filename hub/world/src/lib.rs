@@ -389,6 +389,20 @@ fn stream_key(index: usize, generation: u32) -> u64 {
     (index as u64) << 32 | generation as u64
 }
 
+/// The noise stream of a robot's priming measurement (before the first step), from what the
+/// robot is (its name and start pose), not from its slot: slots follow the order in which the
+/// agents happened to register until the hub settles them at the first step, and a draw keyed
+/// by slot would make one seed give two runs. The high bit keeps it apart from slot keys.
+fn prime_key(r: &Robot) -> u64 {
+    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
+    let mut eat = |b: u8| h = (h ^ u64::from(b)).wrapping_mul(0x0100_0000_01b3);
+    r.spec.name.bytes().for_each(&mut eat);
+    for v in [r.pose.x, r.pose.y, r.pose.theta] {
+        v.to_bits().to_le_bytes().into_iter().for_each(&mut eat);
+    }
+    h | 1 << 63
+}
+
 /// Runs `f` on matching chunks of `a` and `b` (and one scratch per chunk): on the calling thread
 /// as one chunk when `pool` is `None`, else in parallel chunks of `len`. `f` gets the index of
 /// its chunk's first element.

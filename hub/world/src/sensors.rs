@@ -48,7 +48,8 @@ impl World {
     /// Measures every robot on its committed pose and reports through the latency lines;
     /// `prime` reports straight out instead (readings before the first step, when no earlier
     /// reading exists to delay), with the same noise as any tick's: the stream is keyed by the
-    /// tick, so priming twice draws the same values. Measuring reads the neighbours only
+    /// tick and the robot's name and start pose (not its slot, which settles only at the
+    /// first step), so priming twice draws the same values, whatever order robots came in. Measuring reads the neighbours only
     /// through `geo` and the grids, so each robot's readings are written in the same pass.
     pub(super) fn sense_with(&mut self, prime: bool, chunking: &super::Chunking) {
         let World { statics, dyn_grid, geo, lab, params, slots, seed, scratch, tick, .. } = self;
@@ -60,7 +61,8 @@ impl World {
             for (k, slot) in slots.iter_mut().enumerate() {
                 let i = base + k;
                 let Some(r) = &mut slot.robot else { continue };
-                let mut rng = Rng::stream(seed, super::stream_key(i, slot.generation), tick, Draw::Sense);
+                let key = if prime { super::prime_key(r) } else { super::stream_key(i, slot.generation) };
+                let mut rng = Rng::stream(seed, key, tick, Draw::Sense);
                 let now = scene.measure(i, r, &mut cands, &mut rng, tick);
                 scene.report(r, now, prime);
             }
