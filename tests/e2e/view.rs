@@ -58,7 +58,7 @@ fn ws(addr: SocketAddr) -> Ws {
     ws
 }
 
-fn next_frame(ws: &mut Ws) -> frame::Frame {
+fn next_frame<S: Read + Write>(ws: &mut tungstenite::WebSocket<S>) -> frame::Frame {
     loop {
         if let Message::Binary(b) = ws.read().expect("message") {
             return frame::decode(&b).expect("a valid frame");
@@ -68,7 +68,7 @@ fn next_frame(ws: &mut Ws) -> frame::Frame {
 
 /// The first frame that shows `n` robots (within 20 s): the agent has registered them all, so
 /// stopping the run now cannot catch it half-way through its registrations.
-fn frame_with_robots(ws: &mut Ws, n: usize) -> frame::Frame {
+fn frame_with_robots<S: Read + Write>(ws: &mut tungstenite::WebSocket<S>, n: usize) -> frame::Frame {
     let deadline = Instant::now() + Duration::from_secs(20);
     loop {
         let f = next_frame(ws);
@@ -449,39 +449,70 @@ fn udp_viewers_control_the_run_only_with_allow_control() {
     }
 }
 
-#[test]
-fn a_page_that_never_reads_is_dropped_after_the_write_timeout() {
-    // Enough robots that the world frames fill the socket's buffers within seconds (500: the
-    // hub's closing report of every robot still fits the test's stdout pipe); then
-    // the viewer's writes block, and after IO_TIMEOUT it must drop the page, not hold its thread
-    // and buffers for ever.
-    let s = session("view-stall");
-    let dir = std::env::temp_dir().join(format!("iwsim-e2e-view-stall-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).expect("dir");
-    let lab = dir.join("open.xml");
-    std::fs::write(&lab, "<Lab Name=\"open\" Width=\"400\" Height=\"400\"></Lab>\n").expect("lab");
-    let hub =
-        Proc::spawn(&["hub", "--session", &s, "--lab", lab.to_str().expect("utf-8"), "--cycle-ms", "10", "--no-noise"]);
-    let agent = Proc::spawn(&[
-        "agent",
-        "wheelchair",
-        "--session",
-        &s,
-        "--robots",
-        "500",
-        "--pose",
-        "5,5,0",
-        "--spacing",
-        "1.5",
-        "--powers",
-        "0.1,0.1",
-    ]);
-    let mut view = Proc::spawn(&["view", "--session", &s, "--http", "127.0.0.1:0"]);
-    let lines = view.stderr_lines();
-    let addr: SocketAddr = said(&lines, "open http://").trim_end_matches('/').parse().expect("address");
-    // A small receive buffer (which also stops the kernel growing it) keeps what the kernel can
-    // hold for a page that does not read to what a real browser tab would, so the viewer's
-    // writes block within a second rather than after tens of megabytes.
+/// A hub with `robots` chairs in an open 400 m lab, their agent and a viewer: enough robots that
+/// the world frames fill a page's socket buffers within seconds once it stops reading. The
+/// hub's stdout is drained, so its closing report of every robot cannot block it.
+struct Crowd {
+    hub: Proc,
+    agent: Proc,
+    view: Proc,
+    addr: SocketAddr,
+    dir: std::path::PathBuf,
+    _hub_out: Lines,
+}
+
+impl Crowd {
+    fn start(s: &str, robots: usize) -> Self {
+        let dir = std::env::temp_dir().join(format!("iwsim-e2e-{s}"));
+        std::fs::create_dir_all(&dir).expect("dir");
+        let lab = dir.join("open.xml");
+        std::fs::write(&lab, "<Lab Name=\"open\" Width=\"400\" Height=\"400\"></Lab>\n").expect("lab");
+        let mut hub = Proc::spawn(&[
+            "hub",
+            "--session",
+            s,
+            "--lab",
+            lab.to_str().expect("utf-8"),
+            "--cycle-ms",
+            "10",
+            "--no-noise",
+        ]);
+        let hub_out = hub.stdout_lines();
+        let agent = Proc::spawn(&[
+            "agent",
+            "wheelchair",
+            "--session",
+            s,
+            "--robots",
+            &robots.to_string(),
+            "--pose",
+            "5,5,0",
+            "--spacing",
+            "1.5",
+            "--powers",
+            "0.1,0.1",
+        ]);
+        let mut view = Proc::spawn(&["view", "--session", s, "--http", "127.0.0.1:0"]);
+        let lines = view.stderr_lines();
+        let addr = said(&lines, "open http://").trim_end_matches('/').parse().expect("address");
+        Self { hub, agent, view, addr, dir, _hub_out: hub_out }
+    }
+
+    /// Stops the run; the hub and the viewer must end cleanly.
+    fn stop(self, s: &str) {
+        assert_eq!(agent_sdk::control(s, ipc_types::Command::Stop, 0).expect("hub answers").status, 0);
+        assert!(self.hub.wait(Duration::from_secs(20)).status.success());
+        let _ = self.agent.wait(Duration::from_secs(20));
+        assert!(self.view.wait(Duration::from_secs(20)).status.success());
+        let _ = std::fs::remove_dir_all(self.dir);
+    }
+}
+
+/// A TCP connection to the viewer whose receive buffer is small (which also stops the kernel
+/// growing it), so what the kernel holds for a page that does not read is what a real browser
+/// tab would hold, and the viewer's writes block within a second rather than after tens of
+/// megabytes.
+fn connect_with_small_receive_buffer(addr: SocketAddr) -> TcpStream {
     let tcp = TcpStream::connect(addr).expect("connect");
     let small: libc::c_int = 64 * 1024;
     #[allow(unsafe_code)]
@@ -496,26 +527,62 @@ fn a_page_that_never_reads_is_dropped_after_the_write_timeout() {
         )
     };
     assert_eq!(set, 0, "SO_RCVBUF");
-    let (mut stalled, _) =
-        tungstenite::client(format!("ws://{addr}/ws"), tungstenite::stream::MaybeTlsStream::Plain(tcp))
-            .expect("websocket");
-    // Read until the frames carry every robot, then stop reading: a page whose tab froze.
-    frame_with_robots(&mut stalled, 500);
-    let tungstenite::stream::MaybeTlsStream::Plain(tcp) = stalled.get_ref() else { panic!("a plain TCP stream") };
-    let page_port = tcp.local_addr().expect("local address").port();
-    // Watch the viewer's end of this connection in the kernel's table, without reading (which
-    // would let the viewer's writes go on): once its buffers are full, it blocks, and after
-    // IO_TIMEOUT it must close its end (FIN_WAIT or gone) rather than hold the page for ever.
-    let viewer_end_open = || {
-        let table = std::fs::read_to_string("/proc/net/tcp").expect("/proc/net/tcp");
-        table.lines().skip(1).any(|l| {
+    tcp
+}
+
+/// The viewer's end of each connection to it (not its listening socket), from the kernel's
+/// table, read without touching the sockets (reading one would let the viewer's writes go
+/// on): the client's port, whether it is established, and the bytes the viewer has queued
+/// for it that the client has not acknowledged.
+fn viewer_ends(addr: SocketAddr) -> Vec<(u16, bool, u64)> {
+    let table = std::fs::read_to_string("/proc/net/tcp").expect("/proc/net/tcp");
+    let port = |a: &str| a.rsplit(':').next().and_then(|p| u16::from_str_radix(p, 16).ok());
+    table
+        .lines()
+        .skip(1)
+        .filter_map(|l| {
             let f: Vec<&str> = l.split_whitespace().collect();
-            let port = |a: &str| a.rsplit(':').next().and_then(|p| u16::from_str_radix(p, 16).ok());
-            f.len() > 3 && port(f[1]) == Some(addr.port()) && port(f[2]) == Some(page_port) && f[3] == "01"
+            if f.len() < 5 || port(f[1]) != Some(addr.port()) || port(f[2]) == Some(0) {
+                return None;
+            }
+            let tx_queue = f[4].split(':').next().and_then(|q| u64::from_str_radix(q, 16).ok())?;
+            Some((port(f[2])?, f[3] == "01", tx_queue))
         })
+        .collect()
+}
+
+/// The resident set (`VmRSS`) of process `pid`, in bytes.
+fn rss_bytes(pid: u32) -> u64 {
+    let status = std::fs::read_to_string(format!("/proc/{pid}/status")).expect("the process is alive");
+    let line = status.lines().find_map(|l| l.strip_prefix("VmRSS:")).expect("VmRSS");
+    1024 * line.trim().trim_end_matches("kB").trim().parse::<u64>().expect("a number of kB")
+}
+
+#[test]
+fn a_page_that_never_reads_is_dropped_after_the_write_timeout() {
+    // The world frames of 500 robots fill the socket's buffers within seconds once the page
+    // stops reading; then the viewer's writes block, and after IO_TIMEOUT it must drop the page,
+    // not hold its thread and buffers for ever.
+    let s = session("view-stall");
+    let crowd = Crowd::start(&s, 500);
+    let addr = crowd.addr;
+    let (mut stalled, _) =
+        tungstenite::client(format!("ws://{addr}/ws"), connect_with_small_receive_buffer(addr)).expect("websocket");
+    // Read until the frames carry every robot, then stop reading: a page whose tab froze. The
+    // clock starts before its last read, which sent its last acknowledgement.
+    let deadline = Instant::now() + Duration::from_secs(20);
+    let stalled_since = loop {
+        let before = Instant::now();
+        if next_frame(&mut stalled).robots.len() == 500 {
+            break before;
+        }
+        assert!(Instant::now() < deadline, "no frame with 500 robots within 20 s");
     };
+    let page_port = stalled.get_ref().local_addr().expect("local address").port();
+    // Once its buffers are full the viewer blocks, and after IO_TIMEOUT it must close its end
+    // (FIN_WAIT or gone) rather than hold the page for ever.
+    let viewer_end_open = || viewer_ends(addr).iter().any(|&(port, established, _)| port == page_port && established);
     assert!(viewer_end_open(), "the viewer's end of the page's connection is established");
-    let stalled_since = Instant::now();
     while viewer_end_open() {
         assert!(stalled_since.elapsed() < Duration::from_secs(90), "the viewer kept a page that reads nothing");
         std::thread::sleep(Duration::from_millis(100));
@@ -530,9 +597,79 @@ fn a_page_that_never_reads_is_dropped_after_the_write_timeout() {
     let mut fresh = ws(addr);
     assert_eq!(next_frame(&mut fresh).robots.len(), 500);
     drop(fresh);
-    assert_eq!(agent_sdk::control(&s, ipc_types::Command::Stop, 0).expect("hub answers").status, 0);
-    assert!(hub.wait(Duration::from_secs(20)).status.success());
-    let _ = agent.wait(Duration::from_secs(20));
-    assert!(view.wait(Duration::from_secs(20)).status.success());
-    let _ = std::fs::remove_dir_all(dir);
+    crowd.stop(&s);
+}
+
+#[test]
+fn pages_that_never_read_cannot_hold_every_slot_or_grow_the_viewers_memory() {
+    // The attack: as many pages as the viewer has slots complete the handshake and then never
+    // read. Each must be dropped once its socket has taken no whole frame for IO_TIMEOUT, so a
+    // real page gets in, and what the viewer keeps for them must stay small meanwhile.
+    let s = session("view-stall-all");
+    let crowd = Crowd::start(&s, 500);
+    let addr = crowd.addr;
+    // The hub has every robot before the pages come, so every frame they are sent is full size.
+    let mut obs = agent_sdk::Observer::connect_within(&s, "stall-all-test", Duration::from_secs(20)).expect("observer");
+    let (_, robots) = watch(&mut obs, Duration::from_secs(60), |_, r| r.len() == 500);
+    assert_eq!(robots.len(), 500, "every robot registered");
+    obs.close();
+    let stalled: Vec<_> = (0..viewer::server::MAX_CONNECTIONS)
+        .map(|_| {
+            tungstenite::client(format!("ws://{addr}/ws"), connect_with_small_receive_buffer(addr))
+                .expect("a slot for each stalled page")
+                .0
+        })
+        .collect();
+    let ports: Vec<u16> = stalled.iter().map(|w| w.get_ref().local_addr().expect("local address").port()).collect();
+    let stalled_since = Instant::now();
+    // IO_TIMEOUT, plus slack for a loaded two-core machine.
+    let deadline = stalled_since + viewer::server::IO_TIMEOUT + Duration::from_secs(10);
+    // What the viewer holds for the stalled pages, in its memory and in its end of their
+    // sockets (the kernel's send queues), measured on its side while they hold their slots.
+    let (mut peak_rss, mut peak_queued) = (0, 0);
+    let mut measure = || {
+        peak_rss = peak_rss.max(rss_bytes(crowd.view.pid()));
+        let ends = viewer_ends(addr);
+        let queued: u64 = ends.iter().filter(|(port, _, _)| ports.contains(port)).map(|&(_, _, q)| q).sum();
+        peak_queued = peak_queued.max(queued);
+        ends
+    };
+    let served = loop {
+        measure();
+        // A real page: until a slot is free the viewer answers 503 (or closes before the
+        // request is even written), which is "not yet".
+        let refusal = match tungstenite::connect(format!("ws://{addr}/ws")) {
+            Ok((mut page, _)) => {
+                if let tungstenite::stream::MaybeTlsStream::Plain(tcp) = page.get_mut() {
+                    tcp.set_read_timeout(Some(Duration::from_secs(10))).expect("timeout");
+                }
+                break next_frame(&mut page);
+            }
+            Err(e) => e,
+        };
+        assert!(
+            Instant::now() < deadline,
+            "no slot came free within {:?} of the stalled pages connecting; the last answer: {refusal}",
+            deadline - stalled_since
+        );
+        std::thread::sleep(Duration::from_millis(100));
+    };
+    assert_eq!(served.robots.len(), 500);
+    // Every stalled page is dropped, not just the first.
+    while measure().iter().any(|&(port, established, _)| established && ports.contains(&port)) {
+        assert!(
+            Instant::now() < deadline,
+            "stalled pages still held {:?} after they connected",
+            stalled_since.elapsed()
+        );
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    assert!(
+        peak_queued < 64 << 20,
+        "the viewer queued {} MB in the kernel for pages that read nothing",
+        peak_queued >> 20
+    );
+    assert!(peak_rss < 200 << 20, "the viewer's resident set reached {} MB", peak_rss >> 20);
+    drop(stalled);
+    crowd.stop(&s);
 }

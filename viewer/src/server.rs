@@ -11,10 +11,11 @@
 //! (or a served replay, which has no such service) sends frames with none.
 //!
 //! What one browser (or a hostile page) can cost everyone is bounded: at most
-//! [`MAX_CONNECTIONS`] connections at once, [`IO_TIMEOUT`] on every read and write (a client
-//! that never reads is dropped), [`MAX_MESSAGE_BYTES`] per incoming WebSocket message, a
-//! WebSocket only from the viewer's own origin (or one named with `--allow-origin`), and one
-//! control client for every page's commands.
+//! [`MAX_CONNECTIONS`] connections at once, [`IO_TIMEOUT`] on every read and on every whole
+//! message written, at most [`MAX_UNACKED_BYTES`] sent to a page that it has not acknowledged
+//! (a page that never reads is dropped after [`IO_TIMEOUT`]), [`MAX_MESSAGE_BYTES`] per incoming
+//! WebSocket message, a WebSocket only from the viewer's own origin (or one named with
+//! `--allow-origin`), and one control client for every page's commands.
 
 use std::io::{Read, Write};
 use std::net::{SocketAddr, TcpListener, TcpStream};
@@ -44,9 +45,19 @@ pub const MAX_CONNECTIONS: usize = 64;
 /// bytes, and a larger message closes its connection.
 pub const MAX_MESSAGE_BYTES: usize = 4096;
 
-/// How long one read or write on a connection may block: a client that stops reading is
-/// dropped after this, so it cannot pin a thread and kernel buffers for good.
+/// How long one read on a connection may block, how long the socket may take to accept one
+/// whole message, and how long a page may leave what it was sent unacknowledged: a client that
+/// stops reading is dropped after this, so it cannot pin a thread, a slot and kernel buffers
+/// for good.
 pub const IO_TIMEOUT: Duration = Duration::from_secs(5);
+
+/// The most a page may have been sent without acknowledging it (a WebSocket ping follows every
+/// message; its pong says the page has read up to there). A frame that would go beyond this
+/// is skipped (the page gets a newer one once it catches up: a view only needs the newest
+/// world); a frame goes whatever its size when nothing is outstanding. Without this bound the
+/// kernel buffers up to `tcp_wmem`'s maximum (4 MB by default) for every page that does not
+/// read, before a single write blocks.
+pub const MAX_UNACKED_BYTES: usize = 256 * 1024;
 
 /// Page commands waiting for the control client; more are answered "busy".
 const CONTROL_QUEUE: usize = 16;
@@ -467,6 +478,117 @@ fn serve_connection(mut stream: TcpStream, ctx: &Context) -> std::io::Result<()>
     stream.write_all(body.as_bytes())
 }
 
+/// A connection's socket whose writes share one deadline, so that a whole message must be
+/// taken within [`IO_TIMEOUT`]. The socket's own send timeout counts per write call: a call
+/// that copied part of a message before timing out returns that part, and the WebSocket layer's
+/// next call for the rest waits a full timeout again, so a page that takes a trickle (or whose
+/// kernel frees a little room now and then) was never dropped.
+#[derive(Debug)]
+struct DeadlineStream {
+    stream: TcpStream,
+    deadline: Option<Instant>,
+    /// A write ran into the deadline: the page is dropped, whatever the WebSocket layer makes
+    /// of the error (it takes a blocked write while it reads for "try again later").
+    expired: bool,
+}
+
+impl DeadlineStream {
+    fn new(stream: TcpStream) -> Self {
+        Self { stream, deadline: None, expired: false }
+    }
+
+    /// Gives the next whole message (however many writes it takes) until `within` from now.
+    fn arm(&mut self, within: Duration) {
+        self.deadline = Some(Instant::now() + within);
+    }
+}
+
+impl Read for DeadlineStream {
+    fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
+        self.stream.read(buf)
+    }
+}
+
+impl Write for DeadlineStream {
+    fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+        if let Some(deadline) = self.deadline {
+            let left = deadline.saturating_duration_since(Instant::now());
+            // The socket takes no zero timeout (it would mean none); under a millisecond left
+            // is as good as none.
+            if left < Duration::from_millis(1) {
+                self.expired = true;
+                return Err(std::io::Error::new(
+                    std::io::ErrorKind::TimedOut,
+                    "the page took no whole message in time",
+                ));
+            }
+            self.stream.set_write_timeout(Some(left))?;
+        }
+        let written = self.stream.write(buf);
+        if let Err(e) = &written
+            && matches!(e.kind(), std::io::ErrorKind::WouldBlock | std::io::ErrorKind::TimedOut)
+        {
+            self.expired = true;
+        }
+        written
+    }
+
+    fn flush(&mut self) -> std::io::Result<()> {
+        self.stream.flush()
+    }
+}
+
+/// What a page has been sent and has acknowledged, counted in bytes of messages: a ping after
+/// each message carries the count so far, and the page's pong echoes it (browsers answer pings
+/// by themselves, whatever the page's script is doing).
+#[derive(Debug, Default)]
+struct Pace {
+    sent: u64,
+    acked: u64,
+    /// Since when the page has owed an acknowledgement without giving any.
+    owed_since: Option<Instant>,
+}
+
+impl Pace {
+    /// Whether a frame of `len` bytes may go now: when nothing is outstanding (so a frame
+    /// larger than the bound still goes, one at a time), or when it stays within
+    /// [`MAX_UNACKED_BYTES`].
+    fn may_send(&self, len: usize) -> bool {
+        let outstanding = self.sent - self.acked;
+        outstanding == 0 || outstanding + len as u64 <= MAX_UNACKED_BYTES as u64
+    }
+
+    /// Counts a message of `len` bytes sent at `now`; returns the ping payload that follows it.
+    fn sent(&mut self, len: usize, now: Instant) -> [u8; 8] {
+        if self.sent == self.acked {
+            self.owed_since = Some(now);
+        }
+        self.sent += len as u64;
+        self.sent.to_be_bytes()
+    }
+
+    /// Counts a pong that arrived at `now`. One that acknowledges nothing new (a page may send
+    /// pongs of its own as a heartbeat, with any payload) changes nothing.
+    fn pong(&mut self, payload: &[u8], now: Instant) {
+        let Ok(bytes) = <[u8; 8]>::try_from(payload) else { return };
+        let upto = u64::from_be_bytes(bytes);
+        if upto > self.acked && upto <= self.sent {
+            self.acked = upto;
+            self.owed_since = (self.acked < self.sent).then_some(now);
+        }
+    }
+
+    /// Whether the page has acknowledged nothing for [`IO_TIMEOUT`] while it owed some.
+    fn stalled(&self, now: Instant) -> bool {
+        self.owed_since.is_some_and(|t| now.duration_since(t) >= IO_TIMEOUT)
+    }
+}
+
+/// Messages read from a page per turn of its loop: enough to take the pongs of every message
+/// sent since the last turn, few enough that a page flooding the viewer cannot keep its own
+/// stream from being served.
+const READS_PER_TURN: usize = 32;
+
 /// A page's command: `start`, `pause`, `step`, `stop` or `remove:<robot id>` (public for the
 /// fuzz target, which feeds it whatever a WebSocket can carry).
 pub fn parse_command(text: &str) -> Option<(Command, u32)> {
@@ -516,14 +638,13 @@ fn serve_websocket(stream: TcpStream, ctx: &Context) -> std::io::Result<()> {
         }
         Err(forbidden(origin))
     };
-    let mut ws = tungstenite::accept_hdr_with_config(stream, check, Some(config))
+    let ws = tungstenite::accept_hdr_with_config(DeadlineStream::new(stream), check, Some(config))
         .map_err(|e| std::io::Error::other(e.to_string()))?;
-    let io = |e: tungstenite::Error| std::io::Error::other(e.to_string());
-    let map_json = ctx.map_json.as_str();
-    let shared = &ctx.shared;
-    ws.send(Message::text(map_json.to_owned())).map_err(io)?;
+    let mut page = Page { ws, pace: Pace::default() };
+    page.send(Message::text(ctx.map_json.as_str().to_owned()))?;
     // Reads must not block the frame stream: poll them with a short timeout.
-    ws.get_mut().set_read_timeout(Some(Duration::from_millis(5)))?;
+    page.ws.get_mut().stream.set_read_timeout(Some(Duration::from_millis(5)))?;
+    let shared = &ctx.shared;
     let (mut frame_seq, mut roster_seq) = (0u64, 0u64);
     let min_gap = Duration::from_millis(1000 / MAX_FPS as u64);
     let mut last_sent = Instant::now() - min_gap;
@@ -538,39 +659,95 @@ fn serve_websocket(stream: TcpStream, ctx: &Context) -> std::io::Result<()> {
             let frame = (l.frame_seq != frame_seq).then(|| (l.frame.clone(), l.frame_seq));
             (frame, roster, l.finished)
         };
+        // The roster is state the page cannot do without: it goes whatever the page owes.
         if let Some((r, seq)) = roster {
-            ws.send(Message::text(r.as_str().to_owned())).map_err(io)?;
+            page.send(Message::text(r.as_str().to_owned()))?;
             roster_seq = seq;
         }
+        // A frame the page has no room for is skipped; a newer one goes once it catches up.
         if let Some((f, seq)) = frame
             && last_sent.elapsed() >= min_gap
+            && page.pace.may_send(f.len())
         {
-            ws.send(Message::binary(f.as_slice().to_vec())).map_err(io)?;
+            page.send(Message::binary(f.as_slice().to_vec()))?;
             frame_seq = seq;
             last_sent = Instant::now();
         }
-        match ws.read() {
-            Ok(Message::Text(cmd)) => {
-                let reply = match (parse_command(cmd.as_str()), &ctx.control) {
-                    (Some((c, robot)), Some(control)) => command_reply(control, cmd.as_str(), c, robot),
-                    (Some(_), None) => {
-                        "{\"type\":\"error\",\"message\":\"control is off: start iwsim view with --allow-control\"}"
-                            .to_owned()
-                    }
-                    (None, _) => "{\"type\":\"error\",\"message\":\"unknown command\"}".to_owned(),
-                };
-                ws.send(Message::text(reply)).map_err(io)?;
+        for _ in 0..READS_PER_TURN {
+            match page.read()? {
+                Some(Message::Text(cmd)) => {
+                    let reply = match (parse_command(cmd.as_str()), &ctx.control) {
+                        (Some((c, robot)), Some(control)) => command_reply(control, cmd.as_str(), c, robot),
+                        (Some(_), None) => {
+                            "{\"type\":\"error\",\"message\":\"control is off: start iwsim view with --allow-control\"}"
+                                .to_owned()
+                        }
+                        (None, _) => "{\"type\":\"error\",\"message\":\"unknown command\"}".to_owned(),
+                    };
+                    page.send(Message::text(reply))?;
+                }
+                Some(Message::Pong(p)) => page.pace.pong(&p, Instant::now()),
+                Some(Message::Close(_)) => return Ok(()),
+                Some(_) => {}
+                None => break,
             }
-            Ok(Message::Close(_)) => return Ok(()),
-            Ok(_) => {}
-            Err(tungstenite::Error::Io(e))
-                if matches!(e.kind(), std::io::ErrorKind::WouldBlock | std::io::ErrorKind::TimedOut) => {}
-            Err(e) => return Err(io(e)),
+        }
+        // Judged after the page's pongs have been read, so a turn that waited on the hub
+        // (a command's answer) does not count against it.
+        if page.pace.stalled(Instant::now()) {
+            return Err(std::io::Error::new(
+                std::io::ErrorKind::TimedOut,
+                format!("the page acknowledged nothing for {IO_TIMEOUT:?}"),
+            ));
         }
         if finished && frame_seq > 0 {
-            let _ = ws.close(None);
+            page.ws.get_mut().arm(IO_TIMEOUT);
+            let _ = page.ws.close(None);
             return Ok(());
         }
+    }
+}
+
+/// One page's WebSocket and what it has acknowledged.
+#[derive(Debug)]
+struct Page {
+    ws: tungstenite::WebSocket<DeadlineStream>,
+    pace: Pace,
+}
+
+impl Page {
+    /// Writes `msg` whole within [`IO_TIMEOUT`], followed by the ping that counts it.
+    /// tungstenite never holds more than the message in hand (it is written out, or the page
+    /// is dropped), so what a page can cost is what the kernel holds of its last
+    /// [`MAX_UNACKED_BYTES`].
+    fn send(&mut self, msg: Message) -> std::io::Result<()> {
+        let ping = self.pace.sent(msg.len(), Instant::now());
+        self.ws.get_mut().arm(IO_TIMEOUT);
+        let sent = self
+            .ws
+            .write(msg)
+            .and_then(|()| self.ws.write(Message::Ping(ping.to_vec().into())))
+            .and_then(|()| self.ws.flush());
+        sent.map_err(|e| std::io::Error::other(e.to_string()))
+    }
+
+    /// The page's next message, or `None` when none has arrived within the read timeout.
+    fn read(&mut self) -> std::io::Result<Option<Message>> {
+        // Reading may answer the page's pings: those writes get a deadline too.
+        self.ws.get_mut().arm(IO_TIMEOUT);
+        let got = match self.ws.read() {
+            Ok(m) => Some(m),
+            Err(tungstenite::Error::Io(e))
+                if matches!(e.kind(), std::io::ErrorKind::WouldBlock | std::io::ErrorKind::TimedOut) =>
+            {
+                None
+            }
+            Err(e) => return Err(std::io::Error::other(e.to_string())),
+        };
+        if self.ws.get_ref().expired {
+            return Err(std::io::Error::new(std::io::ErrorKind::TimedOut, "the page took no whole message in time"));
+        }
+        Ok(got)
     }
 }
 
@@ -642,6 +819,78 @@ mod tests {
         // A turn with no new sample (between ticks) does not slow the looks again.
         p.saw(false, t0 + Duration::from_millis(1001));
         assert!(p.due(t0 + Duration::from_millis(1002)));
+    }
+
+    #[test]
+    fn a_page_is_sent_frames_only_while_it_acknowledges_what_it_was_sent() {
+        let t0 = Instant::now();
+        let mut p = Pace::default();
+        assert!(p.may_send(10 * MAX_UNACKED_BYTES), "a frame of any size goes when nothing is owed");
+        let first = p.sent(100_000, t0);
+        assert!(p.may_send(MAX_UNACKED_BYTES - 100_000));
+        assert!(!p.may_send(MAX_UNACKED_BYTES - 100_000 + 1), "beyond the bound the frame is skipped");
+        let second = p.sent(100_000, t0 + Duration::from_millis(10));
+        // The page reads the first message: its pong echoes the first ping.
+        p.pong(&first, t0 + Duration::from_secs(4));
+        assert!(p.may_send(MAX_UNACKED_BYTES - 100_000));
+        assert!(!p.stalled(t0 + Duration::from_secs(8)), "it acknowledged something 4 s in");
+        assert!(p.stalled(t0 + Duration::from_secs(9)), "then nothing for IO_TIMEOUT");
+        p.pong(&second, t0 + Duration::from_secs(9));
+        assert!(!p.stalled(t0 + Duration::from_secs(60)), "nothing owed, nothing to wait for");
+        // The next message starts a new wait.
+        p.sent(10, t0 + Duration::from_secs(60));
+        assert!(!p.stalled(t0 + Duration::from_secs(64)));
+        assert!(p.stalled(t0 + Duration::from_secs(65)));
+    }
+
+    #[test]
+    fn pongs_that_acknowledge_nothing_new_change_nothing() {
+        let t0 = Instant::now();
+        let mut p = Pace::default();
+        let first = p.sent(1000, t0);
+        p.sent(1000, t0);
+        for junk in [&b""[..], b"hello", &2001u64.to_be_bytes(), &0u64.to_be_bytes()] {
+            p.pong(junk, t0 + Duration::from_secs(1));
+            assert_eq!(p.acked, 0, "{junk:?}");
+        }
+        p.pong(&first, t0 + Duration::from_secs(1));
+        p.pong(&first, t0 + Duration::from_secs(5));
+        assert_eq!(p.acked, 1000);
+        assert!(p.stalled(t0 + Duration::from_secs(6)), "a repeated pong is no progress");
+    }
+
+    #[test]
+    fn a_message_gets_one_deadline_however_many_writes_it_takes() {
+        // A peer that reads a trickle: every write call makes a little progress, so the
+        // socket's own send timeout (per call) would never fire, and 8 MB would take tens of
+        // seconds.
+        let listener = TcpListener::bind("127.0.0.1:0").expect("bind");
+        let writer = TcpStream::connect(listener.local_addr().expect("address")).expect("connect");
+        let (mut peer, _) = listener.accept().expect("accept");
+        let done = Arc::new(AtomicBool::new(false));
+        let reading = done.clone();
+        let trickle = std::thread::spawn(move || {
+            let mut buf = [0u8; 4096];
+            peer.set_read_timeout(Some(Duration::from_millis(50))).expect("timeout");
+            while !reading.load(Ordering::SeqCst) {
+                let _ = peer.read(&mut buf);
+                // Pacing the trickle, not waiting for anything.
+                std::thread::sleep(Duration::from_millis(20));
+            }
+        });
+        let mut stream = DeadlineStream::new(writer);
+        let within = Duration::from_millis(500);
+        let start = Instant::now();
+        stream.arm(within);
+        let err = stream.write_all(&vec![7u8; 8 << 20]).expect_err("8 MB cannot pass a trickle in 0.5 s");
+        let took = start.elapsed();
+        done.store(true, Ordering::SeqCst);
+        trickle.join().expect("the peer's thread");
+        assert!(matches!(err.kind(), std::io::ErrorKind::TimedOut | std::io::ErrorKind::WouldBlock), "{err}");
+        assert!(stream.expired);
+        assert!(took >= within, "gave up after {took:?}");
+        // Generous: the point is that it ends near its deadline, not after minutes.
+        assert!(took < within + Duration::from_secs(10), "took {took:?}");
     }
 
     #[test]
