@@ -44,8 +44,13 @@ fn said(lines: &Lines, marker: &str) -> String {
 }
 
 fn get(addr: SocketAddr, path: &str) -> String {
+    get_as(addr, &addr.to_string(), path)
+}
+
+/// A GET of `path` addressed to `host` (its `Host` header), whatever address it is sent to.
+fn get_as(addr: SocketAddr, host: &str, path: &str) -> String {
     let mut s = TcpStream::connect(addr).expect("connect");
-    write!(s, "GET {path} HTTP/1.1\r\nHost: x\r\nConnection: close\r\n\r\n").expect("send");
+    write!(s, "GET {path} HTTP/1.1\r\nHost: {host}\r\nConnection: close\r\n\r\n").expect("send");
     let mut out = String::new();
     s.read_to_string(&mut out).expect("read");
     out
@@ -284,6 +289,94 @@ fn a_websocket_from_another_origin_is_refused_unless_allowed() {
     stop_once_both_chairs_run(&s, addr, [hub, agent, view]);
 }
 
+/// A WebSocket handshake written by hand on a TCP socket, with exactly these `Host` and
+/// `Origin` headers (as a browser sends them): the answer's status and head, and the socket
+/// just past the head.
+fn handshake(addr: SocketAddr, host: &str, origin: &str) -> (u16, String, TcpStream) {
+    let mut tcp = TcpStream::connect(addr).expect("connect");
+    tcp.set_read_timeout(Some(Duration::from_secs(10))).expect("timeout");
+    write!(
+        tcp,
+        "GET /ws HTTP/1.1\r\nHost: {host}\r\nOrigin: {origin}\r\nUpgrade: websocket\r\nConnection: Upgrade\r\n\
+         Sec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\nSec-WebSocket-Version: 13\r\n\r\n"
+    )
+    .expect("send");
+    // Byte by byte, so nothing past the head is taken from the socket.
+    let mut head = Vec::new();
+    let mut byte = [0u8; 1];
+    while !head.ends_with(b"\r\n\r\n") {
+        assert_eq!(tcp.read(&mut byte).expect("an answer"), 1, "the answer ended in its head: {head:?}");
+        head.push(byte[0]);
+    }
+    let head = String::from_utf8_lossy(&head).into_owned();
+    let status = head.split_whitespace().nth(1).and_then(|c| c.parse().ok()).expect("a status code");
+    (status, head, tcp)
+}
+
+/// A page's text message as a client sends it (masked, one frame).
+fn masked_text(text: &str) -> Vec<u8> {
+    let mask = [0x11u8, 0x22, 0x33, 0x44];
+    assert!(text.len() < 126, "a short message");
+    let mut frame = vec![0x81, 0x80 | text.len() as u8];
+    frame.extend_from_slice(&mask);
+    frame.extend(text.bytes().enumerate().map(|(i, b)| b ^ mask[i % 4]));
+    frame
+}
+
+#[test]
+fn a_page_under_another_sites_name_is_refused_even_with_that_sites_origin() {
+    // DNS rebinding: attacker.example is made to resolve to 127.0.0.1 once its page has
+    // loaded; the page's requests then carry Host: attacker.example and the matching Origin,
+    // which the origin check alone took for the viewer's own.
+    let s = session("view-rebind");
+    let (hub, agent, view, addr, lines) = start_lines(&s, &["--allow-control", "--allow-host", "lab.example"]);
+    let (status, head, mut tcp) = handshake(addr, "attacker.example", "http://attacker.example");
+    // Its pause goes down the socket whatever the answer; a refused one must get no ack, up
+    // to the end of the stream (or 10 s of a stream that does not end).
+    let _ = tcp.write_all(&masked_text("pause"));
+    let mut got = Vec::new();
+    let deadline = Instant::now() + Duration::from_secs(10);
+    let mut buf = [0u8; 65536];
+    while Instant::now() < deadline && !got.windows(5).any(|w| w == b"\"ack\"") {
+        match tcp.read(&mut buf) {
+            Ok(0) | Err(_) => break,
+            Ok(n) => got.extend_from_slice(&buf[..n]),
+        }
+    }
+    let acked = got.windows(5).any(|w| w == b"\"ack\"");
+    assert!(status == 421 && !acked, "status {status}, pause acked: {acked}\n{head}");
+    let body = String::from_utf8_lossy(&got);
+    assert!(body.contains("attacker.example") && body.contains("--allow-host"), "{body}");
+    // The page under that name is refused too, and the refusal is reported.
+    let page = get_as(addr, "attacker.example", "/");
+    assert!(page.starts_with("HTTP/1.1 421"), "{page}");
+    let line = said(&lines, "refused a request for host");
+    assert!(line.contains("attacker.example") && line.contains("--allow-host"), "{line}");
+
+    // The viewer's own address, and a name allowed with --allow-host, are served.
+    let lab = format!("lab.example:{}", addr.port());
+    assert!(get_as(addr, &lab, "/").starts_with("HTTP/1.1 200 OK"));
+    let (status, head, _) = handshake(addr, &lab, &format!("http://{lab}"));
+    assert_eq!(status, 101, "{head}");
+    let (status, head, tcp) = handshake(addr, &addr.to_string(), &format!("http://{addr}"));
+    assert_eq!(status, 101, "{head}");
+    let mut w = tungstenite::WebSocket::from_raw_socket(tcp, tungstenite::protocol::Role::Client, None);
+    // Both chairs registered first, so the stop below cannot catch the agent half-way.
+    frame_with_robots(&mut w, 2);
+    w.send(Message::text("pause")).expect("send");
+    let reply = loop {
+        if let Message::Text(t) = w.read().expect("reply")
+            && !t.contains("\"map\"")
+            && !t.contains("\"roster\"")
+        {
+            break t;
+        }
+    };
+    assert!(reply.contains("\"ack\""), "{reply}");
+    drop(w);
+    stop_and_expect_clean_exits(&s, [hub, agent, view]);
+}
+
 #[test]
 fn connections_beyond_the_cap_are_refused_and_a_freed_slot_serves_again() {
     let s = session("view-cap");
@@ -306,7 +399,7 @@ fn connections_beyond_the_cap_are_refused_and_a_freed_slot_serves_again() {
         // Until the slot is free the viewer answers 503 and may close before the request is
         // even written: a failed write or read is "not yet", like the 503.
         let page = TcpStream::connect(addr).and_then(|mut c| {
-            write!(c, "GET / HTTP/1.1\r\nHost: x\r\nConnection: close\r\n\r\n")?;
+            write!(c, "GET / HTTP/1.1\r\nHost: {addr}\r\nConnection: close\r\n\r\n")?;
             let mut out = String::new();
             c.read_to_string(&mut out).map(|_| out)
         });

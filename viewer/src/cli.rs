@@ -24,6 +24,12 @@ pub struct ViewArgs {
     /// by default only pages this viewer served may connect.
     #[arg(long = "allow-origin", value_name = "ORIGIN")]
     pub allow_origin: Vec<String>,
+    /// Answer requests addressed to this host name too (repeatable), e.g. lab-pc (any port) or
+    /// lab-pc:8080: the name the page is opened under on a LAN. By default only the address the
+    /// viewer listens on (and localhost over loopback) is answered, so another site's page
+    /// cannot reach it by making its own name resolve here (DNS rebinding).
+    #[arg(long = "allow-host", value_name = "HOST", value_parser = crate::server::allowed_host)]
+    pub allow_host: Vec<String>,
 }
 
 /// Serves the viewer until the hub ends the run.
@@ -33,6 +39,7 @@ pub fn run(args: &ViewArgs) -> anyhow::Result<ExitCode> {
         http: args.http,
         allow_control: args.allow_control,
         allowed_origins: args.allow_origin.clone(),
+        allowed_hosts: args.allow_host.clone(),
         connect_timeout: args.hub.timeout(),
     })?;
     let addr = v.local_addr().unwrap_or(args.http);

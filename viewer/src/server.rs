@@ -16,9 +16,14 @@
 //! (a page that never reads is dropped after [`IO_TIMEOUT`]), [`MAX_MESSAGE_BYTES`] per incoming
 //! WebSocket message, a WebSocket only from the viewer's own origin (or one named with
 //! `--allow-origin`), and one control client for every page's commands.
+//!
+//! Every request must also be addressed to a name the viewer is served under (its `Host`
+//! header; see `host_allowed` for which): an origin check alone is beaten by DNS rebinding, where a
+//! site's own name is made to resolve to this machine, and its page's requests then carry
+//! that name as both `Host` and `Origin`.
 
 use std::io::{Read, Write};
-use std::net::{SocketAddr, TcpListener, TcpStream};
+use std::net::{IpAddr, SocketAddr, TcpListener, TcpStream};
 use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 use std::sync::mpsc::{self, Receiver, RecvTimeoutError, SyncSender, TrySendError};
 use std::sync::{Arc, Condvar, Mutex};
@@ -85,6 +90,10 @@ pub struct ViewerConfig {
     /// WebSocket origins accepted besides the viewer's own (`http://` + the `Host` it is
     /// served as), e.g. `http://lab-pc:8080`.
     pub allowed_origins: Vec<String>,
+    /// Host names requests may be addressed to besides the address the viewer is served at
+    /// (and `localhost` on loopback), e.g. `lab-pc` (any port) or `lab-pc:8080`: the names a
+    /// user opens the page under on a LAN; `--allow-host` on the command line.
+    pub allowed_hosts: Vec<String>,
     /// How long to wait for the hub.
     pub connect_timeout: Duration,
 }
@@ -125,6 +134,11 @@ struct Context {
     shared: Shared,
     map_json: Arc<String>,
     allowed_origins: Vec<String>,
+    /// The address the viewer listens on (with its real port when bound to port 0).
+    served_at: SocketAddr,
+    allowed_hosts: Vec<String>,
+    /// Requests for other hosts, reported at a bounded rate.
+    refused_hosts: Mutex<Throttle>,
     /// The control thread's queue, when pages may control the run.
     control: Option<SyncSender<ControlJob>>,
     /// Refused origins, reported at a bounded rate.
@@ -234,6 +248,133 @@ fn origin_allowed(origin: Option<&str>, host: Option<&str>, allowed: &[String]) 
     host.and_then(|h| Some(origin.strip_prefix("http://")?.eq_ignore_ascii_case(h.trim()))).unwrap_or(false)
 }
 
+/// A `Host` header's name: an IP literal (an IPv6 one in brackets) or a DNS name.
+#[derive(Debug)]
+enum HostName<'a> {
+    Ip(IpAddr),
+    Dns(&'a str),
+}
+
+impl HostName<'_> {
+    fn same(&self, other: &HostName<'_>) -> bool {
+        match (self, other) {
+            (HostName::Ip(a), HostName::Ip(b)) => a.to_canonical() == b.to_canonical(),
+            // DNS names compare without case, and a fully qualified `name.` is `name`.
+            (HostName::Dns(a), HostName::Dns(b)) => {
+                a.trim_end_matches('.').eq_ignore_ascii_case(b.trim_end_matches('.'))
+            }
+            _ => false,
+        }
+    }
+}
+
+/// Splits a `Host` header (or an `--allow-host` entry) into its name and its port, if it
+/// has one: `name`, `name:port`, `[v6]`, `[v6]:port`. `None` when it is none of these.
+fn split_host(host: &str) -> Option<(HostName<'_>, Option<u16>)> {
+    let host = host.trim();
+    let (name, port) = match host.strip_prefix('[') {
+        Some(rest) => {
+            let (inside, after) = rest.split_once(']')?;
+            let port = if after.is_empty() { None } else { Some(after.strip_prefix(':')?) };
+            (HostName::Ip(IpAddr::V6(inside.parse().ok()?)), port)
+        }
+        None => {
+            let (name, port) = host.split_once(':').map_or((host, None), |(n, p)| (n, Some(p)));
+            let valid = |c: char| c.is_ascii_alphanumeric() || matches!(c, '-' | '.' | '_');
+            if name.is_empty() || !name.chars().all(valid) {
+                return None;
+            }
+            (name.parse().map_or(HostName::Dns(name), HostName::Ip), port)
+        }
+    };
+    let port = match port {
+        Some(p) => Some(p.parse().ok()?),
+        None => None,
+    };
+    Some((name, port))
+}
+
+/// Whether a request addressed to `host` (its `Host` header) is for this viewer, which
+/// listens on `served_at` and got the request on its address `arrived_at`. DNS rebinding
+/// makes a site's name resolve to this machine; its page's requests then name that site as
+/// both `Host` and `Origin`, so only the `Host` tells them apart. Served are:
+/// - an IP literal, with the port the viewer listens on, for the address the request
+///   arrived at (the bound address, or any of this machine's when bound to `0.0.0.0`/`[::]`):
+///   an IP cannot be rebound;
+/// - `localhost`, `127.0.0.1` and `[::1]` with that port, when the request came over
+///   loopback (browsers resolve `localhost` themselves);
+/// - whatever `allowed` names (`--allow-host`): `name` for any port, `name:port` for that
+///   one.
+///
+/// A request without `Host` is served: every browser sends one, so it is no web page's (an
+/// HTTP/1.0 program's, say), and a program could send any `Host` it liked. The port is 80
+/// when the header gives none, as HTTP says.
+fn host_allowed(host: Option<&str>, served_at: SocketAddr, arrived_at: IpAddr, allowed: &[String]) -> bool {
+    let Some(host) = host else { return true };
+    let Some((name, port)) = split_host(host) else { return false };
+    let port = port.unwrap_or(80);
+    let allowed_by_user = allowed
+        .iter()
+        .filter_map(|a| split_host(a))
+        .any(|(a_name, a_port)| a_name.same(&name) && a_port.is_none_or(|p| p == port));
+    if allowed_by_user {
+        return true;
+    }
+    if port != served_at.port() {
+        return false;
+    }
+    let loopback = arrived_at.to_canonical().is_loopback();
+    match name {
+        HostName::Ip(ip) => {
+            let ip = ip.to_canonical();
+            ip == arrived_at.to_canonical()
+                || (loopback && (ip == IpAddr::from([127, 0, 0, 1]) || ip == IpAddr::from([0u16, 0, 0, 0, 0, 0, 0, 1])))
+        }
+        HostName::Dns(_) => loopback && name.same(&HostName::Dns("localhost")),
+    }
+}
+
+/// Checks an `--allow-host` value: a host name or IP address, with `:PORT` or without.
+pub fn allowed_host(value: &str) -> Result<String, String> {
+    match split_host(value) {
+        Some(_) => Ok(value.trim().to_owned()),
+        None => Err(format!(
+            "{value:?} is no host: give a name or address, with :PORT or without (lab-pc, lab-pc:8080, [::1]:8080), not a URL"
+        )),
+    }
+}
+
+/// Where the page may be opened, for a refusal's advice.
+fn own_url(served_at: SocketAddr) -> String {
+    if served_at.ip().is_unspecified() {
+        format!("http://<this machine's address>:{}/", served_at.port())
+    } else {
+        format!("http://{served_at}/")
+    }
+}
+
+/// What a request for a host the viewer is not served under is told.
+fn misdirected_text(host: &str, served_at: SocketAddr) -> String {
+    format!(
+        "this viewer is not served as host {host:?}: open {}, or start iwsim view with --allow-host {}\n",
+        own_url(served_at),
+        host.trim()
+    )
+}
+
+impl Context {
+    /// Reports a request for another host, at a bounded rate.
+    fn note_refused_host(&self, host: &str) {
+        let mut refused = self.refused_hosts.lock().unwrap_or_else(|p| p.into_inner());
+        if let Some(n) = refused.note(Instant::now()) {
+            agent_sdk::report!(
+                "iwsim view: refused a request for host {host:?} ({n} so far): the viewer is served at {}; allow a name with --allow-host",
+                own_url(self.served_at)
+            );
+        }
+    }
+}
+
 /// A bound viewer, before it serves.
 #[derive(Debug)]
 pub struct Viewer {
@@ -275,6 +416,9 @@ impl Viewer {
             shared: shared.clone(),
             map_json: self.map_json.clone(),
             allowed_origins: self.cfg.allowed_origins.clone(),
+            served_at: self.listener.local_addr().unwrap_or(self.cfg.http),
+            allowed_hosts: self.cfg.allowed_hosts.clone(),
+            refused_hosts: Mutex::new(Throttle::default()),
             control: control.as_ref().map(|c| c.jobs.clone()),
             refused_origins: Mutex::new(Throttle::default()),
         });
@@ -451,18 +595,37 @@ fn serve_connection(mut stream: TcpStream, ctx: &Context) -> std::io::Result<()>
     }
     let head = String::from_utf8_lossy(&peek[..n]);
     let path = head.split_whitespace().nth(1).unwrap_or("/").to_owned();
+    let arrived_at = stream.local_addr()?.ip();
     if path == "/ws" {
-        return serve_websocket(stream, ctx);
+        // tungstenite reads the whole head: the Host is checked there.
+        return serve_websocket(stream, ctx, arrived_at);
     }
     // Consume the request (up to the blank line) before answering.
     let mut req = Vec::new();
     let mut buf = [0u8; 1024];
-    while !req.windows(4).any(|w| w == b"\r\n\r\n") && req.len() < 16 * 1024 {
+    let ended = |req: &[u8]| req.windows(4).any(|w| w == b"\r\n\r\n");
+    while !ended(&req) && req.len() < MAX_HEAD_BYTES {
         let n = stream.read(&mut buf)?;
         if n == 0 {
             break;
         }
         req.extend_from_slice(&buf[..n]);
+    }
+    // A head that does not end could hide its Host past what was read.
+    if !ended(&req) {
+        return answer(&mut stream, "431 Request Header Fields Too Large", "text/plain", "request head too long\n");
+    }
+    let req = String::from_utf8_lossy(&req);
+    let host = header(&req, "host");
+    if !host_allowed(host, ctx.served_at, arrived_at, &ctx.allowed_hosts) {
+        let host = host.unwrap_or_default();
+        ctx.note_refused_host(host);
+        return answer(
+            &mut stream,
+            "421 Misdirected Request",
+            "text/plain; charset=utf-8",
+            &misdirected_text(host, ctx.served_at),
+        );
     }
     // The query string only tunes the page (view, camera, chair); the file is the path.
     let file = path.split('?').next().unwrap_or("/");
@@ -470,6 +633,22 @@ fn serve_connection(mut stream: TcpStream, ctx: &Context) -> std::io::Result<()>
         Some((_, ctype, body)) => ("200 OK", *ctype, *body),
         None => ("404 Not Found", "text/plain", "not found\n"),
     };
+    answer(&mut stream, status, ctype, body)
+}
+
+/// The most of a plain HTTP request's head the viewer reads; a longer one is refused.
+const MAX_HEAD_BYTES: usize = 16 * 1024;
+
+/// The first header `name` (without case) in a request head.
+fn header<'a>(head: &'a str, name: &str) -> Option<&'a str> {
+    head.split("\r\n").skip(1).take_while(|l| !l.is_empty()).find_map(|l| {
+        let (n, v) = l.split_once(':')?;
+        n.trim().eq_ignore_ascii_case(name).then(|| v.trim())
+    })
+}
+
+/// Writes a whole plain HTTP answer; the connection closes after it.
+fn answer(stream: &mut TcpStream, status: &str, ctype: &str, body: &str) -> std::io::Result<()> {
     write!(
         stream,
         "HTTP/1.1 {status}\r\nContent-Type: {ctype}\r\nContent-Length: {}\r\nCache-Control: no-store\r\nConnection: close\r\n\r\n",
@@ -619,12 +798,25 @@ fn forbidden(origin: &str) -> ErrorResponse {
     r
 }
 
-fn serve_websocket(stream: TcpStream, ctx: &Context) -> std::io::Result<()> {
+/// The answer to a handshake addressed to a host the viewer is not served under.
+fn misdirected(host: &str, served_at: SocketAddr) -> ErrorResponse {
+    let mut r = ErrorResponse::new(Some(misdirected_text(host, served_at)));
+    *r.status_mut() = tungstenite::http::StatusCode::MISDIRECTED_REQUEST;
+    r
+}
+
+fn serve_websocket(stream: TcpStream, ctx: &Context, arrived_at: IpAddr) -> std::io::Result<()> {
     let config = websocket_config();
     // The error type is tungstenite's handshake callback's, not ours to shrink.
     #[allow(clippy::result_large_err)]
     let check = |req: &Request, resp: Response| -> Result<Response, ErrorResponse> {
         let header = |name: &str| req.headers().get(name).map(|v| v.to_str().unwrap_or("\u{fffd}"));
+        let host = header("host");
+        if !host_allowed(host, ctx.served_at, arrived_at, &ctx.allowed_hosts) {
+            let host = host.unwrap_or_default();
+            ctx.note_refused_host(host);
+            return Err(misdirected(host, ctx.served_at));
+        }
         let origin = header("origin");
         if origin_allowed(origin, header("host"), &ctx.allowed_origins) {
             return Ok(resp);
@@ -793,6 +985,73 @@ mod tests {
         // Browsers always send Origin on a WebSocket handshake; a request without one is a
         // program's, which could send any Origin it liked.
         assert!(origin_allowed(None, host, none));
+    }
+
+    #[test]
+    fn requests_are_served_only_for_the_address_the_viewer_is_at_localhost_or_an_allowed_host() {
+        let none: &[String] = &[];
+        let loopback: SocketAddr = "127.0.0.1:8080".parse().expect("address");
+        let lo: IpAddr = "127.0.0.1".parse().expect("address");
+        let ok = |host: &str| host_allowed(Some(host), loopback, lo, none);
+        for host in
+            ["127.0.0.1:8080", "localhost:8080", "LocalHost:8080", "localhost.:8080", "[::1]:8080", " 127.0.0.1:8080 "]
+        {
+            assert!(ok(host), "{host}");
+        }
+        // DNS rebinding: another site's name, resolved to this machine.
+        assert!(!ok("attacker.example"));
+        assert!(!ok("attacker.example:8080"));
+        assert!(!ok("127.0.0.1:9090"), "another port is another server");
+        assert!(!ok("127.0.0.1"), "no port is port 80");
+        assert!(!ok("localhost.attacker.example:8080"));
+        assert!(!ok("192.168.1.5:8080"), "the request did not arrive there");
+        for junk in
+            ["", ":8080", "::1:8080", "[::1", "[::1]8080", "[lab]:8080", "127.0.0.1:80800", "a b:8080", "x\u{fffd}"]
+        {
+            assert!(!ok(junk), "{junk:?}");
+        }
+        // Every browser sends Host; a program without it could have sent any.
+        assert!(host_allowed(None, loopback, lo, none));
+
+        // Bound to every address: the one the request arrived at, and localhost only over loopback.
+        let any: SocketAddr = "0.0.0.0:8080".parse().expect("address");
+        let lan: IpAddr = "192.168.1.5".parse().expect("address");
+        assert!(host_allowed(Some("192.168.1.5:8080"), any, lan, none));
+        assert!(!host_allowed(Some("192.168.1.6:8080"), any, lan, none));
+        assert!(!host_allowed(Some("localhost:8080"), any, lan, none));
+        assert!(host_allowed(Some("localhost:8080"), any, lo, none));
+        assert!(!host_allowed(Some("lab-pc:8080"), any, lan, none));
+        let mapped: IpAddr = "::ffff:192.168.1.5".parse().expect("address");
+        assert!(host_allowed(Some("192.168.1.5:8080"), "[::]:8080".parse().expect("address"), mapped, none));
+        let port80: SocketAddr = "192.168.1.5:80".parse().expect("address");
+        assert!(host_allowed(Some("192.168.1.5"), port80, lan, none));
+
+        // Names the user allows: without a port, on any; with one, on that one.
+        let lab = vec!["LAB-PC".to_owned(), "viewer.lab.example:9000".to_owned()];
+        assert!(host_allowed(Some("lab-pc:8080"), any, lan, &lab));
+        assert!(host_allowed(Some("lab-pc"), any, lan, &lab));
+        assert!(host_allowed(Some("viewer.lab.example:9000"), any, lan, &lab));
+        assert!(!host_allowed(Some("viewer.lab.example:8080"), any, lan, &lab));
+        assert!(!host_allowed(Some("lab-pc.attacker.example:8080"), any, lan, &lab));
+    }
+
+    #[test]
+    fn an_allowed_host_is_a_name_or_address_with_or_without_a_port_never_a_url() {
+        for ok in ["lab-pc", "lab-pc:8080", "192.168.1.5:8080", "[::1]:8080", "viewer.lab.example"] {
+            assert_eq!(allowed_host(ok).as_deref(), Ok(ok));
+        }
+        for bad in ["http://lab-pc:8080", "lab-pc:http", "", "lab pc"] {
+            assert!(allowed_host(bad).is_err_and(|e| e.contains("not a URL")), "{bad:?}");
+        }
+    }
+
+    #[test]
+    fn a_header_is_found_without_case_in_the_head_only() {
+        let head = "GET / HTTP/1.1\r\nhOsT:  lab-pc:8080 \r\nOrigin: http://x\r\n\r\nHost: body";
+        assert_eq!(header(head, "host"), Some("lab-pc:8080"));
+        assert_eq!(header(head, "origin"), Some("http://x"));
+        assert_eq!(header("GET / HTTP/1.0\r\n\r\n", "host"), None);
+        assert_eq!(header("GET /Host: x HTTP/1.0\r\n\r\n", "host"), None, "not in the request line");
     }
 
     #[test]
