@@ -702,7 +702,7 @@ fn pages_that_never_read_cannot_hold_every_slot_or_grow_the_viewers_memory() {
     let crowd = Crowd::start(&s, 500);
     let addr = crowd.addr;
     // The hub has every robot before the pages come, so every frame they are sent is full size.
-    let mut obs = agent_sdk::Observer::connect_within(&s, "stall-all-test", Duration::from_secs(20)).expect("observer");
+    let mut obs = observer::Observer::connect_within(&s, "stall-all-test", Duration::from_secs(20)).expect("observer");
     let (_, robots) = watch(&mut obs, Duration::from_secs(60), |_, r| r.len() == 500);
     assert_eq!(robots.len(), 500, "every robot registered");
     obs.close();

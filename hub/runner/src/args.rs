@@ -36,6 +36,10 @@ pub struct RunArgs {
     /// Let the viewer's page start, pause, step and stop the run.
     #[arg(long)]
     pub allow_control: bool,
+    /// A host name the viewer may be opened under besides its address (`lab-pc`, or
+    /// `lab-pc:8080` for one port), passed to `iwsim view`. Repeatable.
+    #[arg(long, value_name = "HOST")]
+    pub allow_host: Vec<String>,
     /// Print only the summary.
     #[arg(long)]
     pub quiet: bool,
@@ -88,6 +92,10 @@ pub struct DemoArgs {
     /// Let the viewer's page start, pause, step and stop the run.
     #[arg(long)]
     pub allow_control: bool,
+    /// A host name the viewer may be opened under besides its address (`lab-pc`, or
+    /// `lab-pc:8080` for one port), passed to `iwsim view`. Repeatable.
+    #[arg(long, value_name = "HOST")]
+    pub allow_host: Vec<String>,
     /// Session name, so `iwsim view --session NAME` or `iwsim udp --session NAME` can attach
     /// to the demo (default: a unique name, run-<pid>-<seed>-<n>).
     #[arg(long)]

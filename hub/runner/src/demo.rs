@@ -59,6 +59,7 @@ pub fn run(args: &DemoArgs) -> anyhow::Result<ExitCode> {
         headless: args.headless,
         http: args.http,
         allow_control: args.allow_control,
+        allow_host: args.allow_host.clone(),
         verbose: true,
         session: args.session.clone(),
         hub_options: Vec::new(),

@@ -626,6 +626,8 @@ pub struct RunOptions {
     pub http: std::net::SocketAddr,
     /// Let the viewer's page control the run.
     pub allow_control: bool,
+    /// Host names the viewer may be opened under (`iwsim view --allow-host`).
+    pub allow_host: Vec<String>,
     /// Print progress and the agents' messages.
     pub verbose: bool,
     /// The session (default: a unique `run-<pid>-<seed>-<n>`).
@@ -871,6 +873,9 @@ pub fn run_once(
                             vec![s("view"), s("--session"), session.clone(), s("--http"), opts.http.to_string()];
                         if opts.allow_control {
                             args.push(s("--allow-control"));
+                        }
+                        for h in &opts.allow_host {
+                            args.extend([s("--allow-host"), h.clone()]);
                         }
                         let mut v = Kid::spawn(&args, "viewer", false)?;
                         let (vtx, lines) = std::sync::mpsc::channel();
@@ -1265,6 +1270,7 @@ pub fn run(args: &RunArgs) -> anyhow::Result<ExitCode> {
         headless: args.headless || args.seeds.is_some(),
         http: args.http,
         allow_control: args.allow_control,
+        allow_host: args.allow_host.clone(),
         verbose: !args.quiet,
         session: args.session.clone(),
         hub_options: vec![
