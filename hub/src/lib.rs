@@ -617,6 +617,7 @@ pub fn run(cfg: HubConfig) -> Result<HubOutcome, HubError> {
         outcome.recorded_bytes = stats.bytes;
         outcome.recording_dropped_frames = stats.dropped_world_frames;
     }
+    outcome.refused_poses = core.refused_poses();
     outcome.ticks = core.world().tick();
     outcome.run_s = first_step.map_or(0.0, |t| t.elapsed().as_secs_f64());
     outcome.state_hash = StateHash(core.world().state_hash());

@@ -250,3 +250,56 @@ fn an_agent_gets_the_map_without_the_obstacles_and_an_observer_with_them() {
     assert!(hub.wait(Duration::from_secs(10)).status.success());
     assert_no_shared_memory_left(&s);
 }
+
+#[test]
+fn a_real_robot_is_taken_only_under_an_expected_name_and_never_teleported() {
+    // Issue 27: a Real robot's agent pushes its pose, so an agent that could register one
+    // anywhere and move it anywhere would map the lab with its collision flag. The hub takes a
+    // Real robot only under a `--real` name, and refuses (and counts) a pose its body could
+    // not have reached.
+    let s = session("real-bounds");
+    let hub = Proc::spawn(&[
+        "hub",
+        "--session",
+        &s,
+        "--lockstep",
+        "--ticks",
+        "6",
+        "--wait-agents",
+        "1",
+        "--real",
+        "bench",
+        "--json",
+    ]);
+    let mut me = Agent::connect_within(&s, "real-probe", Duration::from_secs(20)).expect("hub comes up");
+    let real = |name: &str| {
+        let mut reg = RobotRegistration::new(name);
+        reg.kind = ipc_types::RobotKind::Real as u32;
+        reg.flags |= ipc_types::REG_HAS_POSE;
+        reg.pose = [10.0, 6.1, 0.0];
+        reg
+    };
+    match me.register(&real("ghost")) {
+        Err(AgentError::Refused { reason: Refusal::NotAllowed, detail }) => {
+            assert!(detail.contains("--real NAME") && detail.contains("\"ghost\""), "{detail}")
+        }
+        other => panic!("a Real robot under an unexpected name was not refused: {other:?}"),
+    }
+    let id = me.register(&real("bench")).expect("the expected Real robot");
+    me.ready().expect("ready");
+    let mut observer = Observer::connect_within(&s, "real-observer", Duration::from_secs(20)).expect("observer");
+    while let Some(tick) = me.wait_tick(agent_sdk::Wait::Blocking).expect("hub alive") {
+        // Every tick, a push 5 m away: across the corridor, through walls.
+        me.send(tick.tick, &[ipc_types::ActionBlock::pose(id, 15.0, 6.1, 0.0)]).expect("sent");
+    }
+    let (_, robots) = observer.world().expect("the last world");
+    observer.close();
+    me.close();
+    let r = robots.iter().find(|r| r.id == id).expect("the bench robot");
+    assert_eq!((r.x_m, r.y_m), (10.0, 6.1), "the teleport was taken");
+    let out = hub.wait(Duration::from_secs(20));
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let outcome = HubOutcome::from_stdout(&text(&out.stdout)).expect("the hub's outcome");
+    assert!(outcome.refused_poses >= 5, "refused and counted: {outcome:?}");
+    assert_no_shared_memory_left(&s);
+}

@@ -219,6 +219,23 @@ impl Rig {
         [r.x_m, r.y_m, r.heading_deg]
     }
 
+    /// Ends the rig as a user would (adapter, hub and controller, emulator) and checks that
+    /// nothing of the session is left.
+    fn end(mut self) {
+        let adapter = self.adapter.take().expect("adapter");
+        adapter.signal("TERM");
+        assert!(adapter.wait(Duration::from_secs(10)).status.success(), "the adapter stops on SIGTERM");
+        assert_eq!(agent_sdk::control(&self.s, ipc_types::Command::Stop, 0).expect("the hub answers").status, 0);
+        for p in [self.hub.take(), self.controller.take()] {
+            let out = p.expect("running").wait(Duration::from_secs(20));
+            assert!(out.status.success(), "{:?}", out.status);
+        }
+        let emulator = self.emulator.take().expect("emulator");
+        emulator.signal("TERM");
+        assert!(emulator.wait(Duration::from_secs(10)).status.success(), "the emulator stops on SIGTERM");
+        assert_no_shared_memory_left(&self.s);
+    }
+
     fn signal_emulator(&self, sig: &str) {
         self.emulator.as_ref().expect("emulator").signal(sig);
     }
@@ -423,6 +440,7 @@ fn an_adapter_held_off_the_cpu_for_a_moment_does_not_stop_a_chair_whose_sources_
     rig.truth.wait_for(woke, Duration::from_secs(10), "the chair driving on after SIGCONT", driving);
     let said = rig.adapter_log.so_far();
     assert!(!said.iter().any(|l| l.contains("stopping the chair")), "a spurious stop: {said:?}");
+    rig.end();
 }
 
 #[test]

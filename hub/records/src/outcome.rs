@@ -87,6 +87,9 @@ pub struct HubOutcome {
     /// many robots costs one republication, not one per robot).
     #[serde(default)]
     pub snapshots: u64,
+    /// Poses pushed for Real robots that their bodies could not have reached (refused).
+    #[serde(default)]
+    pub refused_poses: u64,
     /// Stopped by SIGINT/SIGTERM.
     pub interrupted: bool,
     /// Robots at the end.
@@ -134,12 +137,13 @@ mod tests {
             recorded_bytes: 0,
             recording_dropped_frames: 0,
             snapshots: 61,
+            refused_poses: 0,
             interrupted: false,
             robots: vec![RobotAtEnd { id: 3, x_m: 10.5, y_m: 6.1, heading_deg: -90.0, flags: 4 }],
         };
         assert_eq!(
             out.json_line(),
-            r#"{"ticks":60,"run_s":0.123457,"state_hash":"0123456789abcdef","agents_seen":2,"agents_died":1,"foreign_dropped":4,"recorded_bytes":0,"recording_dropped_frames":0,"snapshots":61,"interrupted":false,"robots":[{"id":3,"x_m":10.5,"y_m":6.1,"heading_deg":-90.0,"flags":4}]}"#
+            r#"{"ticks":60,"run_s":0.123457,"state_hash":"0123456789abcdef","agents_seen":2,"agents_died":1,"foreign_dropped":4,"recorded_bytes":0,"recording_dropped_frames":0,"snapshots":61,"refused_poses":0,"interrupted":false,"robots":[{"id":3,"x_m":10.5,"y_m":6.1,"heading_deg":-90.0,"flags":4}]}"#
         );
     }
 
