@@ -189,3 +189,17 @@ fn bench_lockstep_runs_the_real_load_beside_ipc_only_and_states_the_hub_memory()
         .collect();
     assert!(left.is_empty(), "left in /dev/shm: {left:?}");
 }
+
+#[test]
+fn bench_traffic_runs_navigators_on_the_ward_and_states_rates_and_cpu_per_tick() {
+    let out = iwsim(&["bench", "traffic", "--chairs", "2", "--runs", "1", "--seconds", "10", "--json"]);
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(out.status.success(), "{text}\n{}", String::from_utf8_lossy(&out.stderr));
+    let j: serde_json::Value = serde_json::from_str(&text).expect("one JSON object");
+    assert!(j["cpu"].as_str().is_some_and(|c| c.contains("cores")), "the CPU is stated: {text}");
+    let size = &j["sizes"][0];
+    assert_eq!((size["chairs"].as_u64(), size["chairs_in_runs"].as_u64()), (Some(2), Some(2)), "{text}");
+    for key in ["ticks_per_s", "hub_cpu_us_per_tick", "navigator_cpu_us_per_tick"] {
+        assert!(size[key]["median"].as_f64().is_some_and(|v| v > 0.0), "{key} in {text}");
+    }
+}

@@ -18,6 +18,10 @@ pub enum BenchCommand {
     /// The RS232 link to a chair's board, against the chair emulator on a pseudo-terminal:
     /// command → board → reading round trip, and the highest control rate the line carries.
     Serial(BenchSerialArgs),
+    /// Many navigators sharing the ward in lock-step, as `iwsim run` runs them: ticks per
+    /// second (over the run and in its slowest second), the hub's and the navigators' CPU per
+    /// tick, and how the traffic went (arrivals, contacts, deadlocks, judged from the record).
+    Traffic(BenchTrafficArgs),
     /// The peer process of the raw iceoryx2 ping-pong (started by `bench latency`).
     #[command(hide = true)]
     RawPeer(RawPeerArgs),
@@ -54,6 +58,24 @@ pub struct BenchSerialArgs {
     pub commands: usize,
     /// Seconds of each run at the fastest sample period.
     #[arg(long, default_value_t = 3.0, value_parser = positive_seconds)]
+    pub seconds: f64,
+    /// Print one JSON object instead of text.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// Options of `iwsim bench traffic`.
+#[derive(Debug, Args, Clone)]
+pub struct BenchTrafficArgs {
+    /// Crowd sizes to measure, comma-separated (each is `iwsim run builtin:ward --chairs N`).
+    #[arg(long, value_delimiter = ',', default_value = "6,10,20", value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..=200))]
+    pub chairs: Vec<usize>,
+    /// Runs per crowd size, seeds 1, 2, …; each figure is the median of its runs with min and
+    /// max (the sizes' runs interleaved).
+    #[arg(long, default_value_t = 5, value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..=MAX_RUNS))]
+    pub runs: usize,
+    /// Simulated seconds each run may take (the scenario's time limit).
+    #[arg(long, default_value_t = 120.0, value_parser = positive_seconds)]
     pub seconds: f64,
     /// Print one JSON object instead of text.
     #[arg(long)]

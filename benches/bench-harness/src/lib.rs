@@ -12,6 +12,7 @@ pub mod load;
 pub mod repeat;
 pub mod serial;
 pub mod tiled;
+pub mod traffic;
 pub mod viewer;
 
 pub use args::BenchCommand;
@@ -24,6 +25,7 @@ pub fn run(command: &BenchCommand) -> anyhow::Result<std::process::ExitCode> {
         BenchCommand::Lockstep(a) => lockstep(a),
         BenchCommand::Viewer(a) => viewer::run(a),
         BenchCommand::Serial(a) => serial::run(a),
+        BenchCommand::Traffic(a) => traffic::run(a),
         BenchCommand::RawPeer(a) => raw_peer(a),
         BenchCommand::UdpClient(a) => udp_client(a),
         BenchCommand::LoadAgent(a) => load::load_agent(a),
