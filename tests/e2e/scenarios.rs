@@ -364,9 +364,12 @@ fn plot_draws_a_runs_trajectory_as_svg() {
     let (ok, out, err) = iwsim(&["plot", recording.to_str().expect("utf-8")], Duration::from_secs(30));
     assert!(ok, "{out}\n{err}");
     let texts = svg_outline(&std::fs::read_to_string(&all).expect("run.svg beside the recording")).texts;
-    for want in ["run.mcap", "chair1", "door1"] {
+    for want in ["run.mcap", "chair1", "door1", "Who stood still when", "stopped for good (arrived, or stuck)"] {
         assert!(texts.iter().any(|t| t == want), "text {want:?} missing from {texts:?}");
     }
+    // Several robots: a timeline of who stood still when, with the seconds stood in all.
+    let total = texts.iter().find_map(|t| t.strip_prefix("stood still ≥ 1 s (")?.strip_suffix(" s in all)"));
+    assert!(total.is_some_and(|n| n.parse::<f64>().is_ok()), "the waiting timeline's total: {texts:?}");
 
     // The chair's CSV log: the run has no GPS, so it holds no trajectory, and says where one is.
     let log = dir.join("chair1.csv");

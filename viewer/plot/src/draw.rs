@@ -9,7 +9,7 @@ use plotters::coord::types::RangedCoordf64;
 use plotters::prelude::*;
 use plotters::style::text_anchor::{HPos, Pos, VPos};
 
-use crate::log::{RunLog, Sample, SpeedPoint, speeds};
+use crate::log::{RunLog, Sample, SpeedPoint, Stand, speeds, stands};
 use crate::scene::{Scene, View};
 
 /// Width of the picture, pixels.
@@ -22,8 +22,23 @@ pub const MAP_MIN_H_PX: u32 = 320;
 /// Colour of the trajectory line (of the first robot when there are several).
 pub const TRAJECTORY_RGB: (u8, u8, u8) = (20, 80, 200);
 /// Colours of the robots' lines, in the order of their logs (then again from the first).
-pub const ROBOT_RGB: [(u8, u8, u8); 6] =
-    [TRAJECTORY_RGB, (205, 95, 0), (125, 45, 175), (0, 130, 125), (185, 30, 115), (95, 95, 95)];
+pub const ROBOT_RGB: [(u8, u8, u8); 12] = [
+    TRAJECTORY_RGB,
+    (205, 95, 0),
+    (125, 45, 175),
+    (0, 130, 125),
+    (185, 30, 115),
+    (95, 95, 95),
+    (150, 120, 0),
+    (0, 150, 210),
+    (120, 70, 30),
+    (230, 60, 60),
+    (60, 140, 40),
+    (90, 90, 200),
+];
+/// With more robots than this, legends say "one colour per chair" instead of naming each
+/// (the names are on the map, at the starts, and on the waiting timeline).
+const NAMED_IN_LEGEND: usize = 4;
 /// Colour of the checkpoint circles' outline and numbers.
 pub const CHECKPOINT_RGB: (u8, u8, u8) = (0, 140, 70);
 /// Colour of the speed line.
@@ -38,9 +53,15 @@ const MARGIN_BOTTOM: u32 = 12;
 const X_LABEL_H: u32 = 44;
 const Y_LABEL_W: u32 = 60;
 const SPEED_PLOT_H: u32 = 250;
+/// Height of one chair's row in the waiting timeline, pixels.
+const WAIT_ROW_H: u32 = 18;
+/// A stand at least this long is marked on the map, seconds.
+const WAIT_MARK_S: f64 = 2.0;
 const FONT: &str = "sans-serif";
 
 const INK: RGBColor = RGBColor(30, 30, 30);
+/// INK at a quarter on white, as the pale bars are.
+const PALE_INK: RGBColor = RGBColor(199, 199, 199);
 const GRID: RGBColor = RGBColor(225, 228, 232);
 const WALL_FILL: RGBColor = RGBColor(126, 148, 178);
 const WALL_EDGE: RGBColor = RGBColor(62, 82, 112);
@@ -145,18 +166,29 @@ pub fn render(fig: &Figure) -> Result<String, PlotDrawError> {
     let map_h = (view.height() * scale).round() as u32;
     let map_panel_h = HEADING_H + MARGIN_TOP + map_h + X_LABEL_H + MARGIN_BOTTOM;
     let speed_panel_h = HEADING_H + MARGIN_TOP + SPEED_PLOT_H + X_LABEL_H + MARGIN_BOTTOM;
-    let height = TITLE_H + map_panel_h + speed_panel_h;
+    // Several chairs: a timeline of who stood still when (where is on the map).
+    let waits: Vec<Vec<Stand>> = fig.logs.iter().map(|(_, l)| stands(&l.samples)).collect();
+    let wait_panel_h = if fig.several() {
+        HEADING_H + MARGIN_TOP + WAIT_ROW_H * fig.logs.len() as u32 + X_LABEL_H + MARGIN_BOTTOM
+    } else {
+        0
+    };
+    let height = TITLE_H + map_panel_h + speed_panel_h + wait_panel_h;
 
     let mut svg = String::new();
     {
         let root = SVGBackend::with_string(&mut svg, (WIDTH_PX, height)).into_drawing_area();
         root.fill(&WHITE)?;
         let (title, rest) = root.split_vertically(TITLE_H);
-        let (map_panel, speed_panel) = rest.split_vertically(map_panel_h);
+        let (map_panel, rest) = rest.split_vertically(map_panel_h);
+        let (speed_panel, wait_panel) = rest.split_vertically(speed_panel_h);
         let v: Vec<Vec<SpeedPoint>> = fig.logs.iter().map(|(_, l)| speeds(&l.samples)).collect();
         draw_title(&title, fig, &v)?;
-        draw_map(&map_panel, fig, view, scale, map_w)?;
+        draw_map(&map_panel, fig, view, scale, map_w, &waits)?;
         draw_speed(&speed_panel, fig, &v)?;
+        if fig.several() {
+            draw_waits(&wait_panel, fig, &waits)?;
+        }
         root.present()?;
     }
     Ok(svg)
@@ -190,6 +222,14 @@ fn draw_title(area: &DrawingArea<SVGBackend, Shift>, fig: &Figure, v: &[Vec<Spee
     );
     area.draw(&Text::new(subtitle, (centre, 42), font(14.0).pos(Pos::new(HPos::Center, VPos::Top))))?;
     Ok(())
+}
+
+/// The legend's entries for the robots' lines: each named, or for many one entry.
+fn robot_keys(fig: &Figure) -> Vec<(Key, String)> {
+    if fig.logs.len() > NAMED_IN_LEGEND {
+        return vec![(Key::Line(robot_color(0), false), "one colour per chair".to_owned())];
+    }
+    fig.logs.iter().enumerate().map(|(k, (name, _))| (Key::Line(robot_color(k), false), name.clone())).collect()
 }
 
 /// One legend entry: a marker drawn at a pixel position, then its words.
@@ -237,6 +277,7 @@ fn draw_map(
     view: View,
     scale: f64,
     map_w: u32,
+    waits: &[Vec<Stand>],
 ) -> Result<(), PlotDrawError> {
     let scene = fig.scene;
     let heading_y = (HEADING_H / 2 + 4) as i32;
@@ -245,11 +286,8 @@ fn draw_map(
         (MARGIN_LEFT as i32, heading_y),
         bold(16.0).pos(Pos::new(HPos::Left, VPos::Center)),
     ))?;
-    let mut keys = if fig.several() {
-        fig.logs.iter().enumerate().map(|(k, (name, _))| (Key::Line(robot_color(k), false), name.clone())).collect()
-    } else {
-        vec![(Key::Line(robot_color(0), false), "trajectory".to_owned())]
-    };
+    let mut keys =
+        if fig.several() { robot_keys(fig) } else { vec![(Key::Line(robot_color(0), false), "trajectory".to_owned())] };
     keys.push((Key::Dot(START, 6), "start".into()));
     keys.push((Key::Square(INK), "end".into()));
     if scene.lab.as_ref().is_some_and(|l| !l.walls.is_empty()) {
@@ -263,6 +301,10 @@ fn draw_map(
     }
     if fig.samples().any(|s| s.collision) {
         keys.push((Key::Dot(COLLISION, 4), "collision".into()));
+    }
+    let marked = |w: &&Stand| !w.last && w.seconds() >= WAIT_MARK_S;
+    if fig.several() && waits.iter().flatten().any(|w| marked(&w)) {
+        keys.push((Key::Ring(INK), format!("waited ≥ {WAIT_MARK_S:.0} s")));
     }
     draw_legend(panel, &keys, (WIDTH_PX - MARGIN_RIGHT) as i32, heading_y)?;
 
@@ -339,6 +381,81 @@ fn draw_map(
 
     for (k, (name, log)) in fig.logs.iter().enumerate() {
         draw_track(&mut chart, &log.samples, robot_color(k), scale, fig.several().then_some(name.as_str()))?;
+    }
+    if fig.several() {
+        // Where chairs waited (not where they ended): a ring in the chair's colour, wider for a
+        // longer wait.
+        for (k, w) in waits.iter().enumerate() {
+            let rings = w.iter().filter(marked).filter(|w| view.contains(w.x_m, w.y_m)).map(|w| {
+                let r = (4.0 + 2.0 * w.seconds().sqrt()).clamp(6.0, 18.0) as i32;
+                Circle::new((w.x_m, w.y_m), r, robot_color(k).stroke_width(2))
+            });
+            chart.draw_series(rings)?;
+        }
+    }
+    Ok(())
+}
+
+/// Several chairs: one row per chair, a bar for each time it stood still (where is on the
+/// map): a wait at a doorway, a deadlock, or (pale, to the end) where it stopped for good.
+fn draw_waits(panel: &DrawingArea<SVGBackend, Shift>, fig: &Figure, waits: &[Vec<Stand>]) -> Result<(), PlotDrawError> {
+    let heading_y = (HEADING_H / 2 + 4) as i32;
+    panel.draw(&Text::new(
+        "Who stood still when",
+        (MARGIN_LEFT as i32, heading_y),
+        bold(16.0).pos(Pos::new(HPos::Left, VPos::Center)),
+    ))?;
+    let total: f64 = waits.iter().flatten().filter(|w| !w.last).map(Stand::seconds).sum();
+    let keys = vec![
+        (Key::Square(INK), format!("stood still ≥ 1 s ({total:.0} s in all)")),
+        (Key::Square(PALE_INK), "stopped for good (arrived, or stuck)".into()),
+    ];
+    draw_legend(panel, &keys, (WIDTH_PX - MARGIN_RIGHT) as i32, heading_y)?;
+    let t0 = fig.samples().map(|s| s.time_s).fold(f64::INFINITY, f64::min);
+    let t0 = if t0.is_finite() { t0 } else { 0.0 };
+    let t1 = fig.samples().map(|s| s.time_s).fold(t0 + 0.1, f64::max);
+    let rows = fig.logs.len();
+    let mut chart = ChartBuilder::on(panel)
+        .margin_top(HEADING_H + MARGIN_TOP)
+        .margin_bottom(MARGIN_BOTTOM)
+        .margin_left(MARGIN_LEFT)
+        .margin_right(MARGIN_RIGHT)
+        .x_label_area_size(X_LABEL_H)
+        .y_label_area_size(Y_LABEL_W)
+        .build_cartesian_2d(t0..t1, 0.0..rows as f64)?;
+    let xs = tick_step(t1 - t0, 12.0);
+    let xd = decimals(xs);
+    let names: Vec<&str> = fig.logs.iter().map(|(n, _)| n.as_str()).collect();
+    // Row k (top to bottom) spans y from rows − k − 1 to rows − k; its name sits at its middle.
+    let name_of = |y: &f64| {
+        let k = rows as f64 - y - 0.5;
+        if (k - k.round()).abs() < 1e-6 && k >= 0.0 {
+            names.get(k.round() as usize).map_or(String::new(), |n| (*n).to_owned())
+        } else {
+            String::new()
+        }
+    };
+    chart
+        .configure_mesh()
+        .x_labels(((t1 - t0) / xs) as usize + 2)
+        .x_label_formatter(&|v: &f64| format!("{v:.xd$}"))
+        .y_labels(rows * 2 + 1)
+        .y_label_formatter(&name_of)
+        .disable_y_mesh()
+        .light_line_style(GRID)
+        .bold_line_style(GRID)
+        .axis_style(INK)
+        .x_desc("time (s)")
+        .label_style(font(12.0))
+        .axis_desc_style(font(14.0))
+        .draw()?;
+    for (k, w) in waits.iter().enumerate() {
+        let (lo, hi) = ((rows - k - 1) as f64 + 0.15, (rows - k) as f64 - 0.15);
+        let color = robot_color(k);
+        chart.draw_series(w.iter().map(|w| {
+            let fill = if w.last { color.mix(0.25).filled() } else { color.filled() };
+            Rectangle::new([(w.from_s, lo), (w.to_s, hi)], fill)
+        }))?;
     }
     Ok(())
 }
@@ -485,11 +602,7 @@ fn draw_speed(
         bold(16.0).pos(Pos::new(HPos::Left, VPos::Center)),
     ))?;
     let top = v.iter().flatten().map(|p| p.speed_m_s).fold(0.0, f64::max);
-    let mut keys = if fig.several() {
-        fig.logs.iter().enumerate().map(|(k, (name, _))| (Key::Line(robot_color(k), false), name.clone())).collect()
-    } else {
-        vec![(Key::Line(SPEED, false), "speed".to_owned())]
-    };
+    let mut keys = if fig.several() { robot_keys(fig) } else { vec![(Key::Line(SPEED, false), "speed".to_owned())] };
     keys.push((Key::Line(TOP_SPEED, true), format!("top speed {top:.2} m/s")));
     let collided: Vec<(f64, f64)> = fig
         .logs

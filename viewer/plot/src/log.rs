@@ -178,6 +178,57 @@ pub fn speeds(samples: &[Sample]) -> Vec<SpeedPoint> {
     out
 }
 
+/// A chair standing still: it stayed within [`STAND_RADIUS_M`] of where it stopped for at
+/// least [`MIN_STAND_S`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Stand {
+    /// When it stopped, seconds.
+    pub from_s: f64,
+    /// When it moved on (or the log ended), seconds.
+    pub to_s: f64,
+    /// Where it stood, metres.
+    pub x_m: f64,
+    /// Where it stood, metres.
+    pub y_m: f64,
+    /// It never moved again before the log ended (arrived, or stuck for good).
+    pub last: bool,
+}
+
+impl Stand {
+    /// How long it stood, seconds.
+    pub fn seconds(&self) -> f64 {
+        self.to_s - self.from_s
+    }
+}
+
+/// How far a chair may creep and still count as standing, metres.
+pub const STAND_RADIUS_M: f64 = 0.05;
+/// The shortest stand counted, seconds.
+pub const MIN_STAND_S: f64 = 1.0;
+
+/// Where and when the chair of `samples` stood still (see [`Stand`]), in time order.
+pub fn stands(samples: &[Sample]) -> Vec<Stand> {
+    let mut out = Vec::new();
+    let mut i = 0;
+    while i < samples.len() {
+        let a = &samples[i];
+        let mut j = i + 1;
+        while j < samples.len() && (samples[j].x_m - a.x_m).hypot(samples[j].y_m - a.y_m) <= STAND_RADIUS_M {
+            j += 1;
+        }
+        let end = &samples[j - 1];
+        let last = j == samples.len();
+        let to_s = if last { end.time_s } else { samples[j].time_s };
+        if to_s - a.time_s >= MIN_STAND_S {
+            out.push(Stand { from_s: a.time_s, to_s, x_m: a.x_m, y_m: a.y_m, last });
+            i = j;
+        } else {
+            i += 1;
+        }
+    }
+    out
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -358,5 +409,30 @@ mod tests {
         let v: Vec<(f64, usize)> =
             speeds(&samples).iter().map(|p| ((p.speed_m_s * 1e6).round() / 1e6, p.sample)).collect();
         assert_eq!(v, [(1.0, 1), (2.0, 3), (2.0, 5)]);
+    }
+
+    #[test]
+    fn a_chair_standing_still_for_a_second_or_more_is_found_where_and_when() {
+        let at = |tick: u64, x: f64| Sample {
+            tick,
+            time_s: tick as f64 * 0.1,
+            x_m: x,
+            y_m: 2.0,
+            heading_deg: 0.0,
+            collision: false,
+        };
+        // Drives 1 s, waits 2 s (creeping 3 cm), drives 0.5 s, stops 0.5 s (too short), drives,
+        // then stands to the end.
+        let mut s: Vec<Sample> = (0..10).map(|t| at(t, t as f64 * 0.1)).collect();
+        s.extend((10..30).map(|t| at(t, 0.9 + if t > 20 { 0.03 } else { 0.0 })));
+        s.extend((30..35).map(|t| at(t, 0.93 + (t - 29) as f64 * 0.1)));
+        s.extend((35..40).map(|t| at(t, 1.43)));
+        s.extend((40..45).map(|t| at(t, 1.43 + (t - 39) as f64 * 0.1)));
+        s.extend((45..70).map(|t| at(t, 1.93)));
+        let st = stands(&s);
+        assert_eq!(st.len(), 2, "{st:?}");
+        assert_eq!((st[0].from_s, st[0].to_s, st[0].x_m, st[0].last), (0.9, 3.0, 0.9, false));
+        assert!((st[0].seconds() - 2.1).abs() < 1e-9);
+        assert_eq!((st[1].from_s, st[1].to_s, st[1].last), (4.4, 6.9, true));
     }
 }
