@@ -274,7 +274,7 @@ pub fn run(cfg: HubConfig) -> Result<HubOutcome, HubError> {
         cfg.grid.poses.len()
     );
     loop {
-        if node.wait(Duration::ZERO).is_err() {
+        if ipc_services::stop_requested(&node) {
             outcome.interrupted = true;
             break;
         }

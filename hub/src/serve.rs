@@ -376,7 +376,7 @@ pub fn serve(recording: &Recording, options: &ServeOptions) -> Result<Served, Re
         options.speed
     );
     loop {
-        if node.wait(Duration::ZERO).is_err() {
+        if ipc_services::stop_requested(&node) {
             served.outcome.interrupted = true;
             player.command(Command::Stop);
             publish = true;

@@ -200,17 +200,16 @@ impl Session {
         format!("iwsim/{}/{}", self.name, part)
     }
 
-    /// An iceoryx2 node for this process. SIGINT and SIGTERM are caught: `node.wait(0)`
-    /// then reports a termination request, so every process stops cleanly and removes what
-    /// it created. SIGHUP (a closed terminal or ssh session) is turned into SIGTERM.
+    /// An iceoryx2 node for this process. SIGINT, SIGTERM and SIGHUP (a closed terminal or
+    /// ssh session) are caught: [`stop_requested`] then says so, so every process stops
+    /// cleanly and removes what it created.
     pub fn node(&self, name: &str) -> Result<Node<Svc>, ServicesError> {
-        hangup_as_termination();
         let node_name = NodeName::new(name).map_err(|e| ServicesError::Iceoryx {
             action: "name the node",
             service: name.to_owned(),
             reason: format!("{e:?}"),
         })?;
-        NodeBuilder::new()
+        let node = NodeBuilder::new()
             .name(&node_name)
             .config(&self.config)
             .signal_handling_mode(SignalHandlingMode::HandleTerminationRequests)
@@ -219,7 +218,13 @@ impl Session {
                 action: "create node",
                 service: name.to_owned(),
                 reason: format!("{e:?}"),
-            })
+            })?;
+        // iceoryx2 installs its handlers (for SIGHUP too, which it then only records) the
+        // first time its signal handler is used, which may be any later call: use it now
+        // (`wait` asks it whether to stop), so that ours, installed next, stay.
+        let _ = node.wait(std::time::Duration::ZERO);
+        install_stop_handlers();
+        Ok(node)
     }
 
     fn iox_name(&self, part: &str) -> Result<ServiceName, ServicesError> {
@@ -484,22 +489,35 @@ impl Session {
     /// `remove_node_counter` (private) for why that costs nothing.
     pub fn release_if_unused(&self) -> bool {
         use iceoryx2::node::NodeState;
+        // A dead node's files are removed by the first process that looks; a removal can fail
+        // for a moment (another process cleaning the same node, its files half-read), so the
+        // last process of a session looks a few times before it leaves files behind.
         let mut live = 0;
-        let _ = Node::<Svc>::list(&self.config, |state| {
-            match state {
-                NodeState::Dead(view) => {
-                    let _ = view.try_remove_stale_resources();
+        for attempt in 0..DEAD_NODE_ATTEMPTS {
+            live = 0;
+            let mut failed = 0;
+            let _ = Node::<Svc>::list(&self.config, |state| {
+                match state {
+                    NodeState::Dead(view) => failed += view.try_remove_stale_resources().is_err() as usize,
+                    _ => live += 1,
                 }
-                _ => live += 1,
+                iceoryx2::prelude::CallbackProgression::Continue
+            });
+            if live > 0 || failed == 0 {
+                break;
             }
-            iceoryx2::prelude::CallbackProgression::Continue
-        });
+            tracing::debug!("{failed} dead nodes of session {} not removed yet (attempt {})", self.name, attempt + 1);
+            std::thread::sleep(std::time::Duration::from_millis(5));
+        }
         if live > 0 {
             return false;
         }
         remove_node_counter(&self.config)
     }
 }
+
+/// How many times the last process of a session tries to remove a dead node's files.
+const DEAD_NODE_ATTEMPTS: usize = 20;
 
 /// Removes the domain's node counter: the one shared-memory file iceoryx2 0.10 keeps per domain
 /// (`<prefix>…_node.0_10_0.global_mgmt` in /dev/shm, here one domain per session) and never
@@ -568,37 +586,47 @@ pub fn clean_dead_nodes(session: &Session) -> usize {
     removed
 }
 
-/// Makes SIGHUP end this process as SIGTERM does (iceoryx2 catches only SIGINT and SIGTERM):
-/// a hub, adapter or agent whose terminal closes then stops cleanly, removes its shared
-/// memory, and (the serial bridge) stops its chair, where SIGHUP's default would kill it
-/// where it stands. A SIGHUP the process was told to ignore (`nohup`) stays ignored.
-fn hangup_as_termination() {
-    static ONCE: std::sync::Once = std::sync::Once::new();
-    extern "C" fn on_hangup(_: libc::c_int) {
-        // SAFETY: kill(2) is async-signal-safe; SIGTERM reaches iceoryx2's own handler.
-        #[allow(unsafe_code)]
-        unsafe {
-            libc::kill(libc::getpid(), libc::SIGTERM);
-        }
+/// Set by SIGINT, SIGTERM or SIGHUP once a node exists (see [`stop_requested`]).
+static STOP: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
+
+/// Whether this process was asked to stop: SIGINT, SIGTERM, or SIGHUP (a closed terminal or
+/// ssh session), or iceoryx2's own view of `node`.
+///
+/// iceoryx2 keeps only the *last* signal in one slot, which its own calls reset (a signal
+/// that lands just before one is lost: under load a hub ran on after its SIGTERM), and it does
+/// not take SIGHUP as a request to stop. So every node's process keeps its own flag: the
+/// handlers below only store to it.
+pub fn stop_requested(node: &Node<Svc>) -> bool {
+    STOP.load(std::sync::atomic::Ordering::SeqCst) || node.wait(std::time::Duration::ZERO).is_err()
+}
+
+/// Installs the handlers that set [`STOP`], after iceoryx2's (which a node's creation may
+/// install): SIGINT, SIGTERM, and SIGHUP unless it was ignored (as under `nohup`).
+fn install_stop_handlers() {
+    extern "C" fn on_stop(_: libc::c_int) {
+        // Only an atomic store: the one thing this handler may safely do.
+        STOP.store(true, std::sync::atomic::Ordering::SeqCst);
     }
-    ONCE.call_once(|| {
-        // SAFETY: reads the current disposition, then installs a handler that only calls
-        // kill(2); the structs are zeroed C structs filled as sigaction(2) documents.
+    for signo in [libc::SIGINT, libc::SIGTERM, libc::SIGHUP] {
+        // SAFETY: reads the current disposition, then installs a handler that only stores to
+        // an atomic; the structs are zeroed C structs filled as sigaction(2) documents.
         #[allow(unsafe_code)]
         unsafe {
             let mut old: libc::sigaction = std::mem::zeroed();
-            if libc::sigaction(libc::SIGHUP, std::ptr::null(), &mut old) != 0 || old.sa_sigaction == libc::SIG_IGN {
-                return;
+            if libc::sigaction(signo, std::ptr::null(), &mut old) != 0
+                || (signo == libc::SIGHUP && old.sa_sigaction == libc::SIG_IGN)
+            {
+                continue;
             }
             let mut sa: libc::sigaction = std::mem::zeroed();
-            sa.sa_sigaction = on_hangup as *const () as usize;
+            sa.sa_sigaction = on_stop as *const () as usize;
             sa.sa_flags = libc::SA_RESTART;
             libc::sigemptyset(&mut sa.sa_mask);
-            if libc::sigaction(libc::SIGHUP, &sa, std::ptr::null_mut()) != 0 {
-                tracing::debug!("SIGHUP handler not installed: {}", std::io::Error::last_os_error());
+            if libc::sigaction(signo, &sa, std::ptr::null_mut()) != 0 {
+                tracing::debug!("signal {signo}: handler not installed: {}", std::io::Error::last_os_error());
             }
         }
-    });
+    }
 }
 
 #[cfg(test)]

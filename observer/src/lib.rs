@@ -94,7 +94,7 @@ impl Observer {
     /// a SIGKILLed hub publishes no last tick), and with [`AgentError::Interrupted`] on SIGINT
     /// or SIGTERM.
     pub fn check_alive(&self) -> Result<(), AgentError> {
-        if self._node.wait(Duration::ZERO).is_err() {
+        if ipc_services::stop_requested(&self._node) {
             return Err(AgentError::Interrupted);
         }
         match self.hub_pid {

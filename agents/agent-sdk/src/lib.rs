@@ -472,7 +472,7 @@ impl Agent {
     }
 
     fn check(&self) -> Result<(), AgentError> {
-        if self.node.wait(Duration::ZERO).is_err() {
+        if ipc_services::stop_requested(&self.node) {
             return Err(AgentError::Interrupted);
         }
         if !self.hub_alive() {
