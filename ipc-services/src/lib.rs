@@ -489,35 +489,22 @@ impl Session {
     /// `remove_node_counter` (private) for why that costs nothing.
     pub fn release_if_unused(&self) -> bool {
         use iceoryx2::node::NodeState;
-        // A dead node's files are removed by the first process that looks; a removal can fail
-        // for a moment (another process cleaning the same node, its files half-read), so the
-        // last process of a session looks a few times before it leaves files behind.
         let mut live = 0;
-        for attempt in 0..DEAD_NODE_ATTEMPTS {
-            live = 0;
-            let mut failed = 0;
-            let _ = Node::<Svc>::list(&self.config, |state| {
-                match state {
-                    NodeState::Dead(view) => failed += view.try_remove_stale_resources().is_err() as usize,
-                    _ => live += 1,
+        let _ = Node::<Svc>::list(&self.config, |state| {
+            match state {
+                NodeState::Dead(view) => {
+                    let _ = view.try_remove_stale_resources();
                 }
-                iceoryx2::prelude::CallbackProgression::Continue
-            });
-            if live > 0 || failed == 0 {
-                break;
+                _ => live += 1,
             }
-            tracing::debug!("{failed} dead nodes of session {} not removed yet (attempt {})", self.name, attempt + 1);
-            std::thread::sleep(std::time::Duration::from_millis(5));
-        }
+            iceoryx2::prelude::CallbackProgression::Continue
+        });
         if live > 0 {
             return false;
         }
         remove_node_counter(&self.config)
     }
 }
-
-/// How many times the last process of a session tries to remove a dead node's files.
-const DEAD_NODE_ATTEMPTS: usize = 20;
 
 /// Removes the domain's node counter: the one shared-memory file iceoryx2 0.10 keeps per domain
 /// (`<prefix>…_node.0_10_0.global_mgmt` in /dev/shm, here one domain per session) and never

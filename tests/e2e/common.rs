@@ -30,6 +30,25 @@ impl Proc {
         Self(Some(child))
     }
 
+    /// Spawns as [`Proc::spawn`] does, with SIGHUP's default disposition in the child even when
+    /// the tests run under `nohup` (which makes every child ignore it): as a process started
+    /// from a terminal is, for the tests of what a hang-up does.
+    pub fn spawn_hangup_default(args: &[&str]) -> Self {
+        use std::os::unix::process::CommandExt as _;
+        let mut cmd = Command::new(env!("CARGO_BIN_EXE_iwsim"));
+        cmd.args(args).env("RUST_LOG", "warn").stdin(Stdio::null()).stdout(Stdio::piped()).stderr(Stdio::piped());
+        // SAFETY: between fork and exec the child only calls signal(2), which is
+        // async-signal-safe; nothing is allocated or locked.
+        #[allow(unsafe_code)]
+        unsafe {
+            cmd.pre_exec(|| {
+                libc::signal(libc::SIGHUP, libc::SIG_DFL);
+                Ok(())
+            });
+        }
+        Self(Some(cmd.spawn().expect("iwsim starts")))
+    }
+
     pub fn pid(&self) -> u32 {
         self.0.as_ref().expect("running").id()
     }
@@ -162,8 +181,7 @@ pub fn assert_no_shared_memory_left(s: &str) {
 }
 
 /// Checks that no shared-memory file of session `s` is left in /dev/shm (iceoryx2's files
-/// under /tmp/iceoryx2 aside: a process killed with SIGKILL may leave its node's files there
-/// until the session's next hub removes them, as its start does).
+/// under /tmp/iceoryx2 aside: after a SIGKILL it may leave a dead node's files there).
 pub fn assert_no_dev_shm_left(s: &str) {
     let prefix = format!("iwsim_{s}_");
     let left: Vec<String> = std::fs::read_dir("/dev/shm")
