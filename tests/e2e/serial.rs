@@ -225,6 +225,12 @@ impl Rig {
         let adapter = self.adapter.take().expect("adapter");
         adapter.signal("TERM");
         assert!(adapter.wait(Duration::from_secs(10)).status.success(), "the adapter stops on SIGTERM");
+        self.end_after_the_adapter();
+    }
+
+    /// The run's end once the adapter has left: the hub stops, the controller leaves with it,
+    /// the emulator on SIGTERM; nothing of the session is left.
+    fn end_after_the_adapter(mut self) {
         assert_eq!(agent_sdk::control(&self.s, ipc_types::Command::Stop, 0).expect("the hub answers").status, 0);
         for p in [self.hub.take(), self.controller.take()] {
             let out = p.expect("running").wait(Duration::from_secs(20));
@@ -326,17 +332,7 @@ fn the_bridge_drives_the_emulated_chair_and_its_pose_in_the_hub_follows() {
     let out = adapter.wait(Duration::from_secs(10));
     assert!(out.status.success(), "the adapter after SIGINT: {:?}", out.status);
     rig.truth.wait_for(0, Duration::from_secs(5), "the board's latched stop", |v| v["event"] == "estop");
-    // The run's end: the hub stops, the controller leaves with it, the emulator on SIGTERM;
-    // nothing of the session is left.
-    assert_eq!(agent_sdk::control(&rig.s, ipc_types::Command::Stop, 0).expect("the hub answers").status, 0);
-    for p in [rig.hub.take(), rig.controller.take()] {
-        let out = p.expect("running").wait(Duration::from_secs(20));
-        assert!(out.status.success(), "{:?}", out.status);
-    }
-    let emulator = rig.emulator.take().expect("emulator");
-    emulator.signal("TERM");
-    assert!(emulator.wait(Duration::from_secs(10)).status.success(), "the emulator stops on SIGTERM");
-    assert_no_shared_memory_left(&rig.s);
+    rig.end_after_the_adapter();
 }
 
 #[test]

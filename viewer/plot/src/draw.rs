@@ -411,18 +411,9 @@ fn draw_waits(panel: &DrawingArea<SVGBackend, Shift>, fig: &Figure, waits: &[Vec
         (Key::Square(PALE_INK), "stopped for good (arrived, or stuck)".into()),
     ];
     draw_legend(panel, &keys, (WIDTH_PX - MARGIN_RIGHT) as i32, heading_y)?;
-    let t0 = fig.samples().map(|s| s.time_s).fold(f64::INFINITY, f64::min);
-    let t0 = if t0.is_finite() { t0 } else { 0.0 };
-    let t1 = fig.samples().map(|s| s.time_s).fold(t0 + 0.1, f64::max);
+    let (t0, t1) = time_span(fig);
     let rows = fig.logs.len();
-    let mut chart = ChartBuilder::on(panel)
-        .margin_top(HEADING_H + MARGIN_TOP)
-        .margin_bottom(MARGIN_BOTTOM)
-        .margin_left(MARGIN_LEFT)
-        .margin_right(MARGIN_RIGHT)
-        .x_label_area_size(X_LABEL_H)
-        .y_label_area_size(Y_LABEL_W)
-        .build_cartesian_2d(t0..t1, 0.0..rows as f64)?;
+    let mut chart = time_chart(panel, t0..t1, 0.0..rows as f64)?;
     let xs = tick_step(t1 - t0, 12.0);
     let xd = decimals(xs);
     let names: Vec<&str> = fig.logs.iter().map(|(n, _)| n.as_str()).collect();
@@ -590,6 +581,29 @@ fn draw_lab_outline(chart: &mut MapChart, view: &View, width: f64, height: f64) 
     Ok(())
 }
 
+/// The first and last recorded times (a tenth of a second apart at least).
+fn time_span(fig: &Figure) -> (f64, f64) {
+    let t0 = fig.samples().map(|s| s.time_s).fold(f64::INFINITY, f64::min);
+    let t0 = if t0.is_finite() { t0 } else { 0.0 };
+    (t0, fig.samples().map(|s| s.time_s).fold(t0 + 0.1, f64::max))
+}
+
+/// A panel's chart over time: the speed and waiting panels share its margins and axes' room.
+fn time_chart<'a, 'b>(
+    panel: &'a DrawingArea<SVGBackend<'b>, Shift>,
+    x: std::ops::Range<f64>,
+    y: std::ops::Range<f64>,
+) -> Result<MapChart<'a, 'b>, PlotDrawError> {
+    Ok(ChartBuilder::on(panel)
+        .margin_top(HEADING_H + MARGIN_TOP)
+        .margin_bottom(MARGIN_BOTTOM)
+        .margin_left(MARGIN_LEFT)
+        .margin_right(MARGIN_RIGHT)
+        .x_label_area_size(X_LABEL_H)
+        .y_label_area_size(Y_LABEL_W)
+        .build_cartesian_2d(x, y)?)
+}
+
 fn draw_speed(
     panel: &DrawingArea<SVGBackend, Shift>,
     fig: &Figure,
@@ -615,18 +629,9 @@ fn draw_speed(
     }
     draw_legend(panel, &keys, (WIDTH_PX - MARGIN_RIGHT) as i32, heading_y)?;
 
-    let t0 = fig.samples().map(|s| s.time_s).fold(f64::INFINITY, f64::min);
-    let t0 = if t0.is_finite() { t0 } else { 0.0 };
-    let t1 = fig.samples().map(|s| s.time_s).fold(t0 + 0.1, f64::max);
+    let (t0, t1) = time_span(fig);
     let y_max = if top > 0.0 { top * 1.15 } else { 1.0 };
-    let mut chart = ChartBuilder::on(panel)
-        .margin_top(HEADING_H + MARGIN_TOP)
-        .margin_bottom(MARGIN_BOTTOM)
-        .margin_left(MARGIN_LEFT)
-        .margin_right(MARGIN_RIGHT)
-        .x_label_area_size(X_LABEL_H)
-        .y_label_area_size(Y_LABEL_W)
-        .build_cartesian_2d(t0..t1, 0.0..y_max)?;
+    let mut chart = time_chart(panel, t0..t1, 0.0..y_max)?;
     let (xs, ys) = (tick_step(t1 - t0, 12.0), tick_step(y_max, 6.0));
     let (xd, yd) = (decimals(xs), decimals(ys));
     let xfmt = move |v: &f64| format!("{v:.xd$}");
