@@ -38,7 +38,7 @@ pub fn resume(args: &ResumeArgs) -> anyhow::Result<ExitCode> {
         bail!("no robot {:?} in session {session:?} (its robots: {})", args.chair, names.join(", "));
     };
     let label = robot.name.as_str().unwrap_or("?").to_owned();
-    let answer = agent_sdk::control(session, Command::ResumeChair, robot.id)
+    let answer = agent_sdk::control_within(session, Command::ResumeChair, robot.id, args.hub.timeout())
         .with_context(|| format!("asking the hub of session {session:?} to resume {label}"))?;
     match answer.status {
         0 => {

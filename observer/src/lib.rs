@@ -156,7 +156,7 @@ impl Observer {
             }
             self.check_alive()?;
             if start.elapsed() > ANSWER_TIMEOUT {
-                return Err(AgentError::NoAnswer(self.session.name().to_owned()));
+                return Err(AgentError::NoAnswer(self.session.name().to_owned(), ANSWER_TIMEOUT));
             }
             std::thread::sleep(Duration::from_millis(1));
         }

@@ -44,7 +44,7 @@ pub(crate) fn to_py(e: AgentError) -> PyErr {
         AgentError::Services(_) => SessionNotFound::new_err(text),
         AgentError::Refused { .. } => Refused::new_err(text),
         AgentError::HubGone { .. } => HubGone::new_err(text),
-        AgentError::NoAnswer(_) => NoAnswer::new_err(text),
+        AgentError::NoAnswer(..) => NoAnswer::new_err(text),
         AgentError::Interrupted => PyKeyboardInterrupt::new_err(text),
         AgentError::Ipc(_) | AgentError::Map(_) => IwsimError::new_err(text),
     }

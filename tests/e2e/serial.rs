@@ -164,9 +164,12 @@ impl Rig {
             Some(Proc::spawn(&["agent", "wheelchair", "--session", &self.s, "--name", "chair", "--powers", "0.4,0.4"]));
     }
 
-    /// The operator's `iwsim resume chair1`, as a user types it; what it printed.
+    /// The operator's `iwsim resume chair1`, as a user types it on a loaded machine (where
+    /// starting a process and opening the session's services can take seconds, hence the
+    /// longer wait); what it printed.
     fn resume(&self) -> String {
-        let out = Proc::spawn(&["resume", "chair1", "--session", &self.s]).wait(Duration::from_secs(30));
+        let out = Proc::spawn(&["resume", "chair1", "--session", &self.s, "--connect-timeout", "20"])
+            .wait(Duration::from_secs(60));
         assert!(out.status.success(), "iwsim resume: {:?} {}", out.status, text(&out.stderr));
         text(&out.stdout)
     }

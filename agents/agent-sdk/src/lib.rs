@@ -114,9 +114,9 @@ pub enum AgentError {
         /// The session.
         session: String,
     },
-    /// The hub did not answer in time.
-    #[error("the hub of session {0:?} did not answer within 5 s")]
-    NoAnswer(String),
+    /// The hub did not answer in time: the session and how long it was given.
+    #[error("the hub of session {0:?} did not answer within {secs} s", secs = .1.as_secs_f64())]
+    NoAnswer(String, Duration),
     /// SIGINT or SIGTERM arrived.
     #[error("interrupted by a termination signal")]
     Interrupted,
@@ -154,6 +154,18 @@ pub fn control(
     command: ipc_types::Command,
     robot_id: u32,
 ) -> Result<ipc_types::ControlResponse, AgentError> {
+    control_within(session, command, robot_id, ANSWER_TIMEOUT)
+}
+
+/// [`control`], waiting up to `timeout` for the hub to serve and then to answer: an operator's
+/// command on a loaded machine (`iwsim resume --connect-timeout S`) may wait longer than an
+/// agent's registration.
+pub fn control_within(
+    session: &str,
+    command: ipc_types::Command,
+    robot_id: u32,
+    timeout: Duration,
+) -> Result<ipc_types::ControlResponse, AgentError> {
     let session = Session::new(session)?;
     // Declared first, dropped last: whatever happens below, the node is gone before it runs.
     let _release = session.release_on_drop();
@@ -161,8 +173,8 @@ pub fn control(
     let svc = session.control(&node, Role::Client)?;
     let start = Instant::now();
     while svc.dynamic_config().number_of_servers() == 0 {
-        if start.elapsed() > ANSWER_TIMEOUT {
-            return Err(AgentError::NoAnswer(session.name().to_owned()));
+        if start.elapsed() > timeout {
+            return Err(AgentError::NoAnswer(session.name().to_owned(), timeout));
         }
         std::thread::sleep(Duration::from_micros(200));
     }
@@ -178,8 +190,8 @@ pub fn control(
         if let Some(r) = pending.receive().map_err(ipc("receive an answer"))? {
             return Ok(*r.payload());
         }
-        if start.elapsed() > ANSWER_TIMEOUT {
-            return Err(AgentError::NoAnswer(session.name().to_owned()));
+        if start.elapsed() > timeout {
+            return Err(AgentError::NoAnswer(session.name().to_owned(), timeout));
         }
         std::thread::sleep(Duration::from_micros(200));
     }
@@ -294,7 +306,7 @@ impl ControlClient {
                 return Ok(*r.payload());
             }
             if start.elapsed() > ANSWER_TIMEOUT {
-                return Err(AgentError::NoAnswer(self.session.clone()));
+                return Err(AgentError::NoAnswer(self.session.clone(), ANSWER_TIMEOUT));
             }
             std::thread::sleep(Duration::from_micros(200));
         }
@@ -317,7 +329,7 @@ pub fn receive_map(
         }
         alive()?;
         if start.elapsed() > ANSWER_TIMEOUT {
-            return Err(AgentError::NoAnswer(session.name().to_owned()));
+            return Err(AgentError::NoAnswer(session.name().to_owned(), ANSWER_TIMEOUT));
         }
         std::thread::sleep(Duration::from_millis(1));
     }
@@ -397,7 +409,7 @@ impl Agent {
             || actions_svc.dynamic_config().number_of_subscribers() == 0
         {
             if start.elapsed() > ANSWER_TIMEOUT {
-                return Err(AgentError::NoAnswer(session.name().to_owned()));
+                return Err(AgentError::NoAnswer(session.name().to_owned(), ANSWER_TIMEOUT));
             }
             std::thread::sleep(Duration::from_micros(200));
         }

@@ -99,7 +99,7 @@ impl Agent {
         }
         self.check()?;
         if request.sent.elapsed() > ANSWER_TIMEOUT {
-            return Err(AgentError::NoAnswer(self.session.name().to_owned()));
+            return Err(AgentError::NoAnswer(self.session.name().to_owned(), ANSWER_TIMEOUT));
         }
         Ok(None)
     }
