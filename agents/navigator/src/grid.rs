@@ -152,7 +152,12 @@ pub struct StaticRaster {
     /// Per cell, free cells from it to the first occupied one in each of 8 directions (k·45°),
     /// capped at 255: how wide a passage is across any heading, for [`StaticRaster::off_lane`].
     runs: Vec<[u8; 8]>,
+    /// [`StaticRaster::off_lane_at`] per cell and heading, centimetres, made when first asked.
+    lanes: std::sync::OnceLock<Vec<[u8; 8]>>,
 }
+
+/// Lanes end this far (metres, along the way) from where a passage stops being two lanes wide.
+const JUNCTION_M: f64 = 1.2;
 
 /// The 8 directions of [`StaticRaster`]'s runs, as cell steps.
 const DIRS: [(isize, isize); 8] = [(1, 0), (1, 1), (0, 1), (-1, 1), (-1, 0), (-1, -1), (0, -1), (1, -1)];
@@ -231,27 +236,80 @@ impl StaticRaster {
         }
         let dist = distance_field(&spec, &occ);
         let runs = free_runs(&spec, &occ);
-        Self { spec, occ, dist, runs }
+        Self { spec, occ, dist, runs, lanes: std::sync::OnceLock::new() }
     }
 
     /// How far left of its lane a chair at `pose` drives, metres: in a passage two lanes wide
     /// (wall to wall across the heading between 1.5 and 3.2 m, [`TWO_LANES_M`]), by how much the
     /// free width on its right exceeds a quarter of the passage's (the middle of the right
-    /// lane). Zero right of that line, in rooms, halls and one-lane narrows. Traffic keeps
+    /// lane). Zero right of that line, in rooms, halls, one-lane narrows and near junctions
+    /// ([`JUNCTION_M`]). Traffic keeps
     /// right, so that chairs meeting in a corridor pass each other without a word.
     pub fn off_lane(&self, pose: &crate::geom::Pose) -> f64 {
         let Some((ix, iy)) = self.spec.cell_of(pose.pos()) else { return 0.0 };
-        let runs = &self.runs[self.spec.index(ix, iy)];
-        let dir = |angle: f64| (angle / std::f64::consts::FRAC_PI_4).round().rem_euclid(8.0) as usize;
-        let (right, left) =
-            (dir(pose.theta - std::f64::consts::FRAC_PI_2), dir(pose.theta + std::f64::consts::FRAC_PI_2));
+        let heading = (pose.theta / std::f64::consts::FRAC_PI_4).round().rem_euclid(8.0) as usize;
+        self.off_lane_at(self.spec.index(ix, iy), heading)
+    }
+
+    /// [`StaticRaster::off_lane`] for cell `i` and a heading of `k`·45° (`k` < 8): what the
+    /// grid's cost-to-go charges for a step, so that it foresees the lane cost the hybrid
+    /// search pays and keeps that search as focused as without lanes. Computed for every cell
+    /// and heading the first time it is asked (only a chair that keeps right asks).
+    pub fn off_lane_at(&self, i: usize, k: usize) -> f64 {
+        let lanes = self.lanes.get_or_init(|| {
+            (0..self.spec.len())
+                .map(|i| std::array::from_fn(|k| (self.lane_offset(i, k) * 100.0).round().min(255.0) as u8))
+                .collect()
+        });
+        f64::from(lanes[i][k]) / 100.0
+    }
+
+    /// The width across heading `k` at cell `i`, metres, if it is a two-lane passage's.
+    fn two_lane_width(&self, i: usize, k: usize) -> Option<(f64, f64)> {
+        let runs = &self.runs[i];
+        let (right, left) = ((k + 6) % 8, (k + 2) % 8);
         let step = |k: usize| if k % 2 == 1 { self.spec.cell * std::f64::consts::SQRT_2 } else { self.spec.cell };
         let (r, l) = (f64::from(runs[right]) * step(right), f64::from(runs[left]) * step(left));
         let width = r + l;
-        if width < TWO_LANES_M.0 || width > TWO_LANES_M.1 || runs[right] == u8::MAX || runs[left] == u8::MAX {
+        let two = (TWO_LANES_M.0..=TWO_LANES_M.1).contains(&width) && runs[right] < u8::MAX && runs[left] < u8::MAX;
+        two.then_some((r, width))
+    }
+
+    /// How far left of its lane's middle a chair on cell `i` heading `k`·45° is, metres; zero
+    /// within [`JUNCTION_M`] (along the heading) of where the passage stops being two lanes
+    /// wide: a chair turning out of a doorway or round a corner needs the whole width, and
+    /// charging it for that made the search spend its expansions there.
+    fn lane_offset(&self, i: usize, k: usize) -> f64 {
+        if self.occ[i] {
             return 0.0;
         }
+        let Some((r, width)) = self.two_lane_width(i, k) else { return 0.0 };
+        let (dx, dy) = DIRS[k];
+        let step = if k % 2 == 1 { self.spec.cell * std::f64::consts::SQRT_2 } else { self.spec.cell };
+        let n = (JUNCTION_M / step).ceil() as isize;
+        let (x, y) = self.spec.coords(i);
+        for sign in [1isize, -1] {
+            for s in 1..=n {
+                let (px, py) = (x as isize + sign * s * dx, y as isize + sign * s * dy);
+                if px < 0 || py < 0 || px >= self.spec.nx as isize || py >= self.spec.ny as isize {
+                    break;
+                }
+                let j = self.spec.index(px as usize, py as usize);
+                if self.occ[j] {
+                    break;
+                }
+                if self.two_lane_width(j, k).is_none() {
+                    return 0.0;
+                }
+            }
+        }
         (r - width / 4.0).max(0.0)
+    }
+
+    /// The direction index (into the 8 directions of the free runs, `k`·45°) of a step of
+    /// `(dx, dy)` cells.
+    pub fn direction_of(dx: i64, dy: i64) -> Option<usize> {
+        DIRS.iter().position(|&(x, y)| x as i64 == dx.signum() && y as i64 == dy.signum())
     }
 
     /// Whether a cell is occupied.

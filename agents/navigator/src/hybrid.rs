@@ -114,7 +114,16 @@ pub struct HybridParams {
     /// Cost per metre driven per metre left of the lane's middle, in two-lane passages
     /// ([`crate::grid::StaticRaster::off_lane`]): chairs keep right. 0 (the default) is off.
     pub keep_right: f64,
+    /// Heuristic cost per radian that the chair's heading is off the grid's way downhill
+    /// ([`CostToGo::downhill`]), beyond [`TURN_SLACK_RAD`]: the cost-to-go knows nothing of
+    /// heading, so without it the search fills every pose that faces the wrong way before it
+    /// turns (a chair leaving a room through a doorway spent most of its expansions so).
+    pub turn_heuristic: f64,
 }
+
+/// Heading off the way downhill by less than this costs nothing in the heuristic: the way
+/// downhill is quantised to 22.5° and a path curves.
+pub const TURN_SLACK_RAD: f64 = 0.35;
 
 impl Default for HybridParams {
     fn default() -> Self {
@@ -138,6 +147,7 @@ impl Default for HybridParams {
             horizon_m: 7.0,
             check_step_m: 0.05,
             keep_right: 0.0,
+            turn_heuristic: 0.8,
         }
     }
 }
@@ -219,6 +229,15 @@ pub fn plan(
     params: &HybridParams,
 ) -> Result<PlanOutcome, PathSearchError> {
     let h_of = |p: &Pose| ctg.at(p.pos());
+    // What the search orders by: the cost-to-go and, facing away from the way downhill, the
+    // turn still to make (progress is measured on the cost-to-go alone).
+    let turn_of = |p: &Pose| {
+        if params.turn_heuristic <= 0.0 {
+            return 0.0;
+        }
+        ctg.downhill(p.pos())
+            .map_or(0.0, |d| params.turn_heuristic * (wrap_rad(p.theta - d).abs() - TURN_SLACK_RAD).max(0.0))
+    };
     let Some(h0) = h_of(&start) else {
         return Err(PathSearchError::NoRoute { x: start.x, y: start.y });
     };
@@ -351,7 +370,7 @@ pub fn plan(
             }
             let g = n.g + cost;
             nodes.push(Node { pose, motion: m, g, h, travelled, parent: i });
-            open.push(Open { f: g + params.heuristic_weight * h, i: (nodes.len() - 1) as u32 });
+            open.push(Open { f: g + params.heuristic_weight * (h + turn_of(&pose)), i: (nodes.len() - 1) as u32 });
         }
     }
     if let Some((c, _)) = candidate {
@@ -453,6 +472,54 @@ mod tests {
         assert_eq!(
             plan(&model, &ctg, start, &g, 0.05, &HybridParams::default()),
             Err(PathSearchError::NoRoute { x: 3.5, y: 3.5 })
+        );
+    }
+
+    #[test]
+    fn a_chair_that_keeps_right_plans_down_its_lane_with_the_lane_aware_cost_to_go() {
+        // A 2 m corridor, the chair in its middle bound for its far end. Keeping right costs
+        // more than the middle; the plain cost-to-go does not foresee that, so the search
+        // spends its expansions on the middle. With the lanes in the cost-to-go it goes
+        // straight for the right lane.
+        let mut map = NavMap::empty(24.0, 12.0);
+        map.walls.push(MapWall::rectangle(0.5, 4.9, 23.5, 5.0, false));
+        map.walls.push(MapWall::rectangle(0.5, 7.0, 23.5, 7.1, false));
+        let model = WorldModel::new(map, Footprint::of_body(1.1, 0.65, 0.8));
+        let cm = Costmap::build(&model, 0.345, 0.26);
+        let goal = V2::new(20.0, 6.0);
+        let (gx, gy) = cm.spec.clamp_cell(goal);
+        let start = Pose::from_deg(3.0, 6.0, 0.0);
+        let (sx, sy) = cm.spec.clamp_cell(start.pos());
+        let g = Goal { pos: goal, stop_within: 0.2, accept_within: 0.5, weight: 1.0 };
+        let params = HybridParams { keep_right: 1.0, ..HybridParams::default() };
+        let ctg_of = |lanes| {
+            CostToGo::with_lanes(
+                &cm,
+                &[(cm.spec.index(gx, gy), 0.0)],
+                Some(cm.spec.index(sx, sy)),
+                6.0,
+                4.0,
+                &[],
+                lanes,
+            )
+        };
+        let aware = plan(&model, &ctg_of(Some((&model.statics, 1.0))), start, &g, 0.05, &params).expect("a path");
+        let plain = plan(&model, &ctg_of(None), start, &g, 0.05, &params);
+        // A whole horizon of progress, in the right lane (south of the middle, heading east).
+        let path = aware.path();
+        let end = path.last().expect("poses").pose;
+        assert!(end.x - start.x >= params.horizon_m - 0.5, "{end:?}");
+        let in_lane: Vec<f64> = path.iter().filter(|p| p.pose.x > 6.0).map(|p| p.pose.y).collect();
+        assert!(!in_lane.is_empty() && in_lane.iter().all(|&y| y < 5.85), "{in_lane:?}");
+        let plain_expansions = match plain {
+            Ok(o) => o.expansions,
+            Err(PathSearchError::Exhausted { expansions }) => expansions,
+            Err(e) => panic!("{e}"),
+        };
+        assert!(
+            aware.expansions * 4 < plain_expansions,
+            "lane-aware {} expansions, plain {plain_expansions}",
+            aware.expansions
         );
     }
 }

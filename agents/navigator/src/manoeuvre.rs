@@ -161,6 +161,7 @@ mod tests {
             state: State::Go,
             footprint: Body::INTELLWHEELS.footprint(),
             heard_s: 0.0,
+            still_since_s: 0.0,
             claim: None,
         }
     }

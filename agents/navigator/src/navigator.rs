@@ -205,6 +205,11 @@ enum Mode {
 /// explain a reading (their poses are a tick old and estimated), metres.
 const PEER_SLACK_M: f64 = 0.25;
 
+/// The safety layer stops a motion that would bring the chair this near another chair's
+/// rectangle as that chair said it (metres): a tick of the other's motion at top speed and
+/// some of the two estimates' error.
+const PEER_GUARD_M: f64 = 0.1;
+
 /// A path is dropped when the map changes so that a pose ahead comes nearer than this to
 /// something (poses planned nearer than this, leaving a tight spot, are not re-checked).
 const RECHECK_M: f64 = 0.02;
@@ -221,6 +226,9 @@ const PLAN_BACKOFF: [u64; 3] = [10, 20, 40];
 /// expansion limit (each kind of search its own: forwards only for the final stop, then with
 /// turns): what is not found within that is not found this time.
 const SEARCH_BUDGET: usize = 2;
+/// The coarse search that follows a failed fine one may expand this many times the hybrid
+/// search's limit.
+const COARSE_BUDGET: usize = 2;
 
 /// Counters for logs and tests.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -685,7 +693,8 @@ impl Navigator {
         }
         let (sx, sy) = spec.clamp_cell(start.pos());
         let open = [(start.pos(), 0.6), (cp.pos, accept)];
-        let ctg = CostToGo::new(&cm, &seeds, Some(spec.index(sx, sy)), 6.0, 4.0, &open);
+        let lanes = Some((&self.model.statics, self.hybrid.keep_right));
+        let ctg = CostToGo::with_lanes(&cm, &seeds, Some(spec.index(sx, sy)), 6.0, 4.0, &open, lanes);
         let goal = Goal { pos: cp.pos, stop_within, accept_within: accept, weight };
         let mut failure = PathSearchError::Exhausted { expansions: 0 };
         let mut best: Option<(PlanOutcome, f64)> = None;
@@ -699,6 +708,18 @@ impl Navigator {
             attempts.extend(margins.iter().enumerate().map(|(k, &(m, e))| (&forward_only, k, m, e)));
         }
         attempts.extend(margins.iter().enumerate().map(|(k, &(m, e))| (&self.hybrid, k, m, e)));
+        // Last, the same search on a coarser closed set (10 cm, 10°) with more expansions:
+        // leaving a room through a doorway and turning down a 2 m corridor took the fine
+        // search 30,000 to 70,000 expansions (it tries every nearly-fitting swing round the
+        // jamb), the coarse one 7,000 to 16,000. Fine first, since only it threads the
+        // tightest gaps.
+        let coarse = HybridParams {
+            xy_res: 2.0 * self.hybrid.xy_res,
+            heading_bins: self.hybrid.heading_bins / 2,
+            max_expansions: COARSE_BUDGET * self.hybrid.max_expansions,
+            ..self.hybrid.clone()
+        };
+        attempts.extend(margins.iter().enumerate().skip(1).take(1).map(|(_, &(m, e))| (&coarse, 0, m, e)));
         let model = &mut self.model;
         let stats = &mut self.stats;
         let budget = SEARCH_BUDGET * self.hybrid.max_expansions;
@@ -801,14 +822,34 @@ impl Navigator {
                 }
             }
         }
-        if points.is_empty() {
+        // Other chairs where they said they are (a tick ago, by their own estimate): a motion
+        // that brings the chair nearer than PEER_GUARD_M to one is a collision course, even
+        // where no sensor looks (a corner swinging round in a turn).
+        let fp = self.model.footprint;
+        let near: Vec<&(Pose, Footprint)> =
+            self.peers.iter().filter(|(p, f)| (p.pos() - pose.pos()).norm() <= fp.reach() + f.reach() + 1.0).collect();
+        if points.is_empty() && near.is_empty() {
             return None;
         }
+        let gap = |at: &Pose, (p, f): &(Pose, Footprint)| {
+            let c = f.corners(p, 0.0).map(|q| at.to_body(q));
+            (0..4).map(|k| fp.body_segment_distance(c[k], c[(k + 1) % 4])).fold(f64::INFINITY, f64::min)
+        };
+        let now: Vec<f64> = near.iter().map(|q| gap(&pose, q)).collect();
         let dt = 0.1;
         let mut p = pose;
         for k in 1..=10 {
             p = p.advanced(v, w, dt);
-            if points.iter().any(|q| self.model.body_contains(&p, *q, 0.03)) {
+            let sensed = points.iter().any(|q| self.model.body_contains(&p, *q, 0.03));
+            // Only coming nearer counts: a chair already close may always move away.
+            // A chair near another stops for it but does not slow down (passing a parked
+            // chair closely is normal; slowing there threw the path follower off its line).
+            let peer = k <= 3
+                && near.iter().zip(&now).any(|(q, &d0)| {
+                    let d = gap(&p, q);
+                    d < PEER_GUARD_M && d < d0 - 1e-4
+                });
+            if sensed || peer {
                 let ttc = k as f64 * dt;
                 return Some(if ttc <= 0.3 { (0.0, 0.0, true) } else { (v * ttc.clamp(0.3, 1.0), w, false) });
             }
@@ -914,5 +955,47 @@ mod tests {
         }
         assert!(nav.finished(), "stuck at {:?}", sim.pose);
         assert!((sim.pose.pos() - V2::new(11.0, 2.5)).norm() <= 0.25, "{:?}", sim.pose);
+    }
+
+    #[test]
+    fn a_chair_its_sensors_miss_but_that_says_where_it_is_is_never_driven_into() {
+        // Another chair crosses ahead, low enough that no cone sees it; it says where it is
+        // (as `go`, so nothing plans round it). The safety layer stops short of it, and the
+        // chair goes on once it has gone.
+        let map = NavMap::empty(14.0, 5.0);
+        let start = Pose::from_deg(1.5, 2.5, 0.0);
+        let cfg = NavConfig {
+            checkpoints: vec![Checkpoint { pos: V2::new(11.0, 2.5), radius_m: 0.5 }],
+            start,
+            encoder_ticks_per_m: 1000.0,
+            ..NavConfig::intellwheels()
+        };
+        let fp = cfg.body.footprint();
+        let mut sim = Sim {
+            pose: start,
+            out: [0.0; 2],
+            travel: [0.0; 2],
+            model: WorldModel::new(map.clone(), fp),
+            sensors: default_layout(&fp),
+        };
+        let mut nav = Navigator::new(map, cfg);
+        let mut closest = f64::INFINITY;
+        for tick in 0..900 {
+            // From second 3 to second 10 it stands across the way, 1 m ahead of the front.
+            let other = (30..100).contains(&tick).then(|| Pose::from_deg(4.6, 2.5, 90.0));
+            nav.set_peers(other.map(|p| (p, fp)).into_iter().collect(), &[]);
+            let out = nav.step(&sim.input(tick, None));
+            sim.step(out.powers);
+            if let Some(p) = other {
+                let c = fp.corners(&p, 0.0).map(|q| sim.pose.to_body(q));
+                let gap = (0..4).map(|k| fp.body_segment_distance(c[k], c[(k + 1) % 4])).fold(f64::INFINITY, f64::min);
+                closest = closest.min(gap);
+            }
+            if nav.finished() {
+                break;
+            }
+        }
+        assert!(closest > 0.02, "came within {closest:.3} m of the other chair");
+        assert!(nav.finished(), "stuck at {:?}", sim.pose);
     }
 }

@@ -12,6 +12,8 @@ use crate::zones::Zones;
 
 /// Speed of the pull-over, m/s: a little below cruising, a few metres from another chair.
 const PULL_OVER_SPEED: f64 = 0.25;
+/// A chair that has stood this long (seconds) is planned round whatever it says.
+const STANDING_S: f64 = 2.0;
 /// Say where we are every this many ticks (twice a second at 100 ms) when no other chair is
 /// near...
 const SAY_EVERY_FAR: u64 = 5;
@@ -207,10 +209,12 @@ impl Pilot {
         }
         let peers = self.traffic.peers();
         let all: Vec<(Pose, Footprint)> = peers.iter().map(|p| (p.pose, p.footprint)).collect();
-        // Chairs that say they stand still are obstacles to plan round.
+        // Chairs that say they stand still are obstacles to plan round, and so are those
+        // that have stood for a while whatever they say (waiting for a way, or stopped by
+        // their safety layer): planning through them only makes both stop again.
         let parked: Vec<(Pose, Footprint)> = peers
             .iter()
-            .filter(|p| matches!(p.state, State::Park | State::Wait))
+            .filter(|p| matches!(p.state, State::Park | State::Wait) || p.standing_for(now, STANDING_S))
             .map(|p| (p.pose, p.footprint))
             .collect();
         self.nav.set_peers(all, &parked);

@@ -6,7 +6,7 @@ use std::cmp::Ordering;
 use std::collections::BinaryHeap;
 
 use crate::geom::V2;
-use crate::grid::GridSpec;
+use crate::grid::{GridSpec, StaticRaster};
 use crate::model::WorldModel;
 
 /// Cost of a cell that a wall or a sensed obstacle occupies.
@@ -302,7 +302,26 @@ impl CostToGo {
         soft_penalty: f32,
         open: &[(V2, f64)],
     ) -> Self {
+        Self::with_lanes(cm, seeds, start, slack, soft_penalty, open, None)
+    }
+
+    /// [`CostToGo::new`] that also charges, per metre, `keep_right` times how far left of its
+    /// lane a step drives ([`StaticRaster::off_lane_at`], in the step's direction towards the
+    /// goal): the cost-to-go of a chair that keeps right. The hybrid search charges the same
+    /// for its arcs, so its heuristic foresees the lane cost; without it the search spends
+    /// its expansions proving that no cheaper way exists and gives up.
+    pub fn with_lanes(
+        cm: &Costmap,
+        seeds: &[(usize, f32)],
+        start: Option<usize>,
+        slack: f32,
+        soft_penalty: f32,
+        open: &[(V2, f64)],
+        lanes: Option<(&StaticRaster, f64)>,
+    ) -> Self {
         let spec = cm.spec;
+        // The raster must be the costmap's own grid for its cells to be the same.
+        let lanes = lanes.filter(|(raster, k)| raster.spec == spec && *k > 0.0);
         let passable = |j: usize| {
             let c = cm.cost[j];
             c != HARD
@@ -334,7 +353,14 @@ impl CostToGo {
                 limit = f + slack;
             }
             neighbours(&spec, i, passable, |j, step| {
-                let w = if cm.blocked(j) { 1.0 + soft_penalty } else { 1.0 };
+                let mut w = if cm.blocked(j) { 1.0 + soft_penalty } else { 1.0 };
+                if let Some((raster, keep_right)) = lanes {
+                    // The search runs from the goal: a chair on cell j steps towards cell i.
+                    let ((xi, yi), (xj, yj)) = (spec.coords(i), spec.coords(j));
+                    if let Some(k) = StaticRaster::direction_of(xi as i64 - xj as i64, yi as i64 - yj as i64) {
+                        w += (keep_right * raster.off_lane_at(j, k)) as f32;
+                    }
+                }
                 let c = f + step * cell * w;
                 if c < cost[j] {
                     cost[j] = c;
@@ -343,6 +369,47 @@ impl CostToGo {
             });
         }
         Self { spec, cost }
+    }
+
+    /// The way downhill at `p`: the direction (radians) to the cheapest cell on the ring of
+    /// cells two away (16 directions, 22.5° apart), which is the way the grid's route
+    /// leaves `p`. `None` where the search did not reach or nothing on the ring is cheaper.
+    pub fn downhill(&self, p: V2) -> Option<f64> {
+        const RING: [(i64, i64); 16] = [
+            (2, 0),
+            (2, 1),
+            (2, 2),
+            (1, 2),
+            (0, 2),
+            (-1, 2),
+            (-2, 2),
+            (-2, 1),
+            (-2, 0),
+            (-2, -1),
+            (-2, -2),
+            (-1, -2),
+            (0, -2),
+            (1, -2),
+            (2, -2),
+            (2, -1),
+        ];
+        let (x, y) = self.spec.cell_of(p)?;
+        let here = self.cost[self.spec.index(x, y)];
+        if !here.is_finite() {
+            return None;
+        }
+        let mut best: Option<(f32, (i64, i64))> = None;
+        for (dx, dy) in RING {
+            let (nx, ny) = (x as i64 + dx, y as i64 + dy);
+            if nx < 0 || ny < 0 || nx >= self.spec.nx as i64 || ny >= self.spec.ny as i64 {
+                continue;
+            }
+            let c = self.cost[self.spec.index(nx as usize, ny as usize)];
+            if c < here && best.is_none_or(|(b, _)| c < b) {
+                best = Some((c, (dx, dy)));
+            }
+        }
+        best.map(|(_, (dx, dy))| (dy as f64).atan2(dx as f64))
     }
 
     /// The cost at a point; `None` where the search did not reach.

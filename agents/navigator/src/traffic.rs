@@ -62,6 +62,11 @@ pub const CLAIM_SETTLE_S: f64 = 0.25;
 /// A peer's claim counts while it was heard within this many seconds (claims are said every
 /// tick).
 pub const CLAIM_FRESH_S: f64 = 1.0;
+/// A peer whose said pose moves less than this (metres, radians) stands still.
+pub const STILL_M: f64 = 0.03;
+/// See [`STILL_M`].
+pub const STILL_RAD: f64 = 0.035;
+
 /// At most this many zones in one claim.
 pub const MAX_CLAIM_ZONES: usize = 4;
 
@@ -134,6 +139,16 @@ pub struct Peer {
     pub heard_s: f64,
     /// Its claim on one-lane zones, if any.
     pub claim: Option<Claim>,
+    /// Since when it has said the same place (within [`STILL_M`] and [`STILL_RAD`]),
+    /// seconds: a chair that stands, whatever it says it does.
+    pub still_since_s: f64,
+}
+
+impl Peer {
+    /// Whether it has stood where it is for at least `s` seconds at `now_s`.
+    pub fn standing_for(&self, now_s: f64, s: f64) -> bool {
+        now_s - self.still_since_s >= s
+    }
 }
 
 /// The message a navigator says about itself (at most 100 bytes for names up to 40).
@@ -215,6 +230,7 @@ pub fn decode(bytes: &[u8], heard_s: f64) -> Option<Peer> {
         footprint: Footprint::of_body(length, width, com),
         heard_s,
         claim,
+        still_since_s: heard_s,
     })
 }
 
@@ -386,9 +402,17 @@ impl Traffic {
 
     /// Takes in a message heard at `now_s`.
     pub fn hear(&mut self, bytes: &[u8], now_s: f64) {
-        if let Some(p) = decode(bytes, now_s)
+        if let Some(mut p) = decode(bytes, now_s)
             && p.name != self.name
         {
+            if let Some(old) = self.peers.iter().find(|q| q.name == p.name)
+                && (old.pose.pos() - p.pose.pos()).norm() <= STILL_M
+                && crate::geom::wrap_rad(old.pose.theta - p.pose.theta).abs() <= STILL_RAD
+            {
+                // Still where it was: keep the earlier pose, so that creeping adds up.
+                p.still_since_s = old.still_since_s;
+                p.pose = old.pose;
+            }
             self.peers.retain(|q| q.name != p.name);
             self.peers.push(p);
         }
@@ -767,5 +791,31 @@ mod tests {
         // And it ends once the other has gone by regardless.
         one.hear(&say("chair2", pose(13.0, 6.5, 180.0), State::Go), 61.0);
         assert_eq!(one.decide(a, &fp, 61.0), Decision::Go);
+    }
+
+    #[test]
+    fn a_peer_that_stays_put_is_standing_whatever_it_says_and_creeping_adds_up() {
+        let mut me = Traffic::new("chair1");
+        let at = |t: &Traffic| t.peers().iter().find(|p| p.name == "chair2").cloned().expect("heard");
+        // Says `go` every tick from the same place, within its estimate's jitter.
+        for k in 0..=20 {
+            let jitter = if k % 2 == 0 { 0.01 } else { -0.01 };
+            me.hear(&say("chair2", pose(10.0 + jitter, 6.0, 0.0), State::Go), f64::from(k) * 0.1);
+        }
+        let p = at(&me);
+        assert!(p.standing_for(2.0, 2.0), "stood 2 s: {p:?}");
+        assert!(!p.standing_for(2.0, 2.1));
+        // Creeping 2 cm a tick is not standing: the steps add up past STILL_M.
+        let mut me = Traffic::new("chair1");
+        for k in 0..=20 {
+            me.hear(&say("chair2", pose(10.0 + 0.02 * f64::from(k), 6.0, 0.0), State::Go), f64::from(k) * 0.1);
+        }
+        assert!(!at(&me).standing_for(2.0, 0.5), "{:?}", at(&me));
+        // Turning on the spot is not standing either.
+        let mut me = Traffic::new("chair1");
+        for k in 0..=20 {
+            me.hear(&say("chair2", pose(10.0, 6.0, 5.0 * f64::from(k)), State::Go), f64::from(k) * 0.1);
+        }
+        assert!(!at(&me).standing_for(2.0, 0.5));
     }
 }
