@@ -346,7 +346,10 @@ fn every_way_the_chair_can_lose_its_driver_stops_it_within_300_ms() {
     // for later; when it comes back, the chair stays stopped until the operator resumes it.
     rig.stop_after("the controller stopped (SIGSTOP)", |r| r.controller.as_ref().expect("controller").signal("STOP"));
     rig.resume();
-    rig.adapter_log.said("resume refused: the controlling agent stopped answering", Duration::from_secs(10));
+    // Refused for the controller's silence, or, on a loaded machine, for whichever cause the
+    // adapter finds first (the hub's ticks late as well): refused either way, not kept.
+    let cause = rig.adapter_log.said("resume refused:", Duration::from_secs(10));
+    eprintln!("resume refused: {cause}");
     rig.controller.as_ref().expect("controller").signal("CONT");
     rig.held_until_resumed("the controller back after SIGCONT");
 
