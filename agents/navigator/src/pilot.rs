@@ -32,6 +32,33 @@ const STOP_SHORT_M: f64 = 0.8;
 /// The way out of a zone must be clear of waiting chairs for this far (path length, metres)
 /// before the chair goes in: a chair never stands in a zone waiting for room beyond it.
 const EXIT_ROOM_M: f64 = 1.6;
+/// A chair that has not moved for this long (seconds) while it has somewhere to go is stuck.
+const STUCK_S: f64 = 5.0;
+/// Stuck chairs this near each other (axle to axle, metres) settle who backs off.
+const BACKOFF_NEAR_M: f64 = 4.5;
+/// A chair backs off this far along the way it came (metres), at this speed (m/s)...
+const BACKOFF_M: f64 = 2.0;
+/// See [`BACKOFF_M`].
+const BACKOFF_SPEED: f64 = 0.15;
+/// The way back ends where the chair's heading then differs from its heading now by more
+/// than this, radians.
+const BACKOFF_TURN_RAD: f64 = 0.5;
+/// ...and then stands this long (seconds), so that the others go through first.
+const BACKOFF_HOLD_S: f64 = 6.0;
+/// Where the chair has been is kept every this many metres...
+const TRAIL_STEP_M: f64 = 0.1;
+/// ...for this many points.
+const TRAIL_LEN: usize = 60;
+
+/// Backing off out of a deadlock: along the way the chair came (known to be free of walls
+/// and what it has seen), then standing a while.
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Backoff {
+    /// Driving back, since this time (seconds).
+    Driving(f64),
+    /// Standing until this time, seconds.
+    Holding(f64),
+}
 
 /// What a tick produced.
 #[derive(Debug, Clone, PartialEq)]
@@ -62,6 +89,12 @@ pub struct Pilot {
     zone_wait: Option<Vec<V2>>,
     /// "Cannot say the claim" was logged.
     claim_too_long_said: bool,
+    /// Where the chair has been, oldest first, [`TRAIL_STEP_M`] apart.
+    trail: Vec<Pose>,
+    /// Where the chair stands, and since when (seconds).
+    still: Option<(Pose, f64)>,
+    /// Backing off out of a deadlock.
+    backoff: Option<Backoff>,
 }
 
 impl Pilot {
@@ -78,6 +111,134 @@ impl Pilot {
             zones: Zones::none(),
             zone_wait: None,
             claim_too_long_said: false,
+            trail: Vec::new(),
+            still: None,
+            backoff: None,
+        }
+    }
+
+    /// Keeps where the chair has been, and since when it has stood.
+    fn note_motion(&mut self, me: Pose, now: f64) {
+        // Backing off retraces the trail: it adds nothing to it.
+        if self.backoff.is_none() && self.trail.last().is_none_or(|p| (p.pos() - me.pos()).norm() >= TRAIL_STEP_M) {
+            if self.trail.len() == TRAIL_LEN {
+                self.trail.remove(0);
+            }
+            self.trail.push(me);
+        }
+        let moved = self.still.is_none_or(|(p, _)| {
+            (p.pos() - me.pos()).norm() > traffic::STILL_M
+                || crate::geom::wrap_rad(p.theta - me.theta).abs() > traffic::STILL_RAD
+        });
+        if moved {
+            self.still = Some((me, now));
+        }
+    }
+
+    /// Whether the chair has not moved for `s` seconds.
+    fn stood_for(&self, now: f64, s: f64) -> bool {
+        self.still.is_some_and(|(_, since)| now - since >= s)
+    }
+
+    /// Whether the chair is stuck: it has somewhere to go and has not moved for
+    /// [`STUCK_S`].
+    fn stuck(&self, now: f64) -> bool {
+        !self.nav.finished() && self.traffic.may_be_stuck() && self.stood_for(now, STUCK_S)
+    }
+
+    /// Of the chairs stuck near each other, all but the one whose name sorts first back
+    /// off; each side decides from what it heard, so two never wait for each other.
+    fn should_back_off(&self, me: Pose) -> bool {
+        self.traffic.peers().iter().any(|p| {
+            p.state == State::Stuck && (p.pose.pos() - me.pos()).norm() <= BACKOFF_NEAR_M && p.name < self.name
+        })
+    }
+
+    /// The way back along the trail, [`BACKOFF_M`] of it (reversing, the chair's heading as
+    /// it drove there), from where it stands.
+    fn way_back(&self, me: Pose) -> Vec<crate::hybrid::PathPose> {
+        use crate::hybrid::{Motion, PathPose};
+        let mut path = vec![PathPose { pose: me, motion: Motion::Start }];
+        let mut along = 0.0;
+        let mut last = me.pos();
+        for p in self.trail.iter().rev() {
+            let d = (p.pos() - last).norm();
+            if d < 0.5 * TRAIL_STEP_M {
+                continue;
+            }
+            // Only as far back as the chair drove with about the heading it has: a turn on
+            // the way is not retraced well in reverse (it swung a corner into a wall).
+            if crate::geom::wrap_rad(p.theta - me.theta).abs() > BACKOFF_TURN_RAD {
+                break;
+            }
+            along += d;
+            last = p.pos();
+            path.push(PathPose { pose: *p, motion: Motion::Reverse(0.0) });
+            if along >= BACKOFF_M {
+                break;
+            }
+        }
+        path
+    }
+
+    /// The deadlock breaker, after the traffic rule: a stuck chair says so; if another stuck
+    /// chair near it goes first, it backs off along the way it came and stands aside a
+    /// while. Whether it is backing off (the traffic rule's decision is then set aside).
+    fn back_off(&mut self, me: Pose, now: f64, notes: &mut Vec<String>) -> bool {
+        match self.backoff {
+            // Driving back takes BACKOFF_M at BACKOFF_SPEED; one that takes much longer (held
+            // by its safety layer, or off its line) ends where it is.
+            Some(Backoff::Driving(since))
+                if self.nav.manoeuvring() && now - since < 3.0 * BACKOFF_M / BACKOFF_SPEED =>
+            {
+                true
+            }
+            Some(Backoff::Driving(_)) => {
+                self.backoff = Some(Backoff::Holding(now + BACKOFF_HOLD_S));
+                self.nav.hold();
+                // Driven back: the trail now ends at its point nearest where the chair stands.
+                if let Some(k) = self
+                    .trail
+                    .iter()
+                    .enumerate()
+                    .min_by(|a, b| (a.1.pos() - me.pos()).norm().total_cmp(&(b.1.pos() - me.pos()).norm()))
+                    .map(|(k, _)| k)
+                {
+                    self.trail.truncate(k + 1);
+                }
+                notes.push(format!("backed off at t {now:.1} s; letting the others through"));
+                true
+            }
+            Some(Backoff::Holding(until)) if now < until => {
+                self.nav.hold();
+                true
+            }
+            Some(Backoff::Holding(_)) => {
+                self.backoff = None;
+                self.still = Some((me, now));
+                self.traffic.set_stuck(false);
+                self.nav.resume();
+                notes.push(format!("going on at t {now:.1} s after backing off"));
+                false
+            }
+            None => {
+                let stuck = self.stuck(now);
+                self.traffic.set_stuck(stuck);
+                if !stuck || !self.should_back_off(me) {
+                    return false;
+                }
+                let path = self.way_back(me);
+                // Less than half a metre back makes no room.
+                if path.len() < 6 {
+                    return false;
+                }
+                notes.push(format!("stuck at t {now:.1} s near another stuck chair; backing off"));
+                self.traffic.release_zones();
+                self.zone_wait = None;
+                self.nav.manoeuvre(&path, BACKOFF_SPEED);
+                self.backoff = Some(Backoff::Driving(now));
+                true
+            }
         }
     }
 
@@ -214,7 +375,7 @@ impl Pilot {
         // their safety layer): planning through them only makes both stop again.
         let parked: Vec<(Pose, Footprint)> = peers
             .iter()
-            .filter(|p| matches!(p.state, State::Park | State::Wait) || p.standing_for(now, STANDING_S))
+            .filter(|p| p.state.stands() || p.state == State::Wait || p.standing_for(now, STANDING_S))
             .map(|p| (p.pose, p.footprint))
             .collect();
         self.nav.set_peers(all, &parked);
@@ -222,6 +383,7 @@ impl Pilot {
         let me = self.nav.pose();
         let own = self.nav.model().footprint;
         let mut notes = Vec::new();
+        self.note_motion(me, now);
         // A chair at its last checkpoint stands for good (and says `park`): it negotiates
         // nothing.
         let decision = if self.nav.finished() { Decision::Go } else { self.traffic.decide(me, &own, now) };
@@ -231,11 +393,13 @@ impl Pilot {
         // A chair that yields to another head-on goes nowhere until the other has passed: its
         // claim on zones would make the other wait for it (the two rules would then wait for
         // each other), so it lets them go and claims again when it drives on.
-        if matches!(self.traffic.state(), State::Pull | State::Park) && self.traffic.claim().is_some() {
+        if matches!(self.traffic.state(), State::Pull | State::Park | State::Stuck) && self.traffic.claim().is_some() {
             self.traffic.release_zones();
             self.zone_wait = None;
         }
+        let backing = self.back_off(me, now, &mut notes);
         match decision {
+            _ if backing => {}
             Decision::Go => {
                 if self.zone_gate(me, now, &mut notes) {
                     if !self.nav.manoeuvring() && self.nav.holding() {
@@ -246,7 +410,14 @@ impl Pilot {
             }
             Decision::Hold => {
                 let pulling = self.traffic.state() == State::Pull;
-                if pulling && self.nav.manoeuvring() {
+                if pulling && self.nav.manoeuvring() && self.stood_for(now, STUCK_S) {
+                    // The pull-over makes no headway (its safety layer holds it): give it up
+                    // and stand where it is; standing, it soon counts as stuck, and the other
+                    // plans round it.
+                    self.nav.hold();
+                    self.traffic.pull_lost();
+                    notes.push(format!("pulling over got nowhere by t {now:.1} s; standing"));
+                } else if pulling && self.nav.manoeuvring() {
                     // The pull-over is under way.
                 } else if pulling && self.nav.manoeuvre_lost() {
                     // Strayed from the curve: not parked where it should be; look again.
@@ -274,6 +445,8 @@ impl Pilot {
                         ));
                         self.nav.manoeuvre(&p.path, PULL_OVER_SPEED);
                         self.traffic.pulling();
+                        // Its headway is judged from now.
+                        self.still = Some((me, now));
                         self.no_room_said = false;
                     }
                     None => {

@@ -111,15 +111,24 @@ pub enum State {
     /// Standing still for good or for a while (parked for another chair to pass, or at its
     /// last checkpoint): plan round it.
     Park,
+    /// Standing, with no way on for a while (or backing off to make one): plan round it.
+    /// Of the chairs stuck near each other, all but the one whose name sorts first back off.
+    Stuck,
 }
 
 impl State {
+    /// Whether a chair that says this stands still and is to be planned round.
+    pub fn stands(self) -> bool {
+        matches!(self, State::Park | State::Stuck)
+    }
+
     fn word(self) -> &'static str {
         match self {
             State::Go => "go",
             State::Pull => "pull",
             State::Wait => "wait",
             State::Park => "park",
+            State::Stuck => "stuck",
         }
     }
 }
@@ -191,6 +200,7 @@ pub fn decode(bytes: &[u8], heard_s: f64) -> Option<Peer> {
         "pull" => State::Pull,
         "wait" => State::Wait,
         "park" => State::Park,
+        "stuck" => State::Stuck,
         _ => return None,
     };
     let (length, width, com) = (num(w.next())?, num(w.next())?, num(w.next())?);
@@ -274,6 +284,8 @@ pub struct Traffic {
     claim: Option<Claim>,
     /// Standing still until the zones claimed are ours.
     zone_waiting: bool,
+    /// Stuck, or backing off ([`State::Stuck`]).
+    stuck: bool,
     /// [`CLASH_SLACK_M`], or less for chairs that keep right.
     clash_slack: f64,
 }
@@ -300,6 +312,7 @@ impl Traffic {
             crossed: Vec::new(),
             claim: None,
             zone_waiting: false,
+            stuck: false,
             clash_slack: CLASH_SLACK_M,
         }
     }
@@ -362,6 +375,11 @@ impl Traffic {
         self.zone_waiting = false;
     }
 
+    /// Says whether we are stuck (or backing off): we then say `stuck`.
+    pub fn set_stuck(&mut self, stuck: bool) {
+        self.stuck = stuck;
+    }
+
     /// Says whether we stand still waiting for zones (we then say `wait`: plan round us).
     pub fn set_zone_waiting(&mut self, waiting: bool) {
         self.zone_waiting = waiting;
@@ -382,12 +400,23 @@ impl Traffic {
     /// What we say we are doing.
     pub fn state(&self) -> State {
         match self.role {
-            Role::PullingOver { .. } => State::Pull,
+            Role::PullingOver { moving: true, .. } => State::Pull,
             Role::Parked { .. } => State::Park,
+            // Stuck outranks waiting for a pull-over that finds no room: the other then plans
+            // round us, or, stuck too, one of us backs off.
+            _ if self.stuck => State::Stuck,
+            Role::PullingOver { .. } => State::Pull,
             Role::Waiting { .. } => State::Wait,
             _ if self.zone_waiting => State::Wait,
             _ => State::Go,
         }
+    }
+
+    /// Whether standing still now may be a deadlock: not while a negotiation goes its way
+    /// (waiting for the other to pull over, pulling over, parked for it, passing it), only
+    /// with none going on or as a yielder that finds no room.
+    pub fn may_be_stuck(&self) -> bool {
+        matches!(self.role, Role::Free | Role::PullingOver { moving: false, .. })
     }
 
     /// Whether a negotiation is going on.
@@ -466,14 +495,14 @@ impl Traffic {
                 // No room found yet: look again while the other is still there, and give up
                 // after as long as the other waits (it then goes on regardless).
                 return match self.peer(&peer).cloned() {
-                    Some(p) if p.state != State::Park && now_s - since_s <= WAIT_LIMIT_S => Decision::PullOver(p),
+                    Some(p) if !p.state.stands() && now_s - since_s <= WAIT_LIMIT_S => Decision::PullOver(p),
                     _ => self.finish(peer),
                 };
             }
             Role::Parked { peer } => {
                 // Gone past, or standing for good itself (arrived beside us, or parked for a
                 // third chair): it will not pass, so we go on and plan round it.
-                let stands = self.peer(&peer).is_some_and(|p| p.state == State::Park);
+                let stands = self.peer(&peer).is_some_and(|p| p.state.stands());
                 return if stands || self.gone_past(me, &peer) { self.finish(peer) } else { Decision::Hold };
             }
             Role::Waiting { peer, since_s } => {
@@ -482,7 +511,7 @@ impl Traffic {
                 }
                 match self.peer(&peer).map(|p| p.state) {
                     None => return self.finish(peer),
-                    Some(State::Park) => {
+                    Some(State::Park | State::Stuck) => {
                         self.role = Role::Passing { peer };
                         return Decision::Go;
                     }
@@ -509,7 +538,7 @@ impl Traffic {
             !self.crossed.contains(&p.name)
                 // One already parked is planned round; one already pulling over may have
                 // seen the meeting a moment before we did.
-                && p.state != State::Park
+                && !p.state.stands()
                 && d <= MEET_M
                 && facing(me, p.pose)
                 && along(me, p.pose) > 0.5

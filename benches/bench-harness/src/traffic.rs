@@ -126,11 +126,12 @@ fn children(parent: u32) -> Vec<(u32, u64)> {
     .collect()
 }
 
-/// The scenario file of one run: the ward with `chairs` navigators, `seconds` long.
+/// The scenario file of one run: the ward with `chairs` navigators, `seconds` long, as
+/// `builtin:ward` has them (keeping right).
 fn scenario(chairs: usize, seconds: f64) -> String {
     format!(
         "# Written by iwsim bench traffic.\nname = \"traffic-{chairs}\"\nlab = \"builtin:ward\"\nseconds = {seconds}\n\
-         cycle_ms = 100\nnoise = true\n\n[crowd]\nchairs = {chairs}\n"
+         cycle_ms = 100\nnoise = true\n\n[crowd]\nchairs = {chairs}\noptions = {{ keep-right = 1.0 }}\n"
     )
 }
 
