@@ -825,4 +825,25 @@ mod tests {
         assert!(!layer.occupied(i));
         assert!(layer.cells().is_empty());
     }
+
+    #[test]
+    fn lanes_keep_right_in_a_corridor_and_end_near_a_doorway() {
+        // A 2 m corridor (y 5 to 7) with a 1 m doorway in its north wall at x 10.
+        let mut map = NavMap::empty(20.0, 12.0);
+        map.walls.push(MapWall::rectangle(0.5, 4.9, 19.5, 5.0, false));
+        map.walls.push(MapWall::rectangle(0.5, 7.0, 9.5, 7.1, false));
+        map.walls.push(MapWall::rectangle(10.5, 7.0, 19.5, 7.1, false));
+        let r = StaticRaster::new(&map, 0.05);
+        let at = |x: f64, y: f64, deg: f64| r.off_lane(&crate::geom::Pose::from_deg(x, y, deg));
+        // Eastbound: the right lane is the south half; its middle (y 5.5) costs nothing.
+        assert!(at(4.0, 5.5, 0.0) < 0.05, "{}", at(4.0, 5.5, 0.0));
+        assert!((at(4.0, 6.5, 0.0) - 1.0).abs() < 0.1, "{}", at(4.0, 6.5, 0.0));
+        // Westbound the other way round.
+        assert!(at(4.0, 6.5, 180.0) < 0.05);
+        assert!(at(4.0, 5.5, 180.0) > 0.9);
+        // Within 1.2 m of the doorway the lane ends: a chair turning out of it needs the width.
+        assert_eq!(at(9.5, 6.5, 0.0), 0.0);
+        assert_eq!(at(11.2, 6.5, 0.0), 0.0);
+        assert!(at(12.5, 6.5, 0.0) > 0.9);
+    }
 }

@@ -2,7 +2,8 @@
 //!
 //! Every navigator says where it is and what it is doing, `nav NAME X Y HEADING STATE LENGTH
 //! WIDTH COM` ([`encode`]), where STATE is `go`, `pull` (pulling over), `wait` (standing still
-//! until the chair ahead has pulled over) or `park` (standing still: parked for someone, or
+//! until the chair ahead has pulled over), `stuck` (no way on for a while: see
+//! [`State::Stuck`]) or `park` (standing still: parked for someone, or
 //! done). When two of them are within [`MEET_M`], face each
 //! other, each has the other ahead and their lines are close enough to clash, both apply the
 //! same rule to what they heard — the name that sorts last yields:
@@ -846,5 +847,35 @@ mod tests {
             me.hear(&say("chair2", pose(10.0, 6.0, 5.0 * f64::from(k)), State::Go), f64::from(k) * 0.1);
         }
         assert!(!at(&me).standing_for(2.0, 0.5));
+    }
+
+    #[test]
+    fn a_yielder_with_no_room_that_is_stuck_says_so_and_the_other_plans_round_it() {
+        let fp = BODY.footprint();
+        let (a, b) = (pose(15.0, 6.0, 0.0), pose(21.0, 6.0, 180.0));
+        let mut one = Traffic::new("chair1");
+        let mut two = Traffic::new("chair2");
+        one.hear(&say("chair2", b, State::Go), 0.0);
+        two.hear(&say("chair1", a, State::Go), 0.0);
+        assert_eq!(one.decide(a, &fp, 0.1), Decision::Hold);
+        assert!(matches!(two.decide(b, &fp, 0.1), Decision::PullOver(_)));
+        // No room: chair2 looks and says `pull`; chair1 waits.
+        one.hear(encode("chair2", b, two.state(), &BODY).as_bytes(), 0.2);
+        assert_eq!(one.decide(a, &fp, 0.3), Decision::Hold);
+        // Stuck (its pilot's word after 5 s): it says `stuck`, which outranks `pull`...
+        assert!(two.may_be_stuck(), "a yielder that finds no room may be stuck");
+        two.set_stuck(true);
+        assert_eq!(two.state(), State::Stuck);
+        let m = encode("chair2", b, two.state(), &BODY);
+        assert!(m.contains(" stuck "), "{m}");
+        // ...and chair1 stops waiting for it: it drives on and plans round it.
+        one.hear(m.as_bytes(), 5.5);
+        assert_eq!(one.decide(a, &fp, 5.6), Decision::Go);
+        assert!(!one.may_be_stuck(), "passing is a negotiation going its way");
+        // A chair waiting for the other to pull over is never stuck by itself.
+        let mut three = Traffic::new("chair0");
+        three.hear(&say("chair2", b, State::Go), 0.0);
+        assert_eq!(three.decide(a, &fp, 0.1), Decision::Hold);
+        assert!(!three.may_be_stuck());
     }
 }

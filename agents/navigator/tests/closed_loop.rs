@@ -549,12 +549,12 @@ mod corridor_swap {
     }
 
     fn simulate(chairs: &[Chair], seconds: f64, seed: u64) -> Swap {
-        simulate_on("liacc", chairs, seconds, seed, false)
+        simulate_on("liacc", chairs, seconds, seed, false, 0.0)
     }
 
-    /// As [`simulate`], on built-in map `map`, with the zone rule on when `zone_claims` (a
-    /// ward junction test with it comes with the rule's tuning, issue 26).
-    fn simulate_on(map: &str, chairs: &[Chair], seconds: f64, seed: u64, zone_claims: bool) -> Swap {
+    /// As [`simulate`], on built-in map `map`, with the zone rule on when `zone_claims` and
+    /// chairs keeping right at `keep_right` (0: off).
+    fn simulate_on(map: &str, chairs: &[Chair], seconds: f64, seed: u64, zone_claims: bool, keep_right: f64) -> Swap {
         let trace = std::env::var_os("NAV_TRACE").is_some();
         let lab = builtin::map(map).expect("a built-in map").lab.clone();
         let params = Params::default();
@@ -572,6 +572,7 @@ mod corridor_swap {
                 checkpoints: vec![Checkpoint::from(goal)],
                 start: Pose::from_deg(c.start[0], c.start[1], c.start[2]),
                 encoder_ticks_per_m: ticks_per_m,
+                keep_right,
                 ..NavConfig::intellwheels()
             };
             let handle = world.add_robot(chair_spec(&cfg, c.name)).expect("a valid chair");
@@ -669,5 +670,84 @@ mod corridor_swap {
             assert!(r.min_gap_m > 0.05, "seed {}: the chairs came within {:.3} m", r.seed, r.min_gap_m);
             assert!(r.min_clearance_m > 0.02, "seed {}: {:.3} m from a wall", r.seed, r.min_clearance_m);
         }
+    }
+
+    /// A deadlock made on purpose: four chairs meet where two doorways face each other
+    /// across the ward's corridor, one from each room and one along the corridor each way,
+    /// each bound across the junction. They keep right, as `builtin:ward` has them; all must
+    /// arrive untouched within 110 s (stuck chairs back off until the knot comes undone:
+    /// 47–94 s; without backing off they stood until the traffic rule's 40 s limits ran out,
+    /// and took 80–124 s).
+    #[test]
+    fn four_chairs_meeting_at_a_ward_junction_untie_the_knot_and_all_arrive_untouched() {
+        let chairs = [
+            Chair { name: "chair1", start: [12.5, 3.2, 90.0], goal: [12.5, 11.0] },
+            Chair { name: "chair2", start: [12.5, 10.8, -90.0], goal: [12.5, 2.8] },
+            Chair { name: "chair3", start: [8.0, 6.5, 0.0], goal: [17.5, 6.5] },
+            Chair { name: "chair4", start: [17.0, 7.5, 180.0], goal: [7.5, 7.5] },
+        ];
+        let limit = 110.0;
+        let runs: Vec<Swap> = std::thread::scope(|scope| {
+            let handles: Vec<_> = seed_list(1..=2)
+                .into_iter()
+                .map(|seed| {
+                    scope.spawn({
+                        let chairs = &chairs;
+                        move || simulate_on("ward", chairs, limit, seed, false, 1.0)
+                    })
+                })
+                .collect();
+            handles.into_iter().map(|h| h.join().expect("a simulation thread")).collect()
+        });
+        assert!(!runs.is_empty());
+        for r in &runs {
+            eprintln!("ward junction: {r:?}");
+        }
+        for r in &runs {
+            for (k, (arrived, _, contacts, _)) in r.chairs.iter().enumerate() {
+                assert!(*arrived, "seed {}: {} did not arrive within {limit} s: {r:?}", r.seed, chairs[k].name);
+                assert_eq!(*contacts, 0, "seed {}: {} touched something: {r:?}", r.seed, chairs[k].name);
+            }
+            assert!(r.min_gap_m > 0.0, "seed {}: two chairs touched", r.seed);
+        }
+    }
+
+    /// Three chairs in the LIACC corridor (1.78 m): chair2 and chair3 westbound one behind
+    /// the other, chair1 eastbound. None touches another or a wall on any of 10 seeds (they
+    /// used to: the safety layer now stops short of a chair that said where it is); all three
+    /// arrive on at least 6 (the corridor is too narrow for a chair to pass one that cannot
+    /// pull over far enough, and backing off does not yet clear it).
+    #[test]
+    fn three_chairs_in_one_corridor_two_one_way_and_one_the_other_never_touch() {
+        let chairs = [
+            Chair { name: "chair1", start: [13.0, 6.0, 0.0], goal: [25.5, 6.0] },
+            Chair { name: "chair2", start: [22.5, 6.0, 180.0], goal: [12.0, 6.0] },
+            Chair { name: "chair3", start: [25.0, 6.0, 180.0], goal: [14.5, 6.0] },
+        ];
+        let limit = 150.0;
+        let runs: Vec<Swap> = std::thread::scope(|scope| {
+            let handles: Vec<_> = seed_list(1..=10)
+                .into_iter()
+                .map(|seed| {
+                    scope.spawn({
+                        let chairs = &chairs;
+                        move || simulate(chairs, limit, seed)
+                    })
+                })
+                .collect();
+            handles.into_iter().map(|h| h.join().expect("a simulation thread")).collect()
+        });
+        assert!(!runs.is_empty());
+        for r in &runs {
+            eprintln!("three in a corridor: {r:?}");
+        }
+        for r in &runs {
+            for (k, (_, _, contacts, _)) in r.chairs.iter().enumerate() {
+                assert_eq!(*contacts, 0, "seed {}: {} touched something: {r:?}", r.seed, chairs[k].name);
+            }
+            assert!(r.min_gap_m > 0.0, "seed {}: two chairs touched", r.seed);
+        }
+        let all_arrived = runs.iter().filter(|r| r.chairs.iter().all(|c| c.0)).count();
+        assert!(all_arrived * 10 >= runs.len() * 6, "all three arrived on {all_arrived} of {} seeds", runs.len());
     }
 }
