@@ -118,6 +118,7 @@ pub struct HybridParams {
     /// ([`CostToGo::downhill`]), beyond [`TURN_SLACK_RAD`]: the cost-to-go knows nothing of
     /// heading, so without it the search fills every pose that faces the wrong way before it
     /// turns (a chair leaving a room through a doorway spent most of its expansions so).
+    /// 0 (the default) is off; the navigator's coarse fallback search uses it.
     pub turn_heuristic: f64,
 }
 
@@ -147,7 +148,7 @@ impl Default for HybridParams {
             horizon_m: 7.0,
             check_step_m: 0.05,
             keep_right: 0.0,
-            turn_heuristic: 0.8,
+            turn_heuristic: 0.0,
         }
     }
 }
