@@ -5,8 +5,9 @@
 //! Per crowd size, the median of `--runs` runs (seeds 1, 2, …) with min and max of:
 //! - **ticks/s** over the run (from the hub's first step to its last), and in the run's
 //!   slowest second, read by an observer of the session (the hub's tick every 20 ms);
-//! - **CPU per tick** of the hub and of each navigator, from `/proc/PID/stat` (user + system
-//!   time, every thread) sampled every 20 ms until each process exits, over the run's ticks;
+//! - **CPU per tick** of the hub and of each navigator (user + system time, every thread, over
+//!   the run's ticks), from the run's `summary.json`, where the runner writes each process's
+//!   resource use as it reaps it: exact even for a run shorter than a sampling interval;
 //! - **how the traffic went**, from the run's `summary.json` (judged from its recording):
 //!   chairs arrived, contacts of any kind, deadlocks.
 //!
@@ -23,7 +24,7 @@ use anyhow::Context as _;
 use crate::args::BenchTrafficArgs;
 use crate::repeat::{Spread, interleaved};
 
-/// How often the run's processes and its tick are looked at.
+/// How often the run's tick is looked at.
 const SAMPLE_EVERY: Duration = Duration::from_millis(20);
 /// The window of the slowest-second figure.
 const WINDOW_S: f64 = 1.0;
@@ -83,49 +84,6 @@ pub fn tick_rates(samples: &[(f64, u64)]) -> Option<(f64, Option<f64>)> {
     Some((overall, slowest))
 }
 
-/// A process's parent and its CPU time so far (user + system, clock ticks), from the text of
-/// `/proc/PID/stat`; `None` when it does not parse.
-pub fn parent_and_cpu(stat: &str) -> Option<(u32, u64)> {
-    // The command name is in parentheses and may hold spaces or parentheses: the fields that
-    // follow start after the last ')'.
-    let rest = &stat[stat.rfind(')')? + 1..];
-    let f: Vec<&str> = rest.split_whitespace().collect();
-    let ppid = f.get(1)?.parse().ok()?;
-    let utime: u64 = f.get(11)?.parse().ok()?;
-    let stime: u64 = f.get(12)?.parse().ok()?;
-    Some((ppid, utime + stime))
-}
-
-/// What a child of `iwsim run` is, from its command line.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord)]
-enum Role {
-    Hub,
-    Navigator,
-    Other,
-}
-
-fn role_of(pid: u32) -> Role {
-    let Ok(cmdline) = std::fs::read(format!("/proc/{pid}/cmdline")) else { return Role::Other };
-    let args: Vec<&[u8]> = cmdline.split(|&b| b == 0).collect();
-    match args.get(1..3) {
-        Some([b"hub", _]) => Role::Hub,
-        Some([b"agent", b"navigator"]) => Role::Navigator,
-        _ => Role::Other,
-    }
-}
-
-/// The children of `parent` now, with their CPU time so far.
-fn children(parent: u32) -> Vec<(u32, u64)> {
-    let Ok(dir) = std::fs::read_dir("/proc") else { return Vec::new() };
-    dir.filter_map(|e| {
-        let pid: u32 = e.ok()?.file_name().to_str()?.parse().ok()?;
-        let stat = std::fs::read_to_string(format!("/proc/{pid}/stat")).ok()?;
-        let (ppid, cpu) = parent_and_cpu(&stat)?;
-        (ppid == parent).then_some((pid, cpu))
-    })
-    .collect()
-}
-
 /// The scenario file of one run: the ward with `chairs` navigators, `seconds` long, as
 /// `builtin:ward` has them (keeping right).
 fn scenario(chairs: usize, seconds: f64) -> String {
@@ -151,14 +109,9 @@ fn measure(chairs: usize, seed: u64, seconds: f64, dir: &Path) -> anyhow::Result
     runner::signals::die_with_parent(&mut cmd);
     let mut child = cmd.spawn().context("starting iwsim run")?;
     let start = Instant::now();
-    let mut cpu: BTreeMap<u32, (Role, u64)> = BTreeMap::new();
     let mut timeline: Vec<(f64, u64)> = Vec::new();
     let mut observer: Option<observer::Observer> = None;
     let status = loop {
-        for (pid, ticks) in children(child.id()) {
-            let entry = cpu.entry(pid).or_insert_with(|| (role_of(pid), 0));
-            entry.1 = entry.1.max(ticks);
-        }
         if observer.is_none() {
             observer = observer::Observer::connect_within(&session, "bench-traffic", Duration::ZERO).ok();
         }
@@ -185,31 +138,25 @@ fn measure(chairs: usize, seed: u64, seconds: f64, dir: &Path) -> anyhow::Result
         serde_json::from_str(&text).with_context(|| format!("reading {}", summary_path.display()))?;
     let ticks = summary["ticks"].as_u64().unwrap_or(0).max(1);
     let (ticks_per_s, slowest_window_ticks_per_s) = tick_rates(&timeline).unwrap_or((0.0, None));
-    let hz = clock_ticks_per_s();
-    let seconds_of = |role: Role| cpu.values().filter(|(r, _)| *r == role).map(|&(_, t)| t as f64 / hz).sum::<f64>();
-    let navigators = cpu.values().filter(|(r, _)| *r == Role::Navigator).count();
+    // The runner names its processes `hub` and `agent K (KIND)`.
+    let cpu: BTreeMap<String, f64> = serde_json::from_value(summary["cpu_s"].clone())
+        .with_context(|| format!("{} states no CPU time per process", summary_path.display()))?;
+    let navigators: Vec<f64> = cpu.iter().filter(|(k, _)| k.ends_with("(navigator)")).map(|(_, &v)| v).collect();
+    let hub_s = *cpu.get("hub").with_context(|| format!("{} states no CPU time of the hub", summary_path.display()))?;
     let traffic = &summary["traffic"];
     let n = |key: &str| traffic[key].as_u64().unwrap_or(0);
     Ok(TrafficRun {
         ticks,
         ticks_per_s,
         slowest_window_ticks_per_s,
-        hub_us_per_tick: seconds_of(Role::Hub) * 1e6 / ticks as f64,
-        navigator_us_per_tick: seconds_of(Role::Navigator) * 1e6 / ticks as f64 / navigators.max(1) as f64,
-        navigators,
+        hub_us_per_tick: hub_s * 1e6 / ticks as f64,
+        navigator_us_per_tick: navigators.iter().sum::<f64>() * 1e6 / ticks as f64 / navigators.len().max(1) as f64,
+        navigators: navigators.len(),
         arrived: n("arrived"),
         chairs: n("chairs"),
         contacts: n("contacts_chair") + n("contacts_wall") + n("contacts_obstacle"),
         deadlocks: n("deadlocks"),
     })
-}
-
-/// The kernel's clock ticks per second (`/proc/PID/stat`'s unit).
-fn clock_ticks_per_s() -> f64 {
-    // SAFETY: sysconf reads a constant of the system; it has no memory effects.
-    #[allow(unsafe_code)]
-    let hz = unsafe { libc::sysconf(libc::_SC_CLK_TCK) };
-    if hz > 0 { hz as f64 } else { 100.0 }
 }
 
 /// The machine's CPU model, as `/proc/cpuinfo` names it, and its cores.
@@ -333,12 +280,5 @@ mod tests {
         assert!((overall - (310.0 - 10.0) / (4.5 - 0.6)).abs() < 1e-9, "{overall}");
         assert!((slowest.expect("a window") - 10.0).abs() < 1e-9, "{slowest:?}");
         assert_eq!(tick_rates(&[(0.0, 0), (1.0, 0)]), None, "no step");
-    }
-
-    #[test]
-    fn a_stat_line_gives_the_parent_and_the_cpu_time_whatever_the_command_name() {
-        let stat = "4242 (iwsim (agent) x) S 4200 4242 4200 0 -1 4194560 100 0 0 0 37 5 0 0 20 0 3 0 1 2 3";
-        assert_eq!(parent_and_cpu(stat), Some((4200, 42)));
-        assert_eq!(parent_and_cpu("garbage"), None);
     }
 }

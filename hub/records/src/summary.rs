@@ -20,6 +20,7 @@
 //! # Ok::<(), Box<dyn std::error::Error>>(())
 //! ```
 
+use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
@@ -142,6 +143,11 @@ pub struct RunSummary {
     /// The run's traffic, when two or more robots have routes.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub traffic: Option<TrafficSummary>,
+    /// The CPU time (user + system, seconds, to the millisecond) of each of the run's
+    /// processes, by what the runner calls it (`hub`, `agent 1 (navigator)`, …): measured,
+    /// like `wall_s`, so it differs between equal runs.
+    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
+    pub cpu_s: BTreeMap<String, f64>,
 }
 
 impl RunSummary {
@@ -150,6 +156,7 @@ impl RunSummary {
     pub fn to_json(&self) -> String {
         let mut s = self.clone();
         s.wall_s = round_to(s.wall_s, 3);
+        s.cpu_s.values_mut().for_each(|v| *v = round_to(*v, 3));
         for r in &mut s.robots {
             r.distance_m = round_to(r.distance_m, 3);
             r.top_speed_mps = round_to(r.top_speed_mps, 4);
@@ -308,6 +315,7 @@ mod tests {
                 ..Default::default()
             }],
             traffic: None,
+            cpu_s: BTreeMap::from([("hub".into(), 0.123_456), ("agent 1 (navigator)".into(), 1.5)]),
         }
     }
 
@@ -322,7 +330,8 @@ mod tests {
                 r#""log":"chair1.csv","route":[1],"checkpoints_reached":1,"checkpoints_total":1,"reached_at_s":[12.3],"#,
                 r#""time_s":12.3,"collisions":1,"ticks":900,"distance_m":12.346,"top_speed_mps":0.49,"#,
                 r#""rise_time_s":1.2,"final_pose":[20.1235,6.1,-0.0],"arrived":false,"min_clearance_wall_m":null,"#,
-                r#""min_clearance_chair_m":null,"contacts_chair":0,"contacts_wall":0,"contacts_obstacle":0,"still_s":0.0}]}"#,
+                r#""min_clearance_chair_m":null,"contacts_chair":0,"contacts_wall":0,"contacts_obstacle":0,"still_s":0.0}],"#,
+                r#""cpu_s":{"agent 1 (navigator)":1.5,"hub":0.123}}"#,
                 "\n"
             )
         );

@@ -251,6 +251,8 @@ struct Kid {
     child: Child,
     what: String,
     status: Option<ExitStatus>,
+    /// The CPU time (user + system, seconds) it used, known once it is reaped.
+    cpu_s: Option<f64>,
     /// The threads copying its stderr (and the chair emulator's stdout).
     readers: Vec<JoinHandle<()>>,
 }
@@ -267,7 +269,7 @@ impl Kid {
         crate::signals::unblock_in_child(&mut command);
         crate::signals::die_with_parent(&mut command);
         let child = command.spawn().with_context(|| format!("starting the {what}"))?;
-        Ok(Self { child, what: what.to_owned(), status: None, readers: Vec::new() })
+        Ok(Self { child, what: what.to_owned(), status: None, cpu_s: None, readers: Vec::new() })
     }
 
     /// Copies the child's stderr, line by line, to `sink` (prefixed, unless the line already
@@ -301,12 +303,38 @@ impl Kid {
 
     /// How the child exited, if it has.
     fn exited(&mut self) -> Option<ExitStatus> {
-        if self.status.is_none()
-            && let Ok(Some(status)) = self.child.try_wait()
-        {
-            self.status = Some(status);
+        self.reap(false)
+    }
+
+    /// Reaps the child if it has exited (with `block`, once it has), and keeps how it exited
+    /// and the CPU time it used: the run's `summary.json` states each process's CPU exactly,
+    /// where sampling `/proc` from outside misses what a short-lived process did last.
+    #[allow(unsafe_code)] // wait4(2): std's wait does not give the child's resource use
+    fn reap(&mut self, block: bool) -> Option<ExitStatus> {
+        use std::os::unix::process::ExitStatusExt as _;
+        if self.status.is_some() {
+            return self.status;
         }
-        self.status
+        let pid = self.child.id() as libc::pid_t;
+        let mut raw = 0;
+        // SAFETY: rusage is plain integers, for which all zeroes is a value.
+        let mut usage: libc::rusage = unsafe { std::mem::zeroed() };
+        loop {
+            // SAFETY: wait4 writes only into the two locals it is given; the child is ours and
+            // not reaped yet (`status` is None), so its pid is still its own.
+            let got = unsafe { libc::wait4(pid, &mut raw, if block { 0 } else { libc::WNOHANG }, &mut usage) };
+            if got == pid {
+                let seconds = |t: libc::timeval| t.tv_sec as f64 + t.tv_usec as f64 * 1e-6;
+                self.status = Some(ExitStatus::from_raw(raw));
+                self.cpu_s = Some(seconds(usage.ru_utime) + seconds(usage.ru_stime));
+            } else if got == -1 && std::io::Error::last_os_error().kind() == std::io::ErrorKind::Interrupted {
+                continue;
+            } else if got == -1 {
+                // Not ours to wait for any more (reaped elsewhere): std says how it ended.
+                self.status = self.child.try_wait().ok().flatten();
+            }
+            return self.status;
+        }
     }
 
     /// Sends `signal` to the child if it still runs.
@@ -326,9 +354,7 @@ impl Kid {
     fn kill(&mut self) {
         if self.exited().is_none() {
             let _ = self.child.kill();
-            if let Ok(status) = self.child.wait() {
-                self.status = Some(status);
-            }
+            self.reap(true);
         }
     }
 
@@ -1057,6 +1083,7 @@ pub fn run_once(
     // An agent that fails (a navigator that did not arrive exits 1) fails the run's outcome,
     // not the runner: the summary still says what happened.
     failures.extend(agent_failures);
+    let cpu_s = procs.all().filter_map(|k| Some((k.what.clone(), k.cpu_s?))).collect();
     let summary = RunSummary {
         scenario: scenario.name.clone(),
         seed,
@@ -1070,6 +1097,7 @@ pub fn run_once(
         checkpoints: scenario.checkpoints.clone(),
         robots,
         traffic,
+        cpu_s,
     };
     let text = chair::summary_json(&summary, chair_summary.as_ref()).context("writing summary.json")?;
     std::fs::write(out.join("summary.json"), text)?;
