@@ -45,8 +45,9 @@ pub enum Command {
     /// (run.mcap) or from its robots' CSV logs.
     Plot(plot::PlotArgs),
     /// Runs a scenario (a TOML file or builtin:NAME): the hub, its agents and the viewer as
-    /// processes, then a summary from the robots' logs. Exit code 0 when the expected outcome
-    /// holds. Built in: dynamics, slalom, door, corridor-swap, demo.
+    /// processes, then a summary judged from the hub's recording of the run (run.mcap). Exit
+    /// code 0 when the expected outcome holds. Built in: dynamics, slalom, door, corridor-swap,
+    /// demo, slalom-real, slalom-augmented, ward.
     Run(runner::RunArgs),
     /// Runs an agent process.
     Agent {

@@ -31,6 +31,22 @@ fn map_check_summarises_every_built_in_lab() {
 }
 
 #[test]
+fn run_help_names_every_built_in_scenario() {
+    let out = iwsim(&["run", "--help"]);
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    // clap folds the text; the names are read from the unfolded words.
+    let words = text.split_whitespace().collect::<Vec<_>>().join(" ");
+    let listed = words.split("Built in:").nth(1).and_then(|t| t.split("Usage:").next()).unwrap_or_default();
+    let mut listed: Vec<&str> = listed.split(',').map(|n| n.trim().trim_end_matches('.')).collect();
+    let mut builtins: Vec<&str> = runner::scenario::BUILTINS.iter().map(|(name, _)| *name).collect();
+    listed.sort_unstable();
+    builtins.sort_unstable();
+    assert_eq!(listed, builtins, "{text}");
+    assert!(words.contains("judged from the hub's recording"), "{text}");
+}
+
+#[test]
 fn map_check_names_the_line_and_column_of_a_bad_corner() {
     let path = temp_file(
         "bad-corner.xml",
