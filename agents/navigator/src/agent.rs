@@ -66,6 +66,7 @@ fn config(args: &NavigatorArgs, header: &ipc_types::MapHeader) -> anyhow::Result
         encoder_ticks_per_m: ticks_per_m,
         margin_m: defaults.margin_m,
         keep_right: args.keep_right,
+        plan_allowance: args.plan_allowance.map(|n| n as usize),
     })
 }
 
@@ -169,6 +170,14 @@ fn drive(agent: &mut Agent, args: &NavigatorArgs) -> anyhow::Result<ExitCode> {
         agent_sdk::report!("navigator {name}: {cost}");
     }
     let nav = pilot.navigator();
+    let stats = nav.stats();
+    agent_sdk::report!(
+        "navigator {name}: {} searches ({} found nothing), {} nodes expanded, {} safety stops",
+        stats.plans,
+        stats.failed_plans,
+        stats.expansions,
+        stats.safety_stops
+    );
     let reached = nav.next_checkpoint().min(checkpoints.len());
     if nav.finished() {
         agent_sdk::report!(

@@ -155,6 +155,17 @@ pub struct BodyFrame {
 }
 
 impl BodyFrame {
+    /// The frame of a body at `origin` whose heading has cosine `c` and sine `s` (for callers
+    /// that carry a heading's cosine and sine along rather than the angle).
+    pub fn from_cos_sin(origin: V2, c: f64, s: f64) -> Self {
+        Self { origin, c, s }
+    }
+
+    /// Where the body's origin is, lab coordinates.
+    pub fn origin(&self) -> V2 {
+        self.origin
+    }
+
     /// A lab-frame point in the body frame.
     pub fn apply(&self, p: V2) -> V2 {
         (p - self.origin).rotate_cs(self.c, -self.s)
@@ -227,7 +238,9 @@ impl Footprint {
 
     /// Radius around the body's centre that holds the whole body.
     pub fn centre_reach(&self) -> f64 {
-        ((self.front + self.rear) / 2.0).hypot(self.half)
+        let along = (self.front + self.rear) / 2.0;
+        // sqrt, not libm's slower hypot: every collision check of a search asks.
+        (along * along + self.half * self.half).sqrt()
     }
 
     /// The body's centre at a pose.

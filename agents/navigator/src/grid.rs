@@ -53,6 +53,7 @@ impl GridSpec {
     }
 
     /// The cell nearest to `p` (clamped into the grid).
+    #[inline]
     pub fn clamp_cell(&self, p: V2) -> (usize, usize) {
         let clamp = |v: f64, n: usize| {
             if v.is_finite() { (v / self.cell).floor().clamp(0.0, (n - 1) as f64) as usize } else { 0 }
@@ -76,6 +77,7 @@ impl GridSpec {
     }
 
     /// The cells whose centres may lie in the box `lo`–`hi` (inclusive ranges, clamped).
+    #[inline]
     pub fn range(&self, lo: V2, hi: V2) -> (std::ops::RangeInclusive<usize>, std::ops::RangeInclusive<usize>) {
         let (x0, y0) = self.clamp_cell(lo);
         let (x1, y1) = self.clamp_cell(hi);
@@ -699,6 +701,9 @@ pub struct Buckets {
     spec: GridSpec,
     start: Vec<u32>,
     items: Vec<u32>,
+    /// Per bucket, how many buckets away (Chebyshev) the nearest bucket with an item is:
+    /// a query whose box lies within that finds nothing without looking.
+    empty_around: Vec<u16>,
 }
 
 impl Buckets {
@@ -730,11 +735,27 @@ impl Buckets {
                 fill[b] += 1;
             });
         }
-        Self { spec, start: counts, items }
+        let empty_around = chebyshev_to_nonempty(&spec, |b| counts[b + 1] > counts[b]);
+        Self { spec, start: counts, items, empty_around }
+    }
+
+    /// [`Buckets::query`] over the box of half-side `r` round `centre`, which returns at
+    /// once, having called `f` for nothing, when no bucket that box meets holds an item.
+    #[inline]
+    pub fn query_near(&self, centre: V2, r: f64, f: impl FnMut(usize)) {
+        let (ix, iy) = self.spec.clamp_cell(centre);
+        // The box meets buckets at most ceil(r / cell) away from the centre's, in each axis.
+        let reach = (r / self.spec.cell).ceil();
+        if f64::from(self.empty_around[self.spec.index(ix, iy)]) > reach {
+            return;
+        }
+        let d = V2::new(r, r);
+        self.query(centre - d, centre + d, f);
     }
 
     /// Calls `f` with every item listed in a bucket that meets the box `lo`–`hi` (an item
     /// may come more than once).
+    #[inline]
     pub fn query(&self, lo: V2, hi: V2, mut f: impl FnMut(usize)) {
         let (xs, ys) = self.spec.range(lo, hi);
         for iy in ys {
@@ -746,6 +767,38 @@ impl Buckets {
             }
         }
     }
+}
+
+/// Per cell of `spec`, the Chebyshev distance in cells to the nearest cell where `full`
+/// holds (`u16::MAX` when none does): two chamfer passes, exact for this metric.
+fn chebyshev_to_nonempty(spec: &GridSpec, full: impl Fn(usize) -> bool) -> Vec<u16> {
+    let (nx, ny) = (spec.nx, spec.ny);
+    let mut d: Vec<u16> = (0..spec.len()).map(|b| if full(b) { 0 } else { u16::MAX }).collect();
+    for iy in 0..ny {
+        for ix in 0..nx {
+            let mut best = d[iy * nx + ix];
+            for (dx, dy) in [(-1i64, 0i64), (-1, -1), (0, -1), (1, -1)] {
+                let (x, y) = (ix as i64 + dx, iy as i64 + dy);
+                if x >= 0 && y >= 0 && (x as usize) < nx {
+                    best = best.min(d[y as usize * nx + x as usize].saturating_add(1));
+                }
+            }
+            d[iy * nx + ix] = best;
+        }
+    }
+    for iy in (0..ny).rev() {
+        for ix in (0..nx).rev() {
+            let mut best = d[iy * nx + ix];
+            for (dx, dy) in [(1i64, 0i64), (1, 1), (0, 1), (-1, 1)] {
+                let (x, y) = (ix as i64 + dx, iy as i64 + dy);
+                if x >= 0 && (x as usize) < nx && (y as usize) < ny {
+                    best = best.min(d[y as usize * nx + x as usize].saturating_add(1));
+                }
+            }
+            d[iy * nx + ix] = best;
+        }
+    }
+    d
 }
 
 #[cfg(test)]
@@ -845,5 +898,35 @@ mod tests {
         assert_eq!(at(9.5, 6.5, 0.0), 0.0);
         assert_eq!(at(11.2, 6.5, 0.0), 0.0);
         assert!(at(12.5, 6.5, 0.0) > 0.9);
+    }
+
+    #[test]
+    fn a_query_near_finds_what_the_whole_query_finds() {
+        let area = Area { lo: V2::new(0.0, 0.0), hi: V2::new(20.0, 10.0) };
+        // A few clusters of points, and queries everywhere, some beyond the area.
+        let pts: Vec<V2> = (0..40)
+            .map(|k| {
+                let c = [V2::new(3.0, 2.0), V2::new(12.5, 7.3), V2::new(19.9, 0.1)][k % 3];
+                c + V2::new((k as f64 * 0.37).sin() * 0.8, (k as f64 * 0.71).cos() * 0.8)
+            })
+            .collect();
+        let b = Buckets::build(&area, 0.5, pts.len(), |k| (pts[k], pts[k]));
+        let mut skipped = 0;
+        for qy in -4..=44 {
+            for qx in -4..=84 {
+                let c = V2::new(qx as f64 * 0.25 + 0.01, qy as f64 * 0.25 + 0.02);
+                for r in [0.1, 0.6, 1.3] {
+                    let d = V2::new(r, r);
+                    let (mut all, mut near) = (Vec::new(), Vec::new());
+                    b.query(c - d, c + d, |k| all.push(k));
+                    b.query_near(c, r, |k| near.push(k));
+                    assert_eq!(all, near, "at {c:?}, r {r}");
+                    skipped += usize::from(all.is_empty());
+                }
+            }
+        }
+        assert!(skipped > 1000, "most queries find nothing here: {skipped}");
+        let none = Buckets::build(&area, 0.5, 0, |_| (V2::default(), V2::default()));
+        none.query_near(V2::new(5.0, 5.0), 3.0, |_| panic!("no items"));
     }
 }

@@ -7,9 +7,10 @@
 //! margin, and is guided by the grid's cost-to-go, so it explores little where the way is
 //! easy and finds S-bends like the slalom's where it is not.
 
-use std::collections::{BinaryHeap, HashMap};
+use std::collections::{BinaryHeap, HashSet};
+use std::hash::{BuildHasherDefault, Hasher};
 
-use crate::geom::{Pose, V2, wrap_rad};
+use crate::geom::{BodyFrame, Pose, V2, wrap_rad};
 use crate::model::WorldModel;
 use crate::plan::{CostToGo, Open};
 
@@ -220,7 +221,8 @@ pub fn arc(p: &Pose, ds: f64, k: f64) -> Pose {
 
 /// Plans from `start` towards `goal` with the chair grown by `margin`. Near the start, where
 /// the chair may already stand closer than `margin` to something, the margin grows from what
-/// the start has to the full value over the first 0.6 m.
+/// the start has to the full value over the first 0.6 m. The whole search at once; see
+/// [`Search`] for one spread over several calls.
 pub fn plan(
     model: &WorldModel,
     ctg: &CostToGo,
@@ -229,115 +231,216 @@ pub fn plan(
     margin: f64,
     params: &HybridParams,
 ) -> Result<PlanOutcome, PathSearchError> {
-    let h_of = |p: &Pose| ctg.at(p.pos());
-    // What the search orders by: the cost-to-go and, facing away from the way downhill, the
-    // turn still to make (progress is measured on the cost-to-go alone).
-    let turn_of = |p: &Pose| {
-        if params.turn_heuristic <= 0.0 {
-            return 0.0;
+    let mut search = Search::new(model, ctg, start, goal, margin, params)?;
+    loop {
+        if let Some(result) = search.run(model, ctg, usize::MAX) {
+            return result;
         }
-        ctg.downhill(p.pos())
-            .map_or(0.0, |d| params.turn_heuristic * (wrap_rad(p.theta - d).abs() - TURN_SLACK_RAD).max(0.0))
-    };
-    let Some(h0) = h_of(&start) else {
-        return Err(PathSearchError::NoRoute { x: start.x, y: start.y });
-    };
-    let start_margin = model.clearance(&start, margin).min(margin) - 0.005;
-    let margin_at = |travelled: f64| {
+    }
+}
+
+/// A search under way, which can stop after any number of expansions and go on later (a
+/// navigator bounds its work per tick so that a lock-step run does not wait on one long
+/// search). Between calls the world model may change; the search goes on with what it then
+/// says, as a plan made over a few ticks would.
+#[derive(Debug, Clone)]
+pub struct Search {
+    params: HybridParams,
+    goal: Goal,
+    margin: f64,
+    start_margin: f64,
+    h0: f64,
+    nodes: Vec<Node>,
+    open: BinaryHeap<Open<f64>>,
+    closed: HashSet<u64, BuildHasherDefault<KeyHasher>>,
+    best_progress: (usize, f64),
+    candidate: Option<(usize, f64)>,
+    expansions: usize,
+    /// Each motion with its length, its turn and its sweep ([`Sample`]s).
+    sweeps: Vec<(Motion, f64, f64, Vec<Sample>)>,
+}
+
+impl Search {
+    /// A search from `start` towards `goal`, not yet begun ([`plan`] says what it looks for).
+    pub fn new(
+        model: &WorldModel,
+        ctg: &CostToGo,
+        start: Pose,
+        goal: &Goal,
+        margin: f64,
+        params: &HybridParams,
+    ) -> Result<Self, PathSearchError> {
+        let Some(h0) = ctg.at(start.pos()) else {
+            return Err(PathSearchError::NoRoute { x: start.x, y: start.y });
+        };
+        let start_margin = model.clearance(&start, margin).min(margin) - 0.005;
+        let reach = model.footprint.reach();
+        let mut motions: Vec<Motion> = params.curvatures.iter().map(|&k| Motion::Forward(k)).collect();
+        motions.extend(params.reverse_curvatures.iter().map(|&k| Motion::Reverse(k)));
+        if params.spin_rad > 0.0 {
+            motions.push(Motion::Spin(params.spin_rad));
+            motions.push(Motion::Spin(-params.spin_rad));
+        }
+        // Each motion's sweep, as poses in the frame of the pose it starts from: enough that
+        // no corner moves more than the check step between two of them; the last is where it
+        // ends. Worked out once, they make each successor a few multiplications, not sines.
+        let sweeps = motions
+            .iter()
+            .map(|&m| {
+                let (len, turn) = match m {
+                    Motion::Forward(kap) | Motion::Reverse(kap) => (params.step_m, (kap * params.step_m).abs()),
+                    Motion::Spin(a) => (0.0, a.abs()),
+                    Motion::Start => (0.0, 0.0),
+                };
+                let sweep = len.max(turn * reach);
+                let steps = (sweep / params.check_step_m).ceil().max(1.0) as usize;
+                let samples = (1..=steps)
+                    .map(|s| {
+                        let t = s as f64 / steps as f64;
+                        let local = match m {
+                            Motion::Forward(kap) => arc(&Pose::default(), params.step_m * t, kap),
+                            Motion::Reverse(kap) => arc(&Pose::default(), -params.step_m * t, kap),
+                            Motion::Spin(a) => Pose { x: 0.0, y: 0.0, theta: a * t },
+                            Motion::Start => Pose::default(),
+                        };
+                        let (sin, cos) = local.theta.sin_cos();
+                        Sample { t, x: local.x, y: local.y, theta: local.theta, cos, sin }
+                    })
+                    .collect();
+                (m, len, turn, samples)
+            })
+            .collect();
+        let mut open = BinaryHeap::new();
+        open.push(Open { f: params.heuristic_weight * h0, i: 0 });
+        Ok(Self {
+            params: params.clone(),
+            goal: *goal,
+            margin,
+            start_margin,
+            h0,
+            nodes: vec![Node { pose: start, motion: Motion::Start, g: 0.0, h: h0, travelled: 0.0, parent: u32::MAX }],
+            open,
+            closed: HashSet::default(),
+            best_progress: (0, h0),
+            candidate: None,
+            expansions: 0,
+            sweeps,
+        })
+    }
+
+    /// Nodes expanded so far.
+    pub fn expansions(&self) -> usize {
+        self.expansions
+    }
+
+    /// The margin at `travelled` metres from the start.
+    fn margin_at(&self, travelled: f64) -> f64 {
+        let (margin, start_margin) = (self.margin, self.start_margin);
         if start_margin >= margin {
             margin
         } else {
             start_margin.max(0.0) + (margin - start_margin.max(0.0)) * (travelled / 0.6).min(1.0)
         }
-    };
-    let reach = model.footprint.reach();
-    let key = |p: &Pose| -> u64 {
+    }
+
+    /// The closed set's key of a pose: its cell and heading bin.
+    fn key(&self, p: &Pose) -> u64 {
+        let params = &self.params;
         let ix = (p.x / params.xy_res).floor() as i64 as u64 & 0xFFFFF;
         let iy = (p.y / params.xy_res).floor() as i64 as u64 & 0xFFFFF;
         let bins = params.heading_bins as f64;
         let it = ((wrap_rad(p.theta) + std::f64::consts::PI) / std::f64::consts::TAU * bins).round() as u64
             % params.heading_bins as u64;
         (ix << 40) | (iy << 20) | it
-    };
-
-    let mut nodes = vec![Node { pose: start, motion: Motion::Start, g: 0.0, h: h0, travelled: 0.0, parent: u32::MAX }];
-    let mut open = BinaryHeap::new();
-    open.push(Open { f: params.heuristic_weight * h0, i: 0 });
-    let mut closed: HashMap<u64, ()> = HashMap::new();
-    let mut best_progress = (0usize, h0);
-    let mut candidate: Option<(usize, f64)> = None;
-    let mut expansions = 0usize;
-
-    let mut motions: Vec<Motion> = params.curvatures.iter().map(|&k| Motion::Forward(k)).collect();
-    motions.extend(params.reverse_curvatures.iter().map(|&k| Motion::Reverse(k)));
-    if params.spin_rad > 0.0 {
-        motions.push(Motion::Spin(params.spin_rad));
-        motions.push(Motion::Spin(-params.spin_rad));
     }
 
-    while let Some(Open { f, i }) = open.pop() {
-        let n = nodes[i as usize];
-        if let Some((_, total)) = candidate
-            && f >= total * params.heuristic_weight.max(1.0)
-        {
-            break;
+    /// What the search orders by besides the cost-to-go: facing away from the way downhill,
+    /// the turn still to make (progress is measured on the cost-to-go alone).
+    fn turn_of(&self, ctg: &CostToGo, p: &Pose) -> f64 {
+        let params = &self.params;
+        if params.turn_heuristic <= 0.0 {
+            return 0.0;
         }
-        let k = key(&n.pose);
-        if closed.insert(k, ()).is_some() {
-            continue;
-        }
-        let dist = (n.pose.pos() - goal.pos).norm();
-        let may_end =
-            dist <= goal.accept_within && model.free(&n.pose, margin_at(n.travelled) + params.end_clearance_m);
-        if may_end && dist <= goal.stop_within {
-            return Ok(PlanOutcome { path: extract(&nodes, i as usize), reaches_goal: true, expansions });
-        }
-        if may_end {
-            let total = n.g + goal.weight * dist;
-            if candidate.is_none_or(|(_, t)| total < t) {
-                candidate = Some((i as usize, total));
+        ctg.downhill(p.pos())
+            .map_or(0.0, |d| params.turn_heuristic * (wrap_rad(p.theta - d).abs() - TURN_SLACK_RAD).max(0.0))
+    }
+
+    /// Goes on for at most `allowance` expansions: the outcome once the search has ended,
+    /// `None` while it goes on. `ctg` must be the cost-to-go it was made with.
+    pub fn run(
+        &mut self,
+        model: &WorldModel,
+        ctg: &CostToGo,
+        allowance: usize,
+    ) -> Option<Result<PlanOutcome, PathSearchError>> {
+        let until = self.expansions.saturating_add(allowance);
+        let (goal, h0) = (self.goal, self.h0);
+        let weight = self.params.heuristic_weight;
+        loop {
+            if self.expansions >= until {
+                return None;
             }
-        }
-        if n.h < best_progress.1 {
-            best_progress = (i as usize, n.h);
-        }
-        if candidate.is_none() && h0 - n.h >= params.horizon_m {
-            return Ok(PlanOutcome { path: extract(&nodes, i as usize), reaches_goal: false, expansions });
-        }
-        expansions += 1;
-        if expansions > params.max_expansions {
-            break;
-        }
-        for &m in &motions {
-            let (pose, len, turn) = match m {
-                Motion::Forward(kap) => (arc(&n.pose, params.step_m, kap), params.step_m, (kap * params.step_m).abs()),
-                Motion::Reverse(kap) => (arc(&n.pose, -params.step_m, kap), params.step_m, (kap * params.step_m).abs()),
-                Motion::Spin(a) => (Pose::new(n.pose.x, n.pose.y, n.pose.theta + a), 0.0, a.abs()),
-                Motion::Start => continue,
-            };
-            if closed.contains_key(&key(&pose)) {
+            let Some(Open { f, i }) = self.open.pop() else { break };
+            let n = self.nodes[i as usize];
+            if let Some((_, total)) = self.candidate
+                && f >= total * weight.max(1.0)
+            {
+                break;
+            }
+            if !self.closed.insert(self.key(&n.pose)) {
                 continue;
             }
-            let Some(h) = h_of(&pose) else { continue };
-            let travelled = n.travelled + len + turn * 0.3;
-            // Check the sweep: enough intermediate poses that no corner moves more than the
-            // check step between two of them.
-            let sweep = len.max(turn * reach);
-            let steps = (sweep / params.check_step_m).ceil().max(1.0) as usize;
-            let mut ok = true;
-            for s in 1..=steps {
-                let t = s as f64 / steps as f64;
-                let p = match m {
-                    Motion::Forward(kap) => arc(&n.pose, params.step_m * t, kap),
-                    Motion::Reverse(kap) => arc(&n.pose, -params.step_m * t, kap),
-                    Motion::Spin(a) => Pose::new(n.pose.x, n.pose.y, n.pose.theta + a * t),
-                    Motion::Start => n.pose,
-                };
-                if !model.free(&p, margin_at(n.travelled + (travelled - n.travelled) * t)) {
-                    ok = false;
-                    break;
+            let dist = (n.pose.pos() - goal.pos).norm();
+            let may_end = dist <= goal.accept_within
+                && model.free(&n.pose, self.margin_at(n.travelled) + self.params.end_clearance_m);
+            if may_end && dist <= goal.stop_within {
+                let path = extract(&self.nodes, i as usize);
+                return Some(Ok(PlanOutcome { path, reaches_goal: true, expansions: self.expansions }));
+            }
+            if may_end {
+                let total = n.g + goal.weight * dist;
+                if self.candidate.is_none_or(|(_, t)| total < t) {
+                    self.candidate = Some((i as usize, total));
                 }
             }
+            if n.h < self.best_progress.1 {
+                self.best_progress = (i as usize, n.h);
+            }
+            if self.candidate.is_none() && h0 - n.h >= self.params.horizon_m {
+                let path = extract(&self.nodes, i as usize);
+                return Some(Ok(PlanOutcome { path, reaches_goal: false, expansions: self.expansions }));
+            }
+            self.expansions += 1;
+            if self.expansions > self.params.max_expansions {
+                break;
+            }
+            self.expand(model, ctg, &n, i);
+        }
+        Some(self.end())
+    }
+
+    /// Pushes the successors of node `i` (`n`) that are free and not closed.
+    fn expand(&mut self, model: &WorldModel, ctg: &CostToGo, n: &Node, i: u32) {
+        let params = &self.params;
+        let (s0, c0) = n.pose.theta.sin_cos();
+        for (m, len, turn, samples) in &self.sweeps {
+            let (m, len, turn) = (*m, *len, *turn);
+            let at = |q: &Sample| {
+                let origin = V2::new(n.pose.x + c0 * q.x - s0 * q.y, n.pose.y + s0 * q.x + c0 * q.y);
+                BodyFrame::from_cos_sin(origin, c0 * q.cos - s0 * q.sin, s0 * q.cos + c0 * q.sin)
+            };
+            let Some(end) = samples.last() else { continue };
+            let frame = at(end);
+            let pose = Pose::new(frame.origin().x, frame.origin().y, n.pose.theta + end.theta);
+            if self.closed.contains(&self.key(&pose)) {
+                continue;
+            }
+            let Some(h) = ctg.at(pose.pos()) else { continue };
+            let travelled = n.travelled + len + turn * 0.3;
+            let ok = samples.iter().all(|q| {
+                let f = if std::ptr::eq(q, end) { frame } else { at(q) };
+                model.free_in(&f, self.margin_at(n.travelled + (travelled - n.travelled) * q.t))
+            });
             if !ok {
                 continue;
             }
@@ -348,8 +451,7 @@ pub fn plan(
                 Motion::Start => 0.0,
             };
             // Soft margins, widest first: a pose free at the widest pays nothing.
-            let hard = margin_at(travelled);
-            let frame = pose.body_frame();
+            let hard = self.margin_at(travelled);
             for &(extra, per_m) in params.comfort.iter().rev() {
                 if model.free_in(&frame, hard + extra) {
                     break;
@@ -370,19 +472,64 @@ pub fn plan(
                 cost += params.curvature_change_cost * (m.curvature() - n.motion.curvature()).abs();
             }
             let g = n.g + cost;
-            nodes.push(Node { pose, motion: m, g, h, travelled, parent: i });
-            open.push(Open { f: g + params.heuristic_weight * (h + turn_of(&pose)), i: (nodes.len() - 1) as u32 });
+            let f = g + params.heuristic_weight * (h + self.turn_of(ctg, &pose));
+            self.nodes.push(Node { pose, motion: m, g, h, travelled, parent: i });
+            self.open.push(Open { f, i: (self.nodes.len() - 1) as u32 });
         }
     }
-    if let Some((c, _)) = candidate {
-        return Ok(PlanOutcome { path: extract(&nodes, c), reaches_goal: true, expansions });
+
+    /// The outcome once the open list is empty, the expansions are spent, or nothing left
+    /// can beat the best end found.
+    fn end(&self) -> Result<PlanOutcome, PathSearchError> {
+        let expansions = self.expansions;
+        if let Some((c, _)) = self.candidate {
+            return Ok(PlanOutcome { path: extract(&self.nodes, c), reaches_goal: true, expansions });
+        }
+        // Out of expansions far from the goal: a path that at least gets well on the way is
+        // worth driving (the rest is planned from its end); a scrap of progress is not.
+        if self.h0 - self.best_progress.1 >= 0.5 * self.params.horizon_m {
+            return Ok(PlanOutcome {
+                path: extract(&self.nodes, self.best_progress.0),
+                reaches_goal: false,
+                expansions,
+            });
+        }
+        Err(PathSearchError::Exhausted { expansions })
     }
-    // Out of expansions far from the goal: a path that at least gets well on the way is
-    // worth driving (the rest is planned from its end); a scrap of progress is not.
-    if h0 - best_progress.1 >= 0.5 * params.horizon_m {
-        return Ok(PlanOutcome { path: extract(&nodes, best_progress.0), reaches_goal: false, expansions });
+}
+
+/// A pose along a motion, in the frame of the pose the motion starts from, with its
+/// heading's cosine and sine; `t` is how far along (0 to 1).
+#[derive(Debug, Clone, Copy)]
+struct Sample {
+    t: f64,
+    x: f64,
+    y: f64,
+    theta: f64,
+    cos: f64,
+    sin: f64,
+}
+
+/// The closed set's hasher: its keys are packed cell and heading indices, already unique, so
+/// one multiplication spreads them (the default SipHash cost a tenth of a search).
+#[derive(Debug, Default)]
+struct KeyHasher(u64);
+
+impl Hasher for KeyHasher {
+    fn write(&mut self, bytes: &[u8]) {
+        for &b in bytes {
+            self.write_u64(self.0 ^ u64::from(b));
+        }
     }
-    Err(PathSearchError::Exhausted { expansions })
+
+    fn write_u64(&mut self, k: u64) {
+        let h = k.wrapping_mul(0x9E37_79B9_7F4A_7C15);
+        self.0 = h ^ (h >> 29);
+    }
+
+    fn finish(&self) -> u64 {
+        self.0
+    }
 }
 
 fn extract(nodes: &[Node], mut i: usize) -> Vec<PathPose> {

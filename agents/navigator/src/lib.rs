@@ -154,6 +154,11 @@ pub struct NavigatorArgs {
     /// of the lane's middle (0: off, the default while it is tuned for many chairs).
     #[arg(long, value_name = "COST", default_value_t = 0.0, value_parser = parse_keep_right)]
     pub keep_right: f64,
+    /// Bound each tick's path search to N expansions; a longer search goes on in the next
+    /// ticks while the chair stands (default: none, each search ends in its tick). Keeps one
+    /// chair's long search from holding a lock-step run; changes how traffic goes.
+    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u64).range(100..))]
+    pub plan_allowance: Option<u64>,
 }
 
 fn parse_keep_right(s: &str) -> Result<f64, String> {

@@ -269,8 +269,7 @@ impl WorldModel {
         let mut hit = false;
         let grown = margin + self.sensed_extra + SENSED_RADIUS_M;
         let reach = fp.centre_reach() + grown;
-        let r = V2::new(reach, reach);
-        self.point_index.query(centre - r, centre + r, |k| {
+        self.point_index.query_near(centre, reach, |k| {
             if !hit && self.counts(k) {
                 hit = fp.contains_body(frame.apply(self.points[k]), grown);
             }
@@ -282,7 +281,8 @@ impl WorldModel {
     /// `margin` lies within three discs along its axis, each far enough from every wall.
     fn walls_clear(&self, fp: &Footprint, frame: &BodyFrame, margin: f64) -> bool {
         let len = fp.front + fp.rear;
-        let radius = (len / 6.0).hypot(fp.half) + margin;
+        // sqrt, not hypot: this runs for every pose a search checks, and libm's hypot is slow.
+        let radius = ((len / 6.0) * (len / 6.0) + fp.half * fp.half).sqrt() + margin;
         // Distances are between cell centres: allow for the point's and the wall's cells.
         let slack = self.spec().cell * std::f64::consts::SQRT_2;
         (0..3).all(|k| {

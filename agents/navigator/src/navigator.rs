@@ -106,6 +106,13 @@ pub struct NavConfig {
     /// of the lane's middle ([`HybridParams::keep_right`]); 0 is off, the default while the
     /// many-chair traffic rule is tuned (issue 26).
     pub keep_right: f64,
+    /// Expansions a tick's search may make before it goes on in the next tick, the chair
+    /// standing meanwhile (`None`: each search ends in its tick, the default). A bound keeps
+    /// one chair's long search from holding a lock-step run, but the chairs then think while
+    /// standing and the traffic goes differently: on the ward, 6 chairs, seeds 1–20, a bound
+    /// of 5,000 brought 83 of 120 chairs home against 87 without, and a knot at a junction
+    /// untied on 1 of 4 seeds against 3 (issue 26), so it is opt-in.
+    pub plan_allowance: Option<usize>,
 }
 
 impl NavConfig {
@@ -129,6 +136,7 @@ impl NavConfig {
             pose_source: PoseSourceKind::Odometry,
             encoder_ticks_per_m: sim_model::encoder_ticks_per_m(1024.0, 0.17),
             keep_right: 0.0,
+            plan_allowance: None,
         }
     }
 }
@@ -226,6 +234,21 @@ const PLAN_BACKOFF: [u64; 3] = [10, 20, 40];
 /// expansion limit (each kind of search its own: forwards only for the final stop, then with
 /// turns): what is not found within that is not found this time.
 const SEARCH_BUDGET: usize = 2;
+/// A chair slower than this (m/s, rad/s) stands for a search that goes on over ticks…
+const STANDING_V: f64 = 0.01;
+/// …see [`STANDING_V`].
+const STANDING_W: f64 = 0.03;
+/// Ticks a moving chair brakes before it looks again for a way that takes more than a tick.
+const BRAKE_TICKS: u64 = 3;
+/// A search over ticks whose chair has since moved more than this (metres, radians) from
+/// where it began is dropped.
+const MOVED_M: f64 = 0.02;
+/// See [`MOVED_M`].
+const MOVED_RAD: f64 = 0.03;
+/// After a search that found nothing, the next ones expand at most 1/THRIFT of the limit…
+const THRIFT: usize = 4;
+/// …but for every THRIFT_EVERY-th in a row, which looks as far as the first.
+const THRIFT_EVERY: u32 = 4;
 /// The coarse search that follows a failed fine one may expand this many times the hybrid
 /// search's limit.
 const COARSE_BUDGET: usize = 2;
@@ -233,6 +256,36 @@ const COARSE_BUDGET: usize = 2;
 /// doorway sooner; the fine search goes without (with it the demo's slalom chair stopped
 /// short of its checkpoint beside box B).
 const COARSE_TURN_HEURISTIC: f64 = 0.8;
+
+/// One search to try: its settings, its margin level (0 starts a new kind, with its own
+/// budget), the margin, and the extra margin from sensed obstacles.
+type Attempt = (HybridParams, usize, f64, f64);
+
+/// A search under way, which may take several ticks ([`NavConfig::plan_allowance`]).
+#[derive(Debug)]
+struct Pending {
+    /// The checkpoint it is for (its index).
+    checkpoint: usize,
+    /// The tick it began at.
+    begun_tick: u64,
+    start: Pose,
+    cp: Checkpoint,
+    ctg: CostToGo,
+    goal: Goal,
+    approach: bool,
+    docking: bool,
+    /// Expansions one kind of search may spend on narrower margins.
+    budget: usize,
+    attempts: Vec<Attempt>,
+    /// The next attempt to begin.
+    next: usize,
+    /// The attempt under way, with its level and extra margin from sensed obstacles.
+    current: Option<(hybrid::Search, usize, f64)>,
+    /// Expansions spent by this kind of search.
+    spent: usize,
+    best: Option<(PlanOutcome, f64)>,
+    failure: PathSearchError,
+}
 
 /// Counters for logs and tests.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -272,6 +325,8 @@ pub struct Navigator {
     hybrid: HybridParams,
     track_params: TrackerParams,
     stats: NavStats,
+    /// A search that did not end within its tick's allowance.
+    pending: Option<Pending>,
     mode: Mode,
     /// The sensed map changed in this tick's [`Navigator::perceive`].
     map_changed: bool,
@@ -313,6 +368,7 @@ impl Navigator {
             hybrid,
             track_params,
             stats: NavStats::default(),
+            pending: None,
             mode: Mode::Plan,
             map_changed: false,
             manoeuvre_lost: false,
@@ -371,6 +427,7 @@ impl Navigator {
         let check = vec![false; path.len()];
         self.tracker = Some(Tracker::new(path, &vmax, &check, false, self.track_params));
         self.mode = Mode::Manoeuvre;
+        self.pending = None;
         self.manoeuvre_lost = false;
     }
 
@@ -390,6 +447,7 @@ impl Navigator {
         if self.mode != Mode::Hold {
             self.mode = Mode::Hold;
             self.tracker = None;
+            self.pending = None;
         }
     }
 
@@ -398,14 +456,23 @@ impl Navigator {
         if self.mode != Mode::Plan {
             self.mode = Mode::Plan;
             self.tracker = None;
-            self.plan_after = self.last_tick;
-            self.plan_failures = 0;
+            self.pending = None;
+            // A search that found nothing before the hold still waits out its back-off: a
+            // chair told to wait and go again and again (its way shut by another) would
+            // otherwise search in full each time.
+            self.plan_after = self.plan_after.max(self.last_tick);
         }
     }
 
     /// Whether its last search for a way on found none (it waits to look again).
     pub fn blocked(&self) -> bool {
         self.blocked_since.is_some() && self.tracker.is_none()
+    }
+
+    /// Whether a search is under way that did not end within its last tick's allowance (the
+    /// chair stands meanwhile).
+    pub fn searching(&self) -> bool {
+        self.pending.is_some()
     }
 
     /// Whether it is standing still on request.
@@ -561,6 +628,7 @@ impl Navigator {
                     // from here, where the sensors see the place best.
                     self.dock_retries += 1;
                     self.tracker = None;
+                    self.pending = None;
                     self.plan_after = input.tick;
                     return false;
                 }
@@ -583,6 +651,7 @@ impl Navigator {
             });
             self.next += 1;
             self.tracker = None;
+            self.pending = None;
             self.plan_after = input.tick;
             self.plan_failures = 0;
             self.blocked_since = None;
@@ -619,14 +688,44 @@ impl Navigator {
             let route_m = route(&cm, self.pose.pos(), cp.pos, cp.radius_m).map(|r| r.length_m);
             events.push(NavEvent::Leg { index: self.next, route_m });
         }
-        // Plan from where the chair will be in a moment: its motors lag.
-        let (v, w) = self.drive.velocity();
-        let start = self.pose.advanced(v, w, 0.15);
-        let m = self.cfg.margin_m;
-        // (margin from walls, extra margin from sensed obstacles): sensed obstacles are kept
-        // further off while there is room, since only their seen faces are known.
-        let margins = [(m, m), (0.8 * m, 0.4 * m), (0.6 * m, 0.0), (0.3 * m, 0.0)];
-        match self.search(start, cp, &margins) {
+        // A search under way goes on from where the last tick left it.
+        let mut pending = match self.pending.take() {
+            Some(p) if p.checkpoint == self.next => p,
+            _ => {
+                // Plan from where the chair will be in a moment: its motors lag.
+                let (v, w) = self.drive.velocity();
+                let start = self.pose.advanced(v, w, 0.15);
+                let m = self.cfg.margin_m;
+                // (margin from walls, extra margin from sensed obstacles): sensed obstacles are
+                // kept further off while there is room, since only their seen faces are known.
+                let margins = [(m, m), (0.8 * m, 0.4 * m), (0.6 * m, 0.0), (0.3 * m, 0.0)];
+                self.begin_search(start, cp, &margins, tick)
+            }
+        };
+        let (began, over_ticks) = (pending.start, pending.begun_tick < tick);
+        let Some(result) = self.go_on(&mut pending, self.cfg.plan_allowance.unwrap_or(usize::MAX)) else {
+            // Not found within this tick's allowance: the chair stands while it thinks. One
+            // still moving will not stop where the search starts from (it coasts while it
+            // brakes, and a path from behind it, turning on the spot, swept a corner into a
+            // wall): it looks again once it stands.
+            let (v, w) = self.drive.velocity();
+            if v.abs() > STANDING_V || w.abs() > STANDING_W {
+                self.plan_after = tick + BRAKE_TICKS;
+            } else {
+                self.pending = Some(pending);
+            }
+            self.tracker = None;
+            return;
+        };
+        // A search over several ticks is for where the chair stood when it began: if it has
+        // moved since, the path is not from where it is.
+        let moved = (began.pos() - self.pose.pos()).norm() > MOVED_M
+            || sim_model::wrap_rad(began.theta - self.pose.theta).abs() > MOVED_RAD;
+        if over_ticks && moved {
+            self.plan_after = tick + 1;
+            return;
+        }
+        match result {
             Ok((outcome, kind)) => {
                 self.install(&outcome);
                 self.path_kind = kind;
@@ -650,15 +749,9 @@ impl Navigator {
         }
     }
 
-    /// Searches from `start` towards checkpoint `cp` with each margin in turn; the first
-    /// path found wins, except for the final stop, where a smaller margin may bring the
-    /// chair closer.
-    fn search(
-        &mut self,
-        start: Pose,
-        cp: Checkpoint,
-        margins: &[(f64, f64)],
-    ) -> Result<(PlanOutcome, PathKind), PathSearchError> {
+    /// Sets up a search from `start` towards checkpoint `cp` with each margin in turn (see
+    /// [`Navigator::go_on`]): the cost map and cost-to-go, and the searches to try.
+    fn begin_search(&mut self, start: Pose, cp: Checkpoint, margins: &[(f64, f64)], tick: u64) -> Pending {
         let last = self.next + 1 == self.cfg.checkpoints.len();
         let fp = self.model.footprint;
         // The disc round the axle that the rectangle always covers, plus a little: the axle
@@ -700,63 +793,116 @@ impl Navigator {
         let lanes = Some((&self.model.statics, self.hybrid.keep_right));
         let ctg = CostToGo::with_lanes(&cm, &seeds, Some(spec.index(sx, sy)), 6.0, 4.0, &open, lanes);
         let goal = Goal { pos: cp.pos, stop_within, accept_within: accept, weight };
-        let mut failure = PathSearchError::Exhausted { expansions: 0 };
-        let mut best: Option<(PlanOutcome, f64)> = None;
         // The final stop drives in forwards only: turning on the spot or backing up beside
         // what stands on the checkpoint sweeps the chair over its least-seen side. Only if
         // that finds nothing may it manoeuvre.
         let docking = last && !approach;
-        let forward_only = HybridParams { spin_rad: 0.0, reverse_curvatures: Vec::new(), ..self.hybrid.clone() };
-        let mut attempts: Vec<(&HybridParams, usize, f64, f64)> = Vec::new();
+        // After a search that found nothing, the next ones look less far (a quarter of the
+        // expansions) but for every fourth: the way is most often shut by another chair, and
+        // once it has moved the way is found in far fewer expansions than the limit; each
+        // fourth look is a whole one, for a way that only a long search finds.
+        let thrift = if self.plan_failures.is_multiple_of(THRIFT_EVERY) { 1 } else { THRIFT };
+        let fine = HybridParams { max_expansions: self.hybrid.max_expansions / thrift, ..self.hybrid.clone() };
+        let forward_only = HybridParams { spin_rad: 0.0, reverse_curvatures: Vec::new(), ..fine.clone() };
+        let mut attempts: Vec<Attempt> = Vec::new();
         if docking {
-            attempts.extend(margins.iter().enumerate().map(|(k, &(m, e))| (&forward_only, k, m, e)));
+            attempts.extend(margins.iter().enumerate().map(|(k, &(m, e))| (forward_only.clone(), k, m, e)));
         }
-        attempts.extend(margins.iter().enumerate().map(|(k, &(m, e))| (&self.hybrid, k, m, e)));
+        attempts.extend(margins.iter().enumerate().map(|(k, &(m, e))| (fine.clone(), k, m, e)));
         // Last, the same search on a coarser closed set (10 cm, 10°) with more expansions:
         // leaving a room through a doorway and turning down a 2 m corridor took the fine
         // search 30,000 to 70,000 expansions (it tries every nearly-fitting swing round the
         // jamb), the coarse one 7,000 to 16,000. Fine first, since only it threads the
         // tightest gaps.
         let coarse = HybridParams {
-            xy_res: 2.0 * self.hybrid.xy_res,
-            heading_bins: self.hybrid.heading_bins / 2,
-            max_expansions: COARSE_BUDGET * self.hybrid.max_expansions,
+            xy_res: 2.0 * fine.xy_res,
+            heading_bins: fine.heading_bins / 2,
+            max_expansions: COARSE_BUDGET * fine.max_expansions,
             turn_heuristic: COARSE_TURN_HEURISTIC,
-            ..self.hybrid.clone()
+            ..fine.clone()
         };
-        attempts.extend(margins.iter().enumerate().skip(1).take(1).map(|(_, &(m, e))| (&coarse, 0, m, e)));
+        if let Some(&(m, e)) = margins.get(1) {
+            attempts.push((coarse, 0, m, e));
+        }
+        Pending {
+            checkpoint: self.next,
+            begun_tick: tick,
+            start,
+            cp,
+            ctg,
+            goal,
+            approach,
+            docking,
+            budget: SEARCH_BUDGET * fine.max_expansions,
+            attempts,
+            next: 0,
+            current: None,
+            spent: 0,
+            best: None,
+            failure: PathSearchError::Exhausted { expansions: 0 },
+        }
+    }
+
+    /// Goes on with search `p` for at most `allowance` expansions: each margin in turn, the
+    /// first path found winning, except for the final stop, where a smaller margin may bring
+    /// the chair closer. `None` while it goes on.
+    fn go_on(
+        &mut self,
+        p: &mut Pending,
+        mut allowance: usize,
+    ) -> Option<Result<(PlanOutcome, PathKind), PathSearchError>> {
         let model = &mut self.model;
         let stats = &mut self.stats;
-        let budget = SEARCH_BUDGET * self.hybrid.max_expansions;
-        let mut spent = 0;
-        for (params, level, margin, sensed_extra) in attempts {
-            if best.is_some() && level == 0 {
-                break;
+        loop {
+            if p.current.is_none() {
+                let Some((params, level, margin, sensed_extra)) = p.attempts.get(p.next) else { break };
+                let (level, margin, sensed_extra) = (*level, *margin, *sensed_extra);
+                p.next += 1;
+                if p.best.is_some() && level == 0 {
+                    break;
+                }
+                if level == 0 {
+                    // A new kind of search: its own budget.
+                    p.spent = 0;
+                } else if p.spent >= p.budget {
+                    continue;
+                }
+                stats.plans += 1;
+                model.sensed_extra = sensed_extra;
+                let search = hybrid::Search::new(model, &p.ctg, p.start, &p.goal, margin, params);
+                model.sensed_extra = 0.0;
+                match search {
+                    Ok(search) => p.current = Some((search, level, sensed_extra)),
+                    Err(e) => {
+                        stats.failed_plans += 1;
+                        p.failure = e;
+                        // No way is known on the grid: no margin finds one.
+                        break;
+                    }
+                }
             }
-            if level == 0 {
-                // A new kind of search: its own budget.
-                spent = 0;
-            } else if spent >= budget {
-                continue;
-            }
-            stats.plans += 1;
-            model.sensed_extra = sensed_extra;
-            let result = hybrid::plan(model, &ctg, start, &goal, margin, params);
+            let Some((search, level, sensed_extra)) = &mut p.current else { continue };
+            let (level, before) = (*level, search.expansions());
+            model.sensed_extra = *sensed_extra;
+            let result = search.run(model, &p.ctg, allowance);
             model.sensed_extra = 0.0;
+            allowance = allowance.saturating_sub(search.expansions() - before);
+            let result = result?;
+            p.current = None;
             match result {
                 Ok(outcome) => {
                     stats.expansions += outcome.expansions as u64;
-                    spent += outcome.expansions;
-                    let end = outcome.path().last().map_or(start.pos(), |p| p.pose.pos());
-                    let miss = (end - cp.pos).norm();
-                    if best.as_ref().is_none_or(|(_, b)| miss < b - 0.05) {
-                        best = Some((outcome, miss));
+                    p.spent += outcome.expansions;
+                    let end = outcome.path().last().map_or(p.start.pos(), |q| q.pose.pos());
+                    let miss = (end - p.cp.pos).norm();
+                    if p.best.as_ref().is_none_or(|(_, b)| miss < b - 0.05) {
+                        p.best = Some((outcome, miss));
                     }
                     // The stop at the last checkpoint may come closer with a little less margin
                     // (the chair is slow there), though never with less than the second level:
                     // what stands on a checkpoint is seen only from close by, and not well.
                     let closer =
-                        docking && level == 0 && best.as_ref().is_some_and(|(o, b)| o.reaches_goal() && *b > 0.3);
+                        p.docking && level == 0 && p.best.as_ref().is_some_and(|(o, b)| o.reaches_goal() && *b > 0.3);
                     if !closer {
                         break;
                     }
@@ -765,26 +911,26 @@ impl Navigator {
                     stats.failed_plans += 1;
                     if let PathSearchError::Exhausted { expansions } = e {
                         stats.expansions += expansions as u64;
-                        spent += expansions;
+                        p.spent += expansions;
                     }
                     let stop = matches!(e, PathSearchError::NoRoute { .. });
-                    failure = e;
-                    if stop {
-                        break;
-                    }
-                    if best.is_some() {
+                    p.failure = e;
+                    if stop || p.best.is_some() {
                         break;
                     }
                 }
             }
         }
-        let (outcome, _) = best.ok_or(failure)?;
-        let kind = match (outcome.reaches_goal(), approach) {
+        let (outcome, _) = match p.best.take() {
+            Some(best) => best,
+            None => return Some(Err(p.failure.clone())),
+        };
+        let kind = match (outcome.reaches_goal(), p.approach) {
             (false, _) => PathKind::Partial,
             (true, true) => PathKind::Approach,
             (true, false) => PathKind::Arrive,
         };
-        Ok((outcome, kind))
+        Some(Ok((outcome, kind)))
     }
 
     /// Follows a new path, with speed limits from its clearance.
@@ -917,6 +1063,46 @@ mod tests {
                 collision: false,
             }
         }
+    }
+
+    #[test]
+    fn a_search_bounded_per_tick_finds_the_same_path_over_several_ticks_the_chair_standing() {
+        let mut map = NavMap::empty(14.0, 5.0);
+        map.walls.push(MapWall::rectangle(0.0, 0.0, 14.0, 0.1, false));
+        map.walls.push(MapWall::rectangle(5.0, 0.1, 5.2, 3.2, false));
+        let start = Pose::from_deg(1.5, 1.5, 90.0);
+        let cfg = |allowance| NavConfig {
+            checkpoints: vec![Checkpoint { pos: V2::new(9.0, 1.5), radius_m: 0.5 }],
+            start,
+            encoder_ticks_per_m: 1000.0,
+            plan_allowance: allowance,
+            ..NavConfig::intellwheels()
+        };
+        let fp = cfg(None).body.footprint();
+        let sim = Sim {
+            pose: start,
+            out: [0.0; 2],
+            travel: [0.0; 2],
+            model: WorldModel::new(map.clone(), fp),
+            sensors: default_layout(&fp),
+        };
+        let mut whole = Navigator::new(map.clone(), cfg(None));
+        whole.step(&sim.input(0, None));
+        assert!(!whole.searching() && !whole.path().is_empty(), "the search ends in its tick");
+        let mut bounded = Navigator::new(map, cfg(Some(20)));
+        let mut ticks = 0;
+        loop {
+            let out = bounded.step(&sim.input(ticks, None));
+            ticks += 1;
+            if !bounded.searching() {
+                break;
+            }
+            assert_eq!(out.powers, [0.0, 0.0], "the chair stands while it thinks (tick {ticks})");
+            assert!(ticks < 1000, "the search ends");
+        }
+        assert!(ticks > 3, "20 expansions a tick take several ticks: {ticks}");
+        assert_eq!(bounded.path(), whole.path(), "the same path");
+        assert_eq!(bounded.stats().expansions, whole.stats().expansions);
     }
 
     #[test]

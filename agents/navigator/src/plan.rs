@@ -331,42 +331,60 @@ impl CostToGo {
                     open.iter().any(|&(o, r)| (p - o).norm() <= r)
                 })
         };
+        // Dijkstra with a bucket queue (Dial's): every step costs at least one cell's length
+        // (weights are 1 or more), so with buckets one cell wide a cell taken from bucket k
+        // can only improve cells of later buckets, and each cell's cost is final when its
+        // bucket is taken, as with a heap, at a fraction of a heap's cost over 200,000 cells.
+        let cell = spec.cell as f32;
+        let bucket_of = |c: f32| (c / cell) as usize;
         let mut cost = vec![f32::INFINITY; spec.len()];
-        let mut open = BinaryHeap::new();
+        let mut buckets: Vec<Vec<u32>> = Vec::new();
+        let push = |buckets: &mut Vec<Vec<u32>>, c: f32, i: usize| {
+            let b = bucket_of(c);
+            if b >= buckets.len() {
+                buckets.resize_with(b + 1, Vec::new);
+            }
+            buckets[b].push(i as u32);
+        };
         for &(i, c) in seeds {
             if i < cost.len() && passable(i) && c < cost[i] {
                 cost[i] = c;
-                open.push(Open { f: c, i: i as u32 });
+                push(&mut buckets, c, i);
             }
         }
         let mut limit = f32::INFINITY;
-        let cell = spec.cell as f32;
-        while let Some(Open { f, i }) = open.pop() {
-            let i = i as usize;
-            if f > cost[i] {
-                continue;
-            }
-            if f > limit {
-                break;
-            }
-            if Some(i) == start {
-                limit = f + slack;
-            }
-            neighbours(&spec, i, passable, |j, step| {
-                let mut w = if cm.blocked(j) { 1.0 + soft_penalty } else { 1.0 };
-                if let Some((raster, keep_right)) = lanes {
-                    // The search runs from the goal: a chair on cell j steps towards cell i.
-                    let ((xi, yi), (xj, yj)) = (spec.coords(i), spec.coords(j));
-                    if let Some(k) = StaticRaster::direction_of(xi as i64 - xj as i64, yi as i64 - yj as i64) {
-                        w += (keep_right * raster.off_lane_at(j, k)) as f32;
+        let mut b = 0;
+        'search: while b < buckets.len() {
+            while let Some(i) = buckets[b].pop() {
+                let i = i as usize;
+                let f = cost[i];
+                // Stale: the cell was improved into an earlier bucket and taken there.
+                if bucket_of(f) != b {
+                    continue;
+                }
+                if f > limit {
+                    break 'search;
+                }
+                if Some(i) == start {
+                    limit = f + slack;
+                }
+                neighbours(&spec, i, passable, |j, step| {
+                    let mut w = if cm.blocked(j) { 1.0 + soft_penalty } else { 1.0 };
+                    if let Some((raster, keep_right)) = lanes {
+                        // The search runs from the goal: a chair on cell j steps towards cell i.
+                        let ((xi, yi), (xj, yj)) = (spec.coords(i), spec.coords(j));
+                        if let Some(k) = StaticRaster::direction_of(xi as i64 - xj as i64, yi as i64 - yj as i64) {
+                            w += (keep_right * raster.off_lane_at(j, k)) as f32;
+                        }
                     }
-                }
-                let c = f + step * cell * w;
-                if c < cost[j] {
-                    cost[j] = c;
-                    open.push(Open { f: c, i: j as u32 });
-                }
-            });
+                    let c = f + step * cell * w;
+                    if c < cost[j] {
+                        cost[j] = c;
+                        push(&mut buckets, c, j);
+                    }
+                });
+            }
+            b += 1;
         }
         Self { spec, cost }
     }
@@ -495,5 +513,50 @@ mod tests {
         let behind = ctg.at(V2::new(9.5, 1.0)).expect("reached");
         assert!(behind > 7.0, "{behind}");
         assert_eq!(ctg.at(V2::new(10.0, 1.0)), None, "inside the wall");
+    }
+
+    #[test]
+    fn the_bucket_queue_gives_the_costs_a_heap_dijkstra_gives() {
+        let cm = costmap(two_rooms(true));
+        let spec = cm.spec;
+        let goal = spec.clamp_cell(V2::new(17.0, 1.0));
+        // Several seeds with uneven starting costs, as a checkpoint's disc gives.
+        let seeds: Vec<(usize, f32)> =
+            (0..5).map(|k| (spec.index(goal.0 + k, goal.1 + k % 2), 0.013 * (k * k) as f32)).collect();
+        let soft = 3.0;
+        let ctg = CostToGo::new(&cm, &seeds, None, 0.0, soft, &[]);
+        // The reference: the same graph (no narrow cells open, no lanes) with a binary heap.
+        let passable = |j: usize| cm.cost[j] != HARD && cm.cost[j] != NARROW;
+        let mut cost = vec![f32::INFINITY; spec.len()];
+        let mut open = BinaryHeap::new();
+        for &(i, c) in &seeds {
+            if passable(i) && c < cost[i] {
+                cost[i] = c;
+                open.push(Open { f: c, i: i as u32 });
+            }
+        }
+        while let Some(Open { f, i }) = open.pop() {
+            let i = i as usize;
+            if f > cost[i] {
+                continue;
+            }
+            neighbours(&spec, i, passable, |j, step| {
+                let w = if cm.blocked(j) { 1.0 + soft } else { 1.0 };
+                let c = f + step * spec.cell as f32 * w;
+                if c < cost[j] {
+                    cost[j] = c;
+                    open.push(Open { f: c, i: j as u32 });
+                }
+            });
+        }
+        let mut reached = 0;
+        for (a, b) in ctg.cost.iter().zip(&cost) {
+            assert_eq!(a.is_finite(), b.is_finite());
+            if a.is_finite() {
+                reached += 1;
+                assert!((a - b).abs() <= 1e-4 * b.max(1.0), "{a} against {b}");
+            }
+        }
+        assert!(reached > spec.len() / 2, "most of both rooms is reached: {reached}");
     }
 }
