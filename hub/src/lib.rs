@@ -682,7 +682,7 @@ fn publish_tick(
             count: count as u32,
             t_pub_ns: 0,
             spin_us,
-            reserved: 0,
+            flags: if core.mode() == Mode::LockStep { ipc_types::TICK_LOCKSTEP } else { 0 },
         };
         let mut sample = ports::fill(sample, core.agent_blocks(id).map(|r| core.sensor_block(r)));
         // Stamped last, so the latency figure starts at the send itself.

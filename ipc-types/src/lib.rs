@@ -448,9 +448,15 @@ pub struct TickHeader {
     /// sleeps: non-zero in lock-step while every agent the hub waits for can have a core of
     /// its own (then a spinning agent takes no core another process needs); 0 otherwise.
     pub spin_us: u32,
-    /// Zero.
-    pub reserved: u32,
+    /// [`TICK_LOCKSTEP`]; the other bits are zero (as the whole field was from hubs before it
+    /// had a meaning).
+    pub flags: u32,
 }
+
+/// [`TickHeader::flags`]: the hub steps only once its agents have answered (lock-step, or
+/// their deadline passed); without it the next tick comes a cycle later whether an agent has
+/// answered or not, and a late answer leaves the robot on its last command meanwhile.
+pub const TICK_LOCKSTEP: u32 = 1;
 const _: () = assert!(core::mem::size_of::<TickHeader>() == 40);
 const _: () = assert!(core::mem::align_of::<TickHeader>() == 8);
 

@@ -166,6 +166,20 @@ fn the_demo_runs_headless_in_lock_step_and_passes() {
     let _ = std::fs::remove_dir_all(dir);
 }
 
+/// README's main command as a user runs it: real time, where the hub does not wait for the
+/// navigator (a search that outlasts the 100 ms cycle leaves the chair on its last command).
+/// The lock-step test above does not see that: a change once passed it while this failed.
+#[test]
+fn the_demo_as_readme_runs_it_in_real_time_passes() {
+    let dir = std::env::temp_dir().join(format!("iwsim-demo-real-time-{}", std::process::id()));
+    let out = iwsim(&["demo", "--headless", "--out", dir.to_str().expect("utf-8 path")]);
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(out.status.success(), "{text}\n{}", String::from_utf8_lossy(&out.stderr));
+    assert!(text.contains("real time") || String::from_utf8_lossy(&out.stderr).contains("real time"), "{text}");
+    assert!(text.contains("expected outcome: PASS"), "{text}");
+    let _ = std::fs::remove_dir_all(dir);
+}
+
 #[test]
 fn bench_lockstep_runs_the_real_load_beside_ipc_only_and_states_the_hub_memory() {
     let bench = Command::new(env!("CARGO_BIN_EXE_iwsim"))

@@ -145,6 +145,10 @@ pub struct Tick {
     /// Nanoseconds from the hub sending these sensor blocks to this agent having them
     /// (CLOCK_MONOTONIC, shared by every process on the machine).
     pub latency_ns: u64,
+    /// Whether the hub waits for this agent's answer before it steps (lock-step). When not, a
+    /// tick comes every cycle regardless, and an agent that thinks longer than a cycle leaves
+    /// its robot on its last command meanwhile.
+    pub lockstep: bool,
 }
 
 /// Sends a run-control command to the hub of `session` (start, pause, step, stop, remove a
@@ -608,6 +612,7 @@ impl Agent {
                     sim_time_s: h.sim_time_s,
                     run_state: RunState::Finished,
                     latency_ns: self.received_ns.saturating_sub(h.t_pub_ns),
+                    lockstep: h.flags & ipc_types::TICK_LOCKSTEP != 0,
                 }));
             }
             return self.tick_from_last();
@@ -659,6 +664,7 @@ impl Agent {
             sim_time_s: h.sim_time_s,
             run_state: RunState::from_u32(h.run_state).unwrap_or(RunState::Running),
             latency_ns: self.received_ns.saturating_sub(h.t_pub_ns),
+            lockstep: h.flags & ipc_types::TICK_LOCKSTEP != 0,
         }))
     }
 

@@ -13,6 +13,13 @@ use crate::geom::{Pose, V2};
 use crate::map::NavMap;
 use crate::navigator::{Body, Checkpoint, NavConfig, NavEvent, Navigator};
 use crate::pilot::Pilot;
+
+/// Expansions a tick's search may make when the hub does not wait for the answer (real
+/// time): about 25 ms on the reference machine (6 µs an expansion, AMD EPYC), so the answer
+/// comes well within the 100 ms cycle on a machine 2-3 times slower. Unbounded, a search
+/// took up to 470 ms, and the chair drove on its last command for those four ticks: in
+/// `iwsim demo` it came within 5 mm of box B (issue 26).
+const REAL_TIME_PLAN_ALLOWANCE: usize = 4000;
 use crate::pose::PoseSourceKind;
 use crate::sensors::{Input, check_mode, default_layout};
 
@@ -137,6 +144,11 @@ fn drive(agent: &mut Agent, args: &NavigatorArgs) -> anyhow::Result<ExitCode> {
             mode_checked = true;
         }
         contacts = block.collision_count;
+        let allowance =
+            args.plan_allowance.map(|n| n as usize).or((!tick.lockstep).then_some(REAL_TIME_PLAN_ALLOWANCE));
+        if pilot.navigator().config().plan_allowance != allowance {
+            pilot.navigator_mut().set_plan_allowance(allowance);
+        }
         let input = Input::from_block(block, time_s);
         let started = std::time::Instant::now();
         let out = pilot.tick(&input, block.messages().map(|(_, m)| m));

@@ -155,8 +155,11 @@ pub struct NavigatorArgs {
     #[arg(long, value_name = "COST", default_value_t = 0.0, value_parser = parse_keep_right)]
     pub keep_right: f64,
     /// Bound each tick's path search to N expansions; a longer search goes on in the next
-    /// ticks while the chair stands (default: none, each search ends in its tick). Keeps one
-    /// chair's long search from holding a lock-step run; changes how traffic goes.
+    /// ticks while the chair stands. Default: 4000 when the hub runs in real time (a few tens
+    /// of milliseconds, so the answer comes within the 100 ms cycle and the chair is not left
+    /// driving on a stale command while the navigator thinks), none in lock-step (each
+    /// search ends in its tick; the hub waits). In lock-step a bound keeps one chair's long
+    /// search from holding the run, and changes how traffic goes.
     #[arg(long, value_name = "N", value_parser = clap::value_parser!(u64).range(100..))]
     pub plan_allowance: Option<u64>,
 }

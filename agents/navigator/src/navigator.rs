@@ -411,6 +411,13 @@ impl Navigator {
         &self.cfg
     }
 
+    /// Sets [`NavConfig::plan_allowance`] from the next tick on (a search under way keeps
+    /// going under the new bound): an agent learns only from the hub's ticks whether the run
+    /// waits for it.
+    pub fn set_plan_allowance(&mut self, allowance: Option<usize>) {
+        self.cfg.plan_allowance = allowance;
+    }
+
     /// Tells where the other chairs are (as they said): `all` of them, whose readings map
     /// nothing, since they move; and those `parked` for good or for us, which are obstacles
     /// to plan round, exactly as said.

@@ -356,6 +356,11 @@ impl Pilot {
         &self.nav
     }
 
+    /// The navigator, to change its settings between ticks.
+    pub fn navigator_mut(&mut self) -> &mut Navigator {
+        &mut self.nav
+    }
+
     /// The traffic rule's state.
     pub fn traffic(&self) -> &Traffic {
         &self.traffic

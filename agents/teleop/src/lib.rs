@@ -13,7 +13,7 @@
 //! // Three Up presses (one arrow split across two reads) and a left turn.
 //! assert!(!t.on_keys(b"w\x1b[").quit);
 //! assert!(!t.on_keys(b"Aw\x1bOD").quit);
-//! let tick = Tick { tick: 1, sim_time_s: 0.1, run_state: RunState::Running, latency_ns: 0 };
+//! let tick = Tick { tick: 1, sim_time_s: 0.1, run_state: RunState::Running, latency_ns: 0, lockstep: false };
 //! let action = t.on_tick(tick, &[]).expect("a running tick is answered");
 //! assert_eq!((action.robot_id, action.motors), (7, [0.2, 0.4]));
 //! assert!(t.on_keys(b" q").quit);
@@ -470,7 +470,7 @@ mod tests {
     use ipc_types::REG_HAS_POSE;
 
     fn tick(n: u64, run_state: RunState) -> Tick {
-        Tick { tick: n, sim_time_s: n as f64 * 0.02, run_state, latency_ns: 0 }
+        Tick { tick: n, sim_time_s: n as f64 * 0.02, run_state, latency_ns: 0, lockstep: false }
     }
 
     #[test]
