@@ -291,6 +291,8 @@ fn a_real_robot_is_taken_only_under_an_expected_name_and_never_teleported() {
     me.ready().expect("ready");
     let mut observer = Observer::connect_within(&s, "real-observer", Duration::from_secs(20)).expect("observer");
     while let Some(tick) = me.wait_tick(agent_sdk::Wait::Blocking).expect("hub alive") {
+        // A lock-step hub says so in every tick (the navigator then searches unbounded).
+        assert!(tick.lockstep, "tick {} of a lock-step hub", tick.tick);
         // Every tick, a push 5 m away: across the corridor, through walls.
         me.send(tick.tick, &[ipc_types::ActionBlock::pose(id, 15.0, 6.1, 0.0)]).expect("sent");
     }
