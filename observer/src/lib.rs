@@ -133,7 +133,7 @@ impl Observer {
 
     /// The latest world snapshot: every robot's true state, copied out (see
     /// [`Observer::with_world`] to read it in place). The first call gets the snapshot the hub
-    /// keeps for late subscribers (waiting up to 5 s for it); later calls return the newest one.
+    /// keeps for late subscribers (waiting up to 15 s for it); later calls return the newest one.
     pub fn world(&mut self) -> Result<(WorldHeader, Vec<RobotState>), AgentError> {
         self.with_world(|h, robots| (*h, robots.to_vec()))
     }

@@ -77,8 +77,29 @@ use ipc_types::{
 
 /// How long an agent waits for a tick before it checks the hub is still alive.
 const LIVENESS_SLICE: Duration = Duration::from_millis(100);
-/// How long an answer to a registration may take.
-pub const ANSWER_TIMEOUT: Duration = Duration::from_secs(5);
+/// How often a request still unanswered makes the hub's server look at its clients again
+/// (see [`nudge`]).
+const NUDGE_EVERY: Duration = Duration::from_secs(1);
+
+/// Makes the hub's server set up its connections to clients again. An iceoryx2 (0.10) server
+/// does that only when the service's client list changes, and a connection it failed to set
+/// up (one a client was still creating when its wait ran out, on a loaded machine: a warning
+/// only) is not tried again until then, so that client's requests are never read. A client
+/// port created and dropped here changes the list: the server's next look retries.
+fn nudge<Req, Resp>(
+    svc: &ipc_services::iceoryx2::service::port_factory::request_response::PortFactory<Svc, Req, (), Resp, ()>,
+) where
+    Req: std::fmt::Debug + ZeroCopySend + Copy,
+    Resp: std::fmt::Debug + ZeroCopySend + Copy,
+{
+    let _ = svc.client_builder().create();
+}
+
+/// How long an answer to a registration (or a command, or the map) may take: longer than
+/// [`ipc_services::CREATION_TIMEOUT`], since on a loaded machine the hub's port may wait that
+/// long for another client's connection before it reads ours. A hub that is gone is noticed
+/// at once all the same (the waits check it is alive).
+pub const ANSWER_TIMEOUT: Duration = Duration::from_secs(15);
 
 /// How `wait_tick` waits.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -190,12 +211,18 @@ pub fn control_within(
         .map_err(ipc("send a command"))?;
     let _ = doorbell.notify();
     let start = Instant::now();
+    let mut nudged = start;
     loop {
         if let Some(r) = pending.receive().map_err(ipc("receive an answer"))? {
             return Ok(*r.payload());
         }
         if start.elapsed() > timeout {
             return Err(AgentError::NoAnswer(session.name().to_owned(), timeout));
+        }
+        if nudged.elapsed() > NUDGE_EVERY {
+            nudged = Instant::now();
+            nudge(&svc);
+            let _ = doorbell.notify();
         }
         std::thread::sleep(Duration::from_micros(200));
     }
@@ -235,6 +262,8 @@ pub fn receive_newest<T: std::fmt::Debug + ZeroCopySend, H: std::fmt::Debug + Ze
 /// so a process serving other inputs (the UDP bridge) never stalls on them.
 pub struct ControlClient {
     client: Client<Svc, ipc_types::ControlRequest, (), ipc_types::ControlResponse, ()>,
+    /// The control service, kept to [`nudge`] the hub with.
+    svc: ipc_services::ControlService,
     doorbell: Notifier<Svc>,
     _node: Node<Svc>,
     /// The session's name, for errors.
@@ -272,7 +301,7 @@ impl ControlClient {
             .map_err(ipc("create the hub doorbell"))?;
         let client = svc.client_builder().create().map_err(ipc("create a control client"))?;
         let session = session.name().to_owned();
-        Ok(Self { client, doorbell, _node: node, session, pending: Vec::new(), _release: release })
+        Ok(Self { client, svc, doorbell, _node: node, session, pending: Vec::new(), _release: release })
     }
 
     /// Sends a command and returns at once; answers are collected and dropped later.
@@ -291,7 +320,7 @@ impl ControlClient {
         Ok(())
     }
 
-    /// Sends a command and waits up to 5 s for the hub's answer, on this one client: a
+    /// Sends a command and waits up to 15 s for the hub's answer, on this one client: a
     /// process that sends many commands (the web viewer) keeps one node instead of one per
     /// command.
     pub fn ask(
@@ -305,6 +334,7 @@ impl ControlClient {
             .map_err(ipc("send a command"))?;
         let _ = self.doorbell.notify();
         let start = Instant::now();
+        let mut nudged = start;
         loop {
             if let Some(r) = p.receive().map_err(ipc("receive an answer"))? {
                 return Ok(*r.payload());
@@ -312,12 +342,17 @@ impl ControlClient {
             if start.elapsed() > ANSWER_TIMEOUT {
                 return Err(AgentError::NoAnswer(self.session.clone(), ANSWER_TIMEOUT));
             }
+            if nudged.elapsed() > NUDGE_EVERY {
+                nudged = Instant::now();
+                nudge(&self.svc);
+                let _ = self.doorbell.notify();
+            }
             std::thread::sleep(Duration::from_micros(200));
         }
     }
 }
 
-/// Waits up to 5 s for the map sample the hub keeps for late subscribers and decodes it;
+/// Waits up to 15 s for the map sample the hub keeps for late subscribers and decodes it;
 /// `alive` is asked between polls so a caller can give up early when the hub is gone.
 pub fn receive_map(
     svc: &ipc_services::MapService,
@@ -346,6 +381,10 @@ pub struct Agent {
     agent_id: u32,
     hub_pid: u32,
     register: Client<Svc, RegisterRequest, (), RegisterResponse, ()>,
+    /// The register service, kept to [`nudge`] the hub with.
+    register_svc: ipc_services::RegisterService,
+    /// When this agent last nudged the hub about an unanswered request.
+    nudged: Instant,
     sensors: Option<Subscriber<Svc, [SensorBlock], TickHeader>>,
     actions: Publisher<Svc, [ActionBlock], ActionHeader>,
     tick_listener: Listener<Svc>,
@@ -432,6 +471,8 @@ impl Agent {
             agent_id: 0,
             hub_pid: 0,
             register,
+            register_svc,
+            nudged: Instant::now(),
             sensors: None,
             actions,
             tick_listener,
@@ -772,7 +813,7 @@ impl Agent {
     }
 
     /// The map as this agent's robots may know it, decoded: walls, beacons, targets, grid and
-    /// route, without the scenario's obstacles (its sensors must find those). Waits up to 5 s
+    /// route, without the scenario's obstacles (its sensors must find those). Waits up to 15 s
     /// for the hub's kept sample.
     pub fn map(&self) -> Result<map::Map, AgentError> {
         let svc = self.session.map(&self.node, Role::Client)?;

@@ -1,6 +1,6 @@
 //! Registration without waiting: send a request to the hub, go on serving other inputs, and
 //! poll for the answer. For processes that carry other clients' robots (the UDP bridge), where
-//! [`Agent::register`]'s wait (up to 5 s for a busy or stopped hub) would stall everyone.
+//! [`Agent::register`]'s wait (up to 15 s for a busy or stopped hub) would stall everyone.
 //!
 //! ```no_run
 //! use agent_sdk::Agent;
@@ -23,7 +23,7 @@ use ipc_services::Svc;
 use ipc_services::iceoryx2::pending_response::PendingResponse;
 use ipc_types::{Refusal, RegisterKind, RegisterRequest, RegisterResponse, RobotRegistration};
 
-use crate::{ANSWER_TIMEOUT, Agent, AgentError, ipc};
+use crate::{ANSWER_TIMEOUT, Agent, AgentError, NUDGE_EVERY, ipc, nudge};
 
 /// A request sent to the hub whose answer has not been read yet. The hub's register service
 /// holds at most 4 requests of one agent in flight: keep fewer than that outstanding (one
@@ -72,7 +72,7 @@ impl Agent {
 
     /// The hub's answer to `request` if it has come: `Ok(None)` while it has not, the
     /// acceptance once (an accepted robot joins [`Agent::robots`]), or the hub's typed
-    /// refusal. Fails with [`AgentError::NoAnswer`] once the request is 5 s old, and like
+    /// refusal. Fails with [`AgentError::NoAnswer`] once the request is [`ANSWER_TIMEOUT`] (15 s) old, and like
     /// [`Agent::check_alive`] when the hub is gone or a termination signal arrived.
     pub fn poll_pending(&mut self, request: &PendingRequest) -> Result<Option<Accepted>, AgentError> {
         let Some(r) = self.poll_response(request)? else { return Ok(None) };
@@ -100,6 +100,11 @@ impl Agent {
         self.check()?;
         if request.sent.elapsed() > ANSWER_TIMEOUT {
             return Err(AgentError::NoAnswer(self.session.name().to_owned(), ANSWER_TIMEOUT));
+        }
+        if request.sent.elapsed() > NUDGE_EVERY && self.nudged.elapsed() > NUDGE_EVERY {
+            self.nudged = Instant::now();
+            nudge(&self.register_svc);
+            let _ = self.doorbell.notify();
         }
         Ok(None)
     }
