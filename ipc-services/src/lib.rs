@@ -159,9 +159,6 @@ pub enum ServicesError {
     },
 }
 
-/// See [`Session::new`]: how long an opener waits for a connection being created.
-pub const CREATION_TIMEOUT: std::time::Duration = std::time::Duration::from_secs(10);
-
 /// A session: the name space of one run's services, and the iceoryx2 configuration every
 /// process of it uses (built in code, so no config file in the working directory can change
 /// behaviour).
@@ -185,13 +182,6 @@ impl Session {
         let mut config = Config::default();
         config.global.prefix = iceoryx2::prelude::FileName::new(Self::prefix_of(name).as_bytes())
             .map_err(|_| ServicesError::BadSession(name.to_owned()))?;
-        // How long a port opening a connection (or segment) another process is still creating
-        // waits for it. iceoryx2's 1 s was too short on a loaded 2-core machine: the opener
-        // gave up ("Unable to establish connection to new receiver", a warning only), and as
-        // a port retries only when the set of ports changes, the hub never heard that
-        // client's requests (a Stop went unanswered in CI). Waiting longer costs nothing when
-        // the creator is quick.
-        config.global.creation_timeout = CREATION_TIMEOUT;
         Ok(Self { name: name.to_owned(), config })
     }
 

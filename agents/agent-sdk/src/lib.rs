@@ -83,9 +83,11 @@ const NUDGE_EVERY: Duration = Duration::from_secs(1);
 
 /// Makes the hub's server set up its connections to clients again. An iceoryx2 (0.10) server
 /// does that only when the service's client list changes, and a connection it failed to set
-/// up (one a client was still creating when its wait ran out, on a loaded machine: a warning
-/// only) is not tried again until then, so that client's requests are never read. A client
-/// port created and dropped here changes the list: the server's next look retries.
+/// up (one a client was still creating when the server's wait for it, `creation_timeout`,
+/// 1 s, ran out on a loaded machine: a warning only) is not tried again until then, so that
+/// client's requests are never read. A client port created and dropped here changes the
+/// list: the server's next look retries. (A longer `creation_timeout` was tried instead: the
+/// hub's loop then blocked for as long, and an operator's resume went unanswered for 20 s.)
 fn nudge<Req, Resp>(
     svc: &ipc_services::iceoryx2::service::port_factory::request_response::PortFactory<Svc, Req, (), Resp, ()>,
 ) where
@@ -95,10 +97,9 @@ fn nudge<Req, Resp>(
     let _ = svc.client_builder().create();
 }
 
-/// How long an answer to a registration (or a command, or the map) may take: longer than
-/// [`ipc_services::CREATION_TIMEOUT`], since on a loaded machine the hub's port may wait that
-/// long for another client's connection before it reads ours. A hub that is gone is noticed
-/// at once all the same (the waits check it is alive).
+/// How long an answer to a registration (or a command, or the map) may take: on a loaded
+/// 2-core machine a hub's loop was seen to answer after more than 5 s. A hub that is gone is
+/// noticed at once all the same (the waits check it is alive).
 pub const ANSWER_TIMEOUT: Duration = Duration::from_secs(15);
 
 /// How `wait_tick` waits.
