@@ -78,8 +78,35 @@ use ipc_types::{
 /// How long an agent waits for a tick before it checks the hub is still alive.
 const LIVENESS_SLICE: Duration = Duration::from_millis(100);
 /// How often a request still unanswered makes the hub's server look at its clients again
-/// (see [`nudge`]).
+/// (see [`Nudge`]).
 const NUDGE_EVERY: Duration = Duration::from_secs(1);
+
+/// When to nudge the hub about an unanswered request: once [`NUDGE_EVERY`] has passed since
+/// the request was sent or since the last nudge.
+#[derive(Debug)]
+pub(crate) struct Nudge(Instant);
+
+impl Nudge {
+    pub(crate) fn new() -> Self {
+        Self(Instant::now())
+    }
+
+    /// If it is time, [`nudge`]s the hub through `svc` and rings its doorbell.
+    pub(crate) fn if_due<Req, Resp>(
+        &mut self,
+        svc: &ipc_services::iceoryx2::service::port_factory::request_response::PortFactory<Svc, Req, (), Resp, ()>,
+        doorbell: &Notifier<Svc>,
+    ) where
+        Req: std::fmt::Debug + ZeroCopySend + Copy,
+        Resp: std::fmt::Debug + ZeroCopySend + Copy,
+    {
+        if self.0.elapsed() > NUDGE_EVERY {
+            self.0 = Instant::now();
+            nudge(svc);
+            let _ = doorbell.notify();
+        }
+    }
+}
 
 /// Makes the hub's server set up its connections to clients again. An iceoryx2 (0.10) server
 /// does that only when the service's client list changes, and a connection it failed to set
@@ -212,7 +239,7 @@ pub fn control_within(
         .map_err(ipc("send a command"))?;
     let _ = doorbell.notify();
     let start = Instant::now();
-    let mut nudged = start;
+    let mut nudge = Nudge::new();
     loop {
         if let Some(r) = pending.receive().map_err(ipc("receive an answer"))? {
             return Ok(*r.payload());
@@ -220,11 +247,7 @@ pub fn control_within(
         if start.elapsed() > timeout {
             return Err(AgentError::NoAnswer(session.name().to_owned(), timeout));
         }
-        if nudged.elapsed() > NUDGE_EVERY {
-            nudged = Instant::now();
-            nudge(&svc);
-            let _ = doorbell.notify();
-        }
+        nudge.if_due(&svc, &doorbell);
         std::thread::sleep(Duration::from_micros(200));
     }
 }
@@ -335,7 +358,7 @@ impl ControlClient {
             .map_err(ipc("send a command"))?;
         let _ = self.doorbell.notify();
         let start = Instant::now();
-        let mut nudged = start;
+        let mut nudge = Nudge::new();
         loop {
             if let Some(r) = p.receive().map_err(ipc("receive an answer"))? {
                 return Ok(*r.payload());
@@ -343,11 +366,7 @@ impl ControlClient {
             if start.elapsed() > ANSWER_TIMEOUT {
                 return Err(AgentError::NoAnswer(self.session.clone(), ANSWER_TIMEOUT));
             }
-            if nudged.elapsed() > NUDGE_EVERY {
-                nudged = Instant::now();
-                nudge(&self.svc);
-                let _ = self.doorbell.notify();
-            }
+            nudge.if_due(&self.svc, &self.doorbell);
             std::thread::sleep(Duration::from_micros(200));
         }
     }
@@ -384,8 +403,8 @@ pub struct Agent {
     register: Client<Svc, RegisterRequest, (), RegisterResponse, ()>,
     /// The register service, kept to [`nudge`] the hub with.
     register_svc: ipc_services::RegisterService,
-    /// When this agent last nudged the hub about an unanswered request.
-    nudged: Instant,
+    /// When this agent next nudges the hub about an unanswered request.
+    nudge: Nudge,
     sensors: Option<Subscriber<Svc, [SensorBlock], TickHeader>>,
     actions: Publisher<Svc, [ActionBlock], ActionHeader>,
     tick_listener: Listener<Svc>,
@@ -473,7 +492,7 @@ impl Agent {
             hub_pid: 0,
             register,
             register_svc,
-            nudged: Instant::now(),
+            nudge: Nudge::new(),
             sensors: None,
             actions,
             tick_listener,

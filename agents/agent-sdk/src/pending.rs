@@ -23,7 +23,7 @@ use ipc_services::Svc;
 use ipc_services::iceoryx2::pending_response::PendingResponse;
 use ipc_types::{Refusal, RegisterKind, RegisterRequest, RegisterResponse, RobotRegistration};
 
-use crate::{ANSWER_TIMEOUT, Agent, AgentError, NUDGE_EVERY, ipc, nudge};
+use crate::{ANSWER_TIMEOUT, Agent, AgentError, NUDGE_EVERY, ipc};
 
 /// A request sent to the hub whose answer has not been read yet. The hub's register service
 /// holds at most 4 requests of one agent in flight: keep fewer than that outstanding (one
@@ -101,10 +101,10 @@ impl Agent {
         if request.sent.elapsed() > ANSWER_TIMEOUT {
             return Err(AgentError::NoAnswer(self.session.name().to_owned(), ANSWER_TIMEOUT));
         }
-        if request.sent.elapsed() > NUDGE_EVERY && self.nudged.elapsed() > NUDGE_EVERY {
-            self.nudged = Instant::now();
-            nudge(&self.register_svc);
-            let _ = self.doorbell.notify();
+        // One clock for all of this agent's requests: the first nudge comes a second after
+        // the agent's previous one, at most, and never for a request younger than that.
+        if request.sent.elapsed() > NUDGE_EVERY {
+            self.nudge.if_due(&self.register_svc, &self.doorbell);
         }
         Ok(None)
     }
