@@ -303,6 +303,13 @@ fn facing(a: Pose, b: Pose) -> bool {
     crate::geom::wrap_rad(a.theta - b.theta).abs() > 2.4 // more than about 137° apart
 }
 
+/// Whether `other` still comes our way: ahead of us and heading more against us than with
+/// us. Looser than a meeting ([`facing`]), so that a chair swinging round us as it passes
+/// still counts.
+fn coming(me: Pose, other: Pose) -> bool {
+    along(me, other) > -PASSED_M && crate::geom::wrap_rad(me.theta - other.theta).abs() > std::f64::consts::FRAC_PI_2
+}
+
 impl Traffic {
     /// The rule for the navigator called `name`.
     pub fn new(name: &str) -> Self {
@@ -479,6 +486,18 @@ impl Traffic {
         self.peer(peer).is_none_or(|p| along(me, p.pose) < -PASSED_M)
     }
 
+    /// Whether we and `p` meet head-on: near, facing each other, each ahead of the other,
+    /// on lines close enough to clash.
+    fn clashes(&self, me: Pose, own: &Footprint, p: &Peer) -> bool {
+        (p.pose.x - me.x).hypot(p.pose.y - me.y) <= MEET_M
+            && facing(me, p.pose)
+            && along(me, p.pose) > 0.5
+            && along(p.pose, me) > 0.5
+            // Each side measures the other's offset in its own frame; the larger of the two
+            // makes the test the same on both sides.
+            && across(me, p.pose).abs().max(across(p.pose, me).abs()) < own.half + p.footprint.half + self.clash_slack
+    }
+
     fn finish(&mut self, peer: String) -> Decision {
         self.role = Role::Free;
         self.crossed.push(peer);
@@ -495,19 +514,26 @@ impl Traffic {
                 }
                 // No room found yet: look again while the other is still there, and give up
                 // after as long as the other waits (it then goes on regardless).
+                // A meeting that has come apart (the other turned off, into a doorway or a
+                // lane of its own) asks nothing more of us: pulling over for a chair that no
+                // longer comes only blocks the way (a yielder once stood 30 s in a doorway
+                // for a chair long gone down the corridor).
                 return match self.peer(&peer).cloned() {
-                    Some(p) if !p.state.stands() && now_s - since_s <= WAIT_LIMIT_S => Decision::PullOver(p),
+                    Some(p) if !p.state.stands() && now_s - since_s <= WAIT_LIMIT_S && self.clashes(me, own, &p) => {
+                        Decision::PullOver(p)
+                    }
                     _ => self.finish(peer),
                 };
             }
             Role::Parked { peer } => {
                 // Gone past, or standing for good itself (arrived beside us, or parked for a
-                // third chair): it will not pass, so we go on and plan round it.
-                let stands = self.peer(&peer).is_some_and(|p| p.state.stands());
-                return if stands || self.gone_past(me, &peer) { self.finish(peer) } else { Decision::Hold };
+                // third chair), or no longer coming our way: it will not pass, so we go on
+                // and plan round it.
+                let done = self.peer(&peer).is_none_or(|p| p.state.stands() || !coming(me, p.pose));
+                return if done || self.gone_past(me, &peer) { self.finish(peer) } else { Decision::Hold };
             }
             Role::Waiting { peer, since_s } => {
-                if self.gone_past(me, &peer) {
+                if self.gone_past(me, &peer) || self.peer(&peer).is_some_and(|p| !coming(me, p.pose)) {
                     return self.finish(peer);
                 }
                 match self.peer(&peer).map(|p| p.state) {
@@ -535,18 +561,11 @@ impl Traffic {
         self.crossed
             .retain(|n| peers.iter().any(|p| &p.name == n && (p.pose.x - me.x).hypot(p.pose.y - me.y) < 2.0 * MEET_M));
         let meeting = self.peers.iter().find(|p| {
-            let d = (p.pose.x - me.x).hypot(p.pose.y - me.y);
             !self.crossed.contains(&p.name)
                 // One already parked is planned round; one already pulling over may have
                 // seen the meeting a moment before we did.
                 && !p.state.stands()
-                && d <= MEET_M
-                && facing(me, p.pose)
-                && along(me, p.pose) > 0.5
-                && along(p.pose, me) > 0.5
-                // Each side measures the other's offset in its own frame; the larger of the
-                // two makes the test the same on both sides.
-                && across(me, p.pose).abs().max(across(p.pose, me).abs()) < own.half + p.footprint.half + self.clash_slack
+                && self.clashes(me, own, p)
         });
         let Some(p) = meeting.cloned() else { return Decision::Go };
         if self.name > p.name {
@@ -733,17 +752,45 @@ mod tests {
         assert!(matches!(two.decide(b, &fp, 0.1), Decision::PullOver(_)));
         two.pulling();
         two.parked();
-        let arrived = pose(20.0, 7.2, 90.0);
-        two.hear(&say("chair1", arrived, State::Go), 5.0);
+        let nearer = pose(18.5, 6.3, 10.0);
+        two.hear(&say("chair1", nearer, State::Go), 5.0);
         assert_eq!(two.decide(b, &fp, 5.0), Decision::Hold, "still on its way");
-        two.hear(&say("chair1", arrived, State::Park), 6.0);
+        let mut turned = two.clone();
+        two.hear(&say("chair1", nearer, State::Park), 6.0);
         assert_eq!(two.decide(b, &fp, 6.0), Decision::Go, "it stands for good: go on round it");
+        // Nor does it wait for one that turned off (into a doorway beside it).
+        turned.hear(&say("chair1", pose(20.0, 7.2, 90.0), State::Go), 6.0);
+        assert_eq!(turned.decide(b, &fp, 6.0), Decision::Go, "it no longer comes");
         // A yielder still looking for room does not pull over for a chair that stands.
         let mut three = Traffic::new("chair3");
         three.hear(&say("chair1", a, State::Go), 0.0);
         assert!(matches!(three.decide(b, &fp, 0.1), Decision::PullOver(_)));
         three.hear(&say("chair1", a, State::Park), 0.2);
         assert_eq!(three.decide(b, &fp, 0.3), Decision::Go);
+    }
+
+    /// Two chairs leaving facing doorways meet head-on for a moment, then both turn down the
+    /// corridor: the one looking for room to pull over stops looking, the other stops
+    /// waiting (a yielder once stood 20 s in a doorway for a chair long gone).
+    #[test]
+    fn a_meeting_that_comes_apart_is_over_for_both() {
+        let fp = BODY.footprint();
+        let (one_at, two_at) = (pose(12.5, 5.0, 90.0), pose(12.6, 9.0, -90.0));
+        let mut one = Traffic::new("chair1");
+        let mut two = Traffic::new("chair2");
+        one.hear(&say("chair2", two_at, State::Go), 0.0);
+        two.hear(&say("chair1", one_at, State::Go), 0.0);
+        assert_eq!(one.decide(one_at, &fp, 0.1), Decision::Hold);
+        assert!(matches!(two.decide(two_at, &fp, 0.1), Decision::PullOver(_)), "no room found yet");
+        // chair1 turns east down the corridor.
+        let east = pose(14.0, 6.6, 0.0);
+        two.hear(&say("chair1", east, State::Go), 3.0);
+        assert_eq!(two.decide(two_at, &fp, 3.0), Decision::Go, "no longer anybody to pull over for");
+        assert!(!two.negotiating());
+        // chair2 turns east too: chair1, had it waited, waits no more.
+        one.hear(&say("chair2", pose(13.5, 7.5, 0.0), State::Pull), 3.0);
+        assert_eq!(one.decide(one_at, &fp, 3.0), Decision::Go, "it no longer comes");
+        assert!(!one.negotiating());
     }
 
     #[test]
