@@ -315,6 +315,22 @@ impl WorldModel {
         best
     }
 
+    /// The chair's distance at `pose` to the nearest sensed obstacle (and parked chair), up
+    /// to `cap` metres; negative when it overlaps one.
+    pub fn sensed_clearance(&self, pose: &Pose, cap: f64) -> f64 {
+        let fp = &self.footprint;
+        let frame = pose.body_frame();
+        let centre = frame.to_world(V2::new(fp.centre_offset(), 0.0));
+        let mut best = cap;
+        self.point_index.query_near(centre, fp.centre_reach() + cap, |k| {
+            if self.counts(k) {
+                let p = frame.apply(self.points[k]);
+                best = best.min(fp.body_segment_distance(p, p) - SENSED_RADIUS_M - self.sensed_extra);
+            }
+        });
+        best
+    }
+
     /// Whether sensed point `k` counts as an obstacle for planning.
     fn counts(&self, k: usize) -> bool {
         k >= self.parked_from || self.sensed.evidence(self.point_cells[k] as usize) >= self.plan_evidence

@@ -218,6 +218,10 @@ const PEER_SLACK_M: f64 = 0.25;
 /// some of the two estimates' error.
 const PEER_GUARD_M: f64 = 0.1;
 
+/// The safety layer stops a motion that would bring the chair this near something in its
+/// sensed map (metres): plans keep farther off, so only a motion off its line trips it.
+const SENSED_GUARD_M: f64 = 0.01;
+
 /// A path is dropped when the map changes so that a pose ahead comes nearer than this to
 /// something (poses planned nearer than this, leaving a tight spot, are not re-checked).
 const RECHECK_M: f64 = 0.02;
@@ -986,7 +990,13 @@ impl Navigator {
         let fp = self.model.footprint;
         let near: Vec<&(Pose, Footprint)> =
             self.peers.iter().filter(|(p, f)| (p.pos() - pose.pos()).norm() <= fp.reach() + f.reach() + 1.0).collect();
-        if points.is_empty() && near.is_empty() {
+        // What the sensed map already holds (a chair that says nothing, found by the sensors
+        // a while ago): the plan keeps clear of it, but a manoeuvre planned before it was
+        // found, or a path follower off its line, would not (a pull-over once pushed into
+        // a silent chair for a minute).
+        let sensed_now = self.model.sensed_clearance(&pose, SENSED_GUARD_M + 0.5);
+        let sensed_near = sensed_now < SENSED_GUARD_M + 0.5;
+        if points.is_empty() && near.is_empty() && !sensed_near {
             return None;
         }
         let gap = |at: &Pose, (p, f): &(Pose, Footprint)| {
@@ -1007,7 +1017,11 @@ impl Navigator {
                     let d = gap(&p, q);
                     d < PEER_GUARD_M && d < d0 - 1e-4
                 });
-            if sensed || peer {
+            let known = sensed_near && k <= 3 && {
+                let d = self.model.sensed_clearance(&p, SENSED_GUARD_M + 0.5);
+                d < SENSED_GUARD_M && d < sensed_now - 1e-4
+            };
+            if sensed || peer || known {
                 let ttc = k as f64 * dt;
                 return Some(if ttc <= 0.3 { (0.0, 0.0, true) } else { (v * ttc.clamp(0.3, 1.0), w, false) });
             }

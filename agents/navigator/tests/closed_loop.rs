@@ -529,6 +529,40 @@ mod corridor_swap {
         min_gap_m: f64,
         /// The least clearance of either chair to a wall, metres.
         min_clearance_m: f64,
+        /// The least distance between any two chairs' rectangles, the silent ones included.
+        min_gap_any_m: f64,
+        /// Contacts of the silent chairs.
+        silent_contacts: u64,
+    }
+
+    /// A chair that is not a navigator (a teleop chair, a Ciber-Rato robot): it says nothing
+    /// and stands where it started.
+    struct Silent {
+        name: &'static str,
+        start: [f64; 3],
+    }
+
+    /// What else a run has beside its navigators.
+    #[derive(Default)]
+    struct Extra {
+        silent: Vec<Silent>,
+        /// Of the messages each navigator would hear, this percentage is lost (drawn per
+        /// message from the seed, the tick and the listener).
+        loss_pct: u64,
+    }
+
+    /// Whether the `k`-th message `listener` would hear at `tick` is lost.
+    fn lost(seed: u64, tick: u64, listener: usize, k: usize, loss_pct: u64) -> bool {
+        // splitmix64 of the four: a fixed, well-mixed draw.
+        let mut z = seed
+            .wrapping_mul(0x9E37_79B9_7F4A_7C15)
+            .wrapping_add(tick << 20)
+            .wrapping_add((listener as u64) << 8)
+            .wrapping_add(k as u64);
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        z ^= z >> 31;
+        z % 100 < loss_pct
     }
 
     /// The distance between two chairs' rectangles (0 when they overlap).
@@ -555,6 +589,19 @@ mod corridor_swap {
     /// As [`simulate`], on built-in map `map`, with the zone rule on when `zone_claims` and
     /// chairs keeping right at `keep_right` (0: off).
     fn simulate_on(map: &str, chairs: &[Chair], seconds: f64, seed: u64, zone_claims: bool, keep_right: f64) -> Swap {
+        simulate_with(map, chairs, seconds, seed, zone_claims, keep_right, &Extra::default())
+    }
+
+    /// As [`simulate_on`], with silent chairs and lost messages.
+    fn simulate_with(
+        map: &str,
+        chairs: &[Chair],
+        seconds: f64,
+        seed: u64,
+        zone_claims: bool,
+        keep_right: f64,
+        extra: &Extra,
+    ) -> Swap {
         let trace = std::env::var_os("NAV_TRACE").is_some();
         let lab = builtin::map(map).expect("a built-in map").lab.clone();
         let params = Params::default();
@@ -581,20 +628,33 @@ mod corridor_swap {
             let pilot = if zone_claims { pilot.with_zone_claims() } else { pilot };
             fleet.push((handle, pilot, None::<f64>));
         }
+        let mut silent = Vec::new();
+        for q in &extra.silent {
+            let cfg =
+                NavConfig { start: Pose::from_deg(q.start[0], q.start[1], q.start[2]), ..NavConfig::intellwheels() };
+            silent.push((world.add_robot(chair_spec(&cfg, q.name)).expect("a valid chair"), q));
+        }
         world.refresh_sensors();
         let mut min_gap = f64::INFINITY;
+        let mut min_gap_any = f64::INFINITY;
         let mut min_clearance = f64::INFINITY;
         let limit = (seconds / 0.1).round() as u64;
         for tick in 0..=limit {
             let time_s = tick as f64 * 0.1;
             let mut actions = Vec::new();
-            for (handle, pilot, done) in &mut fleet {
+            for (listener, (handle, pilot, done)) in fleet.iter_mut().enumerate() {
                 let name = pilot.name().to_owned();
                 let robot = world.robot(*handle).expect("a chair");
                 min_clearance = min_clearance.min(clearance(&lab, &fp, robot));
                 let block = sensor_block(robot, tick);
                 let input = Input::from_block(&block, time_s);
-                let heard: Vec<&[u8]> = robot.inbox.iter().map(|h| h.message.as_bytes()).collect();
+                let heard: Vec<&[u8]> = robot
+                    .inbox
+                    .iter()
+                    .enumerate()
+                    .filter(|&(k, _)| !lost(seed, tick, listener, k, extra.loss_pct))
+                    .map(|(_, h)| h.message.as_bytes())
+                    .collect();
                 let out = pilot.tick(&input, heard);
                 if trace {
                     eprintln!(
@@ -614,8 +674,18 @@ mod corridor_swap {
                 action.say = out.say.as_deref().map(|s| Message::new(s.as_bytes()).expect("a short message"));
                 actions.push(action);
             }
+            for (handle, _) in &silent {
+                actions.push(Action::motors(*handle, 0.0, 0.0));
+            }
             let (a, b) = (&fleet[0].0, &fleet[1].0);
             min_gap = min_gap.min(gap(&fp, world.robot(*a).expect("a chair"), world.robot(*b).expect("a chair")));
+            let all: Vec<_> = fleet.iter().map(|f| f.0).chain(silent.iter().map(|s| s.0)).collect();
+            for (i, a) in all.iter().enumerate() {
+                for b in &all[i + 1..] {
+                    let (ra, rb) = (world.robot(*a).expect("a chair"), world.robot(*b).expect("a chair"));
+                    min_gap_any = min_gap_any.min(gap(&fp, ra, rb));
+                }
+            }
             if fleet.iter().all(|(_, _, done)| done.is_some_and(|t| time_s > t + 2.0)) {
                 break;
             }
@@ -633,7 +703,15 @@ mod corridor_swap {
                 )
             })
             .collect();
-        Swap { seed, chairs, min_gap_m: min_gap, min_clearance_m: min_clearance }
+        let silent_contacts = silent.iter().map(|q| world.robot(q.0).expect("a chair").collision_count).sum();
+        Swap {
+            seed,
+            chairs,
+            min_gap_m: min_gap,
+            min_clearance_m: min_clearance,
+            min_gap_any_m: min_gap_any,
+            silent_contacts,
+        }
     }
 
     /// The built-in corridor-swap scenario: chair1 east from (14.5, 6.0), chair2 west from
@@ -751,5 +829,78 @@ mod corridor_swap {
         }
         let all_arrived = runs.iter().filter(|r| r.chairs.iter().all(|c| c.0)).count();
         assert!(all_arrived * 10 >= runs.len() * 6, "all three arrived on {all_arrived} of {} seeds", runs.len());
+    }
+
+    /// Runs `chairs` (and `extra`) on `map` for `seeds`, a thread each.
+    fn runs_with(
+        map: &str,
+        chairs: &[Chair],
+        limit: f64,
+        seeds: std::ops::RangeInclusive<u64>,
+        extra: &Extra,
+    ) -> Vec<Swap> {
+        std::thread::scope(|scope| {
+            let handles: Vec<_> = seed_list(seeds)
+                .into_iter()
+                .map(|seed| scope.spawn(move || simulate_with(map, chairs, limit, seed, false, 1.0, extra)))
+                .collect();
+            handles.into_iter().map(|h| h.join().expect("a simulation thread")).collect()
+        })
+    }
+
+    /// Nothing touched anything, and (if `arrive`) every navigator arrived within the limit.
+    fn untouched(what: &str, chairs: &[Chair], runs: &[Swap], arrive: bool) {
+        assert!(!runs.is_empty());
+        for r in runs {
+            eprintln!("{what}: {r:?}");
+        }
+        for r in runs {
+            for (k, (arrived, _, contacts, _)) in r.chairs.iter().enumerate() {
+                assert_eq!(*contacts, 0, "seed {}: {} touched something: {r:?}", r.seed, chairs[k].name);
+                assert!(*arrived || !arrive, "seed {}: {} did not arrive: {r:?}", r.seed, chairs[k].name);
+            }
+            assert_eq!(r.silent_contacts, 0, "seed {}: a silent chair was touched: {r:?}", r.seed);
+            assert!(r.min_gap_any_m > 0.0, "seed {}: two chairs touched", r.seed);
+        }
+    }
+
+    /// A chair that is no navigator (it says nothing) stands broken down in the eastbound
+    /// lane of the ward's corridor while two navigators come by, one each way: it is found by
+    /// the sensors alone and nobody touches it or anybody else. (Before the safety layer
+    /// minded what the sensed map holds, a navigator pulling over pushed into it for a
+    /// minute on two of these seeds.) Getting past is not yet sure: on seeds 1–3 the
+    /// eastbound chair, going round it, meets the westbound one in its lane and the two stand
+    /// (issue 26); arrivals are printed, not asserted.
+    #[test]
+    fn a_silent_chair_standing_in_the_corridor_is_never_touched() {
+        let chairs = [
+            Chair { name: "chair1", start: [14.5, 6.5, 0.0], goal: [26.0, 6.5] },
+            Chair { name: "chair2", start: [26.5, 7.5, 180.0], goal: [14.0, 7.5] },
+        ];
+        let extra = Extra { silent: vec![Silent { name: "teleop", start: [20.0, 6.5, 0.0] }], loss_pct: 0 };
+        let runs = runs_with("ward", &chairs, 120.0, 1..=3, &extra);
+        untouched("silent chair standing", &chairs, &runs, false);
+    }
+
+    /// Half of all messages lost: two chairs meeting head-on in the LIACC corridor (1.78 m, too
+    /// narrow to pass without one pulling over) still never touch, and both arrive.
+    #[test]
+    fn with_half_the_messages_lost_two_chairs_meeting_head_on_never_touch() {
+        let chairs = [
+            Chair { name: "chair1", start: [14.5, 6.0, 0.0], goal: [24.5, 6.0] },
+            Chair { name: "chair2", start: [24.5, 6.0, 180.0], goal: [14.5, 6.0] },
+        ];
+        let extra = Extra { silent: vec![], loss_pct: 50 };
+        let runs = std::thread::scope(|scope| {
+            let handles: Vec<_> = seed_list(1..=3)
+                .into_iter()
+                .map(|seed| {
+                    let (chairs, extra) = (&chairs, &extra);
+                    scope.spawn(move || simulate_with("liacc", chairs, 150.0, seed, false, 0.0, extra))
+                })
+                .collect();
+            handles.into_iter().map(|h| h.join().expect("a simulation thread")).collect::<Vec<_>>()
+        });
+        untouched("half the messages lost", &chairs, &runs, true);
     }
 }
