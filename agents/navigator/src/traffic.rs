@@ -516,7 +516,7 @@ impl Traffic {
                 // after as long as the other waits (it then goes on regardless).
                 // A meeting that has come apart (the other turned off, into a doorway or a
                 // lane of its own) asks nothing more of us: pulling over for a chair that no
-                // longer comes only blocks the way (a yielder once stood 30 s in a doorway
+                // longer comes only blocks the way (a yielder once stood 20 s in a doorway
                 // for a chair long gone down the corridor).
                 return match self.peer(&peer).cloned() {
                     Some(p) if !p.state.stands() && now_s - since_s <= WAIT_LIMIT_S && self.clashes(me, own, &p) => {
