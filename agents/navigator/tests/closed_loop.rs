@@ -632,7 +632,7 @@ mod corridor_swap {
         for q in &extra.silent {
             let cfg =
                 NavConfig { start: Pose::from_deg(q.start[0], q.start[1], q.start[2]), ..NavConfig::intellwheels() };
-            silent.push((world.add_robot(chair_spec(&cfg, q.name)).expect("a valid chair"), q));
+            silent.push(world.add_robot(chair_spec(&cfg, q.name)).expect("a valid chair"));
         }
         world.refresh_sensors();
         let mut min_gap = f64::INFINITY;
@@ -674,12 +674,12 @@ mod corridor_swap {
                 action.say = out.say.as_deref().map(|s| Message::new(s.as_bytes()).expect("a short message"));
                 actions.push(action);
             }
-            for (handle, _) in &silent {
+            for handle in &silent {
                 actions.push(Action::motors(*handle, 0.0, 0.0));
             }
             let (a, b) = (&fleet[0].0, &fleet[1].0);
             min_gap = min_gap.min(gap(&fp, world.robot(*a).expect("a chair"), world.robot(*b).expect("a chair")));
-            let all: Vec<_> = fleet.iter().map(|f| f.0).chain(silent.iter().map(|s| s.0)).collect();
+            let all: Vec<_> = fleet.iter().map(|f| f.0).chain(silent.iter().copied()).collect();
             for (i, a) in all.iter().enumerate() {
                 for b in &all[i + 1..] {
                     let (ra, rb) = (world.robot(*a).expect("a chair"), world.robot(*b).expect("a chair"));
@@ -703,7 +703,7 @@ mod corridor_swap {
                 )
             })
             .collect();
-        let silent_contacts = silent.iter().map(|q| world.robot(q.0).expect("a chair").collision_count).sum();
+        let silent_contacts = silent.iter().map(|h| world.robot(*h).expect("a chair").collision_count).sum();
         Swap {
             seed,
             chairs,
