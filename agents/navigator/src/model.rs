@@ -299,11 +299,7 @@ impl WorldModel {
         let centre = frame.to_world(V2::new(fp.centre_offset(), 0.0));
         let reach = fp.centre_reach() + cap;
         let r = V2::new(reach, reach);
-        let mut best = cap;
-        self.seg_index.query(centre - r, centre + r, |k| {
-            let s = self.segs[k];
-            best = best.min(fp.body_segment_distance(frame.apply(s.a), frame.apply(s.b)));
-        });
+        let mut best = self.wall_clearance(pose, cap);
         self.point_index.query(centre - r, centre + r, |k| {
             if !self.counts(k) {
                 return;
@@ -311,6 +307,22 @@ impl WorldModel {
             let p = frame.apply(self.points[k]);
             let d = fp.body_segment_distance(p, p) - SENSED_RADIUS_M - self.sensed_extra;
             best = best.min(d.max(0.0));
+        });
+        best
+    }
+
+    /// The chair's distance at `pose` to the nearest known wall, up to `cap` metres (0 when
+    /// it overlaps one).
+    pub fn wall_clearance(&self, pose: &Pose, cap: f64) -> f64 {
+        let fp = &self.footprint;
+        let frame = pose.body_frame();
+        let centre = frame.to_world(V2::new(fp.centre_offset(), 0.0));
+        let reach = fp.centre_reach() + cap;
+        let r = V2::new(reach, reach);
+        let mut best = cap;
+        self.seg_index.query(centre - r, centre + r, |k| {
+            let s = self.segs[k];
+            best = best.min(fp.body_segment_distance(frame.apply(s.a), frame.apply(s.b)));
         });
         best
     }

@@ -219,8 +219,14 @@ const PEER_SLACK_M: f64 = 0.25;
 const PEER_GUARD_M: f64 = 0.1;
 
 /// The safety layer stops a motion that would bring the chair this near something in its
-/// sensed map (metres): plans keep farther off, so only a motion off its line trips it.
+/// sensed map or a known wall (metres): plans keep farther off (their narrowest margin is
+/// 0.015 m), so only a motion off its line trips it, such as a turn on the spot begun a few
+/// centimetres from where it was planned.
 const SENSED_GUARD_M: f64 = 0.01;
+
+/// Slower than this (m/s, by the drive's model) the chair stands, for beginning a turn on
+/// the spot: a tick's roll at it is 2 mm.
+const STANDING_MPS: f64 = 0.02;
 
 /// A path is dropped when the map changes so that a pose ahead comes nearer than this to
 /// something (poses planned nearer than this, leaving a tight spot, are not re-checked).
@@ -230,6 +236,44 @@ const RECHECK_M: f64 = 0.02;
 const DOCK_M: f64 = 0.9;
 /// A final stop farther than this from the checkpoint is planned again (twice at most).
 const DOCK_AGAIN_M: f64 = 0.3;
+
+/// A plan that found nothing, kept to tell whether the next would find anything more.
+#[derive(Debug, Clone)]
+struct Failure {
+    start: Pose,
+    parked: Vec<V2>,
+    tick: u64,
+}
+
+impl Failure {
+    /// Whether a search from `start` with chairs standing at `parked` would be the same search
+    /// as this one (or one with more in its way), before [`UNCHANGED_RETRY_TICKS`] are up.
+    fn unchanged(&self, start: &Pose, parked: &[V2], tick: u64) -> bool {
+        tick < self.tick + UNCHANGED_RETRY_TICKS
+            && (start.pos() - self.start.pos()).norm() <= MOVED_M
+            && sim_model::wrap_rad(start.theta - self.start.theta).abs() <= MOVED_RAD
+            && self.parked.iter().all(|&q| parked.iter().any(|&p| (p - q).norm() <= PARKED_SAME_M))
+    }
+}
+
+/// A refuge ([`Navigator::path_to_refuge`]) is at most this far away by the way there,
+/// metres...
+const REFUGE_REACH_M: f64 = 10.0;
+/// ...has this much free floor all round it (more than half a 2 m corridor's width, so a
+/// room or a hall), metres...
+const REFUGE_CLEAR_M: f64 = 1.3;
+/// ...and is this far from every other chair, metres.
+const REFUGE_APART_M: f64 = 1.8;
+
+/// A chair planned round counts as where it stood within this (metres).
+const PARKED_SAME_M: f64 = 0.1;
+
+/// A failed plan that nothing has changed is tried again after this many ticks all the same.
+const UNCHANGED_RETRY_TICKS: u64 = 100;
+
+/// A chair planned round that has moved this far (metres) since a plan found nothing may
+/// have opened the way: the chair looks again at once.
+const PARKED_MOVED_M: f64 = 0.3;
 
 /// Ticks before a failed plan is tried again, by how many failed in a row before it (1, 2,
 /// then 4 s at the usual 100 ms tick).
@@ -338,6 +382,11 @@ pub struct Navigator {
     manoeuvre_lost: bool,
     /// Other chairs' rectangles as they said: readings they explain map nothing.
     peers: Vec<(Pose, Footprint)>,
+    /// The last plan that found nothing, while nothing has changed since that could open a
+    /// way: where it started, where the chairs planned round stood, and the tick.
+    failure: Option<Failure>,
+    /// Where the chairs planned round stand now.
+    parked_now: Vec<V2>,
 }
 
 impl Navigator {
@@ -377,6 +426,8 @@ impl Navigator {
             map_changed: false,
             manoeuvre_lost: false,
             peers: Vec::new(),
+            failure: None,
+            parked_now: Vec::new(),
         }
     }
 
@@ -427,7 +478,17 @@ impl Navigator {
     /// to plan round, exactly as said.
     pub fn set_peers(&mut self, all: Vec<(Pose, Footprint)>, parked: &[(Pose, Footprint)]) {
         self.peers = all;
+        // A chair that found no way waits before it looks again, longer each time; but when
+        // one of the chairs that shut the way moves off (backing off to let it through), it
+        // looks again at once: the way may be open only while that one stands aside.
+        if self.failure.as_ref().is_some_and(|f| {
+            f.parked.iter().any(|&q| parked.iter().all(|(p, _)| (p.pos() - q).norm() > PARKED_MOVED_M))
+        }) {
+            self.plan_after = 0;
+            self.failure = None;
+        }
         self.model.set_parked(parked);
+        self.parked_now = parked.iter().map(|(p, _)| p.pos()).collect();
     }
 
     /// Drives `path` (forward poses from about where the chair is) at up to `speed` m/s with
@@ -440,6 +501,68 @@ impl Navigator {
         self.mode = Mode::Manoeuvre;
         self.pending = None;
         self.manoeuvre_lost = false;
+    }
+
+    /// A path to a refuge: the nearest place (by the way there, within [`REFUGE_REACH_M`])
+    /// with [`REFUGE_CLEAR_M`] of free floor all round, such as a room off a corridor or a
+    /// hall, and at least [`REFUGE_APART_M`] from each of `others`. A chair in a deadlock
+    /// that gives way goes there: out of a corridor, not just a little way back along it.
+    /// `None` when there is none, or no path to one.
+    pub fn path_to_refuge(&self, others: &[V2]) -> Option<Vec<PathPose>> {
+        let fp = self.model.footprint;
+        let narrow = fp.half.min(fp.rear).min(fp.front) + 0.04;
+        let cm = Costmap::build(&self.model, fp.half + 0.02, narrow);
+        let spec = cm.spec;
+        let here = self.pose.pos();
+        let (sx, sy) = spec.clamp_cell(here);
+        let from_here = CostToGo::new(&cm, &[(spec.index(sx, sy), 0.0)], None, 0.0, 4.0, &[(here, 0.6)]);
+        let mut best: Option<(f64, V2)> = None;
+        let reach = V2::new(REFUGE_REACH_M, REFUGE_REACH_M);
+        let (xs, ys) = spec.range(here - reach, here + reach);
+        for iy in ys {
+            for ix in xs.clone() {
+                let p = spec.center(ix, iy);
+                let Some(c) = from_here.at(p) else { continue };
+                if c > REFUGE_REACH_M
+                    || best.is_some_and(|(b, _)| c >= b)
+                    || self.model.statics.distance_at(p) < REFUGE_CLEAR_M
+                    || others.iter().any(|&q| (q - p).norm() < REFUGE_APART_M)
+                {
+                    continue;
+                }
+                best = Some((c, p));
+            }
+        }
+        let (_, refuge) = best?;
+        // The path ends at the refuge, not short of it: the whole body is out of the way
+        // only there.
+        let accept = 0.15;
+        let (gx, gy) = spec.clamp_cell(refuge);
+        let r = (accept / spec.cell).ceil() as i64;
+        let mut seeds = Vec::new();
+        for dy in -r..=r {
+            for dx in -r..=r {
+                let (x, y) = (gx as i64 + dx, gy as i64 + dy);
+                if x < 0 || y < 0 || x >= spec.nx as i64 || y >= spec.ny as i64 {
+                    continue;
+                }
+                let d = (spec.center(x as usize, y as usize) - refuge).norm();
+                if d <= accept {
+                    seeds.push((spec.index(x as usize, y as usize), d as f32));
+                }
+            }
+        }
+        let ctg = CostToGo::new(&cm, &seeds, Some(spec.index(sx, sy)), 6.0, 4.0, &[(here, 0.6), (refuge, accept)]);
+        let goal = Goal { pos: refuge, stop_within: 0.1, accept_within: accept, weight: 1.0 };
+        let coarse = HybridParams {
+            xy_res: 2.0 * self.hybrid.xy_res,
+            heading_bins: self.hybrid.heading_bins / 2,
+            turn_heuristic: COARSE_TURN_HEURISTIC,
+            horizon_m: f64::INFINITY,
+            ..self.hybrid.clone()
+        };
+        let outcome = hybrid::plan(&self.model, &ctg, self.pose, &goal, 0.6 * self.cfg.margin_m, &coarse).ok()?;
+        outcome.reaches_goal().then(|| outcome.path().to_vec())
     }
 
     /// Whether a manoeuvre is being driven.
@@ -559,6 +682,7 @@ impl Navigator {
             }
             None => (0.0, 0.0),
         };
+        (v, w) = self.stop_before_turning(v, w);
         if let Some((sv, sw, stop)) = self.safety(input, v, w) {
             (v, w) = (sv, sw);
             if stop {
@@ -569,6 +693,13 @@ impl Navigator {
         }
         let powers = self.drive.powers(v, w);
         Output { powers, events }
+    }
+
+    /// A turn on the spot begins only once the chair stands: the motors cannot brake and turn
+    /// at once (a wheel asked for both saturates, and the chair rolls on while it turns), and
+    /// the turn was checked where it was planned, not a few centimetres on.
+    fn stop_before_turning(&self, v: f64, w: f64) -> (f64, f64) {
+        if v == 0.0 && w != 0.0 && self.drive.velocity().0.abs() > STANDING_MPS { (0.0, 0.0) } else { (v, w) }
     }
 
     /// A manoeuvre's tick: follow its path (the safety layer may slow or stop the chair,
@@ -710,6 +841,16 @@ impl Navigator {
                 // (margin from walls, extra margin from sensed obstacles): sensed obstacles are
                 // kept further off while there is room, since only their seen faces are known.
                 let margins = [(m, m), (0.8 * m, 0.4 * m), (0.6 * m, 0.0), (0.3 * m, 0.0)];
+                // The same search as the last, which found nothing, would find nothing again:
+                // the chair has not moved and no chair planned round has moved off (see
+                // [`Navigator::set_peers`]). A stuck chair so costs nothing until its way may
+                // have opened, or until it looks again anyway ([`UNCHANGED_RETRY_TICKS`]: sensed
+                // ghosts fade with each failure).
+                if self.failure.as_ref().is_some_and(|f| f.unchanged(&start, &self.parked_now, tick)) {
+                    self.plan_after = tick + PLAN_BACKOFF[0];
+                    self.tracker = None;
+                    return;
+                }
                 self.begin_search(start, cp, &margins, tick)
             }
         };
@@ -738,6 +879,7 @@ impl Navigator {
         }
         match result {
             Ok((outcome, kind)) => {
+                self.failure = None;
                 self.install(&outcome);
                 self.path_kind = kind;
                 self.blocked_since = None;
@@ -751,6 +893,7 @@ impl Navigator {
                 // waits for others costs a lock-step run little.
                 self.plan_after = tick + PLAN_BACKOFF[(self.plan_failures as usize).min(PLAN_BACKOFF.len() - 1)];
                 self.plan_failures += 1;
+                self.failure = Some(Failure { start: began, parked: self.parked_now.clone(), tick });
                 self.model.sensed.fade(0.4);
                 if self.blocked_since.is_none() {
                     self.blocked_since = Some(tick);
@@ -996,7 +1139,15 @@ impl Navigator {
         // a silent chair for a minute).
         let sensed_now = self.model.sensed_clearance(&pose, SENSED_GUARD_M + 0.5);
         let sensed_near = sensed_now < SENSED_GUARD_M + 0.5;
-        if points.is_empty() && near.is_empty() && !sensed_near {
+        // The known walls likewise: a path keeps its margin from them as planned, but a turn
+        // on the spot swings the corners through a circle of a metre and more from wherever
+        // the chair happens to stand (ward, 10 chairs: a turn begun 3 cm on from its planned
+        // place, the chair still rolling, put a corner on a doorway's jamb), and a manoeuvre
+        // (backing off along the trail, pulling over) is not planned against them at all
+        // (backing off once put a rear corner on the corridor's wall).
+        let walls_now = self.model.wall_clearance(&pose, SENSED_GUARD_M + 0.5);
+        let walls_near = walls_now < SENSED_GUARD_M + 0.5;
+        if points.is_empty() && near.is_empty() && !sensed_near && !walls_near {
             return None;
         }
         let gap = |at: &Pose, (p, f): &(Pose, Footprint)| {
@@ -1021,6 +1172,11 @@ impl Navigator {
                 let d = self.model.sensed_clearance(&p, SENSED_GUARD_M + 0.5);
                 d < SENSED_GUARD_M && d < sensed_now - 1e-4
             };
+            let known = known
+                || walls_near && k <= 3 && {
+                    let d = self.model.wall_clearance(&p, SENSED_GUARD_M + 0.5);
+                    d < SENSED_GUARD_M && d < walls_now - 1e-4
+                };
             if sensed || peer || known {
                 let ttc = k as f64 * dt;
                 return Some(if ttc <= 0.3 { (0.0, 0.0, true) } else { (v * ttc.clamp(0.3, 1.0), w, false) });
@@ -1209,5 +1365,103 @@ mod tests {
         }
         assert!(closest > 0.02, "came within {closest:.3} m of the other chair");
         assert!(nav.finished(), "stuck at {:?}", sim.pose);
+    }
+
+    #[test]
+    fn a_turn_on_the_spot_that_would_swing_a_corner_into_a_known_wall_is_stopped() {
+        // The chair stands facing east, its front-left corner 3 cm below a wall that covers
+        // only the front half of it: a turn to the left lifts that corner into the wall within
+        // a tick or two, a turn to the right takes it away. (A path keeps its margin where it
+        // was planned; a turn begun a few centimetres on, or beside the line, would not.)
+        let fp = NavConfig::intellwheels().body.footprint();
+        let start = Pose::from_deg(2.0, 2.0, 0.0);
+        let mut map = NavMap::empty(14.0, 5.0);
+        let wall_y = start.y + fp.half + 0.03;
+        map.walls.push(MapWall::rectangle(start.x + 0.1, wall_y, 14.0, wall_y + 0.1, false));
+        let cfg = NavConfig {
+            checkpoints: vec![Checkpoint { pos: V2::new(11.0, 1.0), radius_m: 0.5 }],
+            start,
+            encoder_ticks_per_m: 1000.0,
+            ..NavConfig::intellwheels()
+        };
+        let sim = Sim {
+            pose: start,
+            out: [0.0; 2],
+            travel: [0.0; 2],
+            model: WorldModel::new(map.clone(), fp),
+            sensors: default_layout(&fp),
+        };
+        let nav = Navigator::new(map, cfg);
+        let input = sim.input(0, None);
+        let spin = TrackerParams::default().spin_rate;
+        assert_eq!(nav.safety(&input, 0.0, spin).map(|s| s.2), Some(true), "turning left into the wall stops");
+        assert_eq!(nav.safety(&input, 0.0, -spin), None, "turning right, away from it, goes on");
+        assert_eq!(nav.safety(&input, 0.3, 0.0), None, "driving along it goes on");
+    }
+
+    #[test]
+    fn a_chair_still_rolling_stands_before_it_turns_on_the_spot() {
+        let map = NavMap::empty(14.0, 5.0);
+        let cfg = NavConfig {
+            checkpoints: vec![Checkpoint { pos: V2::new(11.0, 2.5), radius_m: 0.5 }],
+            start: Pose::from_deg(1.5, 2.5, 0.0),
+            encoder_ticks_per_m: 1000.0,
+            ..NavConfig::intellwheels()
+        };
+        let mut nav = Navigator::new(map, cfg);
+        // Rolling at 0.25 m/s, by the drive's model.
+        for _ in 0..40 {
+            nav.drive.powers(0.25, 0.0);
+        }
+        let spin = TrackerParams::default().spin_rate;
+        assert_eq!(nav.stop_before_turning(0.0, spin), (0.0, 0.0), "brakes first");
+        for _ in 0..3 {
+            nav.drive.powers(0.0, 0.0);
+        }
+        assert_eq!(nav.stop_before_turning(0.0, spin), (0.0, spin), "then turns");
+        assert_eq!(nav.stop_before_turning(0.2, 0.5), (0.2, 0.5), "a turn while driving is not held up");
+    }
+
+    #[test]
+    fn a_chair_whose_way_is_shut_searches_again_when_the_chair_in_it_moves_off_not_before() {
+        // A corridor 1.1 m wide, and another chair standing in it (planned round, as a chair
+        // that says it stands): no way through. Nothing changes for 5.5 s, then it drives off.
+        let mut map = NavMap::empty(14.0, 3.0);
+        map.walls.push(MapWall::rectangle(0.0, 0.0, 14.0, 0.1, false));
+        map.walls.push(MapWall::rectangle(0.0, 1.2, 14.0, 1.3, false));
+        let start = Pose::from_deg(1.5, 0.65, 0.0);
+        let cfg = NavConfig {
+            checkpoints: vec![Checkpoint { pos: V2::new(11.0, 0.65), radius_m: 0.5 }],
+            start,
+            encoder_ticks_per_m: 1000.0,
+            ..NavConfig::intellwheels()
+        };
+        let fp = cfg.body.footprint();
+        let sim = Sim {
+            pose: start,
+            out: [0.0; 2],
+            travel: [0.0; 2],
+            model: WorldModel::new(map.clone(), fp),
+            sensors: default_layout(&fp),
+        };
+        let mut nav = Navigator::new(map, cfg);
+        let other = (Pose::from_deg(6.0, 0.65, 0.0), fp);
+        let mut first = None;
+        for tick in 0..55 {
+            nav.set_peers(vec![other], &[other]);
+            let out = nav.step(&sim.input(tick, None));
+            assert_eq!(out.powers, [0.0, 0.0]);
+            let stats = nav.stats();
+            if stats.failed_plans > 0 {
+                let first = *first.get_or_insert(stats);
+                assert_eq!(stats, first, "no search again while nothing changes (tick {tick})");
+            }
+        }
+        assert!(first.is_some_and(|s| s.failed_plans == s.plans), "the way is shut: {first:?}");
+        // It drives off, out of the corridor's end: the next tick looks again and finds the way.
+        let gone = (Pose::from_deg(13.0, 2.5, 0.0), fp);
+        nav.set_peers(vec![gone], &[gone]);
+        nav.step(&sim.input(55, None));
+        assert!(!nav.path().is_empty(), "{:?}", nav.stats());
     }
 }

@@ -34,6 +34,11 @@ const STOP_SHORT_M: f64 = 0.8;
 const EXIT_ROOM_M: f64 = 1.6;
 /// A chair that has not moved for this long (seconds) while it has somewhere to go is stuck.
 const STUCK_S: f64 = 5.0;
+/// A chair in a negotiation (waiting for another to pull over, parked for it, passing it)
+/// that has not moved for this long (seconds) is stuck all the same: the other is held up
+/// by a third (ward, 6 chairs, seed 4: five chairs stood two minutes, each waiting on one
+/// of the others, and none said it was stuck).
+const STUCK_NEGOTIATING_S: f64 = 15.0;
 /// Stuck chairs this near each other (axle to axle, metres) settle who backs off.
 const BACKOFF_NEAR_M: f64 = 4.5;
 /// A chair backs off this far along the way it came (metres), at this speed (m/s)...
@@ -45,6 +50,13 @@ const BACKOFF_SPEED: f64 = 0.15;
 const BACKOFF_TURN_RAD: f64 = 0.5;
 /// ...and then stands this long (seconds), so that the others go through first.
 const BACKOFF_HOLD_S: f64 = 6.0;
+/// A chair backing off or giving way that has not moved for this long (seconds) stops
+/// trying to.
+const STALLED_S: f64 = 4.0;
+/// A chair giving way drives to its refuge at this speed (m/s)...
+const REFUGE_SPEED: f64 = 0.2;
+/// ...and stands there this long (seconds): long enough for the others to get past.
+const REFUGE_HOLD_S: f64 = 15.0;
 /// Where the chair has been is kept every this many metres...
 const TRAIL_STEP_M: f64 = 0.1;
 /// ...for this many points.
@@ -54,8 +66,9 @@ const TRAIL_LEN: usize = 60;
 /// and what it has seen), then standing a while.
 #[derive(Debug, Clone, Copy, PartialEq)]
 enum Backoff {
-    /// Driving back, since this time (seconds).
-    Driving(f64),
+    /// Driving back (or to a refuge) until it is driven or this time (seconds) is up, then
+    /// standing for the given seconds.
+    Driving { until: f64, hold_s: f64 },
     /// Standing until this time, seconds.
     Holding(f64),
 }
@@ -143,7 +156,9 @@ impl Pilot {
     /// Whether the chair is stuck: it has somewhere to go and has not moved for
     /// [`STUCK_S`].
     fn stuck(&self, now: f64) -> bool {
-        !self.nav.finished() && self.traffic.may_be_stuck() && self.stood_for(now, STUCK_S)
+        !self.nav.finished()
+            && ((self.traffic.may_be_stuck() && self.stood_for(now, STUCK_S))
+                || (self.traffic.negotiating() && self.stood_for(now, STUCK_NEGOTIATING_S)))
     }
 
     /// Of the chairs stuck near each other, all but the one whose name sorts first back
@@ -188,13 +203,15 @@ impl Pilot {
         match self.backoff {
             // Driving back takes BACKOFF_M at BACKOFF_SPEED; one that takes much longer (held
             // by its safety layer, or off its line) ends where it is.
-            Some(Backoff::Driving(since))
-                if self.nav.manoeuvring() && now - since < 3.0 * BACKOFF_M / BACKOFF_SPEED =>
+            // Held up on the way (the safety layer stops it short of a chair that does not
+            // stand aside), it stands where it got to.
+            Some(Backoff::Driving { until, .. })
+                if self.nav.manoeuvring() && now < until && !self.stood_for(now, STALLED_S) =>
             {
                 true
             }
-            Some(Backoff::Driving(_)) => {
-                self.backoff = Some(Backoff::Holding(now + BACKOFF_HOLD_S));
+            Some(Backoff::Driving { hold_s, .. }) => {
+                self.backoff = Some(Backoff::Holding(now + hold_s));
                 self.nav.hold();
                 // Driven back: the trail now ends at its point nearest where the chair stands.
                 if let Some(k) = self
@@ -227,6 +244,23 @@ impl Pilot {
                 if !stuck || !self.should_back_off(me) {
                     return false;
                 }
+                // Best out of the way altogether: into a room or a hall near by.
+                let others: Vec<V2> = self.traffic.peers().iter().map(|p| p.pose.pos()).collect();
+                if let Some(path) = self.nav.path_to_refuge(&others) {
+                    let to = path.last().map_or(me.pos(), |p| p.pose.pos());
+                    let length: f64 = path.windows(2).map(|w| (w[1].pose.pos() - w[0].pose.pos()).norm()).sum();
+                    notes.push(format!(
+                        "stuck at t {now:.1} s near another stuck chair; giving way in a refuge at {}",
+                        place(to)
+                    ));
+                    self.traffic.release_zones();
+                    self.zone_wait = None;
+                    self.nav.manoeuvre(&path, REFUGE_SPEED);
+                    self.still = Some((me, now));
+                    let until = now + 10.0 + 3.0 * length / REFUGE_SPEED;
+                    self.backoff = Some(Backoff::Driving { until, hold_s: REFUGE_HOLD_S });
+                    return true;
+                }
                 let path = self.way_back(me);
                 // Less than half a metre back makes no room.
                 if path.len() < 6 {
@@ -236,7 +270,9 @@ impl Pilot {
                 self.traffic.release_zones();
                 self.zone_wait = None;
                 self.nav.manoeuvre(&path, BACKOFF_SPEED);
-                self.backoff = Some(Backoff::Driving(now));
+                self.still = Some((me, now));
+                let until = now + 3.0 * BACKOFF_M / BACKOFF_SPEED;
+                self.backoff = Some(Backoff::Driving { until, hold_s: BACKOFF_HOLD_S });
                 true
             }
         }
