@@ -1464,4 +1464,38 @@ mod tests {
         nav.step(&sim.input(55, None));
         assert!(!nav.path().is_empty(), "{:?}", nav.stats());
     }
+
+    #[test]
+    fn a_chair_giving_way_finds_a_refuge_in_the_room_off_its_corridor() {
+        // A corridor 2 m wide (y 1-3) with one room (x 6-11, y 3-8) through a 1 m doorway
+        // at x 8-9; the chair stands in the corridor west of it.
+        let mut map = NavMap::empty(16.0, 9.0);
+        map.walls.push(MapWall::rectangle(0.0, 0.9, 16.0, 1.0, false));
+        map.walls.push(MapWall::rectangle(0.0, 3.0, 8.0, 3.1, false));
+        map.walls.push(MapWall::rectangle(9.0, 3.0, 16.0, 3.1, false));
+        map.walls.push(MapWall::rectangle(5.9, 3.1, 6.0, 8.1, false));
+        map.walls.push(MapWall::rectangle(11.0, 3.1, 11.1, 8.1, false));
+        map.walls.push(MapWall::rectangle(5.9, 8.1, 11.1, 8.2, false));
+        let start = Pose::from_deg(5.0, 2.0, 0.0);
+        let cfg = NavConfig {
+            checkpoints: vec![Checkpoint { pos: V2::new(15.0, 2.0), radius_m: 0.5 }],
+            start,
+            encoder_ticks_per_m: 1000.0,
+            ..NavConfig::intellwheels()
+        };
+        let nav = Navigator::new(map.clone(), cfg.clone());
+        let path = nav.path_to_refuge(&[V2::new(13.0, 2.0)]).expect("the room is a refuge");
+        let end = path.last().expect("a path").pose;
+        assert!(end.y > 3.1 + REFUGE_CLEAR_M - 0.2 && (6.0..11.0).contains(&end.x), "in the room: {end:?}");
+        assert!(nav.model.wall_clearance(&end, 0.3) >= 0.3, "wholly off the walls: {end:?}");
+        // Another chair standing just inside the room: the refuge is beyond it, at a distance.
+        let other = V2::new(8.5, 5.0);
+        let path = nav.path_to_refuge(&[other]).expect("the room is big enough for two");
+        let end = path.last().expect("a path").pose;
+        assert!((end.pos() - other).norm() >= REFUGE_APART_M - 0.2, "{end:?}");
+        // Without the room (its doorway walled up) a corridor is no refuge.
+        map.walls.push(MapWall::rectangle(8.0, 3.0, 9.0, 3.1, false));
+        let nav = Navigator::new(map, cfg);
+        assert!(nav.path_to_refuge(&[]).is_none());
+    }
 }

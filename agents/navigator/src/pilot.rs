@@ -614,3 +614,53 @@ impl Pilot {
 fn place(p: V2) -> String {
     format!("({:.1}, {:.1})", p.x, p.y)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::map::{MapWall, NavMap};
+    use crate::navigator::{Checkpoint, NavConfig};
+
+    /// A chair in a negotiation that has stood 15 s is stuck, whatever the negotiation: here
+    /// it has the way and waits for the other to pull over, which only ever says it is
+    /// pulling over (held up by a third chair). It then says `stuck`, so that the deadlock
+    /// breaker settles who gives way.
+    #[test]
+    fn a_chair_waiting_in_a_negotiation_that_never_ends_says_it_is_stuck() {
+        let mut map = NavMap::empty(30.0, 4.0);
+        map.walls.push(MapWall::rectangle(0.0, 0.0, 30.0, 0.1, false));
+        map.walls.push(MapWall::rectangle(0.0, 2.1, 30.0, 2.2, false));
+        let start = Pose::from_deg(15.0, 1.1, 0.0);
+        let cfg = NavConfig {
+            checkpoints: vec![Checkpoint { pos: V2::new(27.0, 1.1), radius_m: 0.5 }],
+            start,
+            encoder_ticks_per_m: 1000.0,
+            ..NavConfig::intellwheels()
+        };
+        let body = cfg.body;
+        let mut pilot = Pilot::new("chair1", Navigator::new(map, cfg));
+        let other = Pose::from_deg(21.0, 1.1, 180.0);
+        let mut said = Vec::new();
+        for tick in 0..200u64 {
+            let input = Input {
+                tick,
+                time_s: tick as f64 * 0.1,
+                proximity_m: [3.0; ipc_types::MAX_PROXIMITY],
+                proximity_count: 0,
+                encoder_ticks: [0, 0],
+                gps: None,
+                compass_deg: None,
+                collision: false,
+            };
+            let msg = traffic::encode("chair2", other, State::Pull, &body).into_bytes();
+            let out = pilot.tick(&input, [msg.as_slice()]);
+            assert_eq!(out.powers, [0.0, 0.0], "it waits (tick {tick})");
+            if let Some(s) = out.say {
+                said.push((tick, s));
+            }
+        }
+        let stuck_at = said.iter().find(|(_, s)| s.contains(" stuck ")).map(|(t, _)| *t);
+        assert!(said.iter().any(|(_, s)| s.contains(" wait ")), "it waited first: {said:?}");
+        assert!(stuck_at.is_some_and(|t| (150..=160).contains(&t)), "stuck after 15 s: {stuck_at:?}");
+    }
+}

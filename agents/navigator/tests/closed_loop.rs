@@ -754,8 +754,8 @@ mod corridor_swap {
     /// across the ward's corridor, one from each room and one along the corridor each way,
     /// each bound across the junction. They keep right, as `builtin:ward` has them. None
     /// touches anything on any seed; all four arrive within 120 s on at least 3 of seeds 1–4.
-    /// With the deadlock breaker seeds 2–4 untie in at most 98 s and seed 1 stays knotted;
-    /// without it all four untie when the traffic rule's 40 s limits run out (80–115 s): the
+    /// Seeds 2–4 untie in at most 109 s and on seed 1 two stay knotted (on seeds 1–10, 6
+    /// untie; with the breaker that backed off 2 m instead of going to a refuge, 8): the
     /// breaker does not yet untie every knot (issue 26).
     #[test]
     fn four_chairs_knotted_at_a_ward_junction_never_touch_and_mostly_untie_it() {
@@ -869,8 +869,8 @@ mod corridor_swap {
     /// the sensors alone and nobody touches it or anybody else. (Before the safety layer
     /// minded what the sensed map holds, a navigator pulling over pushed into it for a
     /// minute on two of these seeds.) Getting past is not yet sure: on seeds 1–3 the
-    /// eastbound chair, going round it, meets the westbound one in its lane and the two stand
-    /// (issue 26); arrivals are printed, not asserted.
+    /// eastbound chair gets round it and arrives, the westbound one does not (issue 26);
+    /// arrivals are printed, not asserted.
     #[test]
     fn a_silent_chair_standing_in_the_corridor_is_never_touched() {
         let chairs = [
