@@ -237,6 +237,27 @@ const DOCK_M: f64 = 0.9;
 /// A final stop farther than this from the checkpoint is planned again (twice at most).
 const DOCK_AGAIN_M: f64 = 0.3;
 
+/// The cells within `accept` of `goal`, each with `weight` × its distance: where a
+/// cost-to-go towards the goal starts.
+fn goal_seeds(spec: &crate::grid::GridSpec, goal: V2, accept: f64, weight: f64) -> Vec<(usize, f32)> {
+    let r = (accept / spec.cell).ceil() as i64;
+    let (gx, gy) = spec.clamp_cell(goal);
+    let mut seeds = Vec::new();
+    for dy in -r..=r {
+        for dx in -r..=r {
+            let (x, y) = (gx as i64 + dx, gy as i64 + dy);
+            if x < 0 || y < 0 || x >= spec.nx as i64 || y >= spec.ny as i64 {
+                continue;
+            }
+            let d = (spec.center(x as usize, y as usize) - goal).norm();
+            if d <= accept {
+                seeds.push((spec.index(x as usize, y as usize), (weight * d) as f32));
+            }
+        }
+    }
+    seeds
+}
+
 /// A plan that found nothing, kept to tell whether the next would find anything more.
 #[derive(Debug, Clone)]
 struct Failure {
@@ -537,21 +558,7 @@ impl Navigator {
         // The path ends at the refuge, not short of it: the whole body is out of the way
         // only there.
         let accept = 0.15;
-        let (gx, gy) = spec.clamp_cell(refuge);
-        let r = (accept / spec.cell).ceil() as i64;
-        let mut seeds = Vec::new();
-        for dy in -r..=r {
-            for dx in -r..=r {
-                let (x, y) = (gx as i64 + dx, gy as i64 + dy);
-                if x < 0 || y < 0 || x >= spec.nx as i64 || y >= spec.ny as i64 {
-                    continue;
-                }
-                let d = (spec.center(x as usize, y as usize) - refuge).norm();
-                if d <= accept {
-                    seeds.push((spec.index(x as usize, y as usize), d as f32));
-                }
-            }
-        }
+        let seeds = goal_seeds(&spec, refuge, accept, 1.0);
         let ctg = CostToGo::new(&cm, &seeds, Some(spec.index(sx, sy)), 6.0, 4.0, &[(here, 0.6), (refuge, accept)]);
         let goal = Goal { pos: refuge, stop_within: 0.1, accept_within: accept, weight: 1.0 };
         let coarse = HybridParams {
@@ -927,21 +934,7 @@ impl Navigator {
             (cp.radius_m, 0.75 * self.cfg.arrive_m, 4.0)
         };
         let spec = cm.spec;
-        let r = (accept / spec.cell).ceil() as i64;
-        let (gx, gy) = spec.clamp_cell(cp.pos);
-        let mut seeds = Vec::new();
-        for dy in -r..=r {
-            for dx in -r..=r {
-                let (x, y) = (gx as i64 + dx, gy as i64 + dy);
-                if x < 0 || y < 0 || x >= spec.nx as i64 || y >= spec.ny as i64 {
-                    continue;
-                }
-                let d = (spec.center(x as usize, y as usize) - cp.pos).norm();
-                if d <= accept {
-                    seeds.push((spec.index(x as usize, y as usize), (weight * d) as f32));
-                }
-            }
-        }
+        let seeds = goal_seeds(&spec, cp.pos, accept, weight);
         let (sx, sy) = spec.clamp_cell(start.pos());
         let open = [(start.pos(), 0.6), (cp.pos, accept)];
         let lanes = Some((&self.model.statics, self.hybrid.keep_right));
