@@ -102,6 +102,34 @@ fn sigterm_to_a_lock_step_run_stops_its_hub_and_agents_and_leaves_nothing() {
     interrupt_a_run("sigterm-lockstep", &["--lockstep"], false, "TERM", "SIGTERM", 143);
 }
 
+/// `iwsim bench traffic` owns its runs like `iwsim run` owns its children: SIGTERM to it
+/// alone, mid-run, stops that run (hub and navigators) and the bench, and leaves nothing.
+/// (Its runs' observer is an iceoryx2 node, whose handlers once swallowed the signal: the
+/// bench went on to the end.)
+#[test]
+fn sigterm_to_bench_traffic_stops_its_run_and_leaves_nothing() {
+    let mut bench = Proc::spawn(&["bench", "traffic", "--chairs", "10", "--runs", "1", "--seconds", "600"]);
+    let pid = bench.pid();
+    let lines = bench.stderr_lines();
+    let prefix = format!("bench-traffic-{pid}-");
+    let deadline = Instant::now() + Duration::from_secs(60);
+    // The run is under way once its hub publishes (its shared memory is there) and its ten
+    // navigators are up (each has the session among its arguments, as do the hub and the run).
+    while shared_memory_files(&format!("iwsim_{prefix}")).is_empty() || processes_with_argument(&prefix).len() < 12 {
+        assert!(Instant::now() < deadline, "the bench's run never started: {:?}", lines.so_far());
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    bench.signal("TERM");
+    let output = bench.wait(Duration::from_secs(30));
+    let stderr = lines.to_end(Duration::from_secs(10));
+    assert!(!output.status.success(), "{stderr:?}");
+    assert!(stderr.iter().any(|l| l.contains("interrupted by SIGTERM")), "{stderr:?}");
+    let procs = processes_with_argument(&prefix);
+    assert!(procs.is_empty(), "processes of the bench left: {procs:?}");
+    let files = shared_memory_files(&format!("iwsim_{prefix}"));
+    assert!(files.is_empty(), "left in /dev/shm: {files:?}");
+}
+
 #[test]
 fn sighup_to_a_real_time_run_stops_its_hub_and_agents_and_leaves_nothing() {
     interrupt_a_run("sighup-realtime", &[], false, "HUP", "SIGHUP", 129);

@@ -53,6 +53,12 @@ const BACKOFF_HOLD_S: f64 = 6.0;
 /// A chair backing off or giving way that has not moved for this long (seconds) stops
 /// trying to.
 const STALLED_S: f64 = 4.0;
+/// A chair that has heard this many others within [`CROWD_RADIUS_M`] may not hear them all
+/// (a tick's inbox holds 400 bytes, about eight messages): it backs off rather than drive to
+/// a refuge.
+const CROWD_PEERS: usize = 7;
+/// See [`CROWD_PEERS`]: the hub's default message range, metres.
+const CROWD_RADIUS_M: f64 = 8.0;
 /// A chair giving way drives to its refuge at this speed (m/s)...
 const REFUGE_SPEED: f64 = 0.2;
 /// ...and stands there this long (seconds): long enough for the others to get past.
@@ -169,6 +175,13 @@ impl Pilot {
         })
     }
 
+    /// Whether [`CROWD_PEERS`] or more other chairs have been heard within
+    /// [`CROWD_RADIUS_M`]: then some may go unheard.
+    fn in_crowd(&self, me: Pose) -> bool {
+        let near = self.traffic.peers().iter().filter(|p| (p.pose.pos() - me.pos()).norm() <= CROWD_RADIUS_M);
+        near.count() >= CROWD_PEERS
+    }
+
     /// The way back along the trail, [`BACKOFF_M`] of it (reversing, the chair's heading as
     /// it drove there), from where it stands.
     fn way_back(&self, me: Pose) -> Vec<crate::hybrid::PathPose> {
@@ -244,9 +257,14 @@ impl Pilot {
                 if !stuck || !self.should_back_off(me) {
                     return false;
                 }
-                // Best out of the way altogether: into a room or a hall near by.
+                // Best out of the way altogether: into a room or a hall near by. Not in a
+                // crowd, though: a chair hears at most 400 bytes a tick, so among this many
+                // others some go unheard, and a long manoeuvre among chairs it does not know
+                // of swings its corners into them (the ward with 20 chairs: two chairs bound
+                // for refuges in one room, one unheard by the other, touched 120 times).
                 let others: Vec<V2> = self.traffic.peers().iter().map(|p| p.pose.pos()).collect();
-                if let Some(path) = self.nav.path_to_refuge(&others) {
+                let refuge = if self.in_crowd(me) { None } else { self.nav.path_to_refuge(&others) };
+                if let Some(path) = refuge {
                     let to = path.last().map_or(me.pos(), |p| p.pose.pos());
                     let length: f64 = path.windows(2).map(|w| (w[1].pose.pos() - w[0].pose.pos()).norm()).sum();
                     notes.push(format!(
@@ -662,5 +680,27 @@ mod tests {
         let stuck_at = said.iter().find(|(_, s)| s.contains(" stuck ")).map(|(t, _)| *t);
         assert!(said.iter().any(|(_, s)| s.contains(" wait ")), "it waited first: {said:?}");
         assert!(stuck_at.is_some_and(|t| (150..=160).contains(&t)), "stuck after 15 s: {stuck_at:?}");
+    }
+
+    /// Among seven chairs heard within 8 m a chair may not hear them all: it does not drive
+    /// to a refuge there. Six, or seven with one farther off, are no crowd.
+    #[test]
+    fn seven_chairs_heard_near_by_are_a_crowd() {
+        let cfg = NavConfig::intellwheels();
+        let body = cfg.body;
+        let mut pilot = Pilot::new("chair1", Navigator::new(NavMap::empty(40.0, 14.0), cfg));
+        let me = Pose::from_deg(20.0, 7.0, 0.0);
+        let hear = |pilot: &mut Pilot, k: usize, x: f64| {
+            let m = traffic::encode(&format!("chair{}", k + 2), Pose::from_deg(x, 7.0, 0.0), State::Go, &body);
+            pilot.traffic.hear(m.as_bytes(), 0.0);
+        };
+        for k in 0..6 {
+            hear(&mut pilot, k, 14.0 + 2.0 * k as f64);
+        }
+        assert!(!pilot.in_crowd(me), "six are no crowd");
+        hear(&mut pilot, 6, 29.0);
+        assert!(!pilot.in_crowd(me), "the seventh is 9 m off");
+        hear(&mut pilot, 7, 27.5);
+        assert!(pilot.in_crowd(me), "seven within 8 m are");
     }
 }

@@ -14,6 +14,7 @@
 //! The runs of the sizes are interleaved (round 1 of every size, then round 2, …) so that the
 //! machine's drifting load weighs on each alike.
 
+use runner::signals::Signals;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::process::{Command, ExitCode, Stdio};
@@ -94,7 +95,7 @@ fn scenario(chairs: usize, seconds: f64) -> String {
 }
 
 /// Runs the ward once with `chairs` navigators on `seed`, in `dir`, and measures it.
-fn measure(chairs: usize, seed: u64, seconds: f64, dir: &Path) -> anyhow::Result<TrafficRun> {
+fn measure(chairs: usize, seed: u64, seconds: f64, dir: &Path, signals: &Signals) -> anyhow::Result<TrafficRun> {
     std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
     let file = dir.join("scenario.toml");
     std::fs::write(&file, scenario(chairs, seconds)).with_context(|| format!("writing {}", file.display()))?;
@@ -107,6 +108,7 @@ fn measure(chairs: usize, seed: u64, seconds: f64, dir: &Path) -> anyhow::Result
     cmd.arg("run").arg(&file).args(["--lockstep", "--headless", "--quiet", "--seed", &seed.to_string()]);
     cmd.arg("--out").arg(&out).args(["--session", &session]).stdout(Stdio::null()).stderr(stderr);
     runner::signals::die_with_parent(&mut cmd);
+    runner::signals::unblock_in_child(&mut cmd);
     let mut child = cmd.spawn().context("starting iwsim run")?;
     let start = Instant::now();
     let mut timeline: Vec<(f64, u64)> = Vec::new();
@@ -126,7 +128,14 @@ fn measure(chairs: usize, seed: u64, seconds: f64, dir: &Path) -> anyhow::Result
         if let Some(status) = child.try_wait().context("waiting for iwsim run")? {
             break status;
         }
-        std::thread::sleep(SAMPLE_EVERY);
+        // Ctrl-C or SIGTERM: the run is told likewise (it stops its hub and agents and
+        // removes their shared memory) and waited for, and the bench ends.
+        if let Some(signal) = signals.wait(SAMPLE_EVERY) {
+            drop(observer);
+            runner::signals::send(&child, signal.forwarded());
+            let _ = child.wait();
+            anyhow::bail!("interrupted by {} during the {chairs}-chair run of seed {seed}", signal.name());
+        }
     };
     drop(observer);
     let summary_path = out.join("summary.json");
@@ -192,9 +201,12 @@ pub fn run(args: &BenchTrafficArgs) -> anyhow::Result<ExitCode> {
         );
         println!("CPU: {}", cpu_model());
     }
+    // The runs' observer is an iceoryx2 node, whose handlers would take SIGINT and SIGTERM
+    // and let the bench run on: the signals wait in a signalfd that the sampling loop reads.
+    let signals = Signals::install()?;
     let result = interleaved(args.runs, sizes.len(), |round, k| {
         let seed = round as u64 + 1;
-        let r = measure(sizes[k], seed, args.seconds, &root.join(format!("n{}-seed{seed}", sizes[k])));
+        let r = measure(sizes[k], seed, args.seconds, &root.join(format!("n{}-seed{seed}", sizes[k])), &signals);
         if let (Ok(r), false) = (&r, args.json) {
             eprintln!(
                 "  {} chairs, seed {seed}: {} ticks at {:.0} ticks/s, {}/{} arrived, {} contacts",

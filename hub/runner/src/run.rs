@@ -338,15 +338,9 @@ impl Kid {
     }
 
     /// Sends `signal` to the child if it still runs.
-    #[allow(unsafe_code)] // kill(2): std sends only SIGKILL
     fn signal(&mut self, signal: i32) {
         if self.exited().is_none() {
-            let pid = self.child.id() as libc::pid_t;
-            // SAFETY: kill touches no memory of ours; the child is not reaped yet, so its pid
-            // cannot have been given to another process.
-            unsafe {
-                libc::kill(pid, signal);
-            }
+            crate::signals::send(&self.child, signal);
         }
     }
 

@@ -156,6 +156,17 @@ impl Drop for Signals {
     }
 }
 
+/// Sends `signal` to `child`, which is not reaped yet (so its pid is still its own).
+#[allow(unsafe_code)] // kill(2): std sends only SIGKILL
+pub fn send(child: &std::process::Child, signal: i32) {
+    let pid = child.id() as libc::pid_t;
+    // SAFETY: kill touches no memory of ours; the child is not reaped yet, so its pid cannot
+    // have been given to another process.
+    unsafe {
+        libc::kill(pid, signal);
+    }
+}
+
 /// Makes `command`'s child start with no signal blocked, whatever the runner blocks.
 pub fn unblock_in_child(command: &mut std::process::Command) {
     use std::os::unix::process::CommandExt as _;
