@@ -68,8 +68,8 @@ const TRAIL_STEP_M: f64 = 0.1;
 /// ...for this many points.
 const TRAIL_LEN: usize = 60;
 
-/// Backing off out of a deadlock: along the way the chair came (known to be free of walls
-/// and what it has seen), then standing a while.
+/// Giving way out of a deadlock: to a refuge, or back along the way the chair came (known to
+/// be free of walls and what it has seen), then standing a while.
 #[derive(Debug, Clone, Copy, PartialEq)]
 enum Backoff {
     /// Driving back (or to a refuge) until it is driven or this time (seconds) is up, then
@@ -159,8 +159,8 @@ impl Pilot {
         self.still.is_some_and(|(_, since)| now - since >= s)
     }
 
-    /// Whether the chair is stuck: it has somewhere to go and has not moved for
-    /// [`STUCK_S`].
+    /// Whether the chair is stuck: it has somewhere to go and has not moved for [`STUCK_S`]
+    /// (in no negotiation going its way) or for [`STUCK_NEGOTIATING_S`] (in one).
     fn stuck(&self, now: f64) -> bool {
         !self.nav.finished()
             && ((self.traffic.may_be_stuck() && self.stood_for(now, STUCK_S))
@@ -210,14 +210,14 @@ impl Pilot {
     }
 
     /// The deadlock breaker, after the traffic rule: a stuck chair says so; if another stuck
-    /// chair near it goes first, it backs off along the way it came and stands aside a
-    /// while. Whether it is backing off (the traffic rule's decision is then set aside).
+    /// chair near it goes first, it gives way in a refuge (a room near by), or backs off
+    /// along the way it came, and stands aside a while. Whether it is giving way (the
+    /// traffic rule's decision is then set aside).
     fn back_off(&mut self, me: Pose, now: f64, notes: &mut Vec<String>) -> bool {
         match self.backoff {
-            // Driving back takes BACKOFF_M at BACKOFF_SPEED; one that takes much longer (held
-            // by its safety layer, or off its line) ends where it is.
-            // Held up on the way (the safety layer stops it short of a chair that does not
-            // stand aside), it stands where it got to.
+            // Driving back or to a refuge ends where the chair is once it takes much longer
+            // than the way should (off its line), or once the chair has stood STALLED_S (its
+            // safety layer holds it short of a chair or a wall).
             Some(Backoff::Driving { until, .. })
                 if self.nav.manoeuvring() && now < until && !self.stood_for(now, STALLED_S) =>
             {
