@@ -524,9 +524,9 @@ impl Navigator {
         self.manoeuvre_lost = false;
     }
 
-    /// A path to a refuge: the nearest place (by the way there, within [`REFUGE_REACH_M`])
-    /// with [`REFUGE_CLEAR_M`] of free floor all round, such as a room off a corridor or a
-    /// hall, and at least [`REFUGE_APART_M`] from each of `others`. A chair in a deadlock
+    /// A path to a refuge: the nearest place (by the way there, within 10 m) with 1.3 m of
+    /// free floor all round, such as a room off a corridor or a hall, and at least 1.8 m from
+    /// each of `others` (`REFUGE_REACH_M`, `REFUGE_CLEAR_M`, `REFUGE_APART_M`). A chair in a deadlock
     /// that gives way goes there: out of a corridor, not just a little way back along it.
     /// `None` when there is none, or no path to one.
     pub fn path_to_refuge(&self, others: &[V2]) -> Option<Vec<PathPose>> {
