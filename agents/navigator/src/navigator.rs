@@ -1235,6 +1235,31 @@ mod tests {
         }
     }
 
+    impl Sim {
+        /// A chair at rest at `start` on `map`, with the intellwheels body's sensors.
+        fn at(map: &NavMap, start: Pose) -> Self {
+            let fp = NavConfig::intellwheels().body.footprint();
+            Self {
+                pose: start,
+                out: [0.0; 2],
+                travel: [0.0; 2],
+                model: WorldModel::new(map.clone(), fp),
+                sensors: default_layout(&fp),
+            }
+        }
+    }
+
+    /// The intellwheels chair from `start` to one checkpoint at `goal` (0.5 m), with the
+    /// encoders [`Sim`] counts.
+    fn cfg_to(start: Pose, goal: V2) -> NavConfig {
+        NavConfig {
+            checkpoints: vec![Checkpoint { pos: goal, radius_m: 0.5 }],
+            start,
+            encoder_ticks_per_m: 1000.0,
+            ..NavConfig::intellwheels()
+        }
+    }
+
     #[test]
     fn a_search_bounded_per_tick_finds_the_same_path_over_several_ticks_the_chair_standing() {
         let mut map = NavMap::empty(14.0, 5.0);
@@ -1248,14 +1273,7 @@ mod tests {
             plan_allowance: allowance,
             ..NavConfig::intellwheels()
         };
-        let fp = cfg(None).body.footprint();
-        let sim = Sim {
-            pose: start,
-            out: [0.0; 2],
-            travel: [0.0; 2],
-            model: WorldModel::new(map.clone(), fp),
-            sensors: default_layout(&fp),
-        };
+        let sim = Sim::at(&map, start);
         let mut whole = Navigator::new(map.clone(), cfg(None));
         whole.step(&sim.input(0, None));
         assert!(!whole.searching() && !whole.path().is_empty(), "the search ends in its tick");
@@ -1280,20 +1298,9 @@ mod tests {
         let mut map = NavMap::empty(14.0, 5.0);
         map.walls.push(MapWall::rectangle(0.0, 0.0, 14.0, 0.1, false));
         let start = Pose::from_deg(1.5, 2.5, 0.0);
-        let cfg = NavConfig {
-            checkpoints: vec![Checkpoint { pos: V2::new(11.0, 2.5), radius_m: 0.5 }],
-            start,
-            encoder_ticks_per_m: 1000.0,
-            ..NavConfig::intellwheels()
-        };
+        let cfg = cfg_to(start, V2::new(11.0, 2.5));
         let fp = cfg.body.footprint();
-        let mut sim = Sim {
-            pose: start,
-            out: [0.0; 2],
-            travel: [0.0; 2],
-            model: WorldModel::new(map.clone(), fp),
-            sensors: default_layout(&fp),
-        };
+        let mut sim = Sim::at(&map, start);
         let mut nav = Navigator::new(map, cfg);
         let mut pole = None;
         for tick in 0..900 {
@@ -1325,20 +1332,9 @@ mod tests {
         // chair goes on once it has gone.
         let map = NavMap::empty(14.0, 5.0);
         let start = Pose::from_deg(1.5, 2.5, 0.0);
-        let cfg = NavConfig {
-            checkpoints: vec![Checkpoint { pos: V2::new(11.0, 2.5), radius_m: 0.5 }],
-            start,
-            encoder_ticks_per_m: 1000.0,
-            ..NavConfig::intellwheels()
-        };
+        let cfg = cfg_to(start, V2::new(11.0, 2.5));
         let fp = cfg.body.footprint();
-        let mut sim = Sim {
-            pose: start,
-            out: [0.0; 2],
-            travel: [0.0; 2],
-            model: WorldModel::new(map.clone(), fp),
-            sensors: default_layout(&fp),
-        };
+        let mut sim = Sim::at(&map, start);
         let mut nav = Navigator::new(map, cfg);
         let mut closest = f64::INFINITY;
         for tick in 0..900 {
@@ -1371,19 +1367,8 @@ mod tests {
         let mut map = NavMap::empty(14.0, 5.0);
         let wall_y = start.y + fp.half + 0.03;
         map.walls.push(MapWall::rectangle(start.x + 0.1, wall_y, 14.0, wall_y + 0.1, false));
-        let cfg = NavConfig {
-            checkpoints: vec![Checkpoint { pos: V2::new(11.0, 1.0), radius_m: 0.5 }],
-            start,
-            encoder_ticks_per_m: 1000.0,
-            ..NavConfig::intellwheels()
-        };
-        let sim = Sim {
-            pose: start,
-            out: [0.0; 2],
-            travel: [0.0; 2],
-            model: WorldModel::new(map.clone(), fp),
-            sensors: default_layout(&fp),
-        };
+        let cfg = cfg_to(start, V2::new(11.0, 1.0));
+        let sim = Sim::at(&map, start);
         let nav = Navigator::new(map, cfg);
         let input = sim.input(0, None);
         let spin = TrackerParams::default().spin_rate;
@@ -1395,12 +1380,7 @@ mod tests {
     #[test]
     fn a_chair_still_rolling_stands_before_it_turns_on_the_spot() {
         let map = NavMap::empty(14.0, 5.0);
-        let cfg = NavConfig {
-            checkpoints: vec![Checkpoint { pos: V2::new(11.0, 2.5), radius_m: 0.5 }],
-            start: Pose::from_deg(1.5, 2.5, 0.0),
-            encoder_ticks_per_m: 1000.0,
-            ..NavConfig::intellwheels()
-        };
+        let cfg = cfg_to(Pose::from_deg(1.5, 2.5, 0.0), V2::new(11.0, 2.5));
         let mut nav = Navigator::new(map, cfg);
         // Rolling at 0.25 m/s, by the drive's model.
         for _ in 0..40 {
@@ -1423,20 +1403,9 @@ mod tests {
         map.walls.push(MapWall::rectangle(0.0, 0.0, 14.0, 0.1, false));
         map.walls.push(MapWall::rectangle(0.0, 1.2, 14.0, 1.3, false));
         let start = Pose::from_deg(1.5, 0.65, 0.0);
-        let cfg = NavConfig {
-            checkpoints: vec![Checkpoint { pos: V2::new(11.0, 0.65), radius_m: 0.5 }],
-            start,
-            encoder_ticks_per_m: 1000.0,
-            ..NavConfig::intellwheels()
-        };
+        let cfg = cfg_to(start, V2::new(11.0, 0.65));
         let fp = cfg.body.footprint();
-        let sim = Sim {
-            pose: start,
-            out: [0.0; 2],
-            travel: [0.0; 2],
-            model: WorldModel::new(map.clone(), fp),
-            sensors: default_layout(&fp),
-        };
+        let sim = Sim::at(&map, start);
         let mut nav = Navigator::new(map, cfg);
         let other = (Pose::from_deg(6.0, 0.65, 0.0), fp);
         let mut first = None;
@@ -1470,12 +1439,7 @@ mod tests {
         map.walls.push(MapWall::rectangle(11.0, 3.1, 11.1, 8.1, false));
         map.walls.push(MapWall::rectangle(5.9, 8.1, 11.1, 8.2, false));
         let start = Pose::from_deg(5.0, 2.0, 0.0);
-        let cfg = NavConfig {
-            checkpoints: vec![Checkpoint { pos: V2::new(15.0, 2.0), radius_m: 0.5 }],
-            start,
-            encoder_ticks_per_m: 1000.0,
-            ..NavConfig::intellwheels()
-        };
+        let cfg = cfg_to(start, V2::new(15.0, 2.0));
         let nav = Navigator::new(map.clone(), cfg.clone());
         let path = nav.path_to_refuge(&[V2::new(13.0, 2.0)]).expect("the room is a refuge");
         let end = path.last().expect("a path").pose;
