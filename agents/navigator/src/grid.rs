@@ -151,12 +151,30 @@ pub struct StaticRaster {
     occ: Vec<bool>,
     /// Distance from each cell's centre to the nearest occupied cell's centre, metres.
     dist: Vec<f32>,
-    /// Per cell, free cells from it to the first occupied one in each of 8 directions (k·45°),
-    /// capped at 255: how wide a passage is across any heading, for [`StaticRaster::off_lane`].
-    runs: Vec<[u8; 8]>,
     /// [`StaticRaster::off_lane_at`] per cell and heading, centimetres, made when first asked.
     lanes: std::sync::OnceLock<Vec<[u8; 8]>>,
+    /// [`StaticRaster::distance_to_narrows`] per cell, made when first asked.
+    narrows: std::sync::OnceLock<Vec<f32>>,
 }
+
+/// A passage narrower than this (metres, wall to wall along one of the four axes of the grid)
+/// is a narrow: a doorway, a gap between furniture.
+const NARROW_PASSAGE_M: f64 = 1.3;
+
+/// The walls as lanes see them: per cell, free cells from it to the first occupied one in each
+/// of 8 directions (k·45°, capped at 255), the least of those within [`DOORWAY_BRIDGE_M`] across
+/// the direction: the distance to a wall line, doorways in it bridged.
+struct LaneWalls<'a> {
+    spec: &'a GridSpec,
+    occ: &'a [bool],
+    runs: Vec<[u8; 8]>,
+}
+
+/// Gaps in a wall up to twice this wide (metres) are bridged when lanes are laid: a doorway off
+/// a corridor does not end the corridor's lanes. In the ward (a 1 m doorway every 5 m on both
+/// sides) lanes that ended 1.2 m either side of each doorway held on a third of the corridor,
+/// and chairs met head-on in the rest.
+const DOORWAY_BRIDGE_M: f64 = 0.6;
 
 /// Lanes end this far (metres, along the way) from where a passage stops being two lanes wide.
 const JUNCTION_M: f64 = 1.2;
@@ -192,6 +210,51 @@ fn free_runs(spec: &GridSpec, occ: &[bool]) -> Vec<[u8; 8]> {
         }
     }
     runs
+}
+
+impl LaneWalls<'_> {
+    /// The width across heading `k` at cell `i` and the free part of it on the right, metres,
+    /// if it is a two-lane passage's.
+    fn two_lane_width(&self, i: usize, k: usize) -> Option<(f64, f64)> {
+        let runs = &self.runs[i];
+        let (right, left) = ((k + 6) % 8, (k + 2) % 8);
+        let step = |k: usize| if k % 2 == 1 { self.spec.cell * std::f64::consts::SQRT_2 } else { self.spec.cell };
+        let (r, l) = (f64::from(runs[right]) * step(right), f64::from(runs[left]) * step(left));
+        let width = r + l;
+        let two = (TWO_LANES_M.0..=TWO_LANES_M.1).contains(&width) && runs[right] < u8::MAX && runs[left] < u8::MAX;
+        two.then_some((r, width))
+    }
+
+    /// How far left of its lane's middle a chair on cell `i` heading `k`·45° is, metres; zero
+    /// within [`JUNCTION_M`] (along the heading) of where the passage stops being two lanes
+    /// wide: a chair turning round a corner needs the whole width, and charging it for that
+    /// made the search spend its expansions there. Zero in a (bridged) doorway.
+    fn lane_offset(&self, i: usize, k: usize) -> f64 {
+        if self.occ[i] {
+            return 0.0;
+        }
+        let Some((r, width)) = self.two_lane_width(i, k) else { return 0.0 };
+        let (dx, dy) = DIRS[k];
+        let step = if k % 2 == 1 { self.spec.cell * std::f64::consts::SQRT_2 } else { self.spec.cell };
+        let n = (JUNCTION_M / step).ceil() as isize;
+        let (x, y) = self.spec.coords(i);
+        for sign in [1isize, -1] {
+            for s in 1..=n {
+                let (px, py) = (x as isize + sign * s * dx, y as isize + sign * s * dy);
+                if px < 0 || py < 0 || px >= self.spec.nx as isize || py >= self.spec.ny as isize {
+                    break;
+                }
+                let j = self.spec.index(px as usize, py as usize);
+                if self.occ[j] {
+                    break;
+                }
+                if self.two_lane_width(j, k).is_none() {
+                    return 0.0;
+                }
+            }
+        }
+        (r - width / 4.0).max(0.0)
+    }
 }
 
 impl StaticRaster {
@@ -237,16 +300,15 @@ impl StaticRaster {
             }
         }
         let dist = distance_field(&spec, &occ);
-        let runs = free_runs(&spec, &occ);
-        Self { spec, occ, dist, runs, lanes: std::sync::OnceLock::new() }
+        Self { spec, occ, dist, lanes: std::sync::OnceLock::new(), narrows: std::sync::OnceLock::new() }
     }
 
     /// How far left of its lane a chair at `pose` drives, metres: in a passage two lanes wide
-    /// (wall to wall across the heading between 1.5 and 3.2 m, [`TWO_LANES_M`]), by how much the
-    /// free width on its right exceeds a quarter of the passage's (the middle of the right
-    /// lane). Zero right of that line, in rooms, halls, one-lane narrows and near junctions
-    /// ([`JUNCTION_M`]). Traffic keeps
-    /// right, so that chairs meeting in a corridor pass each other without a word.
+    /// (wall to wall across the heading between 1.5 and 3.2 m, [`TWO_LANES_M`], doorways in its
+    /// walls bridged, [`DOORWAY_BRIDGE_M`]), by how much the free width on its right exceeds a
+    /// quarter of the passage's (the middle of the right lane). Zero right of that line, in
+    /// rooms, halls, doorways, one-lane narrows and near junctions ([`JUNCTION_M`]). Traffic
+    /// keeps right, so that chairs meeting in a corridor pass each other without a word.
     pub fn off_lane(&self, pose: &crate::geom::Pose) -> f64 {
         let Some((ix, iy)) = self.spec.cell_of(pose.pos()) else { return 0.0 };
         let heading = (pose.theta / std::f64::consts::FRAC_PI_4).round().rem_euclid(8.0) as usize;
@@ -259,55 +321,45 @@ impl StaticRaster {
     /// and heading the first time it is asked (only a chair that keeps right asks).
     pub fn off_lane_at(&self, i: usize, k: usize) -> f64 {
         let lanes = self.lanes.get_or_init(|| {
+            let walls = self.lane_walls();
             (0..self.spec.len())
-                .map(|i| std::array::from_fn(|k| (self.lane_offset(i, k) * 100.0).round().min(255.0) as u8))
+                .map(|i| std::array::from_fn(|k| (walls.lane_offset(i, k) * 100.0).round().min(255.0) as u8))
                 .collect()
         });
         f64::from(lanes[i][k]) / 100.0
     }
 
-    /// The width across heading `k` at cell `i`, metres, if it is a two-lane passage's.
-    fn two_lane_width(&self, i: usize, k: usize) -> Option<(f64, f64)> {
-        let runs = &self.runs[i];
-        let (right, left) = ((k + 6) % 8, (k + 2) % 8);
-        let step = |k: usize| if k % 2 == 1 { self.spec.cell * std::f64::consts::SQRT_2 } else { self.spec.cell };
-        let (r, l) = (f64::from(runs[right]) * step(right), f64::from(runs[left]) * step(left));
-        let width = r + l;
-        let two = (TWO_LANES_M.0..=TWO_LANES_M.1).contains(&width) && runs[right] < u8::MAX && runs[left] < u8::MAX;
-        two.then_some((r, width))
-    }
-
-    /// How far left of its lane's middle a chair on cell `i` heading `k`·45° is, metres; zero
-    /// within [`JUNCTION_M`] (along the heading) of where the passage stops being two lanes
-    /// wide: a chair turning out of a doorway or round a corner needs the whole width, and
-    /// charging it for that made the search spend its expansions there.
-    fn lane_offset(&self, i: usize, k: usize) -> f64 {
-        if self.occ[i] {
-            return 0.0;
-        }
-        let Some((r, width)) = self.two_lane_width(i, k) else { return 0.0 };
-        let (dx, dy) = DIRS[k];
-        let step = if k % 2 == 1 { self.spec.cell * std::f64::consts::SQRT_2 } else { self.spec.cell };
-        let n = (JUNCTION_M / step).ceil() as isize;
-        let (x, y) = self.spec.coords(i);
-        for sign in [1isize, -1] {
-            for s in 1..=n {
-                let (px, py) = (x as isize + sign * s * dx, y as isize + sign * s * dy);
-                if px < 0 || py < 0 || px >= self.spec.nx as isize || py >= self.spec.ny as isize {
-                    break;
-                }
-                let j = self.spec.index(px as usize, py as usize);
-                if self.occ[j] {
-                    break;
-                }
-                if self.two_lane_width(j, k).is_none() {
-                    return 0.0;
+    /// The free runs from every cell, each the least within [`DOORWAY_BRIDGE_M`] across its
+    /// direction (a sliding minimum along the perpendicular), so that a run through a doorway
+    /// counts as far as the wall the doorway is in. (A morphological closing does not bridge a
+    /// doorway in a thin wall: discs from both sides cover it.)
+    fn lane_walls(&self) -> LaneWalls<'_> {
+        let (nx, ny) = (self.spec.nx as isize, self.spec.ny as isize);
+        let plain = free_runs(&self.spec, &self.occ);
+        let mut runs = plain.clone();
+        for k in 0..8 {
+            let (px, py) = DIRS[(k + 2) % 8];
+            let step = if k % 2 == 1 { self.spec.cell * std::f64::consts::SQRT_2 } else { self.spec.cell };
+            let n = (DOORWAY_BRIDGE_M / step).round() as isize;
+            for y in 0..ny {
+                for x in 0..nx {
+                    let i = (y * nx + x) as usize;
+                    if self.occ[i] {
+                        continue;
+                    }
+                    let mut least = plain[i][k];
+                    for s in -n..=n {
+                        let (qx, qy) = (x + s * px, y + s * py);
+                        if qx >= 0 && qy >= 0 && qx < nx && qy < ny {
+                            least = least.min(plain[(qy * nx + qx) as usize][k]);
+                        }
+                    }
+                    runs[i][k] = least;
                 }
             }
         }
-        (r - width / 4.0).max(0.0)
+        LaneWalls { spec: &self.spec, occ: &self.occ, runs }
     }
-
     /// The direction index (into the 8 directions of the free runs, `k`·45°) of a step of
     /// `(dx, dy)` cells.
     pub fn direction_of(dx: i64, dy: i64) -> Option<usize> {
@@ -335,6 +387,30 @@ impl StaticRaster {
     /// The distance field (per cell).
     pub fn distances(&self) -> &[f32] {
         &self.dist
+    }
+
+    /// Distance from the centre of `p`'s cell to the nearest narrow ([`NARROW_PASSAGE_M`]:
+    /// a doorway, say), metres; made for every cell the first time it is asked. A chair that
+    /// gives way must not stand where the others need to pass.
+    pub fn distance_to_narrows(&self, p: V2) -> f64 {
+        let field = self.narrows.get_or_init(|| {
+            let runs = free_runs(&self.spec, &self.occ);
+            let narrow: Vec<bool> = runs
+                .iter()
+                .zip(&self.occ)
+                .map(|(r, &o)| {
+                    !o && (0..4).any(|k| {
+                        let step = if k % 2 == 1 { self.spec.cell * std::f64::consts::SQRT_2 } else { self.spec.cell };
+                        (f64::from(r[k]) + f64::from(r[k + 4]) - 1.0) * step < NARROW_PASSAGE_M
+                    })
+                })
+                .collect();
+            distance_field(&self.spec, &narrow)
+        });
+        match self.spec.cell_of(p) {
+            Some((ix, iy)) => f64::from(field[self.spec.index(ix, iy)]),
+            None => 0.0,
+        }
     }
 }
 
@@ -880,12 +956,13 @@ mod tests {
     }
 
     #[test]
-    fn lanes_keep_right_in_a_corridor_and_end_near_a_doorway() {
-        // A 2 m corridor (y 5 to 7) with a 1 m doorway in its north wall at x 10.
+    fn lanes_keep_right_in_a_corridor_past_its_doorways_and_end_at_a_hall() {
+        // A 2 m corridor (y 5 to 7) with a 1 m doorway in its north wall at x 10, opening into a
+        // hall at x 14.
         let mut map = NavMap::empty(20.0, 12.0);
-        map.walls.push(MapWall::rectangle(0.5, 4.9, 19.5, 5.0, false));
+        map.walls.push(MapWall::rectangle(0.5, 4.9, 14.0, 5.0, false));
         map.walls.push(MapWall::rectangle(0.5, 7.0, 9.5, 7.1, false));
-        map.walls.push(MapWall::rectangle(10.5, 7.0, 19.5, 7.1, false));
+        map.walls.push(MapWall::rectangle(10.5, 7.0, 14.0, 7.1, false));
         let r = StaticRaster::new(&map, 0.05);
         let at = |x: f64, y: f64, deg: f64| r.off_lane(&crate::geom::Pose::from_deg(x, y, deg));
         // Eastbound: the right lane is the south half; its middle (y 5.5) costs nothing.
@@ -894,10 +971,18 @@ mod tests {
         // Westbound the other way round.
         assert!(at(4.0, 6.5, 180.0) < 0.05);
         assert!(at(4.0, 5.5, 180.0) > 0.9);
-        // Within 1.2 m of the doorway the lane ends: a chair turning out of it needs the width.
-        assert_eq!(at(9.5, 6.5, 0.0), 0.0);
-        assert_eq!(at(11.2, 6.5, 0.0), 0.0);
-        assert!(at(12.5, 6.5, 0.0) > 0.9);
+        // The doorway does not end the lanes: past it, and in front of it, the lanes hold.
+        for x in [9.5, 10.0, 10.5, 11.2] {
+            assert!((at(x, 6.5, 0.0) - 1.0).abs() < 0.1, "x {x}: {}", at(x, 6.5, 0.0));
+            assert!(at(x, 6.5, 180.0) < 0.05, "x {x}: {}", at(x, 6.5, 180.0));
+        }
+        // In the doorway itself, and in the room beyond, no lanes.
+        assert_eq!(at(10.0, 7.05, 90.0), 0.0);
+        assert_eq!(at(10.0, 8.0, 0.0), 0.0);
+        // Near the hall the lanes end (1.2 m before the bridged walls do, 0.6 m past the
+        // real ones): a chair turning there needs the width.
+        assert!(at(12.0, 6.5, 0.0) > 0.9);
+        assert_eq!(at(13.6, 6.5, 0.0), 0.0);
     }
 
     #[test]

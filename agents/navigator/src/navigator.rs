@@ -283,8 +283,12 @@ const REFUGE_REACH_M: f64 = 10.0;
 /// ...has this much free floor all round it (more than half a 2 m corridor's width, so a
 /// room or a hall), metres...
 const REFUGE_CLEAR_M: f64 = 1.3;
-/// ...and is this far from every other chair, metres.
+/// ...and is this far from every other chair, metres...
 const REFUGE_APART_M: f64 = 1.8;
+/// ...and from every doorway or other narrow, metres: a room's best spot by its clearance is
+/// just inside its doorway, where a chair giving way shuts the room to the chair it gave way to
+/// (two chairs at a ward doorway swapped the roles of blocker and blocked for a minute).
+const REFUGE_DOOR_M: f64 = 2.0;
 
 /// A chair planned round counts as where it stood within this (metres).
 const PARKED_SAME_M: f64 = 0.1;
@@ -525,8 +529,9 @@ impl Navigator {
     }
 
     /// A path to a refuge: the nearest place (by the way there, within 10 m) with 1.3 m of
-    /// free floor all round, such as a room off a corridor or a hall, and at least 1.8 m from
-    /// each of `others` (`REFUGE_REACH_M`, `REFUGE_CLEAR_M`, `REFUGE_APART_M`). A chair in a deadlock
+    /// free floor all round, such as a room off a corridor or a hall, at least 1.8 m from
+    /// each of `others` and 2 m from any doorway (`REFUGE_REACH_M`, `REFUGE_CLEAR_M`,
+    /// `REFUGE_APART_M`, `REFUGE_DOOR_M`). A chair in a deadlock
     /// that gives way goes there: out of a corridor, not just a little way back along it.
     /// `None` when there is none, or no path to one.
     pub fn path_to_refuge(&self, others: &[V2]) -> Option<Vec<PathPose>> {
@@ -547,6 +552,7 @@ impl Navigator {
                 if c > REFUGE_REACH_M
                     || best.is_some_and(|(b, _)| c >= b)
                     || self.model.statics.distance_at(p) < REFUGE_CLEAR_M
+                    || self.model.statics.distance_to_narrows(p) < REFUGE_DOOR_M
                     || others.iter().any(|&q| (q - p).norm() < REFUGE_APART_M)
                 {
                     continue;
@@ -1445,8 +1451,11 @@ mod tests {
         let end = path.last().expect("a path").pose;
         assert!(end.y > 3.1 + REFUGE_CLEAR_M - 0.2 && (6.0..11.0).contains(&end.x), "in the room: {end:?}");
         assert!(nav.model.wall_clearance(&end, 0.3) >= 0.3, "wholly off the walls: {end:?}");
-        // Another chair standing just inside the room: the refuge is beyond it, at a distance.
-        let other = V2::new(8.5, 5.0);
+        // Not in front of the doorway (x 8-9, y 3-3.1), where it would shut the room.
+        let door = V2::new(8.5, 3.05);
+        assert!((end.pos() - door).norm() >= REFUGE_DOOR_M, "{end:?} blocks the doorway");
+        // Another chair standing in the room's west half: the refuge is away from it.
+        let other = V2::new(7.4, 6.0);
         let path = nav.path_to_refuge(&[other]).expect("the room is big enough for two");
         let end = path.last().expect("a path").pose;
         assert!((end.pos() - other).norm() >= REFUGE_APART_M - 0.2, "{end:?}");

@@ -90,7 +90,7 @@ pub fn tick_rates(samples: &[(f64, u64)]) -> Option<(f64, Option<f64>)> {
 fn scenario(chairs: usize, seconds: f64) -> String {
     format!(
         "# Written by iwsim bench traffic.\nname = \"traffic-{chairs}\"\nlab = \"builtin:ward\"\nseconds = {seconds}\n\
-         cycle_ms = 100\nnoise = true\n\n[crowd]\nchairs = {chairs}\noptions = {{ keep-right = 1.0 }}\n"
+         cycle_ms = 100\nnoise = true\n\n[crowd]\nchairs = {chairs}\noptions = {{ keep-right = 2.0 }}\n"
     )
 }
 
