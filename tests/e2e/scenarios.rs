@@ -75,6 +75,29 @@ fn builtin_door_lets_the_chair_through_for_every_seed() {
 }
 
 #[test]
+fn six_chairs_with_crossing_goals_on_the_ward_all_arrive_on_three_seeds() {
+    // builtin:ward as it is: six navigator processes with goals placed by the seed, their
+    // ways crossing in the 2 m corridor and its 1 m doorways, lock-step, 300 s. Judged from
+    // each run's recording: every chair arrives, nothing touches, no deadlock.
+    let dir = out_dir("ward-six");
+    let d = dir.to_str().expect("utf-8");
+    let args = ["run", "builtin:ward", "--lockstep", "--headless", "--seeds", "1..3", "--out", d];
+    let (ok, out, err) = iwsim(&args, Duration::from_secs(600));
+    assert!(ok, "{out}\n{err}");
+    assert!(out.contains("success rate 3/3 (100 %)") && out.contains("collisions 0 in all"), "{out}");
+    for seed in 1..=3 {
+        let s = summary(&dir.join(format!("seed-{seed}")));
+        let t = s.traffic.as_ref().expect("six chairs on routes: the traffic is measured");
+        assert_eq!((t.chairs, t.arrived, t.deadlocks), (6, 6, 0), "seed {seed}: {t:?}");
+        assert_eq!((t.contacts_chair, t.contacts_wall, t.contacts_obstacle), (0, 0, 0), "seed {seed}: {t:?}");
+        for r in &s.robots {
+            assert!(r.min_clearance_chair_m.is_some_and(|m| m > 0.0), "seed {seed}: {r:?}");
+        }
+    }
+    let _ = std::fs::remove_dir_all(dir);
+}
+
+#[test]
 fn chairs_placed_on_the_ward_by_the_seed_each_reach_their_own_goal() {
     // `--chairs 2` on the ward: two navigators with goals of their own, placed by seed 1; the
     // judge reads each chair's route from the placement (its goal), the same for the same seed.
