@@ -356,7 +356,7 @@ struct Scratch {
     /// One sensing scratch per chunk of robots (see [`World::chunking`]).
     sense: Vec<SenseScratch>,
     blocked: Vec<(bool, bool)>,
-    deliveries: Vec<(u32, Heard)>,
+    deliveries: Vec<(u32, Real, Heard)>,
     speakers: Vec<u32>,
     listeners: Vec<u32>,
 }
@@ -1064,7 +1064,6 @@ impl World {
         let range = self.params.message_range_m;
         let deliveries = &mut self.scratch.deliveries;
         deliveries.clear();
-        // Speakers in slot order, so every inbox lists speakers in slot order.
         self.scratch.speakers.sort_unstable();
         for &i in &self.scratch.speakers {
             let slot = &mut self.slots[i as usize];
@@ -1073,17 +1072,21 @@ impl World {
             let from = RobotHandle { index: i, generation: slot.generation };
             let c = self.geo[i as usize].centre;
             let e = Vector2::new(range, range);
-            let first = deliveries.len();
             self.dyn_grid.query(c - e, c + e, |j| {
                 let g = &self.geo[j as usize];
-                if j != i && g.alive && (g.centre - c).norm_squared() <= range * range {
-                    deliveries.push((j, Heard { from, message }));
+                let d2 = (g.centre - c).norm_squared();
+                if j != i && g.alive && d2 <= range * range {
+                    deliveries.push((j, d2, Heard { from, message }));
                 }
             });
-            // The grid lists by cell; listeners in slot order keep drops deterministic.
-            deliveries[first..].sort_unstable_by_key(|(j, _)| *j);
         }
-        for &(j, heard) in deliveries.iter() {
+        // Each listener hears its nearest speakers first (ties: the lower slot), so when its
+        // inbox is full the farthest go unheard, not those in the highest slots: with 20
+        // chairs in a corridor some chair was never heard by a near one, which then drove
+        // into it. Sorted by listener, distance and speaker, the drops are deterministic.
+        deliveries
+            .sort_unstable_by(|a, b| a.0.cmp(&b.0).then(a.1.total_cmp(&b.1)).then(a.2.from.index.cmp(&b.2.from.index)));
+        for &(j, _, heard) in deliveries.iter() {
             let Some(r) = self.slots[j as usize].robot.as_mut() else { continue };
             let used: usize = r.inbox.iter().map(|h| h.message.len()).sum();
             if used + heard.message.len() <= MAX_INBOX_BYTES {
