@@ -228,7 +228,8 @@ impl LaneWalls<'_> {
     /// How far left of its lane's middle a chair on cell `i` heading `k`·45° is, metres; zero
     /// within [`JUNCTION_M`] (along the heading) of where the passage stops being two lanes
     /// wide: a chair turning round a corner needs the whole width, and charging it for that
-    /// made the search spend its expansions there. Zero in a (bridged) doorway.
+    /// made the search spend its expansions there. (In a doorway, a chair crossing the
+    /// corridor's line, heading through it, finds the passage one lane wide: zero too.)
     fn lane_offset(&self, i: usize, k: usize) -> f64 {
         if self.occ[i] {
             return 0.0;
