@@ -9,6 +9,17 @@ use std::time::{Duration, Instant};
 
 use observer::Observer;
 
+/// Waits until `ready` holds, looking every `every`, for at most `timeout`; panics with
+/// `what` (and what `ready` last said) if it never does. For conditions nothing announces
+/// (a file growing, processes going away), so they are waited on, not slept for.
+pub fn wait_until(what: &str, timeout: Duration, every: Duration, mut ready: impl FnMut() -> bool) {
+    let deadline = Instant::now() + timeout;
+    while !ready() {
+        assert!(Instant::now() < deadline, "{what} within {timeout:?}");
+        std::thread::sleep(every);
+    }
+}
+
 pub fn session(tag: &str) -> String {
     static N: AtomicU32 = AtomicU32::new(0);
     format!("e2e-{tag}-{}-{}", std::process::id(), N.fetch_add(1, Ordering::Relaxed))

@@ -9,7 +9,7 @@ use std::time::{Duration, Instant};
 use records::summary::RunSummary;
 
 use super::common::{
-    Lines, Proc, assert_no_shared_memory_left, processes_with_argument, session, shared_memory_files, text,
+    Lines, Proc, assert_no_shared_memory_left, processes_with_argument, session, shared_memory_files, text, wait_until,
 };
 
 /// A fresh directory for one test.
@@ -112,13 +112,11 @@ fn sigterm_to_bench_traffic_stops_its_run_and_leaves_nothing() {
     let pid = bench.pid();
     let lines = bench.stderr_lines();
     let prefix = format!("bench-traffic-{pid}-");
-    let deadline = Instant::now() + Duration::from_secs(60);
     // The run is under way once its hub publishes (its shared memory is there) and its ten
     // navigators are up (each has the session among its arguments, as do the hub and the run).
-    while shared_memory_files(&format!("iwsim_{prefix}")).is_empty() || processes_with_argument(&prefix).len() < 12 {
-        assert!(Instant::now() < deadline, "the bench's run never started: {:?}", lines.so_far());
-        std::thread::sleep(Duration::from_millis(50));
-    }
+    let started =
+        || !shared_memory_files(&format!("iwsim_{prefix}")).is_empty() && processes_with_argument(&prefix).len() >= 12;
+    wait_until("the bench's run starting", Duration::from_secs(60), Duration::from_millis(50), started);
     bench.signal("TERM");
     let output = bench.wait(Duration::from_secs(30));
     let stderr = lines.to_end(Duration::from_secs(10));
@@ -154,11 +152,8 @@ fn a_run_whose_hub_is_killed_writes_a_partial_summary_saying_so() {
     let (dir, out, run, lines) = long_lock_step_run("hub-killed");
     let pid = run.pid();
     // Chunks close every simulated second: wait for some to reach the disk.
-    let start = Instant::now();
-    while std::fs::metadata(out.join("run.mcap")).map_or(0, |m| m.len()) < 200_000 {
-        assert!(start.elapsed() < Duration::from_secs(60), "the recording did not grow");
-        std::thread::sleep(Duration::from_millis(20));
-    }
+    let grown = || std::fs::metadata(out.join("run.mcap")).map_or(0, |m| m.len()) >= 200_000;
+    wait_until("the recording growing to 200 kB", Duration::from_secs(60), Duration::from_millis(20), grown);
     let hub = processes_with_argument(&format!("run-{pid}-"))
         .into_iter()
         .find(|p| p.contains(" hub "))
@@ -190,15 +185,8 @@ fn a_runner_killed_outright_takes_its_hub_and_agents_with_it() {
     assert!(processes_with_argument(&prefix).len() >= 2, "the hub and the agent run");
     run.kill9();
     // The children stop on their own (SIGTERM from the kernel): poll until none is left.
-    let start = Instant::now();
-    while !processes_with_argument(&prefix).is_empty() {
-        assert!(
-            start.elapsed() < Duration::from_secs(30),
-            "orphans of the killed runner: {:?}",
-            processes_with_argument(&prefix)
-        );
-        std::thread::sleep(Duration::from_millis(50));
-    }
+    let gone = || processes_with_argument(&prefix).is_empty();
+    wait_until("the killed runner's children stopping", Duration::from_secs(30), Duration::from_millis(50), gone);
     assert_nothing_of_run_left(pid);
     let _ = std::fs::remove_dir_all(dir);
 }

@@ -185,6 +185,11 @@ const DIRS: [(isize, isize); 8] = [(1, 0), (1, 1), (0, 1), (-1, 1), (-1, 0), (-1
 /// Passages between these widths (metres, wall to wall) have two lanes, one each way.
 const TWO_LANES_M: (f64, f64) = (1.5, 3.2);
 
+/// The length of one step in direction `k` of [`DIRS`], metres (diagonals are √2 cells).
+fn step_m(spec: &GridSpec, k: usize) -> f64 {
+    if k % 2 == 1 { spec.cell * std::f64::consts::SQRT_2 } else { spec.cell }
+}
+
 /// Free runs from each cell in each direction of [`DIRS`]: one linear pass per direction,
 /// visiting each cell after its neighbour in that direction.
 fn free_runs(spec: &GridSpec, occ: &[bool]) -> Vec<[u8; 8]> {
@@ -218,8 +223,8 @@ impl LaneWalls<'_> {
     fn two_lane_width(&self, i: usize, k: usize) -> Option<(f64, f64)> {
         let runs = &self.runs[i];
         let (right, left) = ((k + 6) % 8, (k + 2) % 8);
-        let step = |k: usize| if k % 2 == 1 { self.spec.cell * std::f64::consts::SQRT_2 } else { self.spec.cell };
-        let (r, l) = (f64::from(runs[right]) * step(right), f64::from(runs[left]) * step(left));
+        let (r, l) =
+            (f64::from(runs[right]) * step_m(self.spec, right), f64::from(runs[left]) * step_m(self.spec, left));
         let width = r + l;
         let two = (TWO_LANES_M.0..=TWO_LANES_M.1).contains(&width) && runs[right] < u8::MAX && runs[left] < u8::MAX;
         two.then_some((r, width))
@@ -236,8 +241,7 @@ impl LaneWalls<'_> {
         }
         let Some((r, width)) = self.two_lane_width(i, k) else { return 0.0 };
         let (dx, dy) = DIRS[k];
-        let step = if k % 2 == 1 { self.spec.cell * std::f64::consts::SQRT_2 } else { self.spec.cell };
-        let n = (JUNCTION_M / step).ceil() as isize;
+        let n = (JUNCTION_M / step_m(self.spec, k)).ceil() as isize;
         let (x, y) = self.spec.coords(i);
         for sign in [1isize, -1] {
             for s in 1..=n {
@@ -340,8 +344,7 @@ impl StaticRaster {
         let mut runs = plain.clone();
         for k in 0..8 {
             let (px, py) = DIRS[(k + 2) % 8];
-            let step = if k % 2 == 1 { self.spec.cell * std::f64::consts::SQRT_2 } else { self.spec.cell };
-            let n = (DOORWAY_BRIDGE_M / step).round() as isize;
+            let n = (DOORWAY_BRIDGE_M / step_m(&self.spec, k)).round() as isize;
             for y in 0..ny {
                 for x in 0..nx {
                     let i = (y * nx + x) as usize;
@@ -401,8 +404,7 @@ impl StaticRaster {
                 .zip(&self.occ)
                 .map(|(r, &o)| {
                     !o && (0..4).any(|k| {
-                        let step = if k % 2 == 1 { self.spec.cell * std::f64::consts::SQRT_2 } else { self.spec.cell };
-                        (f64::from(r[k]) + f64::from(r[k + 4]) - 1.0) * step < NARROW_PASSAGE_M
+                        (f64::from(r[k]) + f64::from(r[k + 4]) - 1.0) * step_m(&self.spec, k) < NARROW_PASSAGE_M
                     })
                 })
                 .collect();
