@@ -151,8 +151,9 @@ pub struct StaticRaster {
     occ: Vec<bool>,
     /// Distance from each cell's centre to the nearest occupied cell's centre, metres.
     dist: Vec<f32>,
-    /// [`StaticRaster::off_lane_at`] per cell and heading, centimetres, made when first asked.
-    lanes: std::sync::OnceLock<Vec<[u8; 8]>>,
+    /// [`StaticRaster::off_lane_at`] per cell and heading, centimetres, and per cell a bit
+    /// per heading for [`StaticRaster::in_own_lane`]; made when first asked.
+    lanes: std::sync::OnceLock<(Vec<[u8; 8]>, Vec<u8>)>,
     /// [`StaticRaster::distance_to_narrows`] per cell, made when first asked.
     narrows: std::sync::OnceLock<Vec<f32>>,
 }
@@ -168,6 +169,8 @@ struct LaneWalls<'a> {
     spec: &'a GridSpec,
     occ: &'a [bool],
     runs: Vec<[u8; 8]>,
+    /// The free runs before bridging.
+    plain: Vec<[u8; 8]>,
 }
 
 /// Gaps in a wall up to twice this wide (metres) are bridged when lanes are laid: a doorway off
@@ -223,11 +226,22 @@ impl LaneWalls<'_> {
     fn two_lane_width(&self, i: usize, k: usize) -> Option<(f64, f64)> {
         let runs = &self.runs[i];
         let (right, left) = ((k + 6) % 8, (k + 2) % 8);
-        let (r, l) =
-            (f64::from(runs[right]) * step_m(self.spec, right), f64::from(runs[left]) * step_m(self.spec, left));
-        let width = r + l;
+        let width = self.width(i, k);
         let two = (TWO_LANES_M.0..=TWO_LANES_M.1).contains(&width) && runs[right] < u8::MAX && runs[left] < u8::MAX;
-        two.then_some((r, width))
+        two.then_some((f64::from(runs[right]) * step_m(self.spec, right), width))
+    }
+
+    /// The width across heading `k` at cell `i`, wall to wall (doorways bridged), metres.
+    fn width(&self, i: usize, k: usize) -> f64 {
+        let (right, left) = ((k + 6) % 8, (k + 2) % 8);
+        f64::from(self.runs[i][right]) * step_m(self.spec, right)
+            + f64::from(self.runs[i][left]) * step_m(self.spec, left)
+    }
+
+    /// The free run through cell `i` along heading `k`, both ways (nothing bridged), metres.
+    fn length(&self, i: usize, k: usize) -> f64 {
+        f64::from(self.plain[i][k]) * step_m(self.spec, k)
+            + f64::from(self.plain[i][(k + 4) % 8]) * step_m(self.spec, k)
     }
 
     /// How far left of its lane's middle a chair on cell `i` heading `k`·45° is, metres; zero
@@ -308,6 +322,19 @@ impl StaticRaster {
         Self { spec, occ, dist, lanes: std::sync::OnceLock::new(), narrows: std::sync::OnceLock::new() }
     }
 
+    /// Whether a chair at `pose` drives in its own lane: in a two-lane passage (as for
+    /// [`StaticRaster::off_lane`]), right of its middle line, heading along it (within 22.5°
+    /// of one of the 8 directions, the one across which the passage is narrowest).
+    pub fn in_own_lane(&self, pose: &crate::geom::Pose) -> bool {
+        let Some((ix, iy)) = self.spec.cell_of(pose.pos()) else { return false };
+        let i = self.spec.index(ix, iy);
+        if self.occ[i] {
+            return false;
+        }
+        let k = (pose.theta / std::f64::consts::FRAC_PI_4).round().rem_euclid(8.0) as usize;
+        self.lanes().1[i] & (1 << k) != 0
+    }
+
     /// How far left of its lane a chair at `pose` drives, metres: in a passage two lanes wide
     /// (wall to wall across the heading between 1.5 and 3.2 m, [`TWO_LANES_M`], doorways in its
     /// walls bridged, [`DOORWAY_BRIDGE_M`]), by how much the free width on its right exceeds a
@@ -325,13 +352,29 @@ impl StaticRaster {
     /// search pays and keeps that search as focused as without lanes. Computed for every cell
     /// and heading the first time it is asked (only a chair that keeps right asks).
     pub fn off_lane_at(&self, i: usize, k: usize) -> f64 {
-        let lanes = self.lanes.get_or_init(|| {
+        f64::from(self.lanes().0[i][k]) / 100.0
+    }
+
+    fn lanes(&self) -> &(Vec<[u8; 8]>, Vec<u8>) {
+        self.lanes.get_or_init(|| {
             let walls = self.lane_walls();
-            (0..self.spec.len())
+            let offsets = (0..self.spec.len())
                 .map(|i| std::array::from_fn(|k| (walls.lane_offset(i, k) * 100.0).round().min(255.0) as u8))
-                .collect()
-        });
-        f64::from(lanes[i][k]) / 100.0
+                .collect();
+            let own = (0..self.spec.len())
+                .map(|i| {
+                    (0..8).fold(0u8, |bits, k| {
+                        // Along the passage, not across it at 45°: the free run along the
+                        // heading is more than twice the width across it.
+                        let along = walls.length(i, k) > 2.0 * walls.width(i, k);
+                        let right =
+                            !self.occ[i] && along && walls.two_lane_width(i, k).is_some_and(|(r, w)| r < w / 2.0);
+                        bits | (u8::from(right) << k)
+                    })
+                })
+                .collect();
+            (offsets, own)
+        })
     }
 
     /// The free runs from every cell, each the least within [`DOORWAY_BRIDGE_M`] across its
@@ -362,7 +405,7 @@ impl StaticRaster {
                 }
             }
         }
-        LaneWalls { spec: &self.spec, occ: &self.occ, runs }
+        LaneWalls { spec: &self.spec, occ: &self.occ, runs, plain }
     }
     /// The direction index (into the 8 directions of the free runs, `k`·45°) of a step of
     /// `(dx, dy)` cells.
@@ -986,6 +1029,17 @@ mod tests {
         // real ones): a chair turning there needs the width.
         assert!(at(12.0, 6.5, 0.0) > 0.9);
         assert_eq!(at(13.6, 6.5, 0.0), 0.0);
+        // In its own lane: right of the middle line, heading along the corridor (within
+        // 22.5°), past the doorway too; not left of it, across it, in the doorway or the hall.
+        let own = |x: f64, y: f64, deg: f64| r.in_own_lane(&crate::geom::Pose::from_deg(x, y, deg));
+        for (x, y, deg) in [(4.0, 5.6, 0.0), (4.0, 5.9, 15.0), (10.0, 6.4, 180.0), (12.5, 6.3, -170.0)] {
+            assert!(own(x, y, deg), "({x}, {y}) heading {deg}°");
+        }
+        for (x, y, deg) in [(4.0, 6.1, 0.0), (4.0, 5.9, 180.0), (4.0, 5.5, 90.0), (4.0, 5.5, 40.0), (10.0, 7.05, 90.0)]
+        {
+            assert!(!own(x, y, deg), "({x}, {y}) heading {deg}°");
+        }
+        assert!(!own(16.0, 6.5, 180.0), "the hall has no lanes");
     }
 
     #[test]

@@ -445,7 +445,13 @@ impl Pilot {
         self.note_motion(me, now);
         // A chair at its last checkpoint stands for good (and says `park`): it negotiates
         // nothing.
-        let decision = if self.nav.finished() { Decision::Go } else { self.traffic.decide(me, &own, now) };
+        let decision = if self.nav.finished() {
+            Decision::Go
+        } else {
+            let statics = &self.nav.model().statics;
+            let lanes = self.nav.config().keep_right > 0.0;
+            self.traffic.decide_in_lanes(me, &own, now, &|p| lanes && statics.in_own_lane(&p))
+        };
         if !matches!(decision, Decision::PullOver(_)) {
             self.no_room_said = false;
         }
