@@ -323,14 +323,12 @@ impl StaticRaster {
     }
 
     /// Whether a chair at `pose` drives in its own lane: in a two-lane passage (as for
-    /// [`StaticRaster::off_lane`]), right of its middle line, heading along it (within 22.5°
-    /// of one of the 8 directions, the one across which the passage is narrowest).
+    /// [`StaticRaster::off_lane`]), right of its middle line, heading along it: of the 8
+    /// directions the nearest to its heading is one along which the free run is more than
+    /// twice the passage's width across it (a chair crossing at 45° is in no lane).
     pub fn in_own_lane(&self, pose: &crate::geom::Pose) -> bool {
         let Some((ix, iy)) = self.spec.cell_of(pose.pos()) else { return false };
         let i = self.spec.index(ix, iy);
-        if self.occ[i] {
-            return false;
-        }
         let k = (pose.theta / std::f64::consts::FRAC_PI_4).round().rem_euclid(8.0) as usize;
         self.lanes().1[i] & (1 << k) != 0
     }
@@ -355,6 +353,8 @@ impl StaticRaster {
         f64::from(self.lanes().0[i][k]) / 100.0
     }
 
+    /// The lane offsets per cell and heading, and the own-lane bits per cell, made when first
+    /// asked.
     fn lanes(&self) -> &(Vec<[u8; 8]>, Vec<u8>) {
         self.lanes.get_or_init(|| {
             let walls = self.lane_walls();

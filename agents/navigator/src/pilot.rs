@@ -34,6 +34,14 @@ const STOP_SHORT_M: f64 = 0.8;
 const EXIT_ROOM_M: f64 = 1.6;
 /// A chair that has not moved for this long (seconds) while it has somewhere to go is stuck.
 const STUCK_S: f64 = 5.0;
+/// A yielder whose own path turns off by this much (radians) within [`TURN_OFF_M`] of path,
+/// keeping [`TURN_OFF_GAP_M`] from the other where it stands, goes on instead of pulling over:
+/// it is leaving the other's way (swinging out to turn into a doorway).
+const TURN_OFF_RAD: f64 = 1.0;
+/// See [`TURN_OFF_RAD`], metres.
+const TURN_OFF_M: f64 = 3.0;
+/// See [`TURN_OFF_RAD`], metres.
+const TURN_OFF_GAP_M: f64 = 0.15;
 /// A chair in a negotiation (waiting for another to pull over, parked for it, passing it)
 /// that has not moved for this long (seconds) is stuck all the same: the other is held up
 /// by a third (ward, 6 chairs, seed 4: five chairs stood two minutes, each waiting on one
@@ -496,6 +504,13 @@ impl Pilot {
                     notes.push(format!("waiting at t {now:.1} s for the chair ahead to pull over"));
                 }
             }
+            Decision::PullOver(peer) if self.turns_off_clear_of(me, &peer.pose, &peer.footprint) => {
+                // Going on is the quickest way out of its way: the other waits (we say we are
+                // pulling over) until we have turned off, and the meeting then ends for both.
+                if !std::mem::replace(&mut self.no_room_said, true) {
+                    notes.push(format!("turning off out of {}'s way at t {now:.1} s", peer.name));
+                }
+            }
             // Looking for room costs a few milliseconds: every fifth tick is often enough.
             Decision::PullOver(_) if self.no_room_said && !input.tick.is_multiple_of(5) => self.nav.hold(),
             Decision::PullOver(peer) => {
@@ -550,6 +565,33 @@ impl Pilot {
             self.said = Some(state);
         }
         PilotOutput { powers: out.powers, say, events: out.events, notes }
+    }
+
+    /// Whether the path the chair follows turns off by [`TURN_OFF_RAD`] within [`TURN_OFF_M`],
+    /// keeping [`TURN_OFF_GAP_M`] from a chair standing at `at` until it has.
+    fn turns_off_clear_of(&self, me: Pose, at: &Pose, other: &Footprint) -> bool {
+        if self.nav.holding() || self.nav.manoeuvring() {
+            return false;
+        }
+        let own = self.nav.model().footprint;
+        let corners = other.corners(at, 0.0);
+        let (mut along, mut last) = (0.0, me.pos());
+        for q in self.nav.path() {
+            along += (q.pos() - last).norm();
+            last = q.pos();
+            if along > TURN_OFF_M {
+                break;
+            }
+            let c = corners.map(|p| q.to_body(p));
+            if (0..4).any(|k| own.body_segment_distance(c[k], c[(k + 1) % 4]) < TURN_OFF_GAP_M) {
+                return false;
+            }
+            // Once turned off, the rest of the way is the planner's and the safety layer's.
+            if crate::geom::wrap_rad(q.theta - me.theta).abs() >= TURN_OFF_RAD {
+                return true;
+            }
+        }
+        false
     }
 
     /// The one-lane zone rule for a chair free to drive: claims the zones ahead, releases
@@ -645,6 +687,20 @@ mod tests {
     use crate::map::{MapWall, NavMap};
     use crate::navigator::{Checkpoint, NavConfig};
 
+    /// A tick's input for a chair that stands (its wheels never turn) with nothing in sight.
+    fn standing(tick: u64) -> Input {
+        Input {
+            tick,
+            time_s: tick as f64 * 0.1,
+            proximity_m: [3.0; ipc_types::MAX_PROXIMITY],
+            proximity_count: 0,
+            encoder_ticks: [0, 0],
+            gps: None,
+            compass_deg: None,
+            collision: false,
+        }
+    }
+
     /// A chair in a negotiation that has stood 15 s is stuck, whatever the negotiation: here
     /// it has the way and waits for the other to pull over, which only ever says it is
     /// pulling over (held up by a third chair). It then says `stuck`, so that the deadlock
@@ -666,16 +722,7 @@ mod tests {
         let other = Pose::from_deg(21.0, 1.1, 180.0);
         let mut said = Vec::new();
         for tick in 0..200u64 {
-            let input = Input {
-                tick,
-                time_s: tick as f64 * 0.1,
-                proximity_m: [3.0; ipc_types::MAX_PROXIMITY],
-                proximity_count: 0,
-                encoder_ticks: [0, 0],
-                gps: None,
-                compass_deg: None,
-                collision: false,
-            };
+            let input = standing(tick);
             let msg = traffic::encode("chair2", other, State::Pull, &body).into_bytes();
             let out = pilot.tick(&input, [msg.as_slice()]);
             assert_eq!(out.powers, [0.0, 0.0], "it waits (tick {tick})");
@@ -686,6 +733,38 @@ mod tests {
         let stuck_at = said.iter().find(|(_, s)| s.contains(" stuck ")).map(|(t, _)| *t);
         assert!(said.iter().any(|(_, s)| s.contains(" wait ")), "it waited first: {said:?}");
         assert!(stuck_at.is_some_and(|t| (150..=160).contains(&t)), "stuck after 15 s: {stuck_at:?}");
+    }
+
+    /// A chair whose way turns off (here to a goal round a right turn) within 3 m goes on when
+    /// a chair whose name sorts first comes head-on: turning off is the quickest way out of
+    /// its way. Where its turn would come near the other, it does not.
+    #[test]
+    fn a_yielder_turning_off_out_of_the_way_goes_on() {
+        let run = |other: Pose| {
+            let cfg = NavConfig {
+                checkpoints: vec![Checkpoint { pos: V2::new(7.0, 2.0), radius_m: 0.3 }],
+                start: Pose::from_deg(5.0, 5.0, 0.0),
+                encoder_ticks_per_m: 1000.0,
+                ..NavConfig::intellwheels()
+            };
+            let body = cfg.body;
+            let mut pilot = Pilot::new("chair2", Navigator::new(NavMap::empty(20.0, 10.0), cfg));
+            let mut notes = Vec::new();
+            for tick in 0..10u64 {
+                let input = standing(tick);
+                let msg = traffic::encode("chair1", other, State::Go, &body).into_bytes();
+                let heard: Vec<&[u8]> = if tick >= 3 { vec![msg.as_slice()] } else { Vec::new() };
+                let out = pilot.tick(&input, heard);
+                if tick >= 3 {
+                    notes.extend(out.notes);
+                    assert!(pilot.traffic.negotiating(), "tick {tick}: a head-on meeting");
+                }
+            }
+            notes
+        };
+        let clear = run(Pose::from_deg(10.0, 5.0, 180.0));
+        assert!(clear.iter().any(|n| n.contains("turning off out of chair1's way")), "{clear:?}");
+        assert!(!run(Pose::from_deg(7.0, 5.0, 180.0)).iter().any(|n| n.contains("turning off")));
     }
 
     /// Among seven chairs heard within 8 m a chair may not hear them all: it does not drive

@@ -572,13 +572,15 @@ impl Traffic {
         let peers = &self.peers;
         self.crossed
             .retain(|n| peers.iter().any(|p| &p.name == n && (p.pose.x - me.x).hypot(p.pose.y - me.y) < 2.0 * MEET_M));
+        let me_in_lane = in_own_lane(me);
         let meeting = self.peers.iter().find(|p| {
             !self.crossed.contains(&p.name)
                 // One already parked is planned round; one already pulling over may have
                 // seen the meeting a moment before we did.
                 && !p.state.stands()
                 && self.clashes(me, own, p)
-                && !(in_own_lane(me) && in_own_lane(p.pose))
+                // Two chairs each in its own lane pass each other.
+                && (!me_in_lane || !in_own_lane(p.pose))
         });
         let Some(p) = meeting.cloned() else { return Decision::Go };
         if self.name > p.name {
