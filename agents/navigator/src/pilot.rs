@@ -107,7 +107,8 @@ pub struct Pilot {
     nav: Navigator,
     traffic: Traffic,
     said: Option<State>,
-    /// "No room to pull over" was said (once per search).
+    /// What this meeting asks of us as the yielder was noted ("no room to pull over", or
+    /// "turning off"), once per meeting.
     no_room_said: bool,
     /// The map's one-lane zones: none unless the zone rule is on ([`Pilot::with_zone_claims`]).
     zones: Zones,
