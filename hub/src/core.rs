@@ -1089,6 +1089,16 @@ pub fn hub_params(p: &Params, mode: Mode, tick_limit: u64, deadline_ms: u32) -> 
         ],
         _reserved: 0,
         encoder_ticks_per_m: sim_model::encoder_ticks_per_m(p.encoder_ticks_per_rev as f64, p.wheel_radius_m),
+        key_time_ticks: p.challenge.key_time_ticks,
+        scoring: [
+            p.challenge.return_time_penalty,
+            p.challenge.arrival_time_penalty,
+            p.challenge.collision_wall_penalty,
+            p.challenge.collision_robot_penalty,
+            p.challenge.target_reward,
+            p.challenge.home_reward,
+        ],
+        line_sensor_true_prob: p.challenge.line_sensor_true_prob,
     }
 }
 

@@ -928,7 +928,7 @@ const _: () = assert!(core::mem::align_of::<ControlResponse>() == 8);
 /// clients in its registration reply).
 #[repr(C)]
 #[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable, ZeroCopySend, Default)]
-#[type_name("iwsim::HubParams.v2")]
+#[type_name("iwsim::HubParams.v3")]
 pub struct HubParams {
     /// Proximity noise, metres.
     pub noise_proximity_m: f64,
@@ -963,8 +963,16 @@ pub struct HubParams {
     /// Wheel-encoder ticks per metre of wheel travel (odometry needs it with the track, which
     /// is the robot's `height_m`).
     pub encoder_ticks_per_m: f64,
+    /// Ciber-Rato's `KeyTime`, ticks.
+    pub key_time_ticks: u64,
+    /// Ciber-Rato's scoring values, in its reply's order: `ReturnTimePenalty`,
+    /// `ArrivalTimePenalty`, `CollisionWallPenalty`, `CollisionRobotPenalty`, `TargetReward`,
+    /// `HomeReward`.
+    pub scoring: [u32; 6],
+    /// Ciber-Rato's `LineSensorTrueProb`: the chance that a line-sensor element reads true.
+    pub line_sensor_true_prob: f64,
 }
-const _: () = assert!(core::mem::size_of::<HubParams>() == 120);
+const _: () = assert!(core::mem::size_of::<HubParams>() == 160);
 const _: () = assert!(core::mem::align_of::<HubParams>() == 8);
 
 /// `HubParams` sensor bit: GPS.
@@ -983,7 +991,7 @@ pub const SENSOR_COLLISION: u32 = 1 << 5;
 /// The header of the map.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable, ZeroCopySend, Default)]
-#[type_name("iwsim::MapHeader.v3")]
+#[type_name("iwsim::MapHeader.v4")]
 pub struct MapHeader {
     /// Lab width, metres.
     pub width_m: f64,
@@ -1006,7 +1014,7 @@ pub struct MapHeader {
     /// The run's parameters.
     pub params: HubParams,
 }
-const _: () = assert!(core::mem::size_of::<MapHeader>() == 192);
+const _: () = assert!(core::mem::size_of::<MapHeader>() == 232);
 const _: () = assert!(core::mem::align_of::<MapHeader>() == 8);
 
 /// `MapItem::kind`: a wall starts; `a` = height in metres, `b` = corner count, `c` = 1 for a

@@ -111,7 +111,8 @@ fn an_intellwheels_robot_drives_and_its_gps_track_follows_the_kinematics_within_
     let dir = std::env::temp_dir().join(format!("iwsim-udp-{}", std::process::id()));
     std::fs::create_dir_all(&dir).expect("temp dir");
     let param = dir.join("gps.xml");
-    std::fs::write(&param, "<Parameters GPS=\"On\"/>\n").expect("param file");
+    std::fs::write(&param, "<Parameters GPS=\"On\" KeyTime=\"4000\" CollisionWallPenalty=\"5\"/>\n")
+        .expect("param file");
     let s = session("udp-gps");
     let (hub, bridge, reg) = hub_and_bridge(
         &s,
@@ -124,6 +125,12 @@ fn an_intellwheels_robot_drives_and_its_gps_track_follows_the_kinematics_within_
         r#"<Robot Name="iw" Id="1" Width="1.2" Height="0.7" COM="0.8" X="10" Y="6.1" Dir="0" Type="Simulated" MaxSpeed="0.5" AccelerationCurve="0.6"><IRSensor Id="0" X="0.96" Y="0" Angle="0" Cone="60"/></Robot>"#,
     );
     assert!(reply.starts_with("<Reply Status=\"Ok\">") && reply.contains("GPS=\"On\""), "{reply}");
+    // The parameter file's values reach the client; what it leaves out is the real simulator's.
+    for want in
+        ["KeyTime=\"4000\"", "CollisionWallPenalty=\"5\"", "CollisionRobotPenalty=\"2\"", "ShowActions=\"True\""]
+    {
+        assert!(reply.contains(want), "{want} missing from {reply}");
+    }
 
     // The same chair stepped here, from the thesis's equations.
     let map = builtin::map("liacc").expect("built in");

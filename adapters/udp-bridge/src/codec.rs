@@ -582,23 +582,33 @@ pub struct ReplyParams {
     pub latency: [u32; 5],
     /// `BeaconAperture`, radians.
     pub beacon_aperture: f64,
+    /// `KeyTime`, ticks.
+    pub key_time: u64,
+    /// `ReturnTimePenalty`, `ArrivalTimePenalty`, `CollisionWallPenalty`,
+    /// `CollisionRobotPenalty`, `TargetReward`, `HomeReward`.
+    pub scoring: [u32; 6],
 }
 
-/// `<Reply Status="Ok"><Parameters …/></Reply>`: under 1024 bytes, as pClient reads it.
+/// `<Reply Status="Ok"><Parameters …/></Reply>`: under 1024 bytes, as pClient reads it. The
+/// attributes come in the real simulator's order, with `RequestsPerCycle` beside
+/// `NRequestsPerCycle` (libRobSock reads the former). `ShowActions` is `True` as the real
+/// simulator always says (it reads no such parameter); `ScoreSensor` is `Off`, as Measures
+/// carry no `<Score>`.
 pub fn encode_reply_ok(p: &ReplyParams) -> Vec<u8> {
     let [ro, rb, rg, rc, rcol] = p.requestable;
     let [lo, lb, lg, lc, lcol] = p.latency;
+    let [return_time, arrival_time, wall, robot, target, home] = p.scoring;
     let mut s = String::with_capacity(900);
     let _ = write!(
         s,
-        "<Reply Status=\"Ok\">\n\t<Parameters SimTime=\"{}\" CycleTime=\"{}\" CompassNoise=\"{}\" BeaconNoise=\"{}\" ObstacleNoise=\"{}\" MotorsNoise=\"{}\" KeyTime=\"{}\" GPS=\"{}\" GPSLinNoise=\"{}\" GPSDirNoise=\"{}\" BeaconSensor=\"{}\" CompassSensor=\"{}\" ScoreSensor=\"Off\" ShowActions=\"False\" NBeacons=\"{}\" NRequestsPerCycle=\"{}\" RequestsPerCycle=\"{}\" ObstacleRequestable=\"{}\" BeaconRequestable=\"{}\" GroundRequestable=\"{}\" CompassRequestable=\"{}\" CollisionRequestable=\"{}\" ObstacleLatency=\"{}\" BeaconLatency=\"{}\" GroundLatency=\"{}\" CompassLatency=\"{}\" CollisionLatency=\"{}\" BeaconAperture=\"{}\"/>\n</Reply>",
+        "<Reply Status=\"Ok\">\n\t<Parameters SimTime=\"{}\" CycleTime=\"{}\" CompassNoise=\"{}\" BeaconNoise=\"{}\" ObstacleNoise=\"{}\" MotorsNoise=\"{}\" KeyTime=\"{}\" GPS=\"{}\" GPSLinNoise=\"{}\" GPSDirNoise=\"{}\" BeaconSensor=\"{}\" CompassSensor=\"{}\" ScoreSensor=\"Off\" ShowActions=\"True\" NBeacons=\"{}\" NRequestsPerCycle=\"{}\" RequestsPerCycle=\"{}\" ObstacleRequestable=\"{}\" BeaconRequestable=\"{}\" GroundRequestable=\"{}\" CompassRequestable=\"{}\" CollisionRequestable=\"{}\" ObstacleLatency=\"{}\" BeaconLatency=\"{}\" GroundLatency=\"{}\" CompassLatency=\"{}\" CollisionLatency=\"{}\" BeaconAperture=\"{}\" ReturnTimePenalty=\"{}\" ArrivalTimePenalty=\"{}\" CollisionWallPenalty=\"{}\" CollisionRobotPenalty=\"{}\" TargetReward=\"{}\" HomeReward=\"{}\"/>\n</Reply>",
         p.sim_time,
         p.cycle_ms,
         G(p.compass_noise),
         G(p.beacon_noise),
         G(p.obstacle_noise),
         G(p.motors_noise),
-        p.sim_time,
+        p.key_time,
         on(p.gps),
         G(p.gps_lin_noise),
         G(p.gps_dir_noise),
@@ -618,6 +628,12 @@ pub fn encode_reply_ok(p: &ReplyParams) -> Vec<u8> {
         lc,
         lcol,
         G(p.beacon_aperture),
+        return_time,
+        arrival_time,
+        wall,
+        robot,
+        target,
+        home,
     );
     finish(s)
 }

@@ -179,6 +179,8 @@ fn the_reply_fits_pclients_buffer_and_carries_what_it_reads() {
         requestable: [true, false, false, true, false],
         latency: [1, 0, 0, 5, 0],
         beacon_aperture: std::f64::consts::PI,
+        key_time: 4000,
+        scoring: [25, 100, 5, 0, 100, 100],
     };
     let r = encode_reply_ok(&p);
     assert!(r.len() < 1024, "{} bytes", r.len());
@@ -195,6 +197,9 @@ fn the_reply_fits_pclients_buffer_and_carries_what_it_reads() {
         "CompassLatency=\"5\"",
         "RequestsPerCycle=\"4\"",
         "BeaconAperture=\"3.14159\"",
+        "KeyTime=\"4000\"",
+        "ShowActions=\"True\"",
+        "ReturnTimePenalty=\"25\" ArrivalTimePenalty=\"100\" CollisionWallPenalty=\"5\" CollisionRobotPenalty=\"0\" TargetReward=\"100\" HomeReward=\"100\"",
     ] {
         assert!(t.contains(want), "{want} missing from {t}");
     }

@@ -221,6 +221,8 @@ fn reply_params(map: &Map) -> ReplyParams {
         ],
         latency: [p.latency[0], p.latency[1], p.latency[2], p.latency[3], p.latency[4]],
         beacon_aperture: p.beacon_aperture_rad,
+        key_time: p.key_time_ticks,
+        scoring: p.scoring,
     }
 }
 

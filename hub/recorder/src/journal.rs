@@ -30,14 +30,18 @@
 
 use records::places::Checkpoint;
 use world::map::{
-    Beacon, Grid, Lab, LatencyParams, NoiseParams, Params, RequestParams, SensorSwitches, StartPose, Target, Wall,
+    Beacon, ChallengeParams, Grid, Lab, LatencyParams, NoiseParams, Params, RequestParams, SensorSwitches, StartPose,
+    Target, Wall,
 };
 use world::math::Pose;
 use world::{BodyShape, ProximitySpec, RobotKind, RobotSpec};
 
 /// The first byte of every journal message. Bump it when the layout changes; readers refuse
 /// versions they do not know rather than misread them.
-pub const CODEC_VERSION: u8 = 2;
+pub const CODEC_VERSION: u8 = 3;
+/// The oldest version this build still reads: version 2 differs only in having no
+/// [`ChallengeParams`] (its runs read with the defaults, as they ran).
+pub const OLDEST_CODEC_VERSION: u8 = 2;
 
 /// What a run starts from: enough to rebuild its world exactly.
 #[derive(Debug, Clone, PartialEq)]
@@ -142,7 +146,9 @@ pub enum JournalDecodeError {
     #[error("empty journal message")]
     Empty,
     /// The first byte is a codec version this build does not read.
-    #[error("journal codec version {found} at byte 0; this build reads version {CODEC_VERSION}")]
+    #[error(
+        "journal codec version {found} at byte 0; this build reads versions {OLDEST_CODEC_VERSION} to {CODEC_VERSION}"
+    )]
     Version {
         /// The version found.
         found: u8,
@@ -295,6 +301,7 @@ fn put_params(o: &mut Out, p: &Params) {
         message_range_m,
         encoder_ticks_per_rev,
         wheel_radius_m,
+        challenge,
     } = p;
     let NoiseParams { proximity_m, beacon_deg, compass_deg, gps_pos_m, gps_heading_deg, motor_frac, encoder_slip_frac } =
         noise;
@@ -328,6 +335,30 @@ fn put_params(o: &mut Out, p: &Params) {
     o.f64(*message_range_m);
     o.u32(*encoder_ticks_per_rev);
     o.f64(*wheel_radius_m);
+    let ChallengeParams {
+        key_time_ticks,
+        score_sensor,
+        return_time_penalty,
+        arrival_time_penalty,
+        collision_wall_penalty,
+        collision_robot_penalty,
+        target_reward,
+        home_reward,
+        line_sensor_true_prob,
+    } = challenge;
+    o.u64(*key_time_ticks);
+    o.bool(*score_sensor);
+    for v in [
+        return_time_penalty,
+        arrival_time_penalty,
+        collision_wall_penalty,
+        collision_robot_penalty,
+        target_reward,
+        home_reward,
+    ] {
+        o.u32(*v);
+    }
+    o.f64(*line_sensor_true_prob);
 }
 
 fn kind_byte(kind: RobotKind) -> u8 {
@@ -472,6 +503,8 @@ pub fn encode_event(event: &Event, out: &mut Vec<u8>) {
 struct In<'a> {
     buf: &'a [u8],
     pos: usize,
+    /// The message's codec version.
+    version: u8,
 }
 
 type R<T> = Result<T, JournalDecodeError>;
@@ -481,7 +514,9 @@ impl<'a> In<'a> {
     fn start(buf: &'a [u8]) -> R<Self> {
         match buf.first() {
             None => Err(JournalDecodeError::Empty),
-            Some(&CODEC_VERSION) => Ok(Self { buf, pos: 1 }),
+            Some(&version) if (OLDEST_CODEC_VERSION..=CODEC_VERSION).contains(&version) => {
+                Ok(Self { buf, pos: 1, version })
+            }
             Some(&found) => Err(JournalDecodeError::Version { found }),
         }
     }
@@ -647,6 +682,21 @@ fn get_params(i: &mut In) -> R<Params> {
         message_range_m: i.f64("message range")?,
         encoder_ticks_per_rev: i.u32("encoder ticks")?,
         wheel_radius_m: i.f64("wheel radius")?,
+        challenge: if i.version >= 3 { get_challenge(i)? } else { ChallengeParams::default() },
+    })
+}
+
+fn get_challenge(i: &mut In) -> R<ChallengeParams> {
+    Ok(ChallengeParams {
+        key_time_ticks: i.u64("key time")?,
+        score_sensor: i.bool("score sensor switch")?,
+        return_time_penalty: i.u32("scoring value")?,
+        arrival_time_penalty: i.u32("scoring value")?,
+        collision_wall_penalty: i.u32("scoring value")?,
+        collision_robot_penalty: i.u32("scoring value")?,
+        target_reward: i.u32("scoring value")?,
+        home_reward: i.u32("scoring value")?,
+        line_sensor_true_prob: i.f64("line sensor probability")?,
     })
 }
 

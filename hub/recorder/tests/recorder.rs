@@ -167,7 +167,7 @@ mod journal {
     use super::*;
     use proptest::prelude::*;
     use recorder::journal::{JournalDecodeError, decode_event, decode_run_start, encode_event, encode_run_start};
-    use world::map::{Beacon, Lab, LatencyParams, NoiseParams, RequestParams, SensorSwitches, Target};
+    use world::map::{Beacon, ChallengeParams, Lab, LatencyParams, NoiseParams, RequestParams, SensorSwitches, Target};
     use world::math::Pose;
     use world::{BodyShape, ProximitySpec, RobotKind};
 
@@ -274,41 +274,55 @@ mod journal {
             (any::<u32>(), proptest::array::uniform5(any::<bool>())),
             proptest::array::uniform4(any::<f64>()),
             any::<u32>(),
+            (any::<u64>(), any::<bool>(), proptest::array::uniform6(any::<u32>()), any::<f64>()),
         )
-            .prop_map(|(sim_time_ticks, cycle_ms, n, l, s, (per_cycle, r), f, encoder_ticks_per_rev)| Params {
-                sim_time_ticks,
-                cycle_ms,
-                noise: NoiseParams {
-                    proximity_m: n[0],
-                    beacon_deg: n[1],
-                    compass_deg: n[2],
-                    gps_pos_m: n[3],
-                    gps_heading_deg: n[4],
-                    motor_frac: n[5],
-                    encoder_slip_frac: n[6],
-                },
-                latency: LatencyParams {
-                    proximity: l[0],
-                    beacon: l[1],
-                    ground: l[2],
-                    compass: l[3],
-                    collision: l[4],
-                    gps: l[5],
-                },
-                sensors: SensorSwitches { gps: s[0], beacon: s[1], compass: s[2] },
-                requests: RequestParams {
-                    per_cycle,
-                    obstacle: r[0],
-                    beacon: r[1],
-                    ground: r[2],
-                    compass: r[3],
-                    collision: r[4],
-                },
-                beacon_aperture_rad: f[0],
-                proximity_range_m: f[1],
-                message_range_m: f[2],
-                encoder_ticks_per_rev,
-                wheel_radius_m: f[3],
+            .prop_map(|(sim_time_ticks, cycle_ms, n, l, s, (per_cycle, r), f, encoder_ticks_per_rev, c)| {
+                Params {
+                    sim_time_ticks,
+                    cycle_ms,
+                    noise: NoiseParams {
+                        proximity_m: n[0],
+                        beacon_deg: n[1],
+                        compass_deg: n[2],
+                        gps_pos_m: n[3],
+                        gps_heading_deg: n[4],
+                        motor_frac: n[5],
+                        encoder_slip_frac: n[6],
+                    },
+                    latency: LatencyParams {
+                        proximity: l[0],
+                        beacon: l[1],
+                        ground: l[2],
+                        compass: l[3],
+                        collision: l[4],
+                        gps: l[5],
+                    },
+                    sensors: SensorSwitches { gps: s[0], beacon: s[1], compass: s[2] },
+                    requests: RequestParams {
+                        per_cycle,
+                        obstacle: r[0],
+                        beacon: r[1],
+                        ground: r[2],
+                        compass: r[3],
+                        collision: r[4],
+                    },
+                    beacon_aperture_rad: f[0],
+                    proximity_range_m: f[1],
+                    message_range_m: f[2],
+                    encoder_ticks_per_rev,
+                    wheel_radius_m: f[3],
+                    challenge: ChallengeParams {
+                        key_time_ticks: c.0,
+                        score_sensor: c.1,
+                        return_time_penalty: c.2[0],
+                        arrival_time_penalty: c.2[1],
+                        collision_wall_penalty: c.2[2],
+                        collision_robot_penalty: c.2[3],
+                        target_reward: c.2[4],
+                        home_reward: c.2[5],
+                        line_sensor_true_prob: c.3,
+                    },
+                }
             })
     }
 
@@ -399,6 +413,36 @@ mod journal {
             let cut = cut % bytes.len();
             prop_assert!(decode_event(&bytes[..cut]).is_err());
         }
+    }
+
+    #[test]
+    fn a_run_recorded_before_the_challenge_parameters_reads_with_their_defaults() {
+        let start = run_start();
+        assert_eq!(start.params.challenge, ChallengeParams::default());
+        let mut bytes = Vec::new();
+        encode_run_start(&start, &mut bytes);
+        // Version 2 wrote the same bytes without the challenge parameters.
+        let c = ChallengeParams::default();
+        let mut tail = c.key_time_ticks.to_le_bytes().to_vec();
+        tail.push(u8::from(c.score_sensor));
+        for v in [
+            c.return_time_penalty,
+            c.arrival_time_penalty,
+            c.collision_wall_penalty,
+            c.collision_robot_penalty,
+            c.target_reward,
+            c.home_reward,
+        ] {
+            tail.extend(v.to_le_bytes());
+        }
+        tail.extend(c.line_sensor_true_prob.to_le_bytes());
+        let at = bytes.windows(tail.len()).position(|w| w == tail.as_slice()).expect("the challenge parameters");
+        let mut old = bytes[..at].to_vec();
+        old.extend(&bytes[at + tail.len()..]);
+        old[0] = 2;
+        assert_eq!(decode_run_start(&old), Ok(start));
+        old[0] = 1;
+        assert_eq!(decode_run_start(&old), Err(JournalDecodeError::Version { found: 1 }));
     }
 
     #[test]

@@ -222,6 +222,48 @@ pub struct RequestParams {
     pub collision: bool,
 }
 
+/// The Ciber-Rato challenge's parameters: what the real simulator reads for its scoring and its
+/// line sensor, with its defaults (`SIMPARAM` and the statics of `simulator.cpp` in
+/// ciberRatoTools). They reach Ciber-Rato clients in the registration reply.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ChallengeParams {
+    /// `KeyTime`, ticks (the real simulator's default 1350; its active scoring modes do not
+    /// use it, but clients read it).
+    pub key_time_ticks: u64,
+    /// `ScoreSensor`: whether Measures carry the robot's score.
+    pub score_sensor: bool,
+    /// `ReturnTimePenalty` (25).
+    pub return_time_penalty: u32,
+    /// `ArrivalTimePenalty` (100).
+    pub arrival_time_penalty: u32,
+    /// `CollisionWallPenalty` (2): score per contact with a wall.
+    pub collision_wall_penalty: u32,
+    /// `CollisionRobotPenalty` (2): score per contact with another robot.
+    pub collision_robot_penalty: u32,
+    /// `TargetReward` (100).
+    pub target_reward: u32,
+    /// `HomeReward` (100).
+    pub home_reward: u32,
+    /// `LineSensorTrueProb` (0.98): the chance that each line-sensor element reads true.
+    pub line_sensor_true_prob: f64,
+}
+
+impl Default for ChallengeParams {
+    fn default() -> Self {
+        Self {
+            key_time_ticks: 1350,
+            score_sensor: false,
+            return_time_penalty: 25,
+            arrival_time_penalty: 100,
+            collision_wall_penalty: 2,
+            collision_robot_penalty: 2,
+            target_reward: 100,
+            home_reward: 100,
+            line_sensor_true_prob: 0.98,
+        }
+    }
+}
+
 /// Everything the Parameters XML file sets (root `<Parameters .../>`), with iwsim extensions.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Params {
@@ -247,6 +289,8 @@ pub struct Params {
     pub encoder_ticks_per_rev: u32,
     /// Wheel radius in metres for the encoders (`WheelRadius`, iwsim extension, default 0.17).
     pub wheel_radius_m: f64,
+    /// The Ciber-Rato challenge's scoring and line-sensor parameters.
+    pub challenge: ChallengeParams,
 }
 
 impl Default for Params {
@@ -263,6 +307,7 @@ impl Default for Params {
             message_range_m: 8.0,
             encoder_ticks_per_rev: 1024,
             wheel_radius_m: 0.17,
+            challenge: ChallengeParams::default(),
         }
     }
 }

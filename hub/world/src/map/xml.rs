@@ -1059,6 +1059,18 @@ fn params_from(root: &Element, expected: &'static str) -> Result<Params, MapLoad
                 }
             }
             "WheelRadius" => p.wheel_radius_m = positive()?,
+            "KeyTime" => p.challenge.key_time_ticks = whole(9.007_199_254_740_992e15)? as u64,
+            "ScoreSensor" => p.challenge.score_sensor = switch()?,
+            "ReturnTimePenalty" => p.challenge.return_time_penalty = count()?,
+            "ArrivalTimePenalty" => p.challenge.arrival_time_penalty = count()?,
+            "CollisionWallPenalty" => p.challenge.collision_wall_penalty = count()?,
+            "CollisionRobotPenalty" => p.challenge.collision_robot_penalty = count()?,
+            "TargetReward" => p.challenge.target_reward = count()?,
+            "HomeReward" => p.challenge.home_reward = count()?,
+            "LineSensorTrueProb" => {
+                p.challenge.line_sensor_true_prob =
+                    check(root, attr, value()?, |v| (0.0..=1.0).contains(&v), "a probability, from 0 to 1")?;
+            }
             _ => tracing::debug!(at = %root.pos, "ignoring parameter {attr}={raw:?}"),
         }
     }
@@ -1497,7 +1509,9 @@ mod tests {
                 BeaconLatency=\"2\" GroundLatency=\"3\" CompassLatency=\"4\" GPSLatency=\"5\"
                 BeaconAperture=\"1.25\" ObstacleRange=\"2.5\" MessageRange=\"6\"
                 EncoderTicks=\"2048\" WheelRadius=\"0.2\" EncoderNoise=\"2\"
-                KeyTime=\"1350\" Lab=\"lab.xml\" ShowActions=\"On\" NBeacons=\"1\"/>",
+                KeyTime=\"4000\" Lab=\"lab.xml\" ShowActions=\"On\" NBeacons=\"1\" ScoreSensor=\"On\"
+                ReturnTimePenalty=\"1\" ArrivalTimePenalty=\"2\" CollisionWallPenalty=\"5\"
+                CollisionRobotPenalty=\"0\" TargetReward=\"3\" HomeReward=\"4\" LineSensorTrueProb=\"0.99\"/>",
         );
         assert_eq!(p.sim_time_ticks, 1800);
         assert_eq!(p.cycle_ms, 50);
@@ -1529,6 +1543,20 @@ mod tests {
         assert_eq!(p.message_range_m, 6.0);
         assert_eq!(p.encoder_ticks_per_rev, 2048);
         assert_eq!(p.wheel_radius_m, 0.2);
+        assert_eq!(
+            p.challenge,
+            crate::map::ChallengeParams {
+                key_time_ticks: 4000,
+                score_sensor: true,
+                return_time_penalty: 1,
+                arrival_time_penalty: 2,
+                collision_wall_penalty: 5,
+                collision_robot_penalty: 0,
+                target_reward: 3,
+                home_reward: 4,
+                line_sensor_true_prob: 0.99,
+            }
+        );
     }
 
     #[test]
@@ -1545,6 +1573,8 @@ mod tests {
             ("<Parameters SimTime=\"-1\"/>", "SimTime"),
             ("<Parameters EncoderTicks=\"0\"/>", "EncoderTicks"),
             ("<Parameters WheelRadius=\"0\"/>", "WheelRadius"),
+            ("<Parameters LineSensorTrueProb=\"1.5\"/>", "LineSensorTrueProb"),
+            ("<Parameters CollisionWallPenalty=\"-2\"/>", "CollisionWallPenalty"),
             ("<Parameters ObstacleLatency=\"99999999999\"/>", "ObstacleLatency"),
         ];
         for (text, want_attr) in cases {
