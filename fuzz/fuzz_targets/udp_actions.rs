@@ -4,6 +4,6 @@
 libfuzzer_sys::fuzz_target!(|data: &[u8]| {
     let _ = udp_bridge::codec::decode_actions(data);
     if let Ok(udp_bridge::codec::Registration::Robot(r)) = udp_bridge::codec::decode_registration(data) {
-        let _ = udp_bridge::server::hub_registration(&r);
+        let _ = udp_bridge::server::hub_registration(&r, 50, 0.0);
     }
 });

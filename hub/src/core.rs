@@ -801,7 +801,7 @@ impl HubCore {
 
     /// Every robot's proximity-sensor geometry, in id order.
     pub fn robot_sensors(&self) -> impl Iterator<Item = RobotSensors> + '_ {
-        let default_range = self.stage.world().params().proximity_range_m;
+        let default_range = self.stage.world().params().proximity_range();
         self.robots.keys().filter_map(move |&id| Some(sensor_geometry(self.stage.robot(id)?, id, default_range)))
     }
 
@@ -852,7 +852,7 @@ impl HubCore {
         };
         let mut b = pack_sensor_block(r, robot_id, tick, |h| self.stage.id_of(h));
         if let Some(c) = &entry.chair {
-            let default_range = self.stage.world().params().proximity_range_m;
+            let default_range = self.stage.world().params().proximity_range();
             // Borrowed, not cloned: this runs for every chair at every publication.
             let defaults;
             let specs = if r.spec.sensors.is_empty() {
@@ -1099,6 +1099,7 @@ pub fn hub_params(p: &Params, mode: Mode, tick_limit: u64, deadline_ms: u32) -> 
             p.challenge.home_reward,
         ],
         line_sensor_true_prob: p.challenge.line_sensor_true_prob,
+        obstacle_range_m: p.proximity_range_m.unwrap_or(0.0),
     }
 }
 
@@ -1500,7 +1501,7 @@ mod tests {
         let b = c.sensor_block(id);
         assert_eq!(b.sensor_mode, SensorMode::Real as u32);
         assert_eq!(b.proximity_m[0], 0.3_f32 as f64);
-        let range = c.world().params().proximity_range_m;
+        let range = c.world().params().proximity_range();
         assert_eq!(b.proximity_m[1], range, "no echo reads the sensor's range");
         assert_eq!(c.robot_count(), 1, "the controller leaving removed nothing");
         // A NaN report keeps the last real reading.

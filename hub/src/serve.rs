@@ -277,7 +277,7 @@ impl<'a> Player<'a> {
 
     /// Every robot's proximity-sensor geometry, in id order.
     pub fn robot_sensors(&self) -> impl Iterator<Item = RobotSensors> + '_ {
-        let range = self.stage.world().params().proximity_range_m;
+        let range = self.stage.world().params().proximity_range();
         self.stage.ids().filter_map(move |id| Some(sensor_geometry(self.stage.robot(id)?, id, range)))
     }
 

@@ -971,8 +971,11 @@ pub struct HubParams {
     pub scoring: [u32; 6],
     /// Ciber-Rato's `LineSensorTrueProb`: the chance that a line-sensor element reads true.
     pub line_sensor_true_prob: f64,
+    /// `ObstacleRange` when the parameters give one, metres; 0 when they do not (sensors then
+    /// get the hub's default range, and the UDP bridge gives Ciber-Rato robots the longest).
+    pub obstacle_range_m: f64,
 }
-const _: () = assert!(core::mem::size_of::<HubParams>() == 160);
+const _: () = assert!(core::mem::size_of::<HubParams>() == 168);
 const _: () = assert!(core::mem::align_of::<HubParams>() == 8);
 
 /// `HubParams` sensor bit: GPS.
@@ -1014,7 +1017,7 @@ pub struct MapHeader {
     /// The run's parameters.
     pub params: HubParams,
 }
-const _: () = assert!(core::mem::size_of::<MapHeader>() == 232);
+const _: () = assert!(core::mem::size_of::<MapHeader>() == 240);
 const _: () = assert!(core::mem::align_of::<MapHeader>() == 8);
 
 /// `MapItem::kind`: a wall starts; `a` = height in metres, `b` = corner count, `c` = 1 for a

@@ -285,8 +285,17 @@ fn a_plain_robot_against_a_wall_escapes_by_spinning_as_robsample_does() {
     let mut robot = StandIn::new();
     assert!(robot.register(reg, r#"<Robot Name="spinner" Id="1"/>"#).starts_with("<Reply Status=\"Ok\">"));
     let (mut hit_wall, mut spun, mut escaped) = (None, 0, false);
-    for _ in 0..400 {
+    for k in 0..400 {
         let m = robot.next("Measures");
+        if k == 0 {
+            // The rear sensor (rim x = 4.5) sees the west border 4.5 m off: 1/4.5 → 0.2, as the
+            // real simulator's IR, which has no range limit, reads it (a 3 m range floored it at 0.3).
+            let rear = m
+                .split("<IRSensor ")
+                .find(|e| e.starts_with("Id=\"3\""))
+                .and_then(|e| num(&format!("<IRSensor {e}"), "IRSensor", "Value"));
+            assert_eq!(rear, Some(0.2), "{m}");
+        }
         let collision = m.contains("Collision=\"Yes\"");
         let front = m
             .split("<IRSensor ")

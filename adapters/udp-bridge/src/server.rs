@@ -237,15 +237,20 @@ pub const CIBER_RATO_DIAMETER_M: f64 = 1.0;
 const CIBER_RATO_ACCEL_CURVE: f64 = 0.5;
 
 /// The hub registration for a Ciber-Rato / Intellwheels robot on a hub stepping every
-/// `cycle_ms`, and the client's IR sensor ids in order; or why it cannot be registered.
+/// `cycle_ms` whose parameters give `ObstacleRange` = `obstacle_range_m` (0: none), and the
+/// client's IR sensor ids in order; or why it cannot be registered.
 ///
 /// A plain Ciber-Rato robot (no `Width`, `Height`, `COM` or `Type`) gets Ciber-Rato's body
 /// and motion: a disc of [`CIBER_RATO_DIAMETER_M`] turning about its centre, whose wheels
 /// move [`MAX_POWER`] diameters per cycle at full power (top speed 0.15 m / cycle, 3 m/s at
-/// 50 ms), through the filter `(in + out)/2`. An Intellwheels robot keeps its rectangle.
+/// 50 ms), through the filter `(in + out)/2`; and, unless `ObstacleRange` says otherwise, IR
+/// sensors of the longest range the hub allows (the real simulator's see as far as the lab
+/// goes: far walls read 0.1, not the 1/3 a 3 m range would floor them at). An Intellwheels
+/// robot keeps its rectangle and the hub's default range.
 pub fn hub_registration(
     r: &codec::RobotRegistration,
     cycle_ms: u32,
+    obstacle_range_m: f64,
 ) -> Result<(ipc_types::RobotRegistration, Vec<u32>), String> {
     let mut reg = ipc_types::RobotRegistration::new(&r.name);
     reg.requested_id = r.id;
@@ -308,7 +313,7 @@ pub fn hub_registration(
             y_m: s.y.unwrap_or(0.5 * a.sin()),
             angle_deg: s.angle_deg,
             cone_deg: s.cone_deg.unwrap_or(60.0),
-            range_m: 0.0,
+            range_m: if intellwheels || obstacle_range_m > 0.0 { 0.0 } else { sim_model::MAX_SENSOR_RANGE_M },
         };
         ids.push(s.id);
     }
@@ -640,7 +645,7 @@ impl Bridge {
                 Registration::View => Kind::Viewer,
                 Registration::Panel => Kind::Panel,
                 Registration::Robot(r) | Registration::RobotBeacon(r) => {
-                    match hub_registration(&r, self.map.header.cycle_ms) {
+                    match hub_registration(&r, self.map.header.cycle_ms, self.map.header.params.obstacle_range_m) {
                         Ok((hub_reg, ir_ids)) => self.joining.push(Joining {
                             socket,
                             peer,
@@ -1128,7 +1133,7 @@ mod registration_tests {
     #[test]
     fn a_plain_robot_becomes_a_ciber_rato_disc_at_the_hubs_cycle() {
         let plain = decode(r#"<Robot Name="pClient" Id="2"/>"#);
-        let (reg, ids) = hub_registration(&plain, 50).expect("valid");
+        let (reg, ids) = hub_registration(&plain, 50, 0.0).expect("valid");
         assert_ne!(reg.flags & REG_DISC, 0);
         assert_eq!((reg.width_m, reg.height_m, reg.com), (1.0, 1.0, 0.5));
         // 0.15 m per 50 ms cycle at full power, filtered by (in + out)/2.
@@ -1142,13 +1147,18 @@ mod registration_tests {
             assert!((s.x_m.hypot(s.y_m) - 0.5).abs() < 1e-12);
             assert!((s.x_m - 0.5 * a.to_radians().cos()).abs() < 1e-12);
             assert_eq!((s.angle_deg, s.cone_deg), (a, 60.0));
+            // The real simulator's IR sees as far as the lab goes: the longest range allowed.
+            assert_eq!(s.range_m, 20.0);
         }
+        // With an ObstacleRange in the parameters, the hub's range (0 here means "the hub's").
+        let (ranged, _) = hub_registration(&plain, 50, 2.5).expect("valid");
+        assert!(ranged.sensors[..4].iter().all(|s| s.range_m == 0.0));
         // The top speed follows the hub's cycle: 0.15 m per 100 ms cycle.
-        let (slow, _) = hub_registration(&plain, 100).expect("valid");
+        let (slow, _) = hub_registration(&plain, 100, 0.0).expect("valid");
         assert!((slow.max_speed_mps - 1.5).abs() < 1e-12);
         // Sensors registered at other angles sit on the rim too.
         let two = decode(r#"<Robot Name="r"><IRSensor Id="0" Angle="90"/><IRSensor Id="1" Angle="-90"/></Robot>"#);
-        let (reg, ids) = hub_registration(&two, 50).expect("valid");
+        let (reg, ids) = hub_registration(&two, 50, 0.0).expect("valid");
         assert_eq!((ids, reg.sensor_count, reg.flags & REG_DISC), (vec![0, 1], 2, REG_DISC));
         assert!(reg.sensors[0].x_m.abs() < 1e-12 && (reg.sensors[0].y_m - 0.5).abs() < 1e-12);
     }
@@ -1158,13 +1168,14 @@ mod registration_tests {
         let chair = decode(
             r#"<Robot Name="chair" Width="1.2" Height="0.7" COM="0.8" MaxSpeed="0.6" AccelerationCurve="0.83"/>"#,
         );
-        let (reg, _) = hub_registration(&chair, 50).expect("valid");
+        let (reg, _) = hub_registration(&chair, 50, 0.0).expect("valid");
         assert_eq!(reg.flags & REG_DISC, 0);
         assert_eq!((reg.width_m, reg.height_m, reg.com), (1.2, 0.7, 0.8));
         assert_eq!((reg.max_speed_mps, reg.accel_curve), (0.6, 0.83));
+        assert!(reg.sensors[..reg.sensor_count as usize].iter().all(|s| s.range_m == 0.0), "the hub's default range");
         // A Type alone marks an Intellwheels robot too: thesis defaults, not a disc.
         let door = decode(r#"<Robot Name="door" Type="door"/>"#);
-        let (reg, _) = hub_registration(&door, 50).expect("valid");
+        let (reg, _) = hub_registration(&door, 50, 0.0).expect("valid");
         assert_eq!(reg.flags & REG_DISC, 0);
         assert_eq!((reg.max_speed_mps, reg.kind), (0.5, RobotKind::Door as u32));
     }

@@ -96,7 +96,7 @@ impl Lattice {
 
 /// The hub's default proximity range, metres (the chairs' sensors take it).
 pub fn sensor_range_m() -> f64 {
-    world::map::Params::default().proximity_range_m
+    world::map::Params::default().proximity_range()
 }
 
 /// The registration of a bench chair called `name` at `pose` (x, y metres, heading degrees):

@@ -331,7 +331,8 @@ fn put_params(o: &mut Out, p: &Params) {
         o.bool(*v);
     }
     o.f64(*beacon_aperture_rad);
-    o.f64(*proximity_range_m);
+    o.bool(proximity_range_m.is_some());
+    o.f64(proximity_range_m.unwrap_or(0.0));
     o.f64(*message_range_m);
     o.u32(*encoder_ticks_per_rev);
     o.f64(*wheel_radius_m);
@@ -678,7 +679,14 @@ fn get_params(i: &mut In) -> R<Params> {
         sensors,
         requests,
         beacon_aperture_rad: i.f64("beacon aperture")?,
-        proximity_range_m: i.f64("proximity range")?,
+        proximity_range_m: if i.version >= 3 {
+            let given = i.bool("proximity range flag")?;
+            let range = i.f64("proximity range")?;
+            given.then_some(range)
+        } else {
+            // Version 2 always wrote the range, the default included.
+            Some(i.f64("proximity range")?)
+        },
         message_range_m: i.f64("message range")?,
         encoder_ticks_per_rev: i.u32("encoder ticks")?,
         wheel_radius_m: i.f64("wheel radius")?,

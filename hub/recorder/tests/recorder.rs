@@ -307,7 +307,7 @@ mod journal {
                         collision: r[4],
                     },
                     beacon_aperture_rad: f[0],
-                    proximity_range_m: f[1],
+                    proximity_range_m: (f[1] > 0.0).then_some(f[1]),
                     message_range_m: f[2],
                     encoder_ticks_per_rev,
                     wheel_radius_m: f[3],
@@ -417,11 +417,15 @@ mod journal {
 
     #[test]
     fn a_run_recorded_before_the_challenge_parameters_reads_with_their_defaults() {
-        let start = run_start();
+        let mut start = run_start();
         assert_eq!(start.params.challenge, ChallengeParams::default());
+        // Version 2 always wrote a proximity range.
+        start.params.proximity_range_m = Some(3.0);
         let mut bytes = Vec::new();
         encode_run_start(&start, &mut bytes);
-        // Version 2 wrote the same bytes without the challenge parameters.
+        // Version 2 wrote the same bytes without the challenge parameters, and without the flag
+        // byte before the proximity range (which the message range, encoder ticks and wheel
+        // radius follow).
         let c = ChallengeParams::default();
         let mut tail = c.key_time_ticks.to_le_bytes().to_vec();
         tail.push(u8::from(c.score_sensor));
@@ -437,7 +441,10 @@ mod journal {
         }
         tail.extend(c.line_sensor_true_prob.to_le_bytes());
         let at = bytes.windows(tail.len()).position(|w| w == tail.as_slice()).expect("the challenge parameters");
-        let mut old = bytes[..at].to_vec();
+        let flag = at - (8 + 8 + 4 + 8) - 1;
+        assert_eq!(bytes[flag], 1, "the proximity range flag");
+        let mut old = bytes[..flag].to_vec();
+        old.extend(&bytes[flag + 1..at]);
         old.extend(&bytes[at + tail.len()..]);
         old[0] = 2;
         assert_eq!(decode_run_start(&old), Ok(start));

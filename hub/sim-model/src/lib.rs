@@ -19,6 +19,13 @@
 
 use std::f64::consts::{PI, TAU};
 
+/// The longest proximity-sensor range a robot may have, metres.
+///
+/// Infrared sensors read up to about 1.5 m and ultrasonic ones up to about 10 m; 20 m covers
+/// both. A sensor's range sizes the region of walls and robots its cone is tested against
+/// every tick, so the hub bounds it for the same reason as a body's size.
+pub const MAX_SENSOR_RANGE_M: f64 = 20.0;
+
 /// Wraps an angle in radians to (−π, π]: the one angle convention of the project.
 #[inline]
 pub fn wrap_rad(a: f64) -> f64 {

@@ -42,11 +42,8 @@ pub fn max_speed_mps(dt_s: Real) -> Real {
 }
 
 /// The longest proximity-sensor range, metres.
-///
-/// Infrared sensors read up to about 1.5 m and ultrasonic ones up to about 10 m; 20 m covers
-/// both. A sensor's range sizes the region of walls and robots its cone is tested against
-/// every tick, so it is bounded for the same reason as the body.
-pub const MAX_SENSOR_RANGE_M: Real = 20.0;
+/// ([`sim_model::MAX_SENSOR_RANGE_M`]: the UDP bridge gives Ciber-Rato robots this range.)
+pub const MAX_SENSOR_RANGE_M: Real = sim_model::MAX_SENSOR_RANGE_M;
 
 /// How a robot moves.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
@@ -609,7 +606,7 @@ mod tests {
         let huge = RobotSpec::at(10.0, 6.1, 0.0).body(10_000.0, 1.0, 0.5);
         assert!(matches!(world.add_robot(huge), Err(AddRobotError::OutOfRange { field: "width", .. })));
         assert!(world.is_empty());
-        let params = crate::map::Params { proximity_range_m: 25.0, ..crate::map::Params::default() };
+        let params = crate::map::Params { proximity_range_m: Some(25.0), ..crate::map::Params::default() };
         assert!(matches!(
             crate::World::new(&map.lab, params, 1),
             Err(crate::WorldBuildError::BadParam { name: "proximity_range_m", .. })

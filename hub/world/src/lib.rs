@@ -507,12 +507,12 @@ impl World {
                 Err(WorldBuildError::BadParam { name, value, expected: "> 0" })
             }
         };
-        positive("proximity_range_m", params.proximity_range_m)?;
+        positive("proximity_range_m", params.proximity_range())?;
         // The default range is every default sensor's range: bounded like a registered one.
-        if params.proximity_range_m > MAX_SENSOR_RANGE_M {
+        if params.proximity_range() > MAX_SENSOR_RANGE_M {
             return Err(WorldBuildError::BadParam {
                 name: "proximity_range_m",
-                value: params.proximity_range_m,
+                value: params.proximity_range(),
                 expected: "in (0, 20] m",
             });
         }
@@ -680,7 +680,7 @@ impl World {
         let mut sensors = [PreparedSensor::new(&specs[0], 1.0); MAX_PROXIMITY];
         let (mut reach, mut sensor_radius): (Real, Real) = (0.0, 0.0);
         for (k, s) in specs.iter().enumerate() {
-            sensors[k] = PreparedSensor::new(s, self.params.proximity_range_m);
+            sensors[k] = PreparedSensor::new(s, self.params.proximity_range());
             reach = reach.max(sensors[k].origin.norm() + sensors[k].range);
             sensor_radius = sensor_radius.max(sensors[k].origin.norm());
         }

@@ -17,7 +17,7 @@ fn rect_wall(x0: Real, y0: Real, x1: Real, y1: Real, height_m: Real) -> Wall {
 }
 
 fn quiet() -> Params {
-    Params { noise: NoiseParams::NONE, proximity_range_m: 10.0, ..Params::default() }
+    Params { noise: NoiseParams::NONE, proximity_range_m: Some(10.0), ..Params::default() }
 }
 
 fn world(lab: Lab, params: Params) -> World {
@@ -191,7 +191,7 @@ fn a_cone_wider_than_half_a_turn_sees_walls_and_robots_beside_a_narrow_one() {
         assert!(close(d[0], behind, 1e-9), "{d:?}");
         // The narrow cone ahead meets the side walls along its edges, 4 / sin 30° = 8 m away,
         // or reads its range if that is shorter.
-        assert!(close(d[1], w.params().proximity_range_m.min(8.0), 1e-3), "{d:?}");
+        assert!(close(d[1], w.params().proximity_range().min(8.0), 1e-3), "{d:?}");
     }
 }
 
@@ -209,7 +209,7 @@ fn other_robots_are_seen_by_proximity_sensors() {
 #[test]
 fn readings_are_capped_at_the_range_and_noise_can_be_switched_on() {
     let mut p = quiet();
-    p.proximity_range_m = 3.0;
+    p.proximity_range_m = Some(3.0);
     let mut w = world(empty_lab(20.0, 8.0), p);
     let r = w.add_robot(RobotSpec::at(10.0, 4.0, 0.0)).expect("valid");
     w.step(&[], 0.1);

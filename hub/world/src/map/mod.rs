@@ -281,8 +281,9 @@ pub struct Params {
     pub requests: RequestParams,
     /// Beacon aperture: half-angle in radians (`BeaconAperture`, default π).
     pub beacon_aperture_rad: f64,
-    /// Default proximity sensor range in metres (`ObstacleRange`, iwsim extension, default 3.0).
-    pub proximity_range_m: f64,
+    /// Default proximity sensor range in metres (`ObstacleRange`, iwsim extension), when the
+    /// file gives one; see [`Params::proximity_range`].
+    pub proximity_range_m: Option<f64>,
     /// Message delivery radius in metres (`MessageRange`, iwsim extension, default 8.0).
     pub message_range_m: f64,
     /// Encoder ticks per wheel revolution (`EncoderTicks`, iwsim extension, default 1024).
@@ -303,12 +304,24 @@ impl Default for Params {
             sensors: SensorSwitches::default(),
             requests: RequestParams::default(),
             beacon_aperture_rad: std::f64::consts::PI,
-            proximity_range_m: 3.0,
+            proximity_range_m: None,
             message_range_m: 8.0,
             encoder_ticks_per_rev: 1024,
             wheel_radius_m: 0.17,
             challenge: ChallengeParams::default(),
         }
+    }
+}
+
+/// The proximity range of sensors that give none when the parameters give none, metres.
+pub const DEFAULT_PROXIMITY_RANGE_M: f64 = 3.0;
+
+impl Params {
+    /// The range of proximity sensors that give none: `ObstacleRange`, or
+    /// [`DEFAULT_PROXIMITY_RANGE_M`]. (The UDP bridge gives Ciber-Rato robots, whose real
+    /// simulator has no such limit, the longest range instead when the file is silent.)
+    pub fn proximity_range(&self) -> f64 {
+        self.proximity_range_m.unwrap_or(DEFAULT_PROXIMITY_RANGE_M)
     }
 }
 

@@ -1050,7 +1050,7 @@ fn params_from(root: &Element, expected: &'static str) -> Result<Params, MapLoad
             "CollisionLatency" | "collisionLatency" => p.latency.collision = count()?,
             "GPSLatency" => p.latency.gps = count()?,
             "BeaconAperture" => p.beacon_aperture_rad = not_negative()?,
-            "ObstacleRange" => p.proximity_range_m = positive()?,
+            "ObstacleRange" => p.proximity_range_m = Some(positive()?),
             "MessageRange" => p.message_range_m = not_negative()?,
             "EncoderTicks" => {
                 p.encoder_ticks_per_rev = count()?;
@@ -1539,7 +1539,7 @@ mod tests {
             crate::map::LatencyParams { proximity: 1, beacon: 2, ground: 3, compass: 4, collision: 0, gps: 5 }
         );
         assert_eq!(p.beacon_aperture_rad, 1.25);
-        assert_eq!(p.proximity_range_m, 2.5);
+        assert_eq!(p.proximity_range_m, Some(2.5));
         assert_eq!(p.message_range_m, 6.0);
         assert_eq!(p.encoder_ticks_per_rev, 2048);
         assert_eq!(p.wheel_radius_m, 0.2);
