@@ -1001,6 +1001,7 @@ pub fn pack_sensor_block(
         b.present |= HAS_GPS;
         (b.gps_x_m, b.gps_y_m, b.gps_heading_deg) = (g.x_m, g.y_m, g.heading_deg);
     }
+    b.line_bits = u32::from(rd.line);
     if let Some(t) = rd.ground {
         b.present |= HAS_GROUND;
         b.ground = t as u32;
@@ -1052,6 +1053,9 @@ pub fn merge_chair_readings(
     }
 }
 
+// The world's line sensor fits the sensor block's bits.
+const _: () = assert!(world::LINE_ELEMENTS == ipc_types::LINE_ELEMENTS && ipc_types::LINE_ELEMENTS <= 32);
+
 /// The run parameters agents learn from the map header.
 pub fn hub_params(p: &Params, mode: Mode, tick_limit: u64, deadline_ms: u32) -> HubParams {
     let bit = |on: bool, b: u32| if on { b } else { 0 };
@@ -1098,7 +1102,6 @@ pub fn hub_params(p: &Params, mode: Mode, tick_limit: u64, deadline_ms: u32) -> 
             p.challenge.target_reward,
             p.challenge.home_reward,
         ],
-        line_sensor_true_prob: p.challenge.line_sensor_true_prob,
         obstacle_range_m: p.proximity_range_m.unwrap_or(0.0),
     }
 }

@@ -43,6 +43,8 @@ pub const MESSAGE_BYTES: usize = 100;
 pub const INBOX_BYTES: usize = 400;
 /// Messages a robot may hear per tick (the bytes limit usually binds first).
 pub const MAX_INBOX_MESSAGES: usize = 16;
+/// Elements of the line sensor.
+pub const LINE_ELEMENTS: usize = 7;
 
 /// Service name parts, below `iwsim/<session>/`. The services crate builds full names.
 pub mod service {
@@ -370,7 +372,7 @@ const _: () = assert!(core::mem::align_of::<InboxEntry>() == 4);
 /// never where it truly is. True poses are for observers (the world service).
 #[repr(C)]
 #[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable, ZeroCopySend)]
-#[type_name("iwsim::SensorBlock.v3")]
+#[type_name("iwsim::SensorBlock.v4")]
 pub struct SensorBlock {
     /// Tick these readings belong to.
     pub tick: u64,
@@ -415,8 +417,14 @@ pub struct SensorBlock {
     pub drive_flags: u32,
     /// [`SensorMode`] as u32: where this block's proximity readings and encoders come from.
     pub sensor_mode: u32,
+    /// The line sensor: bit `k` set when element `k` (0 = leftmost, [`LINE_ELEMENTS`] in a
+    /// row 0.438 m ahead of the centre of movement, 0.24 m left to 0.24 m right) reads a line
+    /// on the floor (a lab wall of height 0).
+    pub line_bits: u32,
+    /// Padding.
+    pub _reserved: u32,
 }
-const _: () = assert!(core::mem::size_of::<SensorBlock>() == 824);
+const _: () = assert!(core::mem::size_of::<SensorBlock>() == 832);
 const _: () = assert!(core::mem::align_of::<SensorBlock>() == 8);
 
 impl SensorBlock {
@@ -969,13 +977,11 @@ pub struct HubParams {
     /// `ArrivalTimePenalty`, `CollisionWallPenalty`, `CollisionRobotPenalty`, `TargetReward`,
     /// `HomeReward`.
     pub scoring: [u32; 6],
-    /// Ciber-Rato's `LineSensorTrueProb`: the chance that a line-sensor element reads true.
-    pub line_sensor_true_prob: f64,
     /// `ObstacleRange` when the parameters give one, metres; 0 when they do not (sensors then
     /// get the hub's default range, and the UDP bridge gives Ciber-Rato robots the longest).
     pub obstacle_range_m: f64,
 }
-const _: () = assert!(core::mem::size_of::<HubParams>() == 168);
+const _: () = assert!(core::mem::size_of::<HubParams>() == 160);
 const _: () = assert!(core::mem::align_of::<HubParams>() == 8);
 
 /// `HubParams` sensor bit: GPS.
@@ -1017,7 +1023,7 @@ pub struct MapHeader {
     /// The run's parameters.
     pub params: HubParams,
 }
-const _: () = assert!(core::mem::size_of::<MapHeader>() == 240);
+const _: () = assert!(core::mem::size_of::<MapHeader>() == 232);
 const _: () = assert!(core::mem::align_of::<MapHeader>() == 8);
 
 /// `MapItem::kind`: a wall starts; `a` = height in metres, `b` = corner count, `c` = 1 for a
@@ -1056,14 +1062,14 @@ const _: () = assert!(core::mem::size_of::<MapItem>() == 32);
 const _: () = assert!(core::mem::align_of::<MapItem>() == 8);
 
 /// Bytes of a [`Ping`] after its header, so a ping is as large as a [`SensorBlock`].
-pub const PING_PAYLOAD_BYTES: usize = 808;
+pub const PING_PAYLOAD_BYTES: usize = 816;
 
 /// The sample of `iwsim bench latency`'s raw iceoryx2 ping-pong, the baseline the hub's
 /// latency is compared with. Only the benchmark sends it; it is as large as a sensor block so
 /// both measurements move the same bytes.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Pod, Zeroable, ZeroCopySend)]
-#[type_name("iwsim::bench::Ping.v3")]
+#[type_name("iwsim::bench::Ping.v4")]
 pub struct Ping {
     /// Sequence number; the peer answers with it.
     pub seq: u64,
@@ -1072,7 +1078,7 @@ pub struct Ping {
     /// Filler.
     pub payload: [u8; PING_PAYLOAD_BYTES],
 }
-const _: () = assert!(core::mem::size_of::<Ping>() == 824);
+const _: () = assert!(core::mem::size_of::<Ping>() == 832);
 const _: () = assert!(core::mem::align_of::<Ping>() == 8);
 const _: () = assert!(core::mem::size_of::<Ping>() == core::mem::size_of::<SensorBlock>());
 

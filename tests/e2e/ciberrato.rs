@@ -263,7 +263,9 @@ fn a_lab_name_of_32_bytes_or_more_reaches_viewers_cut_to_31() {
 
 #[test]
 fn a_plain_robot_against_a_wall_escapes_by_spinning_as_robsample_does() {
-    // A lab with one wall ahead of the start, and a client that drives as robsample does:
+    // A lab with one wall ahead of the start and a line on the floor under the robot's way (a
+    // wall of height 0, which it drives over and its IR does not see), and a client that
+    // drives as robsample does:
     // straight on until the wall, then spin until the front IR sensor reads clear, then on.
     let dir = std::env::temp_dir().join(format!("iwsim-e2e-cr-spin-{}", std::process::id()));
     std::fs::create_dir_all(&dir).expect("dir");
@@ -271,7 +273,9 @@ fn a_plain_robot_against_a_wall_escapes_by_spinning_as_robsample_does() {
     std::fs::write(
         &lab,
         "<Lab Name=\"spin\" Width=\"14\" Height=\"7\">\n<Wall Height=\"1\"><Corner X=\"8\" Y=\"0\"/><Corner X=\"9\" Y=\"0\"/>\
-         <Corner X=\"9\" Y=\"7\"/><Corner X=\"8\" Y=\"7\"/></Wall>\n</Lab>\n",
+         <Corner X=\"9\" Y=\"7\"/><Corner X=\"8\" Y=\"7\"/></Wall>\n\
+         <Wall Height=\"0\"><Corner X=\"0\" Y=\"3.4\"/><Corner X=\"8\" Y=\"3.4\"/><Corner X=\"8\" Y=\"3.6\"/>\
+         <Corner X=\"0\" Y=\"3.6\"/></Wall>\n</Lab>\n",
     )
     .expect("lab");
     std::fs::write(&grid, "<Grid><Position X=\"5\" Y=\"3.5\" Dir=\"0\"/></Grid>\n").expect("grid");
@@ -295,6 +299,8 @@ fn a_plain_robot_against_a_wall_escapes_by_spinning_as_robsample_does() {
                 .find(|e| e.starts_with("Id=\"3\""))
                 .and_then(|e| num(&format!("<IRSensor {e}"), "IRSensor", "Value"));
             assert_eq!(rear, Some(0.2), "{m}");
+            // The three middle elements of the line sensor, 0.438 ahead, lie on the 0.2 m line.
+            assert!(m.contains("\t\t<LineSensor Value=\"0011100\" />\n"), "{m}");
         }
         let collision = m.contains("Collision=\"Yes\"");
         let front = m

@@ -660,6 +660,9 @@ pub struct MeasuresData {
     pub beacons: Vec<Option<Option<f64>>>,
     /// GPS X, Y.
     pub gps: Option<(f64, f64)>,
+    /// `LineSensor`: bit `k` for element `k` (0 = leftmost), written `0`/`1` from element 0;
+    /// None = not sent.
+    pub line: Option<u8>,
     /// Messages heard: (speaker id, text).
     pub messages: Vec<(u32, Vec<u8>)>,
     /// End, returning, visiting LEDs.
@@ -710,6 +713,11 @@ pub fn encode_measures_into(m: &MeasuresData, out: &mut Vec<u8>) {
     }
     if let Some((x, y)) = m.gps {
         let _ = writeln!(out, "\t\t<GPS X=\"{}\" Y=\"{}\" />", G(x), G(y));
+    }
+    if let Some(bits) = m.line {
+        out.extend_from_slice(b"\t\t<LineSensor Value=\"");
+        out.extend((0..ipc_types::LINE_ELEMENTS).map(|k| if bits >> k & 1 == 1 { b'1' } else { b'0' }));
+        out.extend_from_slice(b"\" />\n");
     }
     for (from, text) in &m.messages {
         let _ = writeln!(out, "\t\t<Message From=\"{from}\"><![CDATA[{}]]></Message>", Cdata(text));
@@ -871,6 +879,14 @@ pub fn decode_measures(datagram: &[u8]) -> Result<MeasuresData, DecodeError> {
                             }
                         }
                         "GPS" => m.gps = s.num(&["X"])?.zip(s.num(&["Y"])?),
+                        "LineSensor" => {
+                            m.line = s.attr("Value").map(|v| {
+                                v.bytes()
+                                    .take(8)
+                                    .enumerate()
+                                    .fold(0u8, |bits, (k, c)| bits | (u8::from(c == b'1') << k))
+                            });
+                        }
                         "Message" => {
                             let from = s.num(&["From"])?.map_or(0, |f| f.max(0.0) as u32);
                             m.messages.push((from, s.text.as_bytes().to_vec()));

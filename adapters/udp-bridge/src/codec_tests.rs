@@ -215,11 +215,12 @@ fn measures_with_the_defaults_are_byte_exact() {
         ir: vec![Some(1.4), Some(2.1), Some(2.1), Some(0.6)],
         beacons: vec![],
         gps: None,
+        line: Some(0),
         messages: vec![],
         leds: [false; 3],
         buttons: (true, false),
     };
-    let want = "<Measures Time=\"4\">\n\t<Sensors Collision=\"No\" Compass=\"0\" Ground=\"-1\">\n\t\t<IRSensor Id=\"0\" Value=\"1.4\"/>\n\t\t<IRSensor Id=\"1\" Value=\"2.1\"/>\n\t\t<IRSensor Id=\"2\" Value=\"2.1\"/>\n\t\t<IRSensor Id=\"3\" Value=\"0.6\"/>\n\t</Sensors>\n\t<Leds EndLed=\"Off\" ReturningLed=\"Off\" VisitingLed=\"Off\"/>\n\t<Buttons Start=\"On\" Stop=\"Off\"/>\n</Measures>\n\0";
+    let want = "<Measures Time=\"4\">\n\t<Sensors Collision=\"No\" Compass=\"0\" Ground=\"-1\">\n\t\t<IRSensor Id=\"0\" Value=\"1.4\"/>\n\t\t<IRSensor Id=\"1\" Value=\"2.1\"/>\n\t\t<IRSensor Id=\"2\" Value=\"2.1\"/>\n\t\t<IRSensor Id=\"3\" Value=\"0.6\"/>\n\t\t<LineSensor Value=\"0000000\" />\n\t</Sensors>\n\t<Leds EndLed=\"Off\" ReturningLed=\"Off\" VisitingLed=\"Off\"/>\n\t<Buttons Start=\"On\" Stop=\"Off\"/>\n</Measures>\n\0";
     assert_eq!(text(&encode_measures(&m)), want);
 }
 
@@ -233,11 +234,12 @@ fn measures_with_every_sensor_on_are_byte_exact() {
         ir: vec![Some(100.0), Some(0.3)],
         beacons: vec![Some(Some(180.0)), Some(None)],
         gps: Some((12.345678, 6.1)),
+        line: Some(0b1_1100),
         messages: vec![(2, b"hello world".to_vec())],
         leds: [false, true, true],
         buttons: (false, true),
     };
-    let want = "<Measures Time=\"42\">\n\t<Sensors Collision=\"Yes\" Compass=\"-90\" Ground=\"0\">\n\t\t<IRSensor Id=\"0\" Value=\"100\"/>\n\t\t<IRSensor Id=\"1\" Value=\"0.3\"/>\n\t\t<BeaconSensor Id=\"0\" Value=\"180\"/>\n\t\t<BeaconSensor Id=\"1\" Value=\"NotVisible\"/>\n\t\t<GPS X=\"12.3457\" Y=\"6.1\" />\n\t\t<Message From=\"2\"><![CDATA[hello world]]></Message>\n\t</Sensors>\n\t<Leds EndLed=\"Off\" ReturningLed=\"On\" VisitingLed=\"On\"/>\n\t<Buttons Start=\"Off\" Stop=\"On\"/>\n</Measures>\n\0";
+    let want = "<Measures Time=\"42\">\n\t<Sensors Collision=\"Yes\" Compass=\"-90\" Ground=\"0\">\n\t\t<IRSensor Id=\"0\" Value=\"100\"/>\n\t\t<IRSensor Id=\"1\" Value=\"0.3\"/>\n\t\t<BeaconSensor Id=\"0\" Value=\"180\"/>\n\t\t<BeaconSensor Id=\"1\" Value=\"NotVisible\"/>\n\t\t<GPS X=\"12.3457\" Y=\"6.1\" />\n\t\t<LineSensor Value=\"0011100\" />\n\t\t<Message From=\"2\"><![CDATA[hello world]]></Message>\n\t</Sensors>\n\t<Leds EndLed=\"Off\" ReturningLed=\"On\" VisitingLed=\"On\"/>\n\t<Buttons Start=\"Off\" Stop=\"On\"/>\n</Measures>\n\0";
     assert_eq!(text(&encode_measures(&m)), want);
     // And it comes back through our own decoder as well-formed XML.
     assert!(parse(&encode_measures(&m), Repeats::Refused).is_ok());
@@ -300,6 +302,7 @@ fn measures_decode_to_what_was_encoded() {
         ir: vec![Some(2.0), None, Some(0.3), Some(100.0)],
         beacons: vec![Some(Some(12.0)), Some(None)],
         gps: Some((10.5, 3.25)),
+        line: None,
         messages: vec![(2, b"hi ]]> there".to_vec())],
         leds: [false, true, false],
         buttons: (true, false),
@@ -401,6 +404,7 @@ fn measures_and_viewer_robots_keep_their_bytes() {
         ir: vec![None, Some(1.0 / 3.0), Some(99999.95), None, Some(0.000099999)],
         beacons: vec![None, Some(Some(-0.000012345)), Some(None), Some(Some(1234567.0))],
         gps: Some((-1e-300, 5e21)),
+        line: None,
         messages: vec![(7, b"a]]>b".to_vec()), (9, vec![0xff, b'x'])],
         leds: [true, false, true],
         buttons: (true, true),

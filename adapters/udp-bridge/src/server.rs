@@ -401,6 +401,8 @@ pub fn measures_into(
     if b.present & HAS_GPS != 0 {
         m.gps = Some((b.gps_x_m, b.gps_y_m));
     }
+    // Sent every tick, as by the real simulator (it cannot be switched off or requested).
+    m.line = Some(b.line_bits as u8);
     messages.clear();
     messages.extend(b.messages().map(|(from, bytes)| (from, bytes.to_vec())));
     m.messages = messages;

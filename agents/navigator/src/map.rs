@@ -80,9 +80,12 @@ impl NavMap {
             name: map.name.clone(),
             width_m: map.width_m,
             height_m: map.height_m,
+            // A wall of height 0 is a line on the floor: chairs drive over it and sensors do
+            // not see it.
             walls: map
                 .walls
                 .iter()
+                .filter(|w| w.height_m > 0.0)
                 .map(|w| MapWall {
                     corners: w.corners.iter().map(point).collect(),
                     height_m: w.height_m,
@@ -143,6 +146,8 @@ mod tests {
             walls: vec![
                 wall(&[(1.0, 1.0), (2.0, 1.0), (2.0, 2.0), (1.0, 2.0)], false),
                 wall(&[(5.0, 5.0), (6.0, 5.0), (6.0, 6.0)], true),
+                // A line on the floor (height 0): no wall to plan round.
+                Wall { height_m: 0.0, ..wall(&[(0.0, 4.0), (10.0, 4.0), (10.0, 4.2), (0.0, 4.2)], false) },
             ],
             checkpoints: vec![Checkpoint { x: 8.0, y: 2.0, radius: 0.5 }],
             ..Map::default()
@@ -156,6 +161,7 @@ mod tests {
         assert_eq!(map.known_segments().len(), 4 + 4, "the border and the one known wall");
         assert_eq!(map.checkpoints, vec![Checkpoint { x: 8.0, y: 2.0, radius: 0.5 }]);
         assert!(!map.is_open(V2::new(1.5, 1.5)) && map.is_open(V2::new(5.8, 5.5)), "obstacles are not known");
+        assert!(map.is_open(V2::new(5.0, 4.1)), "a line is driven over");
     }
 
     #[test]

@@ -229,6 +229,8 @@ mod tests {
             drive: [0.0; 2],
             drive_flags: 0,
             sensor_mode: 0,
+            line_bits: 0,
+            _reserved: 0,
         }
     }
 

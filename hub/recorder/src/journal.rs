@@ -303,8 +303,16 @@ fn put_params(o: &mut Out, p: &Params) {
         wheel_radius_m,
         challenge,
     } = p;
-    let NoiseParams { proximity_m, beacon_deg, compass_deg, gps_pos_m, gps_heading_deg, motor_frac, encoder_slip_frac } =
-        noise;
+    let NoiseParams {
+        proximity_m,
+        beacon_deg,
+        compass_deg,
+        gps_pos_m,
+        gps_heading_deg,
+        motor_frac,
+        encoder_slip_frac,
+        line_flip_prob,
+    } = noise;
     let LatencyParams { proximity, beacon, ground, compass, collision, gps } = latency;
     let SensorSwitches { gps: gps_on, beacon: beacon_on, compass: compass_on } = sensors;
     let RequestParams {
@@ -345,7 +353,6 @@ fn put_params(o: &mut Out, p: &Params) {
         collision_robot_penalty,
         target_reward,
         home_reward,
-        line_sensor_true_prob,
     } = challenge;
     o.u64(*key_time_ticks);
     o.bool(*score_sensor);
@@ -359,7 +366,7 @@ fn put_params(o: &mut Out, p: &Params) {
     ] {
         o.u32(*v);
     }
-    o.f64(*line_sensor_true_prob);
+    o.f64(*line_flip_prob);
 }
 
 fn kind_byte(kind: RobotKind) -> u8 {
@@ -649,6 +656,8 @@ fn get_params(i: &mut In) -> R<Params> {
         gps_heading_deg: i.f64("noise")?,
         motor_frac: i.f64("noise")?,
         encoder_slip_frac: i.f64("noise")?,
+        // Read after the challenge parameters (version 3 on); no line sensor before.
+        line_flip_prob: 0.0,
     };
     let latency = LatencyParams {
         proximity: i.u32("latency")?,
@@ -671,7 +680,7 @@ fn get_params(i: &mut In) -> R<Params> {
         compass: i.bool("request switch")?,
         collision: i.bool("request switch")?,
     };
-    Ok(Params {
+    let mut params = Params {
         sim_time_ticks,
         cycle_ms,
         noise,
@@ -691,7 +700,11 @@ fn get_params(i: &mut In) -> R<Params> {
         encoder_ticks_per_rev: i.u32("encoder ticks")?,
         wheel_radius_m: i.f64("wheel radius")?,
         challenge: if i.version >= 3 { get_challenge(i)? } else { ChallengeParams::default() },
-    })
+    };
+    if i.version >= 3 {
+        params.noise.line_flip_prob = i.f64("line sensor noise")?;
+    }
+    Ok(params)
 }
 
 fn get_challenge(i: &mut In) -> R<ChallengeParams> {
@@ -704,7 +717,6 @@ fn get_challenge(i: &mut In) -> R<ChallengeParams> {
         collision_robot_penalty: i.u32("scoring value")?,
         target_reward: i.u32("scoring value")?,
         home_reward: i.u32("scoring value")?,
-        line_sensor_true_prob: i.f64("line sensor probability")?,
     })
 }
 

@@ -288,6 +288,7 @@ mod journal {
                         gps_heading_deg: n[4],
                         motor_frac: n[5],
                         encoder_slip_frac: n[6],
+                        line_flip_prob: c.3,
                     },
                     latency: LatencyParams {
                         proximity: l[0],
@@ -320,7 +321,6 @@ mod journal {
                         collision_robot_penalty: c.2[3],
                         target_reward: c.2[4],
                         home_reward: c.2[5],
-                        line_sensor_true_prob: c.3,
                     },
                 }
             })
@@ -419,8 +419,9 @@ mod journal {
     fn a_run_recorded_before_the_challenge_parameters_reads_with_their_defaults() {
         let mut start = run_start();
         assert_eq!(start.params.challenge, ChallengeParams::default());
-        // Version 2 always wrote a proximity range.
+        // Version 2 always wrote a proximity range, and had no line sensor.
         start.params.proximity_range_m = Some(3.0);
+        start.params.noise.line_flip_prob = 0.0;
         let mut bytes = Vec::new();
         encode_run_start(&start, &mut bytes);
         // Version 2 wrote the same bytes without the challenge parameters, and without the flag
@@ -439,7 +440,7 @@ mod journal {
         ] {
             tail.extend(v.to_le_bytes());
         }
-        tail.extend(c.line_sensor_true_prob.to_le_bytes());
+        tail.extend(0f64.to_le_bytes());
         let at = bytes.windows(tail.len()).position(|w| w == tail.as_slice()).expect("the challenge parameters");
         let flag = at - (8 + 8 + 4 + 8) - 1;
         assert_eq!(bytes[flag], 1, "the proximity range flag");

@@ -230,10 +230,40 @@ pub enum StaticBuildError {
     },
 }
 
+/// A line on the floor: a wall of height 0, as Ciber-Rato's line labs draw their paths. Robots
+/// drive over it and proximity sensors do not see it; the line sensor does.
+#[derive(Debug, Clone)]
+pub(crate) struct FloorLine {
+    corners: Vec<Point2<Real>>,
+    min: Point2<Real>,
+    max: Point2<Real>,
+}
+
+impl FloorLine {
+    /// Whether `p` lies on the line, by the crossing rule (a point on a lower edge is on it, one
+    /// on an upper edge is not, as Ciber-Rato's line sensor reads it).
+    fn contains(&self, p: Point2<Real>) -> bool {
+        if p.x < self.min.x || p.x > self.max.x || p.y < self.min.y || p.y > self.max.y {
+            return false;
+        }
+        let n = self.corners.len();
+        let mut inside = false;
+        for i in 0..n {
+            let (a, b) = (self.corners[i], self.corners[(i + 1) % n]);
+            if (a.y > p.y) != (b.y > p.y) && p.x < a.x + (p.y - a.y) * (b.x - a.x) / (b.y - a.y) {
+                inside = !inside;
+            }
+        }
+        inside
+    }
+}
+
 /// The walls of a lab (its border included), indexed for the queries a tick makes.
 #[derive(Debug, Clone)]
 pub(crate) struct StaticIndex {
     pub spec: GridSpec,
+    /// The lab's walls of height 0: lines on the floor, not walls.
+    pub lines: Vec<FloorLine>,
     pub edges: Vec<Edge>,
     pub triangles: Vec<WallTriangle>,
     edge_cells: CellLists<EdgeEntry>,
@@ -258,10 +288,17 @@ impl StaticIndex {
             (rect(-t, 0.0, 0.0, h), Real::INFINITY, None),
             (rect(w, 0.0, w + t, h), Real::INFINITY, None),
         ];
+        let mut lines = Vec::new();
         for (i, wall) in lab.walls.iter().enumerate() {
             let mut corners = wall.corners.clone();
             if signed_area(&corners) < 0.0 {
                 corners.reverse();
+            }
+            if wall.height_m <= 0.0 {
+                let min = corners.iter().fold(corners[0], |m, c| Point2::new(m.x.min(c.x), m.y.min(c.y)));
+                let max = corners.iter().fold(corners[0], |m, c| Point2::new(m.x.max(c.x), m.y.max(c.y)));
+                lines.push(FloorLine { corners, min, max });
+                continue;
             }
             polygons.push((corners, wall.height_m, Some(i)));
         }
@@ -309,7 +346,12 @@ impl StaticIndex {
             }
         }
         let tri_cells = CellLists::build(n_cells, &mut pairs);
-        Ok(Self { spec, edges, triangles, edge_cells, tri_cells })
+        Ok(Self { spec, lines, edges, triangles, edge_cells, tri_cells })
+    }
+
+    /// Whether `p` lies on a line on the floor.
+    pub(crate) fn on_line(&self, p: Point2<Real>) -> bool {
+        self.lines.iter().any(|l| l.contains(p))
     }
 
     /// The grid over [min, max] with the smallest cell, from `cell` doubling, whose cell count

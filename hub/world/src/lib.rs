@@ -53,7 +53,8 @@ pub use body::{
 };
 pub use grid::StaticBuildError;
 pub use readings::{
-    GpsReading, Heard, MAX_BEACONS, MAX_INBOX_BYTES, MAX_MESSAGE_BYTES, Message, MessageTooLong, SensorReadings,
+    GpsReading, Heard, LINE_ELEMENTS, MAX_BEACONS, MAX_INBOX_BYTES, MAX_MESSAGE_BYTES, Message, MessageTooLong,
+    SensorReadings, line_element,
 };
 
 use crate::geom::PlacedBody;

@@ -13,6 +13,16 @@ pub const MAX_MESSAGE_BYTES: usize = 100;
 /// A robot hears at most this many bytes per tick; later messages are dropped.
 pub const MAX_INBOX_BYTES: usize = 400;
 
+/// Elements of the line sensor (Ciber-Rato's, from its iris-ua version on).
+pub const LINE_ELEMENTS: usize = 7;
+
+/// Where line-sensor element `k` (0 = leftmost) looks, in the robot's frame from its centre of
+/// movement (x ahead, y to the left), metres: a row across the robot 0.438 ahead, from 0.24
+/// left to 0.24 right, 0.08 apart, as Ciber-Rato places it on its robot of diameter 1.
+pub fn line_element(k: usize) -> (Real, Real) {
+    (0.438, 0.24 - 0.08 * k as Real)
+}
+
 /// GPS fix.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct GpsReading {
@@ -45,6 +55,9 @@ pub struct SensorReadings {
     pub beacon_count: u8,
     /// Index of the target area under the centre of movement.
     pub ground: Option<u16>,
+    /// The line sensor: bit `k` set when element `k` reads a line on the floor (element 0 is
+    /// the leftmost of [`LINE_ELEMENTS`]; see [`line_element`]).
+    pub line: u8,
     /// The robot's last move was refused (or, for a Real robot, it overlaps something).
     pub collision: bool,
     /// Cumulative wheel encoder ticks, left and right.
@@ -62,6 +75,7 @@ impl SensorReadings {
         beacons_deg: [None; MAX_BEACONS],
         beacon_count: 0,
         ground: None,
+        line: 0,
         collision: false,
         encoder_ticks: [0, 0],
     };

@@ -155,7 +155,33 @@ impl Scene<'_> {
             .iter()
             .position(|t| (t.pos - pos).norm_squared() <= t.radius_m * t.radius_m)
             .map(|t| t as u16);
+        // Drawn last, so that the other readings keep the draws they had before there was a
+        // line sensor.
+        out.line = self.line_reading(r, heading, rng);
         out
+    }
+
+    /// The line sensor: each element reads whether it lies on a line on the floor, and reads
+    /// the opposite with the chance [`crate::map::NoiseParams::line_flip_prob`] (in any lab: a
+    /// lab without lines reads a stray 1 now and then, as Ciber-Rato's does).
+    /// `heading` is the heading's cosine and sine.
+    fn line_reading(&self, r: &Robot, heading: Vector2<Real>, rng: &mut Rng) -> u8 {
+        let flip = self.params.noise.line_flip_prob;
+        let lines = !self.statics.lines.is_empty();
+        if !lines && flip <= 0.0 {
+            return 0;
+        }
+        let (c, s) = (heading.x, heading.y);
+        let mut bits = 0u8;
+        for k in 0..super::LINE_ELEMENTS {
+            let on = lines && {
+                let (x, y) = super::line_element(k);
+                self.statics.on_line(Point2::new(r.pose.x + c * x - s * y, r.pose.y + s * x + c * y))
+            };
+            let read = if flip > 0.0 && rng.next_f64() < flip { !on } else { on };
+            bits |= u8::from(read) << k;
+        }
+        bits
     }
 
     /// Collects the wall and body edges that some sensor of the robot may see.

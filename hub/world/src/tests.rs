@@ -1065,3 +1065,51 @@ fn a_crowded_run_meets_walls_and_robots_so_the_thread_test_covers_contacts() {
     assert!(w.robot(b).expect("alive").collision_count >= 1, "b and c meet");
     assert!(w.robot(c).expect("alive").collision_count >= 1, "c and b meet");
 }
+
+/// The line sensor's string as Ciber-Rato writes it: element 0 (the leftmost) first.
+fn line_string(bits: u8) -> String {
+    (0..LINE_ELEMENTS).map(|k| if bits >> k & 1 == 1 { '1' } else { '0' }).collect()
+}
+
+#[test]
+fn a_line_on_the_floor_is_read_by_the_line_sensor_as_ciber_rato_reads_it() {
+    // A line across the lab, 0.2 m wide (y 9.9 to 10.1): a wall of height 0. The readings are
+    // those the real simulator (ciberRatoTools 528480e, LineSensorTrueProb 1) gave a robot
+    // heading east with its centre at y = 10.0, 10.1 and 9.9: a point on the line's lower
+    // edge reads it, one on its upper edge does not.
+    let mut lab = empty_lab(30.0, 20.0);
+    lab.walls.push(rect_wall(0.0, 9.9, 30.0, 10.1, 0.0));
+    let mut w = world(lab, quiet());
+    let at = |w: &mut World, x: Real, y: Real| w.add_robot(RobotSpec::at(x, y, 0.0).disc(1.0)).expect("free");
+    let (mid, top, bottom) = (at(&mut w, 5.0, 10.0), at(&mut w, 10.0, 10.1), at(&mut w, 15.0, 9.9));
+    // Across the line, heading north: a robot drives over it, and its front sensor sees no wall.
+    let over = w.add_robot(RobotSpec::at(25.0, 8.0, 90.0).disc(1.0).motors(1.0, 0.0)).expect("free");
+    let mut crossed = false;
+    for _ in 0..50 {
+        w.step(&[Action::motors(over, 1.0, 1.0)], 0.1);
+        let r = w.robot(over).expect("alive");
+        assert!(!r.collision, "the line stopped the robot at y {}", r.pose.y);
+        // The front sensor, on the rim, sees the lab's north side (or its 10 m range's end).
+        let far = (20.0 - (r.pose.y + 0.5)).min(10.0);
+        assert!(close(r.readings.proximity()[0], far, 1e-6), "it saw the line: {:?}", r.readings.proximity());
+        crossed |= r.pose.y > 10.6;
+    }
+    assert!(crossed, "it crossed the line");
+    let read = |h| line_string(w.robot(h).expect("alive").readings.line);
+    assert_eq!((read(mid), read(top), read(bottom)), ("0011100".into(), "0000110".into(), "0111000".into()));
+}
+
+#[test]
+fn line_elements_read_the_opposite_at_the_flip_rate() {
+    // No line anywhere: every 1 is a flip, at LineSensorTrueProb 0.9 one element in ten.
+    let params = Params { noise: NoiseParams { line_flip_prob: 0.1, ..NoiseParams::NONE }, ..quiet() };
+    let mut w = world(empty_lab(20.0, 20.0), params);
+    let r = w.add_robot(RobotSpec::at(5.0, 5.0, 0.0).disc(1.0)).expect("free");
+    let mut ones = 0;
+    for _ in 0..1000 {
+        w.step(&[], 0.1);
+        ones += w.robot(r).expect("alive").readings.line.count_ones();
+    }
+    let rate = f64::from(ones) / (1000.0 * LINE_ELEMENTS as f64);
+    assert!(close(rate, 0.1, 0.015), "{rate}");
+}

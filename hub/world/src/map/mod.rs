@@ -115,6 +115,9 @@ pub struct NoiseParams {
     /// The draws are per tick: at a shorter cycle the same value drifts less per metre (the
     /// drift's standard deviation scales with the square root of the cycle).
     pub encoder_slip_frac: f64,
+    /// The chance that each line-sensor element reads the opposite of the truth
+    /// (`LineSensorTrueProb` is one minus this; Ciber-Rato's default 0.98 makes it 0.02).
+    pub line_flip_prob: f64,
 }
 
 impl NoiseParams {
@@ -128,6 +131,8 @@ impl NoiseParams {
         gps_heading_deg: 5.0,
         motor_frac: 0.015,
         encoder_slip_frac: 0.0,
+        // As `LineSensorTrueProb="0.98"` reads (1 − 0.98 is not exactly 0.02).
+        line_flip_prob: 1.0 - 0.98,
     };
     /// What `noise = true` means in a scenario, and what `iwsim hub` uses without a parameters
     /// file: [`NoiseParams::CIBER_RATO`] plus 2 % encoder slip per 100 ms tick.
@@ -151,6 +156,7 @@ impl NoiseParams {
         gps_heading_deg: 0.0,
         motor_frac: 0.0,
         encoder_slip_frac: 0.0,
+        line_flip_prob: 0.0,
     };
 }
 
@@ -222,8 +228,8 @@ pub struct RequestParams {
     pub collision: bool,
 }
 
-/// The Ciber-Rato challenge's parameters: what the real simulator reads for its scoring and its
-/// line sensor, with its defaults (`SIMPARAM` and the statics of `simulator.cpp` in
+/// The Ciber-Rato challenge's parameters: what the real simulator reads for its scoring, with
+/// its defaults (`SIMPARAM` and the statics of `simulator.cpp` in
 /// ciberRatoTools). They reach Ciber-Rato clients in the registration reply.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct ChallengeParams {
@@ -244,8 +250,6 @@ pub struct ChallengeParams {
     pub target_reward: u32,
     /// `HomeReward` (100).
     pub home_reward: u32,
-    /// `LineSensorTrueProb` (0.98): the chance that each line-sensor element reads true.
-    pub line_sensor_true_prob: f64,
 }
 
 impl Default for ChallengeParams {
@@ -259,7 +263,6 @@ impl Default for ChallengeParams {
             collision_robot_penalty: 2,
             target_reward: 100,
             home_reward: 100,
-            line_sensor_true_prob: 0.98,
         }
     }
 }

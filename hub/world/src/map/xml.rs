@@ -1068,8 +1068,8 @@ fn params_from(root: &Element, expected: &'static str) -> Result<Params, MapLoad
             "TargetReward" => p.challenge.target_reward = count()?,
             "HomeReward" => p.challenge.home_reward = count()?,
             "LineSensorTrueProb" => {
-                p.challenge.line_sensor_true_prob =
-                    check(root, attr, value()?, |v| (0.0..=1.0).contains(&v), "a probability, from 0 to 1")?;
+                let truth = check(root, attr, value()?, |v| (0.0..=1.0).contains(&v), "a probability, from 0 to 1")?;
+                p.noise.line_flip_prob = 1.0 - truth;
             }
             _ => tracing::debug!(at = %root.pos, "ignoring parameter {attr}={raw:?}"),
         }
@@ -1554,9 +1554,9 @@ mod tests {
                 collision_robot_penalty: 0,
                 target_reward: 3,
                 home_reward: 4,
-                line_sensor_true_prob: 0.99,
             }
         );
+        assert!((p.noise.line_flip_prob - 0.01).abs() < 1e-12);
     }
 
     #[test]
