@@ -1113,3 +1113,21 @@ fn line_elements_read_the_opposite_at_the_flip_rate() {
     let rate = f64::from(ones) / (1000.0 * LINE_ELEMENTS as f64);
     assert!(close(rate, 0.1, 0.015), "{rate}");
 }
+
+#[test]
+fn the_line_sensors_noise_leaves_the_other_readings_their_draws() {
+    // The same noisy run with and without line-sensor noise: every other reading is the same.
+    let run = |flip: Real| {
+        let params = Params { noise: NoiseParams { line_flip_prob: flip, ..NoiseParams::WHEELCHAIR }, ..quiet() };
+        let mut w = world(empty_lab(20.0, 20.0), params);
+        let r = w.add_robot(RobotSpec::at(5.0, 5.0, 30.0).disc(1.0)).expect("free");
+        (0..50)
+            .map(|_| {
+                w.step(&[Action::motors(r, 0.5, 0.3)], 0.1);
+                let rb = w.robot(r).expect("alive");
+                (rb.pose, SensorReadings { line: 0, ..rb.readings })
+            })
+            .collect::<Vec<_>>()
+    };
+    assert_eq!(run(0.0), run(0.3));
+}
