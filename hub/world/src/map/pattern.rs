@@ -5,12 +5,16 @@
 //!
 //! - a `|` at column `c` is a vertical wall at x = 2·(c+1)/3, from y = Pos to y = Pos + 2
 //!   (it separates two cells of the cell row that starts at y = Pos);
-//! - on an odd `Pos` only, a run of `-` read at the columns that are multiples of 3 is a
-//!   horizontal wall at y = Pos + 1, from the left edge of the run's first cell to the right edge
-//!   of its last cell.
+//! - a run of `-` read at the columns that are multiples of 3 is a horizontal wall at
+//!   y = Pos + 1, from the left edge of the run's first cell to the right edge of its last
+//!   cell; on an even `Pos` (through the middles of cells) it is a line on the floor, of height
+//!   0, whatever the row's height, as the real simulator makes it;
+//! - a `/` or `\` at column `c` is a 45° wall from (2c/3, Pos) to (2c/3 + 2, Pos + 2), or from
+//!   (2c/3, Pos + 2) to (2c/3 + 2, Pos): the diagonal paths of iris's line labs.
 //!
-//! Every wall is 0.2 m thick (±0.1 m about its centre line). Other characters — the `+` or `*`
-//! some labs put at junctions, and iris's diagonal `/` and `\` — carry no wall here.
+//! Every wall is 0.2 m thick (±0.1 m about its centre line). Other characters (the `+` or `*`
+//! some labs put at junctions) carry no wall. Line labs give their rows `Height="0"`, so all
+//! their walls are lines (see [`crate::map::Wall`]).
 //!
 //! For a 28 m × 14 m lab (14 × 7 cells) the rows run from `Pos="0"` to `Pos="12"` and the
 //! patterns are 41 characters long.
@@ -43,9 +47,16 @@ pub fn expand_row(pos: i64, pattern: &str, height_m: f64) -> Vec<Wall> {
         let x = CELL_M * (column as f64 + 1.0) / COLUMNS_PER_CELL as f64;
         walls.push(rectangle(x - HALF_THICKNESS_M, y0, x + HALF_THICKNESS_M, y0 + CELL_M, height_m));
     }
+    for (column, &ch) in cells.iter().enumerate().filter(|(_, ch)| **ch == '/' || **ch == '\\') {
+        let x0 = CELL_M * column as f64 / COLUMNS_PER_CELL as f64;
+        let (from, to) = if ch == '/' { (y0, y0 + CELL_M) } else { (y0 + CELL_M, y0) };
+        walls.push(bar(x0, from, x0 + CELL_M, to, height_m));
+    }
 
-    if pos.rem_euclid(2) == 1 {
+    {
         let y = y0 + 1.0;
+        // Through the middles of cells: a line on the floor.
+        let height_m = if pos.rem_euclid(2) == 1 { height_m } else { 0.0 };
         let mut push_run = |first: usize, last: usize| {
             let x0 = CELL_M * (first / COLUMNS_PER_CELL) as f64;
             let x1 = CELL_M * (last / COLUMNS_PER_CELL + 1) as f64;
@@ -69,6 +80,17 @@ pub fn expand_row(pos: i64, pattern: &str, height_m: f64) -> Vec<Wall> {
         }
     }
     walls
+}
+
+/// A wall [`HALF_THICKNESS_M`] either side of the segment (x0, y0)–(x1, y1), its corners
+/// counter-clockwise.
+fn bar(x0: f64, y0: f64, x1: f64, y1: f64, height_m: f64) -> Wall {
+    let (dx, dy) = (x1 - x0, y1 - y0);
+    let len = dx.hypot(dy);
+    // The left normal, scaled to the half thickness.
+    let (nx, ny) = (-dy / len * HALF_THICKNESS_M, dx / len * HALF_THICKNESS_M);
+    let p = nalgebra::Point2::new;
+    Wall { height_m, corners: vec![p(x0 - nx, y0 - ny), p(x1 - nx, y1 - ny), p(x1 + nx, y1 + ny), p(x0 + nx, y0 + ny)] }
 }
 
 fn rectangle(x0: f64, y0: f64, x1: f64, y1: f64, height_m: f64) -> Wall {
@@ -137,8 +159,10 @@ mod tests {
     }
 
     #[test]
-    fn dashes_in_an_even_row_make_no_wall() {
-        assert!(expand_row(4, "--+--+--+--", 4.0).is_empty());
+    fn dashes_in_an_even_row_make_a_line_through_the_middles_of_cells() {
+        let walls = expand_row(4, "--+--+--+--", 4.0);
+        assert_eq!(walls.iter().map(bounds).collect::<Vec<_>>(), [(0.0, 4.9, 8.0, 5.1)]);
+        assert_eq!(walls[0].height_m, 0.0, "a line on the floor, whatever the row's height");
     }
 
     #[test]
@@ -150,9 +174,32 @@ mod tests {
     }
 
     #[test]
-    fn junction_and_diagonal_characters_make_no_wall() {
-        assert!(expand_row(5, "  +  *  /  \\  +", 4.0).is_empty());
-        assert!(expand_row(6, "  +  *  /  \\  +", 4.0).is_empty());
+    fn junction_characters_make_no_wall() {
+        assert!(expand_row(5, "  +  *     +", 4.0).is_empty());
+        assert!(expand_row(6, "  +  *     +", 4.0).is_empty());
+    }
+
+    #[test]
+    fn slashes_make_diagonal_walls_across_two_metres() {
+        // Column 6: from x = 4; '/' rises to the right, '\' falls.
+        let rising = expand_row(6, "      /", 0.0);
+        let falling = expand_row(6, "      \\", 0.0);
+        let k = 0.1 * std::f64::consts::FRAC_1_SQRT_2;
+        let r = |v: f64| (v * 1e6).round() / 1e6;
+        assert_eq!(bounds(&rising[0]), (r(4.0 - k), r(6.0 - k), r(6.0 + k), r(8.0 + k)));
+        assert_eq!(bounds(&falling[0]), bounds(&rising[0]));
+        // The rising bar holds (5, 7) and (4.1, 6.1) and not (5, 6.5); the falling bar (5, 7) and
+        // (4.1, 7.9).
+        let inside = |w: &Wall, x: f64, y: f64| {
+            let c = &w.corners;
+            (0..c.len()).all(|i| {
+                let (a, b) = (c[i], c[(i + 1) % c.len()]);
+                (b.x - a.x) * (y - a.y) - (b.y - a.y) * (x - a.x) >= 0.0
+            })
+        };
+        assert!(inside(&rising[0], 5.0, 7.0) && inside(&rising[0], 4.1, 6.1) && !inside(&rising[0], 5.0, 6.5));
+        assert!(inside(&falling[0], 5.0, 7.0) && inside(&falling[0], 4.1, 7.9) && !inside(&falling[0], 4.1, 6.1));
+        assert!(signed_area(&rising[0]) > 0.0 && signed_area(&falling[0]) > 0.0);
     }
 
     #[test]

@@ -1614,7 +1614,7 @@ mod tests {
     fn every_pattern_character_of_ciber_ratos_labs_loads() {
         // One row per character Ciber-Rato's 89 shipped labs use.
         let lab = lab_ok("<Lab Width=\"28\" Height=\"14\">\n<Row Pos=\"1\" Pattern=\"--+--| /\\ . · T H X\"/>\n</Lab>");
-        assert_eq!(lab.walls.len(), 2, "the bar and the run of dashes");
+        assert_eq!(lab.walls.len(), 4, "the bar, the two diagonals and the run of dashes");
     }
 
     #[test]
