@@ -1103,12 +1103,14 @@ mod tests {
         assert_eq!(type_name_of::<RobotState>(), "iwsim::RobotState.v3");
         assert_eq!(type_name_of::<RobotRegistration>(), "iwsim::RobotRegistration.v2");
         assert_eq!(type_name_of::<RobotSensors>(), "iwsim::RobotSensors.v1");
-        assert_eq!(type_name_of::<SensorBlock>(), "iwsim::SensorBlock.v3");
+        assert_eq!(type_name_of::<SensorBlock>(), "iwsim::SensorBlock.v4");
         assert_eq!(type_name_of::<ActionBlock>(), "iwsim::ActionBlock.v2");
         assert_eq!(type_name_of::<ChairState>(), "iwsim::ChairState.v1");
         assert_eq!(type_name_of::<RegisterRequest>(), "iwsim::RegisterRequest.v3");
         assert_eq!(type_name_of::<MapItem>(), "iwsim::MapItem.v1");
-        assert_eq!(type_name_of::<Ping>(), "iwsim::bench::Ping.v3");
+        assert_eq!(type_name_of::<Ping>(), "iwsim::bench::Ping.v4");
+        assert_eq!(type_name_of::<HubParams>(), "iwsim::HubParams.v3");
+        assert_eq!(type_name_of::<MapHeader>(), "iwsim::MapHeader.v4");
     }
 
     #[test]
