@@ -400,7 +400,6 @@ fn sensor_block_layout() -> Vec<(&'static str, usize, &'static str, usize)> {
         ("drive_flags", offset_of!(SensorBlock, drive_flags), "<u4", 1),
         ("sensor_mode", offset_of!(SensorBlock, sensor_mode), "<u4", 1),
         ("line_bits", offset_of!(SensorBlock, line_bits), "<u4", 1),
-        ("_reserved", offset_of!(SensorBlock, _reserved), "<u4", 1),
     ]
 }
 
