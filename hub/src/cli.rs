@@ -85,6 +85,11 @@ pub struct HubArgs {
     /// answer then costs no wake-up of the hub.
     #[arg(long, default_value_t = crate::ANSWER_SPIN_US, value_parser = clap::builder::RangedU64ValueParser::<u64>::new().range(0..=100_000))]
     pub answer_spin_us: u64,
+    /// The Ciber-Rato scoring mode (the real simulator's `--scoring N`): 0 competitive (the
+    /// default), 1 control, 2 mapping, 3 planning, 5 line mapping, 6 line planning. Overrides
+    /// the parameters file's `Scoring`.
+    #[arg(long, value_name = "N")]
+    pub scoring: Option<u32>,
     /// A robot name that may register as Real (a physical chair whose adapter pushes its
     /// pose). Repeatable; without it the hub refuses every Real robot, so no agent can place
     /// a robot where it likes to probe the world.
@@ -125,6 +130,10 @@ pub fn config(args: &HubArgs) -> anyhow::Result<HubConfig> {
     }
     if args.no_noise {
         params.noise = NoiseParams::NONE;
+    }
+    if let Some(n) = args.scoring {
+        params.challenge.scoring =
+            world::challenge::Scoring::from_number(n).map_err(|e| anyhow::anyhow!("--scoring {n}: {e}"))?;
     }
     let tick_limit = if args.ticks > 0 { args.ticks } else { params.sim_time_ticks };
     Ok(HubConfig {

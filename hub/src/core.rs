@@ -7,16 +7,18 @@ use std::collections::{BTreeMap, BTreeSet};
 use bytemuck::Zeroable;
 use ipc_types::{
     ACT_GHOST, ACT_LINK_DOWN, ACT_MOTORS, ACT_POSE, ACT_REAL, ACT_SAY, ActionBlock, CHAIR_CONTROLLED, CHAIR_GHOST,
-    CHAIR_LINK_UP, COLLISION, ChairState, Command, DRIVE_CONTROLLED, DRIVE_FRESH, DRIVE_RESUMES_SHIFT, FixedName,
-    HAS_COMPASS, HAS_GPS, HAS_GROUND, HubParams, InboxEntry, MAP_BEACON, MAP_CHECKPOINT, MAP_CORNER, MAP_GRID,
-    MAP_TARGET, MAP_WALL, MAX_AGENTS, MAX_INBOX_MESSAGES, MAX_PROXIMITY, MAX_ROBOTS, MapHeader, MapItem, REG_CHAIR,
-    REG_DISC, REG_HAS_POSE, ROBOT_COLLISION, ROBOT_DISC, ROBOT_FROZEN, ROBOT_LAGGING, Refusal, RobotKind as WireKind,
-    RobotRegistration, RobotSensors, RobotState, RunState, SENSOR_BEACON, SENSOR_COLLISION, SENSOR_COMPASS, SENSOR_GPS,
-    SENSOR_GROUND, SENSOR_OBSTACLE, SensorBlock, SensorGeometry, SensorMode, WorldHeader,
+    CHAIR_LINK_UP, COLLISION, ChairState, ChallengeStanding, Command, DRIVE_CONTROLLED, DRIVE_FRESH,
+    DRIVE_RESUMES_SHIFT, FixedName, HAS_COMPASS, HAS_GPS, HAS_GROUND, HAS_SCORE, HubParams, InboxEntry, MAP_BEACON,
+    MAP_CHECKPOINT, MAP_CORNER, MAP_GRID, MAP_TARGET, MAP_WALL, MAX_AGENTS, MAX_INBOX_MESSAGES, MAX_PROXIMITY,
+    MAX_ROBOTS, MapHeader, MapItem, REG_CHAIR, REG_DISC, REG_HAS_POSE, ROBOT_COLLISION, ROBOT_DISC, ROBOT_FROZEN,
+    ROBOT_LAGGING, Refusal, RobotKind as WireKind, RobotRegistration, RobotSensors, RobotState, RunState,
+    SENSOR_BEACON, SENSOR_COLLISION, SENSOR_COMPASS, SENSOR_GPS, SENSOR_GROUND, SENSOR_OBSTACLE, SENSOR_SCORE,
+    SensorBlock, SensorGeometry, SensorMode, WorldHeader,
 };
 
 use recorder::journal::{Event, RecordedAction, RunStart};
 use records::places::Checkpoint;
+use world::challenge::{Phase, Standing};
 use world::map::{Grid, Lab, Params};
 use world::math::Pose;
 use world::{BodyShape, Message, ProximitySpec, RobotKind, RobotSpec, World, WorldBuildError};
@@ -185,7 +187,7 @@ impl HubCore {
         tick_limit: u64,
     ) -> Result<Self, WorldBuildError> {
         Ok(Self {
-            stage: Stage::new(lab, params, seed)?,
+            stage: Stage::new(lab, params, seed, tick_limit)?,
             grid,
             mode,
             state: RunState::Waiting,
@@ -795,7 +797,7 @@ impl HubCore {
         self.robots.iter().filter_map(|(&id, e)| {
             let r = self.stage.robot(id)?;
             let lagging = self.agents.get(&e.agent_id).is_some_and(|a| a.lagging);
-            Some(robot_state(r, id, e.agent_id, lagging))
+            Some(robot_state(r, id, e.agent_id, lagging, self.stage.standing(id), self.state))
         })
     }
 
@@ -851,6 +853,12 @@ impl HubCore {
             return SensorBlock { robot_id, tick, ..SensorBlock::zeroed() };
         };
         let mut b = pack_sensor_block(r, robot_id, tick, |h| self.stage.id_of(h));
+        if self.stage.world().params().challenge.score_sensor
+            && let Some(s) = self.stage.standing(robot_id)
+        {
+            b.present |= HAS_SCORE;
+            b.standing = challenge_standing(s, self.state);
+        }
         if let Some(c) = &entry.chair {
             let default_range = self.stage.world().params().proximity_range();
             // Borrowed, not cloned: this runs for every chair at every publication.
@@ -919,7 +927,17 @@ pub fn pack_map_for(
 
 /// Robot `id` of agent `agent_id` as observers see it in a world snapshot: what
 /// [`HubCore::robot_states`] publishes, public so that a replay publishes the same.
-pub fn robot_state(r: &world::Robot, id: u32, agent_id: u32, lagging: bool) -> RobotState {
+pub fn robot_state(
+    r: &world::Robot,
+    id: u32,
+    agent_id: u32,
+    lagging: bool,
+    standing: Option<Standing>,
+    run_state: RunState,
+) -> RobotState {
+    let standing = standing.map(|s| challenge_standing(s, run_state)).unwrap_or_default();
+    // A finished robot stands still by the challenge's rule; "frozen" says its agent is gone.
+    let finished = standing.phase == Phase::Finished as u32;
     RobotState {
         id,
         kind: match r.spec.kind {
@@ -928,7 +946,7 @@ pub fn robot_state(r: &world::Robot, id: u32, agent_id: u32, lagging: bool) -> R
             RobotKind::Door => WireKind::Door,
         } as u32,
         flags: (r.collision as u32 * ROBOT_COLLISION)
-            | (r.frozen as u32 * ROBOT_FROZEN)
+            | ((r.frozen && !finished) as u32 * ROBOT_FROZEN)
             | (lagging as u32 * ROBOT_LAGGING)
             | ((r.spec.shape == BodyShape::Disc) as u32 * ROBOT_DISC),
         collision_count: r.collision_count.min(u32::MAX as u64) as u32,
@@ -948,6 +966,23 @@ pub fn robot_state(r: &world::Robot, id: u32, agent_id: u32, lagging: bool) -> R
             }
             p
         },
+        standing,
+    }
+}
+
+/// A robot's challenge standing as published, its phase as shown while the run is in
+/// `run_state` (Stopped while it waits or is paused).
+pub fn challenge_standing(s: Standing, run_state: RunState) -> ChallengeStanding {
+    let narrow = |v: u64| v.min(u64::from(u32::MAX)) as u32;
+    ChallengeStanding {
+        phase: s.phase.shown(matches!(run_state, RunState::Waiting | RunState::Paused)) as u32,
+        // Ciber-Rato keeps the score in 32 bits.
+        score: s.score as i32,
+        arrival_tick: narrow(s.arrival_tick),
+        returning_ticks: narrow(s.returning_ticks),
+        collisions: s.collisions,
+        _reserved: 0,
+        visited_mask: s.visited,
     }
 }
 
@@ -1076,7 +1111,8 @@ pub fn hub_params(p: &Params, mode: Mode, tick_limit: u64, deadline_ms: u32) -> 
             | bit(p.sensors.compass, SENSOR_COMPASS)
             | SENSOR_OBSTACLE
             | SENSOR_GROUND
-            | SENSOR_COLLISION,
+            | SENSOR_COLLISION
+            | bit(p.challenge.score_sensor, SENSOR_SCORE),
         requestable: bit(r.obstacle, SENSOR_OBSTACLE)
             | bit(r.beacon, SENSOR_BEACON)
             | bit(r.ground, SENSOR_GROUND)
@@ -1091,7 +1127,7 @@ pub fn hub_params(p: &Params, mode: Mode, tick_limit: u64, deadline_ms: u32) -> 
             p.latency.collision,
             p.latency.gps,
         ],
-        _reserved: 0,
+        scoring_mode: p.challenge.scoring.number(),
         encoder_ticks_per_m: sim_model::encoder_ticks_per_m(p.encoder_ticks_per_rev as f64, p.wheel_radius_m),
         key_time_ticks: p.challenge.key_time_ticks,
         scoring: [

@@ -83,8 +83,8 @@ pub fn replay_observed(
     mut observe: impl FnMut(&Stage),
 ) -> anyhow::Result<Replayed> {
     let start = &recording.start;
-    let mut stage =
-        Stage::new(&start.lab, start.params.clone(), start.seed).context("rebuilding the recorded world")?;
+    let mut stage = Stage::new(&start.lab, start.params.clone(), start.seed, start.tick_limit)
+        .context("rebuilding the recorded world")?;
     anyhow::ensure!(
         stage.dt_s() == start.dt_s,
         "the recording steps {} s a tick but its parameters give {} s",

@@ -129,7 +129,7 @@ impl<'a> Player<'a> {
 
     fn fresh_stage(recording: &Recording) -> Result<Stage, ReplayServeError> {
         let start = &recording.start;
-        let stage = Stage::new(&start.lab, start.params.clone(), start.seed)?;
+        let stage = Stage::new(&start.lab, start.params.clone(), start.seed, start.tick_limit)?;
         if stage.dt_s() != start.dt_s {
             return Err(ReplayServeError::CycleDiffers { recorded: start.dt_s, rebuilt: stage.dt_s() });
         }
@@ -266,7 +266,14 @@ impl<'a> Player<'a> {
     pub fn robot_states(&self) -> impl Iterator<Item = RobotState> + '_ {
         self.stage.ids().filter_map(|id| {
             let r = self.stage.robot(id)?;
-            Some(robot_state(r, id, self.owners.get(&id).copied().unwrap_or(0), false))
+            Some(robot_state(
+                r,
+                id,
+                self.owners.get(&id).copied().unwrap_or(0),
+                false,
+                self.stage.standing(id),
+                self.state,
+            ))
         })
     }
 

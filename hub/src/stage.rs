@@ -7,8 +7,11 @@ use std::collections::BTreeMap;
 
 use ipc_types::MAX_ROBOTS;
 use recorder::journal::{Event, RecordedAction};
+use world::challenge::{Challenge, Standing, Turn};
 use world::map::{Lab, Params};
-use world::{Action, AddRobotError, Message, Robot, RobotHandle, RobotSpec, StepStats, World, WorldBuildError};
+use world::{
+    Action, AddRobotError, BodyShape, Message, Robot, RobotHandle, RobotSpec, StepStats, World, WorldBuildError,
+};
 
 /// Why a journal event could not be applied to a stage.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -56,12 +59,20 @@ pub struct Stage {
     journal: Option<Vec<Event>>,
     /// Scratch for the world's actions of a step.
     scratch: Vec<Action>,
+    /// The Ciber-Rato challenge every robot is scored in: a rule on the world's outcome, so a
+    /// replay of the journal scores it again, identically.
+    challenge: Challenge,
+    /// Scratch for the challenge's view of a step.
+    turns: Vec<Turn>,
+    leds: Vec<(u32, u32)>,
 }
 
 impl Stage {
-    /// An empty world on `lab` with `params`, seeded with `seed`; a tick lasts `cycle_ms`.
-    pub fn new(lab: &Lab, params: Params, seed: u64) -> Result<Self, WorldBuildError> {
+    /// An empty world on `lab` with `params`, seeded with `seed`; a tick lasts `cycle_ms`, and
+    /// the run lasts `tick_limit` ticks (0: no limit; the challenge's time rule reads it).
+    pub fn new(lab: &Lab, params: Params, seed: u64, tick_limit: u64) -> Result<Self, WorldBuildError> {
         let dt_s = params.cycle_ms.max(1) as f64 / 1000.0;
+        let challenge = Challenge::new(lab, params.challenge.scoring, params.challenge, tick_limit);
         let mut world = World::new(lab, params, seed)?;
         world.set_capacity(MAX_ROBOTS);
         Ok(Self {
@@ -73,7 +84,20 @@ impl Stage {
             settled: false,
             journal: None,
             scratch: Vec::new(),
+            challenge,
+            turns: Vec::new(),
+            leds: Vec::new(),
         })
+    }
+
+    /// The challenge the robots are scored in.
+    pub fn challenge(&self) -> &Challenge {
+        &self.challenge
+    }
+
+    /// Robot `id`'s standing in the challenge.
+    pub fn standing(&self, id: u32) -> Option<Standing> {
+        self.challenge.standing(id)
     }
 
     /// Lets the world's step use `threads` threads (0: one per core) from `parallel_min_robots`
@@ -138,8 +162,10 @@ impl Stage {
     /// Adds robot `id` of agent `agent_id`.
     pub fn add(&mut self, id: u32, agent_id: u32, spec: RobotSpec) -> Result<(), AddRobotError> {
         let recorded = self.journal.is_some().then(|| spec.clone());
+        let (home, half) = ((spec.pose.x, spec.pose.y), half_size(&spec));
         let handle = self.world.add_robot(spec)?;
         self.place(id, handle);
+        self.challenge.add(id, home, half);
         if let Some(spec) = recorded {
             self.journal(|| Event::AddRobot { id, agent_id, spec });
         }
@@ -150,6 +176,7 @@ impl Stage {
     pub fn remove(&mut self, id: u32) -> bool {
         let Some(handle) = self.handles.remove(&id) else { return false };
         self.world.remove_robot(handle);
+        self.challenge.remove(id);
         if let Some(slot) = self.id_by_slot.get_mut(handle.index() as usize) {
             *slot = 0;
         }
@@ -157,10 +184,11 @@ impl Stage {
         true
     }
 
-    /// Freezes or thaws robot `id`; whether it is there.
+    /// Freezes or thaws robot `id`; whether it is there. A robot that finished its challenge
+    /// stays frozen.
     pub fn set_frozen(&mut self, id: u32, frozen: bool) -> bool {
         let Some(&handle) = self.handles.get(&id) else { return false };
-        self.world.set_frozen(handle, frozen);
+        self.world.set_frozen(handle, frozen || self.challenge.finished(id));
         self.journal(|| Event::Freeze { id, frozen });
         true
     }
@@ -218,11 +246,41 @@ impl Stage {
         }));
         let stats = self.world.step(&scratch, self.dt_s);
         self.scratch = scratch;
+        self.score(actions);
         if self.journal.is_some() {
             let hash = self.world.state_hash();
             self.journal(|| Event::Step { tick, actions: actions.to_vec(), hash });
         }
         stats
+    }
+
+    /// Scores the step just taken and stops the robots that finished.
+    fn score(&mut self, actions: &[RecordedAction]) {
+        let mut leds = std::mem::take(&mut self.leds);
+        leds.clear();
+        leds.extend(actions.iter().map(|a| (a.id, a.leds)));
+        // The last action of a robot in a step is the one that counts (stable sort keeps order).
+        leds.sort_by_key(|&(id, _)| id);
+        let mut turns = std::mem::take(&mut self.turns);
+        turns.clear();
+        for (&id, &h) in &self.handles {
+            let Some(r) = self.world.robot(h) else { continue };
+            let end = leds.partition_point(|&(i, _)| i <= id);
+            let led = (end > 0 && leds[end - 1].0 == id).then(|| leds[end - 1].1);
+            turns.push(Turn { id, pose: r.pose, hit_wall: r.collision_wall, hit_robot: r.collision_robot, leds: led });
+        }
+        let world = &self.world;
+        self.challenge.update(world.tick(), &turns, |a, b| world.segment_clear(a, b));
+        for t in &turns {
+            if self.challenge.finished(t.id)
+                && let Some(&h) = self.handles.get(&t.id)
+                && self.world.robot(h).is_some_and(|r| !r.frozen)
+            {
+                self.world.set_frozen(h, true);
+            }
+        }
+        self.turns = turns;
+        self.leds = leds;
     }
 
     /// The robots' ids, in id order.
@@ -265,5 +323,14 @@ impl Stage {
             Event::Finish { .. } => {}
         }
         Ok(None)
+    }
+}
+
+/// A robot's half size, which Ciber-Rato's target rule subtracts from a target's radius: a
+/// disc's radius, a rectangle's half width across (its smaller side).
+fn half_size(spec: &RobotSpec) -> f64 {
+    match spec.shape {
+        BodyShape::Disc => spec.width_m / 2.0,
+        BodyShape::Rectangle => spec.width_m.min(spec.height_m) / 2.0,
     }
 }

@@ -222,10 +222,35 @@ pub const ROBOT_LAGGING: u32 = 1 << 2;
 /// (a plain Ciber-Rato robot); otherwise a `width_m` × `height_m` rectangle placed by `com`.
 pub const ROBOT_DISC: u32 = 1 << 3;
 
+/// A robot's standing in the run's Ciber-Rato challenge (the scoring mode is
+/// [`HubParams::scoring_mode`]).
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Pod, Zeroable, ZeroCopySend, Default)]
+#[type_name("iwsim::ChallengeStanding.v1")]
+pub struct ChallengeStanding {
+    /// Its state, numbered as Ciber-Rato's: 0 Stopped, 1 Running, 2 Waiting, 3 Returning,
+    /// 4 Finished, 5 Removed (a Finished robot stands still for the rest of the run).
+    pub phase: u32,
+    /// Its score.
+    pub score: i32,
+    /// Competitive mode: the tick it arrived (the clock until its first visit).
+    pub arrival_tick: u32,
+    /// Competitive mode: ticks since its return began.
+    pub returning_ticks: u32,
+    /// Collision events: contacts begun while it was scored.
+    pub collisions: u32,
+    /// Padding.
+    pub _reserved: u32,
+    /// Bit `k` set once target `k` (in lab order) has been visited.
+    pub visited_mask: u64,
+}
+const _: () = assert!(core::mem::size_of::<ChallengeStanding>() == 32);
+const _: () = assert!(core::mem::align_of::<ChallengeStanding>() == 8);
+
 /// One robot in a world snapshot.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable, ZeroCopySend)]
-#[type_name("iwsim::RobotState.v3")]
+#[type_name("iwsim::RobotState.v4")]
 pub struct RobotState {
     /// Robot id (1-based, unique in the run).
     pub id: u32,
@@ -256,8 +281,11 @@ pub struct RobotState {
     /// The proximity readings the robot's agent got this tick, metres (noise included);
     /// NaN past the robot's sensor count. Viewers draw the cones with these.
     pub proximity_m: [f32; MAX_PROXIMITY],
+    /// Its standing in the challenge (its phase as shown: Stopped while the run waits or is
+    /// paused).
+    pub standing: ChallengeStanding,
 }
-const _: () = assert!(core::mem::size_of::<RobotState>() == 128);
+const _: () = assert!(core::mem::size_of::<RobotState>() == 160);
 const _: () = assert!(core::mem::align_of::<RobotState>() == 8);
 
 /// One proximity sensor's geometry, as viewers draw it.
@@ -336,6 +364,9 @@ pub const HAS_GPS: u32 = 1 << 1;
 pub const HAS_GROUND: u32 = 1 << 2;
 /// `SensorBlock::present`: the robot collided.
 pub const COLLISION: u32 = 1 << 3;
+/// `SensorBlock::present`: `standing` holds the robot's score (the parameters' `ScoreSensor`
+/// is on; without it `standing` is zero).
+pub const HAS_SCORE: u32 = 1 << 4;
 
 /// `SensorBlock::drive_flags`: a live agent controls this chair.
 pub const DRIVE_CONTROLLED: u32 = 1;
@@ -372,7 +403,7 @@ const _: () = assert!(core::mem::align_of::<InboxEntry>() == 4);
 /// never where it truly is. True poses are for observers (the world service).
 #[repr(C)]
 #[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable, ZeroCopySend)]
-#[type_name("iwsim::SensorBlock.v4")]
+#[type_name("iwsim::SensorBlock.v5")]
 pub struct SensorBlock {
     /// Tick these readings belong to.
     pub tick: u64,
@@ -423,8 +454,10 @@ pub struct SensorBlock {
     pub line_bits: u32,
     /// Padding.
     pub _reserved: u32,
+    /// With [`HAS_SCORE`]: the robot's standing in the challenge (Ciber-Rato's score sensor).
+    pub standing: ChallengeStanding,
 }
-const _: () = assert!(core::mem::size_of::<SensorBlock>() == 832);
+const _: () = assert!(core::mem::size_of::<SensorBlock>() == 864);
 const _: () = assert!(core::mem::align_of::<SensorBlock>() == 8);
 
 impl SensorBlock {
@@ -966,8 +999,9 @@ pub struct HubParams {
     pub requests_per_cycle: u32,
     /// Latencies in ticks: proximity, beacon, ground, compass, collision, GPS.
     pub latency: [u32; 6],
-    /// Padding.
-    pub _reserved: u32,
+    /// The Ciber-Rato scoring mode (`--scoring N`: 0 competitive, 1 control, 2 mapping,
+    /// 3 planning, 5 line mapping, 6 line planning).
+    pub scoring_mode: u32,
     /// Wheel-encoder ticks per metre of wheel travel (odometry needs it with the track, which
     /// is the robot's `height_m`).
     pub encoder_ticks_per_m: f64,
@@ -996,6 +1030,8 @@ pub const SENSOR_OBSTACLE: u32 = 1 << 3;
 pub const SENSOR_GROUND: u32 = 1 << 4;
 /// `HubParams` sensor bit: collision.
 pub const SENSOR_COLLISION: u32 = 1 << 5;
+/// `HubParams` sensor bit: the score sensor (Ciber-Rato's `ScoreSensor`).
+pub const SENSOR_SCORE: u32 = 1 << 6;
 
 /// The header of the map.
 #[repr(C)]
@@ -1062,14 +1098,14 @@ const _: () = assert!(core::mem::size_of::<MapItem>() == 32);
 const _: () = assert!(core::mem::align_of::<MapItem>() == 8);
 
 /// Bytes of a [`Ping`] after its header, so a ping is as large as a [`SensorBlock`].
-pub const PING_PAYLOAD_BYTES: usize = 816;
+pub const PING_PAYLOAD_BYTES: usize = 848;
 
 /// The sample of `iwsim bench latency`'s raw iceoryx2 ping-pong, the baseline the hub's
 /// latency is compared with. Only the benchmark sends it; it is as large as a sensor block so
 /// both measurements move the same bytes.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Pod, Zeroable, ZeroCopySend)]
-#[type_name("iwsim::bench::Ping.v4")]
+#[type_name("iwsim::bench::Ping.v5")]
 pub struct Ping {
     /// Sequence number; the peer answers with it.
     pub seq: u64,
@@ -1078,7 +1114,7 @@ pub struct Ping {
     /// Filler.
     pub payload: [u8; PING_PAYLOAD_BYTES],
 }
-const _: () = assert!(core::mem::size_of::<Ping>() == 832);
+const _: () = assert!(core::mem::size_of::<Ping>() == 864);
 const _: () = assert!(core::mem::align_of::<Ping>() == 8);
 const _: () = assert!(core::mem::size_of::<Ping>() == core::mem::size_of::<SensorBlock>());
 
@@ -1100,15 +1136,15 @@ mod tests {
     #[test]
     fn every_payload_has_a_versioned_type_name() {
         assert_eq!(type_name_of::<WorldHeader>(), "iwsim::WorldHeader.v1");
-        assert_eq!(type_name_of::<RobotState>(), "iwsim::RobotState.v3");
+        assert_eq!(type_name_of::<RobotState>(), "iwsim::RobotState.v4");
         assert_eq!(type_name_of::<RobotRegistration>(), "iwsim::RobotRegistration.v2");
         assert_eq!(type_name_of::<RobotSensors>(), "iwsim::RobotSensors.v1");
-        assert_eq!(type_name_of::<SensorBlock>(), "iwsim::SensorBlock.v4");
+        assert_eq!(type_name_of::<SensorBlock>(), "iwsim::SensorBlock.v5");
         assert_eq!(type_name_of::<ActionBlock>(), "iwsim::ActionBlock.v2");
         assert_eq!(type_name_of::<ChairState>(), "iwsim::ChairState.v1");
         assert_eq!(type_name_of::<RegisterRequest>(), "iwsim::RegisterRequest.v3");
         assert_eq!(type_name_of::<MapItem>(), "iwsim::MapItem.v1");
-        assert_eq!(type_name_of::<Ping>(), "iwsim::bench::Ping.v4");
+        assert_eq!(type_name_of::<Ping>(), "iwsim::bench::Ping.v5");
         assert_eq!(type_name_of::<HubParams>(), "iwsim::HubParams.v3");
         assert_eq!(type_name_of::<MapHeader>(), "iwsim::MapHeader.v4");
     }

@@ -6,6 +6,6 @@
 fn the_reported_layout_ends_within_the_struct() {
     let layout = _iwsim::layout_for_tests();
     let (name, offset, _, _) = layout.last().copied().expect("fields");
-    assert_eq!(name, "line_bits");
-    assert!(offset + 4 <= core::mem::size_of::<ipc_types::SensorBlock>());
+    assert_eq!(name, "visited_mask");
+    assert!(offset + 8 <= core::mem::size_of::<ipc_types::SensorBlock>());
 }

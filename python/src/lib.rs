@@ -375,8 +375,9 @@ fn wait_readable(fd: i32, slice: Duration) -> bool {
 #[pyfunction]
 fn sensor_block_layout() -> Vec<(&'static str, usize, &'static str, usize)> {
     use core::mem::offset_of;
-    use ipc_types::{INBOX_BYTES, MAX_BEACONS, MAX_INBOX_MESSAGES, MAX_PROXIMITY};
+    use ipc_types::{ChallengeStanding, INBOX_BYTES, MAX_BEACONS, MAX_INBOX_MESSAGES, MAX_PROXIMITY};
     let entry = core::mem::size_of::<ipc_types::InboxEntry>();
+    let standing = offset_of!(SensorBlock, standing);
     vec![
         ("tick", offset_of!(SensorBlock, tick), "<u8", 1),
         ("robot_id", offset_of!(SensorBlock, robot_id), "<u4", 1),
@@ -400,6 +401,13 @@ fn sensor_block_layout() -> Vec<(&'static str, usize, &'static str, usize)> {
         ("drive_flags", offset_of!(SensorBlock, drive_flags), "<u4", 1),
         ("sensor_mode", offset_of!(SensorBlock, sensor_mode), "<u4", 1),
         ("line_bits", offset_of!(SensorBlock, line_bits), "<u4", 1),
+        // The challenge standing (with HAS_SCORE), its fields spelled out flat.
+        ("phase", standing + offset_of!(ChallengeStanding, phase), "<u4", 1),
+        ("score", standing + offset_of!(ChallengeStanding, score), "<i4", 1),
+        ("arrival_tick", standing + offset_of!(ChallengeStanding, arrival_tick), "<u4", 1),
+        ("returning_ticks", standing + offset_of!(ChallengeStanding, returning_ticks), "<u4", 1),
+        ("score_collisions", standing + offset_of!(ChallengeStanding, collisions), "<u4", 1),
+        ("visited_mask", standing + offset_of!(ChallengeStanding, visited_mask), "<u8", 1),
     ]
 }
 
@@ -447,7 +455,7 @@ mod tests {
     fn the_layout_covers_every_byte_of_a_sensor_block_in_order_without_overlap() {
         let size = |code: &str| match code {
             "<u8" | "<i8" | "<f8" => 8,
-            "<u4" | "<f4" => 4,
+            "<u4" | "<i4" | "<f4" => 4,
             "V1" | "u1" => 1,
             other => panic!("unknown code {other}"),
         };

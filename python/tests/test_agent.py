@@ -12,7 +12,7 @@ import iwsim
 
 def test_the_sensor_block_dtype_is_the_rust_layout():
     # Built from ipc-types' offsets, not mirrored by hand: its size is the Rust struct's.
-    assert iwsim.SENSOR_BLOCK.itemsize == iwsim._iwsim.SENSOR_BLOCK_BYTES == 832
+    assert iwsim.SENSOR_BLOCK.itemsize == iwsim._iwsim.SENSOR_BLOCK_BYTES == 864
     assert iwsim.SENSOR_BLOCK["proximity_m"].shape == (iwsim._iwsim.MAX_PROXIMITY,)
     assert iwsim.SENSOR_BLOCK.fields["tick"][1] == 0
 

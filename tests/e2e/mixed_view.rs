@@ -311,6 +311,7 @@ fn the_pages_decoder_reads_the_chairs_the_viewer_encodes() {
         motor_out: [0.0; 2],
         name: ipc_types::FixedName::EMPTY,
         proximity_m: [0.5; MAX_PROXIMITY],
+        standing: Default::default(),
     };
     let mut real_m = [f32::NAN; MAX_PROXIMITY];
     (real_m[0], real_m[1]) = (0.5, f32::INFINITY);

@@ -206,6 +206,7 @@ fn the_pages_decoder_reads_what_the_viewer_encodes() {
         motor_out: [0.0; 2],
         name: ipc_types::FixedName::new("c").expect("fits"),
         proximity_m: [0.5, 1.25, f32::NAN, f32::NAN, f32::NAN, f32::NAN, f32::NAN, f32::NAN],
+        standing: Default::default(),
     }];
     let bytes = frame::encode(&h, &robots);
     let dir = std::env::temp_dir().join(format!("iwsim-view-{}", std::process::id()));

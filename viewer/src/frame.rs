@@ -312,6 +312,7 @@ mod tests {
             motor_out: [0.0; 2],
             name: FixedName::new("door \"A\"").expect("fits"),
             proximity_m: [0.25, 1.0006, 80.0, f32::NAN, f32::NAN, f32::NAN, f32::NAN, f32::NAN],
+            standing: Default::default(),
         }
     }
 

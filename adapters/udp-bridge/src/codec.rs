@@ -587,13 +587,14 @@ pub struct ReplyParams {
     /// `ReturnTimePenalty`, `ArrivalTimePenalty`, `CollisionWallPenalty`,
     /// `CollisionRobotPenalty`, `TargetReward`, `HomeReward`.
     pub scoring: [u32; 6],
+    /// `ScoreSensor`: Measures carry `<Score>`.
+    pub score_sensor: bool,
 }
 
 /// `<Reply Status="Ok"><Parameters …/></Reply>`: under 1024 bytes, as pClient reads it. The
 /// attributes come in the real simulator's order, with `RequestsPerCycle` beside
 /// `NRequestsPerCycle` (libRobSock reads the former). `ShowActions` is `True` as the real
-/// simulator always says (it reads no such parameter); `ScoreSensor` is `Off`, as Measures
-/// carry no `<Score>`.
+/// simulator always says (it reads no such parameter).
 pub fn encode_reply_ok(p: &ReplyParams) -> Vec<u8> {
     let [ro, rb, rg, rc, rcol] = p.requestable;
     let [lo, lb, lg, lc, lcol] = p.latency;
@@ -601,7 +602,7 @@ pub fn encode_reply_ok(p: &ReplyParams) -> Vec<u8> {
     let mut s = String::with_capacity(900);
     let _ = write!(
         s,
-        "<Reply Status=\"Ok\">\n\t<Parameters SimTime=\"{}\" CycleTime=\"{}\" CompassNoise=\"{}\" BeaconNoise=\"{}\" ObstacleNoise=\"{}\" MotorsNoise=\"{}\" KeyTime=\"{}\" GPS=\"{}\" GPSLinNoise=\"{}\" GPSDirNoise=\"{}\" BeaconSensor=\"{}\" CompassSensor=\"{}\" ScoreSensor=\"Off\" ShowActions=\"True\" NBeacons=\"{}\" NRequestsPerCycle=\"{}\" RequestsPerCycle=\"{}\" ObstacleRequestable=\"{}\" BeaconRequestable=\"{}\" GroundRequestable=\"{}\" CompassRequestable=\"{}\" CollisionRequestable=\"{}\" ObstacleLatency=\"{}\" BeaconLatency=\"{}\" GroundLatency=\"{}\" CompassLatency=\"{}\" CollisionLatency=\"{}\" BeaconAperture=\"{}\" ReturnTimePenalty=\"{}\" ArrivalTimePenalty=\"{}\" CollisionWallPenalty=\"{}\" CollisionRobotPenalty=\"{}\" TargetReward=\"{}\" HomeReward=\"{}\"/>\n</Reply>",
+        "<Reply Status=\"Ok\">\n\t<Parameters SimTime=\"{}\" CycleTime=\"{}\" CompassNoise=\"{}\" BeaconNoise=\"{}\" ObstacleNoise=\"{}\" MotorsNoise=\"{}\" KeyTime=\"{}\" GPS=\"{}\" GPSLinNoise=\"{}\" GPSDirNoise=\"{}\" BeaconSensor=\"{}\" CompassSensor=\"{}\" ScoreSensor=\"{}\" ShowActions=\"True\" NBeacons=\"{}\" NRequestsPerCycle=\"{}\" RequestsPerCycle=\"{}\" ObstacleRequestable=\"{}\" BeaconRequestable=\"{}\" GroundRequestable=\"{}\" CompassRequestable=\"{}\" CollisionRequestable=\"{}\" ObstacleLatency=\"{}\" BeaconLatency=\"{}\" GroundLatency=\"{}\" CompassLatency=\"{}\" CollisionLatency=\"{}\" BeaconAperture=\"{}\" ReturnTimePenalty=\"{}\" ArrivalTimePenalty=\"{}\" CollisionWallPenalty=\"{}\" CollisionRobotPenalty=\"{}\" TargetReward=\"{}\" HomeReward=\"{}\"/>\n</Reply>",
         p.sim_time,
         p.cycle_ms,
         G(p.compass_noise),
@@ -614,6 +615,7 @@ pub fn encode_reply_ok(p: &ReplyParams) -> Vec<u8> {
         G(p.gps_dir_noise),
         on(p.beacon_sensor),
         on(p.compass_sensor),
+        on(p.score_sensor),
         p.n_beacons,
         p.requests_per_cycle,
         p.requests_per_cycle,
@@ -665,10 +667,38 @@ pub struct MeasuresData {
     pub line: Option<u8>,
     /// Messages heard: (speaker id, text).
     pub messages: Vec<(u32, Vec<u8>)>,
+    /// `<Score>` (None: the score sensor is off).
+    pub score: Option<ScoreData>,
     /// End, returning, visiting LEDs.
     pub leds: [bool; 3],
     /// `Buttons Start` and `Stop`.
     pub buttons: (bool, bool),
+}
+
+/// A robot's challenge standing as Measures (`<Score>`) and viewers (`<Robot>`) carry it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct ScoreData {
+    /// `Score` (Ciber-Rato keeps it in 32 bits: Measures print it signed, viewer datagrams
+    /// unsigned).
+    pub score: i32,
+    /// `ArrivalTime`, ticks.
+    pub arrival_time: u32,
+    /// `ReturningTime`, ticks.
+    pub returning_time: u32,
+    /// `Collisions`: collision events.
+    pub collisions: u32,
+    /// `Collision`: this tick's collision.
+    pub collision: bool,
+    /// `VisitedMask`: bit `k` for target `k`.
+    pub visited: u64,
+    /// Targets in the lab (the mask's length).
+    pub targets: usize,
+}
+
+impl ScoreData {
+    fn write_mask(&self, out: &mut Vec<u8>) {
+        out.extend((0..self.targets).map(|k| if k < 64 && self.visited >> k & 1 == 1 { b'1' } else { b'0' }));
+    }
 }
 
 /// `<Measures>` in the simulator's element and attribute order, under 4096 bytes.
@@ -722,6 +752,19 @@ pub fn encode_measures_into(m: &MeasuresData, out: &mut Vec<u8>) {
     for (from, text) in &m.messages {
         let _ = writeln!(out, "\t\t<Message From=\"{from}\"><![CDATA[{}]]></Message>", Cdata(text));
     }
+    if let Some(sc) = &m.score {
+        let _ = write!(
+            out,
+            "\t\t<Score Score=\"{}\" ArrivalTime=\"{}\" ReturningTime=\"{}\" Collisions=\"{}\" Collision=\"{}\" VisitedMask=\"",
+            sc.score,
+            sc.arrival_time,
+            sc.returning_time,
+            sc.collisions,
+            if sc.collision { "True" } else { "False" }
+        );
+        sc.write_mask(out);
+        out.extend_from_slice(b"\" />\n");
+    }
     let _ = write!(
         out,
         "\t</Sensors>\n\t<Leds EndLed=\"{}\" ReturningLed=\"{}\" VisitingLed=\"{}\"/>\n\t<Buttons Start=\"{}\" Stop=\"{}\"/>\n</Measures>",
@@ -743,10 +786,8 @@ pub struct ViewerRobot<'a> {
     pub id: u32,
     /// `Time`.
     pub time: u64,
-    /// `Collisions`.
-    pub collisions: u32,
-    /// `Collision`.
-    pub collision: bool,
+    /// `Score`, `ArrivalTime`, `ReturningTime`, `Collisions`, `Collision` and `VisitedMask`.
+    pub score: ScoreData,
     /// `State` (Running, Stopped, Finished, Removed…).
     pub state: &'static str,
     /// Intellwheels `Width`.
@@ -761,10 +802,8 @@ pub struct ViewerRobot<'a> {
     pub pose: (f64, f64, f64),
 }
 
-/// `<Robot …><Position X Y Dir/></Robot>` for viewers (thesis Fig. 6.3 adds the body).
-///
-/// iwsim keeps no Ciber-Rato score: `Score`, `ArrivalTime` and `ReturningTime` are always 0
-/// and `VisitedMask` is empty, whatever the lab's targets; `Collisions` is the hub's count.
+/// `<Robot …><Position X Y Dir/></Robot>` for viewers (thesis Fig. 6.3 adds the body). The
+/// score is printed unsigned, as the real simulator prints it here (a negative score wraps).
 pub fn encode_viewer_robot(r: &ViewerRobot<'_>) -> Vec<u8> {
     let mut out = Vec::with_capacity(300);
     encode_viewer_robot_into(r, &mut out);
@@ -777,12 +816,20 @@ pub fn encode_viewer_robot_into(r: &ViewerRobot<'_>, out: &mut Vec<u8>) {
     out.clear();
     let _ = write!(
         out,
-        "<Robot Name=\"{}\" Id=\"{}\" Time=\"{}\" Score=\"0\" ArrivalTime=\"0\" ReturningTime=\"0\" Collisions=\"{}\" Collision=\"{}\" VisitedMask=\"\" State=\"{}\" Width=\"{}\" Height=\"{}\" CenterOfMovement=\"{}\" Type=\"{}\">\n\t<Position X=\"{}\" Y=\"{}\" Dir=\"{}\"/>\n</Robot>",
+        "<Robot Name=\"{}\" Id=\"{}\" Time=\"{}\" Score=\"{}\" ArrivalTime=\"{}\" ReturningTime=\"{}\" Collisions=\"{}\" Collision=\"{}\" VisitedMask=\"",
         Escaped(r.name),
         r.id,
         r.time,
-        r.collisions,
-        if r.collision { "True" } else { "False" },
+        r.score.score as u32,
+        r.score.arrival_time,
+        r.score.returning_time,
+        r.score.collisions,
+        if r.score.collision { "True" } else { "False" },
+    );
+    r.score.write_mask(out);
+    let _ = write!(
+        out,
+        "\" State=\"{}\" Width=\"{}\" Height=\"{}\" CenterOfMovement=\"{}\" Type=\"{}\">\n\t<Position X=\"{}\" Y=\"{}\" Dir=\"{}\"/>\n</Robot>",
         r.state,
         G(r.width),
         G(r.height),
@@ -890,6 +937,25 @@ pub fn decode_measures(datagram: &[u8]) -> Result<MeasuresData, DecodeError> {
                         "Message" => {
                             let from = s.num(&["From"])?.map_or(0, |f| f.max(0.0) as u32);
                             m.messages.push((from, s.text.as_bytes().to_vec()));
+                        }
+                        "Score" => {
+                            let whole = |name: &str| -> Result<u32, DecodeError> {
+                                Ok(s.num(&[name])?.map_or(0, |v: f64| v.clamp(0.0, f64::from(u32::MAX)) as u32))
+                            };
+                            let mask = s.attr("VisitedMask").unwrap_or("");
+                            m.score = Some(ScoreData {
+                                score: s.num(&["Score"])?.map_or(0, |v: f64| v as i32),
+                                arrival_time: whole("ArrivalTime")?,
+                                returning_time: whole("ReturningTime")?,
+                                collisions: whole("Collisions")?,
+                                collision: s.attr("Collision") == Some("True"),
+                                visited: mask
+                                    .bytes()
+                                    .take(64)
+                                    .enumerate()
+                                    .fold(0u64, |bits, (k, c)| bits | (u64::from(c == b'1') << k)),
+                                targets: mask.len(),
+                            });
                         }
                         _ => {}
                     }

@@ -181,6 +181,7 @@ fn the_reply_fits_pclients_buffer_and_carries_what_it_reads() {
         beacon_aperture: std::f64::consts::PI,
         key_time: 4000,
         scoring: [25, 100, 5, 0, 100, 100],
+        score_sensor: true,
     };
     let r = encode_reply_ok(&p);
     assert!(r.len() < 1024, "{} bytes", r.len());
@@ -199,6 +200,7 @@ fn the_reply_fits_pclients_buffer_and_carries_what_it_reads() {
         "BeaconAperture=\"3.14159\"",
         "KeyTime=\"4000\"",
         "ShowActions=\"True\"",
+        "ScoreSensor=\"On\"",
         "ReturnTimePenalty=\"25\" ArrivalTimePenalty=\"100\" CollisionWallPenalty=\"5\" CollisionRobotPenalty=\"0\" TargetReward=\"100\" HomeReward=\"100\"",
     ] {
         assert!(t.contains(want), "{want} missing from {t}");
@@ -217,6 +219,7 @@ fn measures_with_the_defaults_are_byte_exact() {
         gps: None,
         line: Some(0),
         messages: vec![],
+        score: None,
         leds: [false; 3],
         buttons: (true, false),
     };
@@ -236,10 +239,19 @@ fn measures_with_every_sensor_on_are_byte_exact() {
         gps: Some((12.345678, 6.1)),
         line: Some(0b1_1100),
         messages: vec![(2, b"hello world".to_vec())],
+        score: Some(ScoreData {
+            score: -5,
+            arrival_time: 56,
+            returning_time: 0,
+            collisions: 1,
+            collision: true,
+            visited: 0b10,
+            targets: 3,
+        }),
         leds: [false, true, true],
         buttons: (false, true),
     };
-    let want = "<Measures Time=\"42\">\n\t<Sensors Collision=\"Yes\" Compass=\"-90\" Ground=\"0\">\n\t\t<IRSensor Id=\"0\" Value=\"100\"/>\n\t\t<IRSensor Id=\"1\" Value=\"0.3\"/>\n\t\t<BeaconSensor Id=\"0\" Value=\"180\"/>\n\t\t<BeaconSensor Id=\"1\" Value=\"NotVisible\"/>\n\t\t<GPS X=\"12.3457\" Y=\"6.1\" />\n\t\t<LineSensor Value=\"0011100\" />\n\t\t<Message From=\"2\"><![CDATA[hello world]]></Message>\n\t</Sensors>\n\t<Leds EndLed=\"Off\" ReturningLed=\"On\" VisitingLed=\"On\"/>\n\t<Buttons Start=\"Off\" Stop=\"On\"/>\n</Measures>\n\0";
+    let want = "<Measures Time=\"42\">\n\t<Sensors Collision=\"Yes\" Compass=\"-90\" Ground=\"0\">\n\t\t<IRSensor Id=\"0\" Value=\"100\"/>\n\t\t<IRSensor Id=\"1\" Value=\"0.3\"/>\n\t\t<BeaconSensor Id=\"0\" Value=\"180\"/>\n\t\t<BeaconSensor Id=\"1\" Value=\"NotVisible\"/>\n\t\t<GPS X=\"12.3457\" Y=\"6.1\" />\n\t\t<LineSensor Value=\"0011100\" />\n\t\t<Message From=\"2\"><![CDATA[hello world]]></Message>\n\t\t<Score Score=\"-5\" ArrivalTime=\"56\" ReturningTime=\"0\" Collisions=\"1\" Collision=\"True\" VisitedMask=\"010\" />\n\t</Sensors>\n\t<Leds EndLed=\"Off\" ReturningLed=\"On\" VisitingLed=\"On\"/>\n\t<Buttons Start=\"Off\" Stop=\"On\"/>\n</Measures>\n\0";
     assert_eq!(text(&encode_measures(&m)), want);
     // And it comes back through our own decoder as well-formed XML.
     assert!(parse(&encode_measures(&m), Repeats::Refused).is_ok());
@@ -251,16 +263,23 @@ fn viewer_robots_carry_the_intellwheels_body() {
         name: "r1",
         id: 1,
         time: 42,
-        collisions: 2,
-        collision: false,
-        state: "Running",
+        score: ScoreData {
+            score: 110,
+            arrival_time: 56,
+            returning_time: 3,
+            collisions: 2,
+            collision: false,
+            visited: 1,
+            targets: 1,
+        },
+        state: "Returning",
         width: 1.2,
         height: 0.7,
         com: 0.8,
         kind: "Simulated",
         pose: (7.10584, 10.9899, -0.693099),
     };
-    let want = "<Robot Name=\"r1\" Id=\"1\" Time=\"42\" Score=\"0\" ArrivalTime=\"0\" ReturningTime=\"0\" Collisions=\"2\" Collision=\"False\" VisitedMask=\"\" State=\"Running\" Width=\"1.2\" Height=\"0.7\" CenterOfMovement=\"0.8\" Type=\"Simulated\">\n\t<Position X=\"7.10584\" Y=\"10.9899\" Dir=\"-0.693099\"/>\n</Robot>\n\0";
+    let want = "<Robot Name=\"r1\" Id=\"1\" Time=\"42\" Score=\"110\" ArrivalTime=\"56\" ReturningTime=\"3\" Collisions=\"2\" Collision=\"False\" VisitedMask=\"1\" State=\"Returning\" Width=\"1.2\" Height=\"0.7\" CenterOfMovement=\"0.8\" Type=\"Simulated\">\n\t<Position X=\"7.10584\" Y=\"10.9899\" Dir=\"-0.693099\"/>\n</Robot>\n\0";
     assert_eq!(text(&encode_viewer_robot(&r)), want);
 }
 
@@ -304,6 +323,15 @@ fn measures_decode_to_what_was_encoded() {
         gps: Some((10.5, 3.25)),
         line: None,
         messages: vec![(2, b"hi ]]> there".to_vec())],
+        score: Some(ScoreData {
+            score: -15,
+            arrival_time: 7,
+            returning_time: 9,
+            collisions: 4,
+            collision: false,
+            visited: 0b101,
+            targets: 3,
+        }),
         leds: [false, true, false],
         buttons: (true, false),
     };
@@ -406,6 +434,7 @@ fn measures_and_viewer_robots_keep_their_bytes() {
         gps: Some((-1e-300, 5e21)),
         line: None,
         messages: vec![(7, b"a]]>b".to_vec()), (9, vec![0xff, b'x'])],
+        score: None,
         leds: [true, false, true],
         buttons: (true, true),
     };
@@ -420,8 +449,8 @@ fn measures_and_viewer_robots_keep_their_bytes() {
         name: "a&<\"b>",
         id: 77,
         time: 9,
-        collisions: 3,
-        collision: true,
+        // A negative score prints unsigned here, as the real simulator prints it.
+        score: ScoreData { score: -5, collisions: 3, collision: true, ..ScoreData::default() },
         state: "Stopped",
         width: 0.000099999,
         height: 1e21,
@@ -429,7 +458,7 @@ fn measures_and_viewer_robots_keep_their_bytes() {
         kind: "Door",
         pose: (99999.95, -0.0, 179.99999),
     };
-    let want = "<Robot Name=\"a&amp;&lt;&quot;b&gt;\" Id=\"77\" Time=\"9\" Score=\"0\" ArrivalTime=\"0\" ReturningTime=\"0\" Collisions=\"3\" Collision=\"True\" VisitedMask=\"\" State=\"Stopped\" Width=\"9.9999e-05\" Height=\"1e+21\" CenterOfMovement=\"0.333333\" Type=\"Door\">\n\t<Position X=\"99999.9\" Y=\"0\" Dir=\"180\"/>\n</Robot>\n\0";
+    let want = "<Robot Name=\"a&amp;&lt;&quot;b&gt;\" Id=\"77\" Time=\"9\" Score=\"4294967291\" ArrivalTime=\"0\" ReturningTime=\"0\" Collisions=\"3\" Collision=\"True\" VisitedMask=\"\" State=\"Stopped\" Width=\"9.9999e-05\" Height=\"1e+21\" CenterOfMovement=\"0.333333\" Type=\"Door\">\n\t<Position X=\"99999.9\" Y=\"0\" Dir=\"180\"/>\n</Robot>\n\0";
     assert_eq!(text(&encode_viewer_robot(&r)), want);
     encode_viewer_robot_into(&r, &mut buf);
     assert_eq!(text(&buf), want);

@@ -25,13 +25,16 @@ use agent_sdk::map::Map;
 use agent_sdk::pending::PendingRequest;
 use agent_sdk::{Agent, AgentError};
 use ipc_types::{
-    ACT_MOTORS, ACT_POSE, ActionBlock, COLLISION, Command, HAS_COMPASS, HAS_GPS, HAS_GROUND, LED_END, LED_RETURNING,
-    LED_VISITING, REG_HAS_POSE, RobotKind, RunState, SENSOR_BEACON, SENSOR_COLLISION, SENSOR_COMPASS, SENSOR_GPS,
-    SENSOR_GROUND, SENSOR_OBSTACLE, SensorBlock, SensorSpec,
+    ACT_MOTORS, ACT_POSE, ActionBlock, COLLISION, ChallengeStanding, Command, HAS_COMPASS, HAS_GPS, HAS_GROUND,
+    HAS_SCORE, LED_END, LED_RETURNING, LED_VISITING, REG_HAS_POSE, RobotKind, RunState, SENSOR_BEACON,
+    SENSOR_COLLISION, SENSOR_COMPASS, SENSOR_GPS, SENSOR_GROUND, SENSOR_OBSTACLE, SENSOR_SCORE, SensorBlock,
+    SensorSpec,
 };
 use observer::Observer;
 
-use crate::codec::{self, Actions, MeasuresData, Registration, ReplyParams, RobotType, ViewerCommand, ViewerRobot};
+use crate::codec::{
+    self, Actions, MeasuresData, Registration, ReplyParams, RobotType, ScoreData, ViewerCommand, ViewerRobot,
+};
 use crate::noise::NoiseLog;
 
 /// Ciber-Rato's motor power limit: powers are clamped to ±0.15 and 0.15 means full power.
@@ -223,6 +226,7 @@ fn reply_params(map: &Map) -> ReplyParams {
         beacon_aperture: p.beacon_aperture_rad,
         key_time: p.key_time_ticks,
         scoring: p.scoring,
+        score_sensor: p.sensors_on & SENSOR_SCORE != 0,
     }
 }
 
@@ -403,9 +407,25 @@ pub fn measures_into(
     }
     // Sent every tick, as by the real simulator (it cannot be switched off or requested).
     m.line = Some(b.line_bits as u8);
+    if b.present & HAS_SCORE != 0 {
+        m.score = Some(score_data(&b.standing, b.present & COLLISION != 0, map.targets.len()));
+    }
     messages.clear();
     messages.extend(b.messages().map(|(from, bytes)| (from, bytes.to_vec())));
     m.messages = messages;
+}
+
+/// A robot's standing as Measures and viewer datagrams carry it.
+fn score_data(s: &ChallengeStanding, collision: bool, targets: usize) -> ScoreData {
+    ScoreData {
+        score: s.score,
+        arrival_time: s.arrival_tick,
+        returning_time: s.returning_ticks,
+        collisions: s.collisions,
+        collision,
+        visited: s.visited_mask,
+        targets,
+    }
 }
 
 /// The hub's sensor sample of the tick in hand, read where it lies (the agent holds it), with
@@ -903,22 +923,17 @@ impl Bridge {
             return Ok(());
         }
         let (clients, datagram) = (&self.clients, &mut self.scratch.datagram);
+        let targets = self.map.targets.len();
         // Encoded from the snapshot where the hub wrote it, one robot at a time into one buffer.
         let sent = self.observer.with_last_world(|h, robots| {
-            let state_name = match RunState::from_u32(h.run_state) {
-                Some(RunState::Running) => "Running",
-                Some(RunState::Finished) => "Finished",
-                _ => "Stopped",
-            };
             for s in robots {
                 codec::encode_viewer_robot_into(
                     &ViewerRobot {
                         name: s.name.as_str().unwrap_or(""),
                         id: s.id,
                         time: h.tick,
-                        collisions: s.collision_count,
-                        collision: s.flags & ipc_types::ROBOT_COLLISION != 0,
-                        state: state_name,
+                        score: score_data(&s.standing, s.flags & ipc_types::ROBOT_COLLISION != 0, targets),
+                        state: sim_model::CHALLENGE_PHASES.get(s.standing.phase as usize).copied().unwrap_or("Running"),
                         width: s.width_m as f64,
                         height: s.height_m as f64,
                         com: s.com as f64,

@@ -231,6 +231,7 @@ mod tests {
             sensor_mode: 0,
             line_bits: 0,
             _reserved: 0,
+            standing: Default::default(),
         }
     }
 

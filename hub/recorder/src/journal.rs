@@ -38,9 +38,10 @@ use world::{BodyShape, ProximitySpec, RobotKind, RobotSpec};
 
 /// The first byte of every journal message. Bump it when the layout changes; readers refuse
 /// versions they do not know rather than misread them.
-pub const CODEC_VERSION: u8 = 3;
+pub const CODEC_VERSION: u8 = 4;
 /// The oldest version this build still reads: version 2 differs only in having no
-/// [`ChallengeParams`] (its runs read with the defaults, as they ran).
+/// [`ChallengeParams`], version 3 in having no scoring mode (their runs read with the
+/// defaults, as they ran).
 pub const OLDEST_CODEC_VERSION: u8 = 2;
 
 /// What a run starts from: enough to rebuild its world exactly.
@@ -353,6 +354,7 @@ fn put_params(o: &mut Out, p: &Params) {
         collision_robot_penalty,
         target_reward,
         home_reward,
+        scoring,
     } = challenge;
     o.u64(*key_time_ticks);
     o.bool(*score_sensor);
@@ -367,6 +369,7 @@ fn put_params(o: &mut Out, p: &Params) {
         o.u32(*v);
     }
     o.f64(*line_flip_prob);
+    o.u8(scoring.number() as u8);
 }
 
 fn kind_byte(kind: RobotKind) -> u8 {
@@ -704,6 +707,12 @@ fn get_params(i: &mut In) -> R<Params> {
     if i.version >= 3 {
         params.noise.line_flip_prob = i.f64("line sensor noise")?;
     }
+    if i.version >= 4 {
+        let offset = i.pos;
+        let value = i.u8("scoring mode")?;
+        params.challenge.scoring = world::challenge::Scoring::from_number(u32::from(value))
+            .map_err(|_| JournalDecodeError::BadByte { offset, what: "scoring mode", value })?;
+    }
     Ok(params)
 }
 
@@ -717,6 +726,8 @@ fn get_challenge(i: &mut In) -> R<ChallengeParams> {
         collision_robot_penalty: i.u32("scoring value")?,
         target_reward: i.u32("scoring value")?,
         home_reward: i.u32("scoring value")?,
+        // Read last (version 4 on).
+        scoring: world::challenge::Scoring::Competitive,
     })
 }
 

@@ -321,6 +321,8 @@ mod journal {
                         collision_robot_penalty: c.2[3],
                         target_reward: c.2[4],
                         home_reward: c.2[5],
+                        // Any mode, from the key time's bits (the tuple is full).
+                        scoring: world::challenge::Scoring::ALL[(c.0 % 6) as usize],
                     },
                 }
             })
@@ -441,7 +443,14 @@ mod journal {
             tail.extend(v.to_le_bytes());
         }
         tail.extend(0f64.to_le_bytes());
+        // Version 4's scoring mode closes them.
+        tail.push(c.scoring.number() as u8);
         let at = bytes.windows(tail.len()).position(|w| w == tail.as_slice()).expect("the challenge parameters");
+        // Version 3: the same without the scoring mode (its runs scored competitively).
+        let mut v3 = bytes.clone();
+        v3.remove(at + tail.len() - 1);
+        v3[0] = 3;
+        assert_eq!(decode_run_start(&v3), Ok(start.clone()));
         let flag = at - (8 + 8 + 4 + 8) - 1;
         assert_eq!(bytes[flag], 1, "the proximity range flag");
         let mut old = bytes[..flag].to_vec();

@@ -26,6 +26,10 @@ use std::f64::consts::{PI, TAU};
 /// every tick, so the hub bounds it for the same reason as a body's size.
 pub const MAX_SENSOR_RANGE_M: f64 = 20.0;
 
+/// A robot's challenge states as Ciber-Rato names them, by number (its viewers accept exactly
+/// these): the hub publishes the number, the UDP bridge writes the name.
+pub const CHALLENGE_PHASES: [&str; 6] = ["Stopped", "Running", "Waiting", "Returning", "Finished", "Removed"];
+
 /// Wraps an angle in radians to (−π, π]: the one angle convention of the project.
 #[inline]
 pub fn wrap_rad(a: f64) -> f64 {

@@ -3,8 +3,15 @@
 use super::{Motion, World, overlaps};
 use crate::geom::{PlacedBody, bodies_intersect, body_hits_triangle};
 
+/// A collision verdict bit: the next pose meets a wall or the lab's border.
+pub(super) const HIT_WALL: u8 = 1;
+/// A collision verdict bit: the next pose meets another body.
+pub(super) const HIT_ROBOT: u8 = 2;
+
 impl World {
-    /// Fills `scratch.blocked[i]` with (hit, enforce) for every slot.
+    /// Fills `scratch.blocked[i]` with (hit, enforce) for every slot: `hit` holds [`HIT_WALL`]
+    /// and [`HIT_ROBOT`] bits (both when the next pose meets a wall and a body; challenges
+    /// charge each kind of contact its own penalty).
     ///
     /// A robot is refused its next pose when that pose meets a wall, or another body at either
     /// its current or its next pose: testing both makes the outcome independent of the order
@@ -15,7 +22,7 @@ impl World {
     pub(super) fn resolve_collisions(&mut self, stats: &mut super::StepStats, chunking: &super::Chunking) {
         let mut blocked = std::mem::take(&mut self.scratch.blocked);
         blocked.clear();
-        blocked.resize(self.motion.len(), (false, false));
+        blocked.resize(self.motion.len(), (0, false));
         // Each robot's verdict reads only the phase's inputs, so chunks run in any order.
         let mut units = vec![(); blocked.len()]; // zero-sized: never allocates
         let mut chunk_units = [(); super::MAX_CHUNKS];
@@ -28,15 +35,16 @@ impl World {
                 }
             }
         });
-        stats.colliding += blocked.iter().filter(|(hit, _)| *hit).count() as u32;
+        stats.colliding += blocked.iter().filter(|(hit, _)| *hit != 0).count() as u32;
         self.scratch.blocked = blocked;
     }
 
-    fn next_pose_hits(&self, i: usize, m: &Motion) -> bool {
+    fn next_pose_hits(&self, i: usize, m: &Motion) -> u8 {
         let escape = !m.real;
+        let mut hits = 0;
         let s = &self.statics;
         let (x0, y0, x1, y1) = s.spec.cell_range(m.next_min, m.next_max);
-        for iy in y0..=y1 {
+        'walls: for iy in y0..=y1 {
             for ix in x0..=x1 {
                 for &t in s.triangles_in(iy * s.spec.nx + ix) {
                     let tri = &s.triangles[t as usize];
@@ -46,11 +54,13 @@ impl World {
                             && overlaps(m.cur_min, m.cur_max, tri.min, tri.max)
                             && body_hits_triangle(&m.cur, &tri.p))
                     {
-                        return true;
+                        hits = HIT_WALL;
+                        break 'walls;
                     }
                 }
             }
         }
+        // Bodies are tested even after a wall: a contact with both costs both penalties.
         let mut hit = false;
         self.dyn_grid.query(m.next_min, m.next_max, |j| {
             let j = j as usize;
@@ -69,7 +79,7 @@ impl World {
                 hit = !already;
             }
         });
-        hit
+        hits | (hit as u8 * HIT_ROBOT)
     }
 
     /// Whether a placed body touches any wall (the lab border included).

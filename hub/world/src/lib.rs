@@ -31,6 +31,7 @@
 
 #![warn(missing_docs)]
 
+pub mod challenge;
 mod geom;
 pub mod map;
 pub mod math;
@@ -208,6 +209,10 @@ pub struct Robot {
     pub motor_out: [Real; 2],
     /// The last tick's move was refused (Real robots: it overlaps something).
     pub collision: bool,
+    /// This tick's refused move met a wall or the lab's border.
+    pub collision_wall: bool,
+    /// This tick's refused move met another body.
+    pub collision_robot: bool,
     /// Rising edges of `collision`: contacts so far.
     pub collision_count: u64,
     /// The sensor readings reported this tick.
@@ -356,7 +361,7 @@ impl Geo {
 struct Scratch {
     /// One sensing scratch per chunk of robots (see [`World::chunking`]).
     sense: Vec<SenseScratch>,
-    blocked: Vec<(bool, bool)>,
+    blocked: Vec<(u8, bool)>,
     deliveries: Vec<(u32, Real, Heard)>,
     speakers: Vec<u32>,
     listeners: Vec<u32>,
@@ -644,6 +649,12 @@ impl World {
         &self.params
     }
 
+    /// Whether the segment a→b crosses no wall higher than the floor (the lab's border
+    /// included); lines on the floor do not count.
+    pub fn segment_clear(&self, a: Point2<Real>, b: Point2<Real>) -> bool {
+        !self.statics.segment_blocked(a, b, 0.0)
+    }
+
     /// Ticks stepped so far.
     pub fn tick(&self) -> u64 {
         self.tick
@@ -696,6 +707,8 @@ impl World {
             motor_in: [0.0; 2],
             motor_out: [0.0; 2],
             collision: false,
+            collision_wall: false,
+            collision_robot: false,
             collision_count: 0,
             readings,
             inbox: Vec::new(),
@@ -1005,10 +1018,11 @@ impl World {
         r: &mut Robot,
         g: &mut Geo,
         m: &Motion,
-        (hit, enforce): (bool, bool),
+        (hits, enforce): (u8, bool),
         (slip, ticks_per_m, dt): (Real, Real, Real),
         key: (u64, u64, u64),
     ) {
+        let hit = hits != 0;
         let moved = m.moving && !(hit && enforce);
         // A chair's encoders count what its wheels turn, not where the body went: held by a
         // wall or another body, its driven wheels spin on the floor and keep counting, as a
@@ -1049,6 +1063,8 @@ impl World {
             r.collision_count += 1;
         }
         r.collision = hit;
+        r.collision_wall = hits & collide::HIT_WALL != 0;
+        r.collision_robot = hits & collide::HIT_ROBOT != 0;
     }
 
     fn deliver_messages(&mut self, stats: &mut StepStats) {

@@ -250,6 +250,9 @@ pub struct ChallengeParams {
     pub target_reward: u32,
     /// `HomeReward` (100).
     pub home_reward: u32,
+    /// The scoring mode (the real simulator's `--scoring`, 0 by default; an iwsim parameter
+    /// `Scoring`, or `iwsim hub --scoring`).
+    pub scoring: crate::challenge::Scoring,
 }
 
 impl Default for ChallengeParams {
@@ -263,6 +266,7 @@ impl Default for ChallengeParams {
             collision_robot_penalty: 2,
             target_reward: 100,
             home_reward: 100,
+            scoring: crate::challenge::Scoring::Competitive,
         }
     }
 }

@@ -1067,6 +1067,10 @@ fn params_from(root: &Element, expected: &'static str) -> Result<Params, MapLoad
             "CollisionRobotPenalty" => p.challenge.collision_robot_penalty = count()?,
             "TargetReward" => p.challenge.target_reward = count()?,
             "HomeReward" => p.challenge.home_reward = count()?,
+            "Scoring" => {
+                p.challenge.scoring = crate::challenge::Scoring::from_number(count()?)
+                    .map_err(|_| out_of_range(root, attr, "a scoring mode iwsim has: 0, 1, 2, 3, 5 or 6"))?
+            }
             "LineSensorTrueProb" => {
                 let truth = check(root, attr, value()?, |v| (0.0..=1.0).contains(&v), "a probability, from 0 to 1")?;
                 p.noise.line_flip_prob = 1.0 - truth;
@@ -1511,7 +1515,8 @@ mod tests {
                 EncoderTicks=\"2048\" WheelRadius=\"0.2\" EncoderNoise=\"2\"
                 KeyTime=\"4000\" Lab=\"lab.xml\" ShowActions=\"On\" NBeacons=\"1\" ScoreSensor=\"On\"
                 ReturnTimePenalty=\"1\" ArrivalTimePenalty=\"2\" CollisionWallPenalty=\"5\"
-                CollisionRobotPenalty=\"0\" TargetReward=\"3\" HomeReward=\"4\" LineSensorTrueProb=\"0.99\"/>",
+                CollisionRobotPenalty=\"0\" TargetReward=\"3\" HomeReward=\"4\" LineSensorTrueProb=\"0.99\"
+                Scoring=\"1\"/>",
         );
         assert_eq!(p.sim_time_ticks, 1800);
         assert_eq!(p.cycle_ms, 50);
@@ -1554,6 +1559,7 @@ mod tests {
                 collision_robot_penalty: 0,
                 target_reward: 3,
                 home_reward: 4,
+                scoring: crate::challenge::Scoring::Control,
             }
         );
         assert!((p.noise.line_flip_prob - 0.01).abs() < 1e-12);
