@@ -183,6 +183,16 @@ pub fn run(args: &HubArgs) -> anyhow::Result<ExitCode> {
                 r.id, r.x_m, r.y_m, r.heading_deg, r.flags
             );
         }
+        if let Ok(mode) = world::challenge::Scoring::from_number(out.scoring) {
+            let order = if mode.lower_is_better() { "lower is better" } else { "higher is better" };
+            println!("challenge: scoring {} ({}; {order})", out.scoring, mode.name());
+        }
+        for s in &out.scores {
+            println!(
+                "score {} {:?}: {}, score {}, arrival tick {}, returning ticks {}, collisions {}, visited {:?}",
+                s.id, s.name, s.state, s.score, s.arrival_tick, s.returning_ticks, s.collisions, s.visited
+            );
+        }
         if let Some(path) = &args.record {
             println!(
                 "recorded {} bytes to {} ({} world frames for people dropped; the replay journal is whole)",

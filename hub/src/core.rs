@@ -243,6 +243,11 @@ impl HubCore {
         self.stage.world()
     }
 
+    /// The world with its robots by id and their challenge.
+    pub fn stage(&self) -> &Stage {
+        &self.stage
+    }
+
     /// The simulated duration of one tick, seconds (the cycle time, also in lock-step).
     pub fn dt_s(&self) -> f64 {
         self.stage.dt_s()

@@ -601,10 +601,13 @@ pub fn run(cfg: HubConfig) -> Result<HubOutcome, HubError> {
         let done: Vec<i32> = ready.iter().map(|&i| waiting[i]).collect();
         waiting.retain(|fd| !done.contains(fd));
     }
+    outcome.scoring = core.stage().challenge().scoring().number();
+    outcome.scores = core.stage().scores();
     if let Some(mut rec) = recording {
         record_changes(&mut core, &mut rec, &mut journal);
         let reason = if outcome.interrupted { "interrupted" } else { "finished" };
         rec.event(&recorder::journal::Event::Finish { tick: core.world().tick(), reason: reason.to_owned() });
+        rec.metadata(recorder::CHALLENGE_METADATA, challenge_table(outcome.scoring, &outcome.scores));
         let stats = rec.finish()?;
         if stats.dropped_world_frames > 0 || stats.replay_stalls > 0 {
             tracing::warn!(
@@ -627,6 +630,20 @@ pub fn run(cfg: HubConfig) -> Result<HubOutcome, HubError> {
         .collect();
     drop((agents, ports, node));
     Ok(outcome)
+}
+
+/// The run's final challenge standings as the recording's metadata table: the scoring mode,
+/// and one JSON object per robot under its zero-padded id.
+fn challenge_table(
+    scoring: u32,
+    scores: &[records::outcome::ScoreAtEnd],
+) -> std::collections::BTreeMap<String, String> {
+    let mut t = std::collections::BTreeMap::new();
+    t.insert("scoring".to_owned(), scoring.to_string());
+    for s in scores {
+        t.insert(format!("robot {:05}", s.id), s.json());
+    }
+    t
 }
 
 /// Whether waiting for lock-step answers may spin: while every agent the hub waits for can have

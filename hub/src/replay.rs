@@ -126,11 +126,19 @@ pub fn outcome_of(stage: &Stage) -> HubOutcome {
         .ids()
         .filter_map(|id| {
             let r = stage.robot(id)?;
-            let flags = (r.collision as u32 * ipc_types::ROBOT_COLLISION) | (r.frozen as u32 * ipc_types::ROBOT_FROZEN);
+            let flags = (r.collision as u32 * ipc_types::ROBOT_COLLISION)
+                | (stage.frozen_without_agent(id) as u32 * ipc_types::ROBOT_FROZEN);
             Some(RobotAtEnd { id, x_m: r.pose.x, y_m: r.pose.y, heading_deg: r.pose.heading_deg(), flags })
         })
         .collect();
-    HubOutcome { ticks: w.tick(), state_hash: StateHash(w.state_hash()), robots, ..HubOutcome::default() }
+    HubOutcome {
+        ticks: w.tick(),
+        state_hash: StateHash(w.state_hash()),
+        robots,
+        scoring: stage.challenge().scoring().number(),
+        scores: stage.scores(),
+        ..HubOutcome::default()
+    }
 }
 
 /// `iwsim replay`.

@@ -7,6 +7,7 @@ use std::collections::BTreeMap;
 
 use ipc_types::MAX_ROBOTS;
 use recorder::journal::{Event, RecordedAction};
+use records::outcome::ScoreAtEnd;
 use world::challenge::{Challenge, Standing, Turn};
 use world::map::{Lab, Params};
 use world::{
@@ -98,6 +99,30 @@ impl Stage {
     /// Robot `id`'s standing in the challenge.
     pub fn standing(&self, id: u32) -> Option<Standing> {
         self.challenge.standing(id)
+    }
+
+    /// Whether robot `id` is frozen because its agent is gone (not because it finished its
+    /// challenge, which also stops it).
+    pub fn frozen_without_agent(&self, id: u32) -> bool {
+        self.robot(id).is_some_and(|r| r.frozen) && !self.challenge.finished(id)
+    }
+
+    /// Every robot's standing as the run's final table gives it, in id order.
+    pub fn scores(&self) -> Vec<ScoreAtEnd> {
+        let targets = self.world.lab().targets.len();
+        self.challenge
+            .standings()
+            .map(|(id, s)| ScoreAtEnd {
+                id,
+                name: self.robot(id).map(|r| r.spec.name.clone()).unwrap_or_default(),
+                state: s.phase.wire_name().to_owned(),
+                score: s.score,
+                arrival_tick: s.arrival_tick,
+                returning_ticks: s.returning_ticks,
+                collisions: s.collisions,
+                visited: (0..targets).map(|k| if k < 64 && s.visited >> k & 1 == 1 { '1' } else { '0' }).collect(),
+            })
+            .collect()
     }
 
     /// Lets the world's step use `threads` threads (0: one per core) from `parallel_min_robots`

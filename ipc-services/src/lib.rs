@@ -587,6 +587,12 @@ pub fn stop_requested(node: &Node<Svc>) -> bool {
     STOP.load(std::sync::atomic::Ordering::SeqCst) || node.wait(std::time::Duration::ZERO).is_err()
 }
 
+/// Whether a termination signal arrived (the handlers stay after every node is closed: a
+/// process that lingers after its session can still be stopped).
+pub fn stop_signalled() -> bool {
+    STOP.load(std::sync::atomic::Ordering::SeqCst)
+}
+
 /// Installs the handlers that set [`STOP`], after iceoryx2's (which a node's creation may
 /// install): SIGINT, SIGTERM, and SIGHUP unless it was ignored (as under `nohup`).
 fn install_stop_handlers() {

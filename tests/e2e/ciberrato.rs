@@ -11,7 +11,7 @@ use super::common::{Lines, Proc, hub_and_logged_bridge as hub_and_bridge, sessio
 
 /// Waits for the hub and the bridge to exit cleanly; returns the hub's stdout and the
 /// bridge's closing line (its counters).
-fn ended(hub: Proc, bridge: Proc, lines: &Lines) -> (String, String) {
+pub(super) fn ended(hub: Proc, bridge: Proc, lines: &Lines) -> (String, String) {
     let h = hub.wait(Duration::from_secs(30));
     assert!(h.status.success(), "hub: {}", text(&h.stderr));
     let b = bridge.wait(Duration::from_secs(10));
@@ -28,13 +28,13 @@ fn stop(s: &str, hub: Proc, bridge: Proc, lines: &Lines) -> String {
 }
 
 /// A stand-in Ciber-Rato client: one socket, the registration reply's port for later traffic.
-struct StandIn {
+pub(super) struct StandIn {
     sock: UdpSocket,
     server: Option<SocketAddr>,
 }
 
 impl StandIn {
-    fn new() -> Self {
+    pub(super) fn new() -> Self {
         let sock = UdpSocket::bind("127.0.0.1:0").expect("bind");
         sock.set_read_timeout(Some(Duration::from_secs(5))).expect("timeout");
         Self { sock, server: None }
@@ -42,7 +42,7 @@ impl StandIn {
 
     /// The next datagram within `timeout`, without its closing NUL; remembers the port the
     /// first one came from (the client's own port on the bridge, as libRobSock does).
-    fn recv_within(&mut self, timeout: Duration) -> Option<String> {
+    pub(super) fn recv_within(&mut self, timeout: Duration) -> Option<String> {
         let mut buf = [0u8; 65536];
         self.sock.set_read_timeout(Some(timeout.max(Duration::from_millis(1)))).ok()?;
         let (n, from) = self.sock.recv_from(&mut buf).ok()?;
@@ -52,18 +52,18 @@ impl StandIn {
     }
 
     /// Registers and returns the reply (a client that hears nothing in 5 s gives up).
-    fn register(&mut self, reg: SocketAddr, xml: &str) -> String {
+    pub(super) fn register(&mut self, reg: SocketAddr, xml: &str) -> String {
         self.server = None;
         self.sock.send_to(xml.as_bytes(), reg).expect("send");
         self.recv_within(Duration::from_secs(5)).expect("a reply within 5 s")
     }
 
-    fn send(&self, xml: &str) {
+    pub(super) fn send(&self, xml: &str) {
         self.sock.send_to(xml.as_bytes(), self.server.expect("registered")).expect("send");
     }
 
     /// The next datagram whose root is `root`; like robsample, gives up after 2 s of silence.
-    fn next(&mut self, root: &str) -> String {
+    pub(super) fn next(&mut self, root: &str) -> String {
         loop {
             let d = self.recv_within(Duration::from_secs(2)).unwrap_or_else(|| panic!("no datagram for 2 s"));
             if d.starts_with(&format!("<{root} ")) {
@@ -73,14 +73,14 @@ impl StandIn {
     }
 }
 
-fn attr<'a>(xml: &'a str, element: &str, name: &str) -> Option<&'a str> {
+pub(super) fn attr<'a>(xml: &'a str, element: &str, name: &str) -> Option<&'a str> {
     let el = &xml[xml.find(&format!("<{element} "))?..];
     let key = format!(" {name}=\"");
     let rest = &el[el.find(&key)? + key.len()..];
     Some(&rest[..rest.find('"')?])
 }
 
-fn num(xml: &str, element: &str, name: &str) -> Option<f64> {
+pub(super) fn num(xml: &str, element: &str, name: &str) -> Option<f64> {
     attr(xml, element, name)?.parse().ok()
 }
 

@@ -3,6 +3,7 @@
 mod architecture;
 mod browser;
 mod chairs;
+mod challenge;
 mod ciberrato;
 mod cli;
 mod common;

@@ -415,6 +415,26 @@ pub fn measures_into(
     m.messages = messages;
 }
 
+/// A robot of a world snapshot at `tick` as viewers see it.
+fn viewer_robot(s: &ipc_types::RobotState, tick: u64, targets: usize) -> ViewerRobot<'_> {
+    ViewerRobot {
+        name: s.name.as_str().unwrap_or(""),
+        id: s.id,
+        time: tick,
+        score: score_data(&s.standing, s.flags & ipc_types::ROBOT_COLLISION != 0, targets),
+        state: sim_model::CHALLENGE_PHASES.get(s.standing.phase as usize).copied().unwrap_or("Running"),
+        width: s.width_m as f64,
+        height: s.height_m as f64,
+        com: s.com as f64,
+        kind: match RobotKind::from_u32(s.kind) {
+            Some(RobotKind::Real) => "Real",
+            Some(RobotKind::Door) => "Door",
+            _ => "Simulated",
+        },
+        pose: (s.x_m, s.y_m, s.heading_deg),
+    }
+}
+
 /// A robot's standing as Measures and viewer datagrams carry it.
 fn score_data(s: &ChallengeStanding, collision: bool, targets: usize) -> ScoreData {
     ScoreData {
@@ -573,11 +593,7 @@ impl Bridge {
             }
             if self.agent.finished() {
                 tracing::info!("the hub ended the run");
-                let Bridge { agent, counters, control, .. } = self;
-                // The last process of a session removes its files: close every node first.
-                drop(control);
-                agent.close();
-                return Ok(counters);
+                return Ok(self.after_the_run());
             }
             self.agent.check_alive()?;
             self.serve_viewers()?;
@@ -585,6 +601,105 @@ impl Bridge {
             self.answer_hub(changed)?;
             self.drop_silent();
         }
+    }
+
+    /// After the run, as the real simulator does: each robot keeps getting its last Measures
+    /// every cycle (`Time` frozen, both Buttons off) with the LEDs it sets echoed, and viewers
+    /// their robots, until no robot client has spoken for [`GONE_AFTER`] (stock clients quit
+    /// when their EndLed comes back on, or 2 s after the Measures stop) or a termination
+    /// signal comes. The session's nodes close first: the hub is gone, and nothing of the
+    /// session is left in /dev/shm while the bridge lingers.
+    fn after_the_run(self) -> Counters {
+        let tick = self.tick.map_or(0, |t| t.0);
+        let blocks = Blocks { blocks: self.agent.sensors(), index: &self.block_index };
+        let last: Vec<Option<SensorBlock>> = self
+            .clients
+            .iter()
+            .map(|c| match &c.kind {
+                Kind::Robot(r) => blocks.get(r.robot_id).copied(),
+                _ => None,
+            })
+            .collect();
+        let views = self.viewer_datagrams();
+        let Bridge { agent, control, observer, mut clients, map, viewer_map, counters, mut noise, .. } = self;
+        drop(control);
+        drop(observer);
+        agent.close();
+        let cycle = Duration::from_millis(map.header.cycle_ms.max(10) as u64);
+        let mut measures = MeasuresData::default();
+        let mut datagram = Vec::new();
+        let mut buf = [0u8; 65536];
+        let mut fds: Vec<libc::pollfd> = Vec::new();
+        let mut due = Instant::now();
+        loop {
+            let now = Instant::now();
+            let heard = |c: &Client| matches!(c.kind, Kind::Robot(_)) && now.duration_since(c.last_heard) < GONE_AFTER;
+            if agent_sdk::stop_signalled() || !clients.iter().any(heard) {
+                return counters;
+            }
+            for c in &mut clients {
+                for _ in 0..MAX_READS_PER_SOCKET {
+                    let Ok((n, from)) = c.socket.recv_from(&mut buf) else { break };
+                    if from != c.peer {
+                        continue;
+                    }
+                    c.last_heard = Instant::now();
+                    match &mut c.kind {
+                        Kind::Robot(r) => match codec::decode_actions(&buf[..n]) {
+                            Ok(a) => apply_actions(r, &a),
+                            Err(e) => noisy(&mut noise, from, || format!("actions from {from} dropped: {e}")),
+                        },
+                        Kind::Viewer | Kind::Panel => match codec::decode_viewer(&buf[..n]) {
+                            Ok(ViewerCommand::LabReq) => send(&c.socket, c.peer, &codec::encode_lab(&viewer_map)),
+                            Ok(ViewerCommand::GridReq) => send(&c.socket, c.peer, &codec::encode_grid(&map)),
+                            // The run is over: nothing left to start, stop or remove.
+                            Ok(_) => {}
+                            Err(e) => noisy(&mut noise, from, || format!("viewer command from {from} dropped: {e}")),
+                        },
+                    }
+                }
+            }
+            if now >= due {
+                due = now + cycle;
+                for (c, b) in clients.iter().zip(&last) {
+                    match (&c.kind, b) {
+                        (Kind::Robot(r), Some(b)) => {
+                            measures_into(&mut measures, b, tick, RunState::Finished, &r.ir_ids, r.leds, &map, &[]);
+                            codec::encode_measures_into(&measures, &mut datagram);
+                            send(&c.socket, c.peer, &datagram);
+                        }
+                        (Kind::Viewer, _) => views.iter().for_each(|v| send(&c.socket, c.peer, v)),
+                        _ => {}
+                    }
+                }
+            }
+            fds.clear();
+            fds.extend(clients.iter().map(|c| libc::pollfd {
+                fd: c.socket.as_raw_fd(),
+                events: libc::POLLIN,
+                revents: 0,
+            }));
+            let wait_ms = due.saturating_duration_since(Instant::now()).as_millis().min(1000) as libc::c_int;
+            #[allow(unsafe_code)]
+            // SAFETY: fds is a live array of pollfd for the duration of the call.
+            unsafe {
+                libc::poll(fds.as_mut_ptr(), fds.len() as libc::nfds_t, wait_ms);
+            }
+        }
+    }
+
+    /// Every robot of the last world snapshot as viewers get it.
+    fn viewer_datagrams(&self) -> Vec<Vec<u8>> {
+        let targets = self.map.targets.len();
+        let mut out = Vec::new();
+        let _ = self.observer.with_last_world(|h, robots| {
+            for s in robots {
+                let mut d = Vec::new();
+                codec::encode_viewer_robot_into(&viewer_robot(s, h.tick, targets), &mut d);
+                out.push(d);
+            }
+        });
+        out
     }
 
     fn serve_registrations(&mut self) {
@@ -927,25 +1042,7 @@ impl Bridge {
         // Encoded from the snapshot where the hub wrote it, one robot at a time into one buffer.
         let sent = self.observer.with_last_world(|h, robots| {
             for s in robots {
-                codec::encode_viewer_robot_into(
-                    &ViewerRobot {
-                        name: s.name.as_str().unwrap_or(""),
-                        id: s.id,
-                        time: h.tick,
-                        score: score_data(&s.standing, s.flags & ipc_types::ROBOT_COLLISION != 0, targets),
-                        state: sim_model::CHALLENGE_PHASES.get(s.standing.phase as usize).copied().unwrap_or("Running"),
-                        width: s.width_m as f64,
-                        height: s.height_m as f64,
-                        com: s.com as f64,
-                        kind: match RobotKind::from_u32(s.kind) {
-                            Some(RobotKind::Real) => "Real",
-                            Some(RobotKind::Door) => "Door",
-                            _ => "Simulated",
-                        },
-                        pose: (s.x_m, s.y_m, s.heading_deg),
-                    },
-                    datagram,
-                );
+                codec::encode_viewer_robot_into(&viewer_robot(s, h.tick, targets), datagram);
                 for c in clients.iter().filter(|c| matches!(c.kind, Kind::Viewer)) {
                     send(&c.socket, c.peer, datagram);
                 }
@@ -1066,6 +1163,9 @@ impl Bridge {
 /// Datagrams read from one socket per loop: enough for any honest client, and a flood on one
 /// port cannot starve the others.
 const MAX_READS_PER_SOCKET: usize = 64;
+/// After the run, a robot client silent this long has left (stock clients quit 2 s after
+/// their last Measures, or at once when their EndLed comes back on).
+const GONE_AFTER: Duration = Duration::from_secs(2);
 /// Clients one bridge serves (each has a socket).
 const MAX_CLIENTS: usize = 512;
 /// Robot registrations sent to the hub and not yet answered, counting the ready request: the

@@ -42,7 +42,7 @@
 //! compass, or its GPS.
 #![warn(missing_docs)]
 
-pub use ipc_services::report;
+pub use ipc_services::{report, stop_signalled};
 pub use records::{args, files, log};
 
 pub mod cli;

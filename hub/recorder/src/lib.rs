@@ -90,6 +90,10 @@ pub const ROBOTS_TOPIC: &str = "/robots";
 pub const TF_TOPIC: &str = "/tf";
 /// Topic of the proximity cones.
 pub const PROXIMITY_TOPIC: &str = "/proximity";
+/// The name of the metadata record that holds the run's final challenge standings: `scoring`
+/// (the mode's number) and, per robot, `robot 00001` … (a JSON object: id, name, state, score,
+/// arrival and returning ticks, collisions, visited mask).
+pub const CHALLENGE_METADATA: &str = "iwsim.challenge";
 /// Message encoding of the replay channels (the codec of [`journal`]; its version is each
 /// message's first byte).
 pub const JOURNAL_ENCODING: &str = "iwsim-journal";

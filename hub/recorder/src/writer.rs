@@ -130,6 +130,7 @@ struct Frame {
 enum Job {
     Event { t_ns: u64, bytes: Vec<u8> },
     World(Frame),
+    Metadata(mcap::records::Metadata),
 }
 
 /// Records a run into an MCAP file. See the crate docs for the channels.
@@ -252,6 +253,15 @@ impl Recorder {
             }
             Err(TrySendError::Full(_)) => self.dropped_world_frames += 1,
             Err(TrySendError::Disconnected(_)) => self.jobs = None,
+        }
+    }
+
+    /// Records a named table of text (an MCAP metadata record, which any MCAP reader lists
+    /// without iwsim's codec): the run's final challenge standings, for one. Never dropped.
+    pub fn metadata(&mut self, name: &str, entries: std::collections::BTreeMap<String, String>) {
+        let Some(jobs) = &self.jobs else { return };
+        if jobs.send(Job::Metadata(mcap::records::Metadata { name: name.to_owned(), metadata: entries })).is_err() {
+            self.jobs = None;
         }
     }
 
@@ -452,6 +462,10 @@ impl Output {
                     self.buf = buf;
                     self.totals.world_frames += 1;
                     let _ = frames_back.try_send(frame);
+                }
+                Job::Metadata(m) => {
+                    self.close_chunk()?;
+                    self.mcap.write_metadata(&m)?;
                 }
             }
         }

@@ -58,6 +58,34 @@ pub struct RobotAtEnd {
     pub flags: u32,
 }
 
+/// A robot's final standing in the run's Ciber-Rato challenge.
+#[derive(Debug, Clone, PartialEq, Eq, Default, Serialize, Deserialize)]
+pub struct ScoreAtEnd {
+    /// Robot id.
+    pub id: u32,
+    /// Robot name.
+    pub name: String,
+    /// Its state as Ciber-Rato names it (`Running`, `Returning`, `Finished`).
+    pub state: String,
+    /// Its score.
+    pub score: i64,
+    /// Competitive mode: the tick it arrived.
+    pub arrival_tick: u64,
+    /// Competitive mode: ticks since its return began.
+    pub returning_ticks: u64,
+    /// Collision events.
+    pub collisions: u32,
+    /// The targets visited, one `0`/`1` per target in lab order (Ciber-Rato's `VisitedMask`).
+    pub visited: String,
+}
+
+impl ScoreAtEnd {
+    /// As one line of JSON.
+    pub fn json(&self) -> String {
+        crate::to_json(self)
+    }
+}
+
 /// How a hub run ended.
 #[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
 pub struct HubOutcome {
@@ -94,6 +122,12 @@ pub struct HubOutcome {
     pub interrupted: bool,
     /// Robots at the end.
     pub robots: Vec<RobotAtEnd>,
+    /// The challenge's scoring mode (Ciber-Rato's `--scoring N`).
+    #[serde(default)]
+    pub scoring: u32,
+    /// Every robot's final standing in the challenge, in id order.
+    #[serde(default)]
+    pub scores: Vec<ScoreAtEnd>,
 }
 
 /// Why a hub's stdout gave no outcome.
@@ -140,10 +174,21 @@ mod tests {
             refused_poses: 0,
             interrupted: false,
             robots: vec![RobotAtEnd { id: 3, x_m: 10.5, y_m: 6.1, heading_deg: -90.0, flags: 4 }],
+            scoring: 1,
+            scores: vec![ScoreAtEnd {
+                id: 3,
+                name: "RS1".into(),
+                state: "Finished".into(),
+                score: -5,
+                arrival_tick: 0,
+                returning_ticks: 0,
+                collisions: 1,
+                visited: "00".into(),
+            }],
         };
         assert_eq!(
             out.json_line(),
-            r#"{"ticks":60,"run_s":0.123457,"state_hash":"0123456789abcdef","agents_seen":2,"agents_died":1,"foreign_dropped":4,"recorded_bytes":0,"recording_dropped_frames":0,"snapshots":61,"refused_poses":0,"interrupted":false,"robots":[{"id":3,"x_m":10.5,"y_m":6.1,"heading_deg":-90.0,"flags":4}]}"#
+            r#"{"ticks":60,"run_s":0.123457,"state_hash":"0123456789abcdef","agents_seen":2,"agents_died":1,"foreign_dropped":4,"recorded_bytes":0,"recording_dropped_frames":0,"snapshots":61,"refused_poses":0,"interrupted":false,"robots":[{"id":3,"x_m":10.5,"y_m":6.1,"heading_deg":-90.0,"flags":4}],"scoring":1,"scores":[{"id":3,"name":"RS1","state":"Finished","score":-5,"arrival_tick":0,"returning_ticks":0,"collisions":1,"visited":"00"}]}"#
         );
     }
 
