@@ -86,8 +86,8 @@ pub struct HubArgs {
     #[arg(long, default_value_t = crate::ANSWER_SPIN_US, value_parser = clap::builder::RangedU64ValueParser::<u64>::new().range(0..=100_000))]
     pub answer_spin_us: u64,
     /// The Ciber-Rato scoring mode (the real simulator's `--scoring N`): 0 competitive (the
-    /// default), 1 control, 2 mapping, 3 planning, 5 line mapping, 6 line planning. Overrides
-    /// the parameters file's `Scoring`.
+    /// default), 1 control, 2 mapping, 3 planning, 4 line control (2022), 5 line mapping,
+    /// 6 line planning, 7 line control (2023). Overrides the parameters file's `Scoring`.
     #[arg(long, value_name = "N")]
     pub scoring: Option<u32>,
     /// A robot name that may register as Real (a physical chair whose adapter pushes its

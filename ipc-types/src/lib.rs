@@ -1000,7 +1000,7 @@ pub struct HubParams {
     /// Latencies in ticks: proximity, beacon, ground, compass, collision, GPS.
     pub latency: [u32; 6],
     /// The Ciber-Rato scoring mode (`--scoring N`: 0 competitive, 1 control, 2 mapping,
-    /// 3 planning, 5 line mapping, 6 line planning).
+    /// 3 planning, 4 line control 2022, 5 line mapping, 6 line planning, 7 line control 2023).
     pub scoring_mode: u32,
     /// Wheel-encoder ticks per metre of wheel travel (odometry needs it with the track, which
     /// is the robot's `height_m`).

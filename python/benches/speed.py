@@ -148,9 +148,12 @@ def python_udp(lab: str, n: int, ticks: int) -> float:
                     data = s.recv(4096)
                     m = ET.fromstring(data.rstrip(b"\0"))  # parsed as a stock client does
                     _ = [float(ir.get("Value", "0")) for ir in m.iter("IRSensor")]
+                    b = m.find("Buttons")
+                    if answered and b is not None and b.get("Start") == "Off" and b.get("Stop") == "Off":
+                        raise EOFError  # the run is over (the bridge goes on until its clients leave)
                     s.send(b'<Actions LeftMotor="0.3" RightMotor="0.28"/>')
                     answered += 1
-            except (socket.timeout, ConnectionRefusedError):
+            except (socket.timeout, ConnectionRefusedError, EOFError):
                 break
         out, _ = h.communicate(timeout=60)
         return rate(summary_of(out))

@@ -5,11 +5,12 @@
 //! real simulator's) and from the positions the client's own GPS reports.
 
 use std::path::PathBuf;
+use std::time::Duration;
 
 use records::outcome::HubOutcome;
 
 use super::ciberrato::{StandIn, attr, ended, num};
-use super::common::{hub_and_logged_bridge as hub_and_bridge, session};
+use super::common::{Proc, hub_and_logged_bridge as hub_and_bridge, session, text};
 
 /// A course's files: lab, grid and parameters, in a directory of their own.
 struct Course {
@@ -154,7 +155,10 @@ fn a_competitive_course_visits_returns_and_finishes_with_the_scores_the_rules_gi
         "<Parameters GPS=\"On\" ScoreSensor=\"On\" CycleTime=\"50\" SimTime=\"300\"/>\n",
     );
     let s = session("challenge-0");
-    let (hub, bridge, reg, lines) = hub_and_bridge(&s, &course.hub_args("0"), &[]);
+    let record = course.dir.join("run.mcap");
+    let mut args = course.hub_args("0");
+    args.extend(["--record", record.to_str().expect("utf-8")]);
+    let (hub, bridge, reg, lines) = hub_and_bridge(&s, &args, &[]);
     let mut d = Driver::register(reg, "visitor");
     // Before the first step the score is 0, as in the real simulator; from it on, 100 + 100
     // per target.
@@ -211,6 +215,16 @@ fn a_competitive_course_visits_returns_and_finishes_with_the_scores_the_rules_gi
         (e.name.as_str(), e.state.as_str(), e.score, e.visited.as_str(), e.returning_ticks),
         ("visitor", "Finished", s.score, "1", s.returning)
     );
+    // The recording keeps the table, and a replay of it scores the run again, identically.
+    let rec = recorder::read::Recording::open(&record).expect("the recording");
+    let table = rec.metadata.get(recorder::CHALLENGE_METADATA).expect("the challenge table");
+    assert_eq!(table.get("scoring").map(String::as_str), Some("0"));
+    assert_eq!(table.get("robot 00001"), Some(&e.json()));
+    let out =
+        Proc::spawn(&["replay", record.to_str().expect("utf-8"), "--check", "--json"]).wait(Duration::from_secs(60));
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let replayed = HubOutcome::from_stdout(&text(&out.stdout)).expect("the replay's outcome");
+    assert_eq!((replayed.scoring, replayed.scores), (0, vec![e]));
 }
 
 #[test]
@@ -231,45 +245,17 @@ fn a_control_lap_pays_ten_a_cell_until_the_end_led_leaves_the_penalties() {
     // Round the ring through the cells' centres, steering by GPS and compass.
     let cell = |x: f64, y: f64| ((x / 2.0) as i64, (y / 2.0) as i64);
     let ring = [(1, 0), (2, 0), (3, 0), (3, 1), (3, 2), (2, 2), (1, 2), (0, 2), (0, 1), (0, 0)];
-    let waypoints = [(7.0, 1.0), (7.0, 5.0), (1.0, 5.0), (1.0, 1.0)];
-    let (mut next, mut earned) = (0usize, 0i64);
-    let mut visited_cells = vec![cell(d.now.x, d.now.y)];
-    for _ in 0..2000 {
-        let (wx, wy) = waypoints[next];
-        let (x, y) = (d.now.x, d.now.y);
-        if (x - wx).hypot(y - wy) < 0.3 {
-            next += 1;
-            if next == waypoints.len() {
-                break;
-            }
-            continue;
-        }
-        let want = (wy - y).atan2(wx - x);
-        let err = (want - d.now.compass.to_radians() + std::f64::consts::PI).rem_euclid(std::f64::consts::TAU)
-            - std::f64::consts::PI;
-        let (l, r) = if err.abs() > 0.3 {
-            (-0.05 * err.signum(), 0.05 * err.signum())
-        } else {
-            (0.1 - 0.1 * err, 0.1 + 0.1 * err)
-        };
-        let before = d.now.score;
-        d.act(l, r, NONE);
-        let (nx, ny) = (d.now.x, d.now.y);
+    let mut earned = 0i64;
+    drive_round(&mut d, &[(7.0, 1.0), (7.0, 5.0), (1.0, 5.0), (1.0, 1.0)], |before, now| {
         // Each entry into the loop's next cell pays 10, and nothing else pays.
-        let c = cell(nx, ny);
-        if c != *visited_cells.last().expect("a cell") {
-            visited_cells.push(c);
-        }
-        let due = ring.get(earned as usize % ring.len()).is_some_and(|&n| n == c);
-        if due && d.now.score == before + 10 {
-            earned += 1;
-        }
-        assert!(d.now.score == before || (due && d.now.score == before + 10), "{:?} in {c:?}", d.now);
-        assert!(!d.now.collision, "{:?}", d.now);
-    }
-    assert_eq!(next, waypoints.len(), "the lap was not finished: {:?}", d.now);
+        let c = cell(now.x, now.y);
+        let due = ring[earned as usize % ring.len()] == c && cell(before.x, before.y) != c;
+        assert_eq!(now.score, before.score + 10 * i64::from(due), "{now:?} in {c:?}");
+        earned += i64::from(due);
+        assert!(!now.collision, "{now:?}");
+    });
     // One lap: ten cells in order, 100.
-    assert_eq!((earned, d.now.score), (10, 100), "cells {visited_cells:?}");
+    assert_eq!((earned, d.now.score), (10, 100));
     // On south from (1, 1), into the border: one contact event however long it lasts, −5
     // (the robot stays in the start cell: nothing more to earn).
     let mut pushes = 0;
@@ -361,5 +347,104 @@ fn line_mapping_pays_ten_for_each_tick_away_from_every_line() {
         assert_eq!(agent_sdk::control(&sess, ipc_types::Command::Stop, 0).map(|r| r.status).ok(), Some(0));
         let (stdout, _) = ended(hub, bridge, &lines);
         assert_eq!(final_entry(&stdout).score, expected, "mode {mode}");
+    }
+}
+
+/// Drives round `waypoints` by GPS and compass (turning on the spot when far off course);
+/// after each tick calls `tick` with the Measures before and after.
+fn drive_round(d: &mut Driver, waypoints: &[(f64, f64)], mut tick: impl FnMut(&Seen, &Seen)) {
+    let mut next = 0;
+    for _ in 0..3000 {
+        let (wx, wy) = waypoints[next];
+        let (x, y) = (d.now.x, d.now.y);
+        if (x - wx).hypot(y - wy) < 0.3 {
+            next += 1;
+            if next == waypoints.len() {
+                return;
+            }
+            continue;
+        }
+        let want = (wy - y).atan2(wx - x);
+        let err = (want - d.now.compass.to_radians() + std::f64::consts::PI).rem_euclid(std::f64::consts::TAU)
+            - std::f64::consts::PI;
+        // Not a round speed: the robot's positions then never land within the GPS's 6 digits
+        // of a cell's edge, where the client could not tell which side it is on.
+        let v = 0.0937;
+        let (l, r) =
+            if err.abs() > 0.3 { (-0.05 * err.signum(), 0.05 * err.signum()) } else { (v - v * err, v + v * err) };
+        let before = d.now.clone();
+        d.act(l, r, NONE);
+        tick(&before, &d.now);
+    }
+    panic!("the course was not driven: {:?}", d.now);
+}
+
+#[test]
+fn line_control_laps_pay_each_next_cell_and_charge_each_tick_off_the_lines() {
+    // A rectangle of 0.2 m lines round (1, 1)–(5, 4). Mode 4's loop is its 14 whole-metre
+    // points, mode 7's its 28 half-metre points; a lap earns 10 for each, and each tick the
+    // robot is off the loop costs 10 (mode 4: its whole-metre cell is none of the loop's;
+    // mode 7: no loop point within 0.25 m on both axes), worked out here from its GPS.
+    let course = Course::new(
+        "line-control",
+        "<Lab Name=\"ring\" Width=\"7\" Height=\"6\">\
+         <Wall Height=\"0\"><Corner X=\"0.9\" Y=\"0.9\"/><Corner X=\"5.1\" Y=\"0.9\"/><Corner X=\"5.1\" Y=\"1.1\"/><Corner X=\"0.9\" Y=\"1.1\"/></Wall>\
+         <Wall Height=\"0\"><Corner X=\"0.9\" Y=\"3.9\"/><Corner X=\"5.1\" Y=\"3.9\"/><Corner X=\"5.1\" Y=\"4.1\"/><Corner X=\"0.9\" Y=\"4.1\"/></Wall>\
+         <Wall Height=\"0\"><Corner X=\"0.9\" Y=\"0.9\"/><Corner X=\"1.1\" Y=\"0.9\"/><Corner X=\"1.1\" Y=\"4.1\"/><Corner X=\"0.9\" Y=\"4.1\"/></Wall>\
+         <Wall Height=\"0\"><Corner X=\"4.9\" Y=\"0.9\"/><Corner X=\"5.1\" Y=\"0.9\"/><Corner X=\"5.1\" Y=\"4.1\"/><Corner X=\"4.9\" Y=\"4.1\"/></Wall>\
+         </Lab>\n",
+        "<Grid><Position X=\"1\" Y=\"1\" Dir=\"0\"/></Grid>\n",
+        "<Parameters GPS=\"On\" ScoreSensor=\"On\" CycleTime=\"50\"/>\n",
+    );
+    // The loop's points in metres, `step` apart, round the rectangle.
+    let ring = |step: f64| {
+        let n = |a: f64, b: f64| ((b - a) / step).round() as i64;
+        let mut pts = Vec::new();
+        pts.extend((0..n(1.0, 5.0)).map(|k| (1.0 + k as f64 * step, 1.0)));
+        pts.extend((0..n(1.0, 4.0)).map(|k| (5.0, 1.0 + k as f64 * step)));
+        pts.extend((0..n(1.0, 5.0)).map(|k| (5.0 - k as f64 * step, 4.0)));
+        pts.extend((0..n(1.0, 4.0)).map(|k| (1.0, 4.0 - k as f64 * step)));
+        pts
+    };
+    for (mode, step) in [("4", 1.0), ("7", 0.5)] {
+        let pts = ring(step);
+        let n = pts.len();
+        assert_eq!(n, if mode == "4" { 14 } else { 28 });
+        // Mode 4: the robot is at loop point k when its whole-metre cell (x + 0.5 and y + 0.5
+        // truncated) is k's. Mode 7: near k when within 0.5 m of it on both axes (so the next
+        // point can already be near: its pay then comes a tick early). The corner rule of
+        // mode 7 never applies here: no two points either side of one touch.
+        let at = |k: usize, x: f64, y: f64| {
+            let (px, py) = pts[k];
+            if mode == "4" {
+                ((x + 0.5).trunc(), (y + 0.5).trunc()) == (px, py)
+            } else {
+                (px - x).abs() < 0.5 && (py - y).abs() < 0.5
+            }
+        };
+        let sess = session(&format!("challenge-{mode}"));
+        let (hub, bridge, reg, lines) = hub_and_bridge(&sess, &course.hub_args(mode), &[]);
+        let mut d = Driver::register(reg, "follower");
+        let (mut next, mut expected, mut paid, mut off_ticks) = (1usize, 0i64, 0usize, 0usize);
+        drive_round(&mut d, &[(5.0, 1.0), (5.0, 4.0), (1.0, 4.0), (1.0, 1.0)], |_, now| {
+            if at(next, now.x, now.y) {
+                next = (next + 1) % n;
+                expected += 10;
+                paid += 1;
+            }
+            if !(0..n).any(|k| at(k, now.x, now.y)) {
+                expected -= 10;
+                off_ticks += 1;
+            }
+            assert_eq!(now.score, expected, "mode {mode}: {now:?}");
+        });
+        // The whole lap was paid, point by point.
+        assert!(paid >= n, "mode {mode}: {paid} of {n} points paid, {off_ticks} ticks off the loop");
+        let s = d.act(0.0, 0.0, END).clone();
+        assert_eq!(s.score, 0, "{s:?}");
+        drop(d);
+        assert_eq!(agent_sdk::control(&sess, ipc_types::Command::Stop, 0).map(|r| r.status).ok(), Some(0));
+        let (stdout, _) = ended(hub, bridge, &lines);
+        assert_eq!(final_entry(&stdout).state, "Finished", "mode {mode}");
     }
 }

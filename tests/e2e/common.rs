@@ -65,20 +65,34 @@ impl Proc {
     }
 
     /// Waits for the process to exit (checking every few milliseconds) and returns its
-    /// output; panics with what it printed if it does not exit in time.
+    /// output; panics with what it printed if it does not exit in time. Its stdout is read
+    /// meanwhile, so a process that prints more than a pipe holds at its end (a hub's outcome
+    /// line with hundreds of robots) is not held up writing it.
     pub fn wait(mut self, timeout: Duration) -> Output {
         let mut child = self.0.take().expect("running");
+        let reader = child.stdout.take().map(|mut out| {
+            std::thread::spawn(move || {
+                let mut buf = Vec::new();
+                let _ = std::io::Read::read_to_end(&mut out, &mut buf);
+                buf
+            })
+        });
+        let stdout = |reader: Option<std::thread::JoinHandle<Vec<u8>>>| {
+            reader.map(|r| r.join().unwrap_or_default()).unwrap_or_default()
+        };
         let start = Instant::now();
         loop {
             if child.try_wait().expect("wait works").is_some() {
-                return child.wait_with_output().expect("output");
+                let mut out = child.wait_with_output().expect("output");
+                out.stdout = stdout(reader);
+                return out;
             }
             if start.elapsed() > timeout {
                 let _ = child.kill();
                 let out = child.wait_with_output().expect("output");
                 panic!(
                     "process did not exit within {timeout:?}\nstdout: {}\nstderr: {}",
-                    String::from_utf8_lossy(&out.stdout),
+                    String::from_utf8_lossy(&stdout(reader)),
                     String::from_utf8_lossy(&out.stderr)
                 );
             }

@@ -210,8 +210,7 @@ fn registration_refusals_come_back_as_typed_errors() {
 
 #[test]
 fn registering_many_robots_republishes_the_world_once_not_once_per_robot() {
-    // Enough that one republication per robot would stand out by far; few enough that the
-    // hub's JSON line (every robot's pose) fits the pipe the test reads after the exit.
+    // Enough that one republication per robot would stand out by far.
     const N: usize = 600;
     let s = session("many");
     let hub = Proc::spawn(&["hub", "--session", &s, "--start-on-command", "--json"]);

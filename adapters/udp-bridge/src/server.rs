@@ -12,9 +12,13 @@
 //! once a cycle; a robot client that falls silent keeps its robot and its last powers
 //! (removal for silence is opt-in: [`BridgeConfig::client_timeout`]).
 //!
-//! Scores: iwsim keeps no Ciber-Rato score. Viewers get `Score="0"`, `ArrivalTime="0"`,
-//! `ReturningTime="0"` and an empty `VisitedMask`, and the registration reply says
-//! `ScoreSensor="Off"`, so Measures carry no `<Score>`; `Collisions` is the hub's count.
+//! Scores: the hub scores every robot in the run's challenge (`world::challenge`); viewers get
+//! each robot's `Score`, `ArrivalTime`, `ReturningTime`, `Collisions`, `VisitedMask` and
+//! `State` from the world snapshot, and with `ScoreSensor="On"` each robot's Measures carry
+//! its `<Score>` from its sensor block.
+//!
+//! After the run the bridge stays, as the simulator does: Measures (Time frozen, both Buttons
+//! off) every cycle until the clients go quiet (see `Bridge::after_the_run`).
 
 use std::io::ErrorKind;
 use std::net::{IpAddr, SocketAddr, UdpSocket};

@@ -814,10 +814,13 @@ pub fn udp_client(args: &UdpClientArgs) -> anyhow::Result<ExitCode> {
     let mut buf = [0u8; 4096];
     'run: loop {
         for s in &socks {
-            // After the run the bridge exits and the Measures stop: that is the end.
+            // The run is over when the Measures say both Buttons are off (the bridge then
+            // goes on sending them until its clients leave, as Ciber-Rato's simulator does),
+            // or when they stop.
             let timeout = if answered == 0 { Duration::from_secs(30) } else { Duration::from_millis(1500) };
             s.set_read_timeout(Some(timeout))?;
             match s.recv(&mut buf) {
+                Ok(n) if answered > 0 && run_over(&buf[..n]) => break 'run,
                 Ok(n) if args.real => {
                     let m = udp_bridge::codec::decode_measures(&buf[..n]).context("a Measures from the bridge")?;
                     // On a tie, turn towards the side the chair already faces.
@@ -840,6 +843,12 @@ pub fn udp_client(args: &UdpClientArgs) -> anyhow::Result<ExitCode> {
         println!("{}", readings.line());
     }
     Ok(ExitCode::SUCCESS)
+}
+
+/// Whether a Measures says the run is over (Ciber-Rato's Buttons both off).
+fn run_over(measures: &[u8]) -> bool {
+    const OVER: &[u8] = b"<Buttons Start=\"Off\" Stop=\"Off\"/>";
+    measures.windows(OVER.len()).any(|w| w == OVER)
 }
 
 /// One variant of `iwsim bench lockstep` (shared memory or UDP, IPC only or with the real

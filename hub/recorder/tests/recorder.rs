@@ -322,7 +322,7 @@ mod journal {
                         target_reward: c.2[4],
                         home_reward: c.2[5],
                         // Any mode, from the key time's bits (the tuple is full).
-                        scoring: world::challenge::Scoring::ALL[(c.0 % 6) as usize],
+                        scoring: world::challenge::Scoring::ALL[(c.0 % 8) as usize],
                     },
                 }
             })

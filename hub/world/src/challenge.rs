@@ -26,13 +26,21 @@
 //! - **2, mapping** and **3, planning**: the competitive score from 0 (penalties only, no
 //!   target bonus), and `EndLed` the only way to finish. (The real simulator also writes the
 //!   lab's reference map for its offline scripts; iwsim does not.)
+//! - **4, line control (2022)**: the loop of lines in 1 m cells centred on whole metres, walked
+//!   once from the start: east first, then at each cell right, else straight, else left, as
+//!   far as the point half a cell that way lies on a line. Entering the loop's next cell earns
+//!   10; each tick in a cell off the loop costs 10; `EndLed` leaves the penalties alone.
 //! - **5, line mapping** and **6, line planning**: 10 per tick the robot's centre is more than
 //!   0.5 m from every wall and line; `EndLed` finishes it with that score.
+//! - **7, line control (2023)**: as 4 in 0.5 m cells, with seven turns (−135° to 135° by 45°,
+//!   probed 0.2 m ahead) for the 45° lines; a robot within a cell (0.5 m on both axes) of the
+//!   next one earns 10, or of the one after a corner (both counted), and a robot near no cell
+//!   of the loop pays 10 a tick.
 //!
 //! A Finished robot stands still for the rest of the run (it is still an obstacle, and still
 //! senses), and its score no longer changes.
 //!
-//! Modes 4 and 7 (line control) are not implemented: [`Scoring::from_number`] says so.
+//! Where the real simulator finds no loop it exits; here the robot earns nothing.
 
 use std::collections::BTreeMap;
 
@@ -72,32 +80,35 @@ pub enum Scoring {
     Mapping,
     /// 3: planning (as mapping).
     Planning,
+    /// 4: line control (2022): laps of the loop of lines, in 1 m cells.
+    LineControl2022,
     /// 5: line mapping (ticks spent away from every line).
     LineMapping,
     /// 6: line planning (as line mapping).
     LinePlanning,
+    /// 7: line control (2023): laps of the loop of lines, 45° turns included, in 0.5 m cells.
+    LineControl2023,
 }
 
 /// Why a scoring number was not accepted.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
 pub enum ScoringError {
-    /// Line control (4, 7) follows paths of lines iwsim does not trace.
-    #[error("scoring mode {0} (line control) is not implemented; iwsim has 0, 1, 2, 3, 5 and 6")]
-    NotImplemented(u32),
     /// Not a mode of the real simulator.
-    #[error("scoring mode {0} does not exist; the real simulator's modes are 0 to 7 (iwsim has 0, 1, 2, 3, 5 and 6)")]
+    #[error("scoring mode {0} does not exist; the real simulator's modes are 0 to 7")]
     Unknown(u32),
 }
 
 impl Scoring {
     /// Every mode iwsim has.
-    pub const ALL: [Scoring; 6] = [
+    pub const ALL: [Scoring; 8] = [
         Scoring::Competitive,
         Scoring::Control,
         Scoring::Mapping,
         Scoring::Planning,
+        Scoring::LineControl2022,
         Scoring::LineMapping,
         Scoring::LinePlanning,
+        Scoring::LineControl2023,
     ];
 
     /// The mode numbered `n` (the real simulator's `--scoring n`).
@@ -107,9 +118,10 @@ impl Scoring {
             1 => Ok(Self::Control),
             2 => Ok(Self::Mapping),
             3 => Ok(Self::Planning),
+            4 => Ok(Self::LineControl2022),
             5 => Ok(Self::LineMapping),
             6 => Ok(Self::LinePlanning),
-            4 | 7 => Err(ScoringError::NotImplemented(n)),
+            7 => Ok(Self::LineControl2023),
             _ => Err(ScoringError::Unknown(n)),
         }
     }
@@ -121,8 +133,10 @@ impl Scoring {
             Self::Control => 1,
             Self::Mapping => 2,
             Self::Planning => 3,
+            Self::LineControl2022 => 4,
             Self::LineMapping => 5,
             Self::LinePlanning => 6,
+            Self::LineControl2023 => 7,
         }
     }
 
@@ -133,8 +147,10 @@ impl Scoring {
             Self::Control => "control",
             Self::Mapping => "mapping",
             Self::Planning => "planning",
+            Self::LineControl2022 => "line control 2022",
             Self::LineMapping => "line mapping",
             Self::LinePlanning => "line planning",
+            Self::LineControl2023 => "line control 2023",
         }
     }
 
@@ -423,15 +439,48 @@ impl Challenge {
         }
         match self.scoring {
             Scoring::Control => {
-                if c.path.is_none() {
-                    c.path = Some(control_loop(p, clear));
-                }
-                let cell = control_cell(p);
-                if let Some(path) = c.path.as_ref().filter(|path| path.len() > 1)
-                    && path[c.next] == cell
-                {
+                // Walked once, from the start (the real simulator walks it at the Start, from
+                // where the robot stands then).
+                let path = c.path.get_or_insert_with(|| control_loop(c.home, clear));
+                if path.len() > 1 && path[c.next] == control_cell(p) {
                     c.next = (c.next + 1) % path.len();
                     c.progress += PROGRESS;
+                }
+            }
+            Scoring::LineControl2022 => {
+                let lab = &self.lab;
+                let path = c.path.get_or_insert_with(|| line_loop_2022(c.home, lab));
+                let cell = ((p.x + 0.5) as i64, (p.y + 0.5) as i64);
+                if path.len() > 1 && path[c.next] == cell {
+                    c.next = (c.next + 1) % path.len();
+                    c.progress += PROGRESS;
+                }
+                if !path.contains(&cell) {
+                    c.progress -= PROGRESS;
+                }
+            }
+            Scoring::LineControl2023 => {
+                let lab = &self.lab;
+                let path = c.path.get_or_insert_with(|| line_loop_2023(c.home, lab));
+                let n = path.len();
+                // Cells are in half metres: near means within one on both axes.
+                let near = |k: usize| {
+                    let (cx, cy) = path[k % n];
+                    (cx as Real - 2.0 * p.x).abs() < 1.0 && (cy as Real - 2.0 * p.y).abs() < 1.0
+                };
+                if n > 1 {
+                    let (after, before) = (path[(c.next + 1) % n], path[(c.next + n - 1) % n]);
+                    if near(c.next) {
+                        c.next = if c.next + 1 >= n { 0 } else { c.next + 1 };
+                        c.progress += PROGRESS;
+                    } else if (after.0 - before.0).abs() + (after.1 - before.1).abs() < 2 && near(c.next + 1) {
+                        // A corner cell may be cut: reaching the cell after it counts for both.
+                        c.next = if c.next + 2 >= n { 0 } else { c.next + 2 };
+                        c.progress += PROGRESS;
+                    }
+                }
+                if !(0..n).any(near) {
+                    c.progress -= PROGRESS;
                 }
             }
             Scoring::LineMapping | Scoring::LinePlanning => {
@@ -545,6 +594,52 @@ fn control_loop(start: Point2<Real>, clear: &impl Fn(Point2<Real>, Point2<Real>)
         cell = (cell.0 + dx, cell.1 + dy);
     }
     path
+}
+
+/// Whether `p` lies on a line or in a wall (any wall of the lab but its border), as Ciber-Rato's
+/// `isInside`.
+fn on_a_wall(lab: &Lab, p: Point2<Real>) -> bool {
+    lab.walls.iter().any(|w| point_in_polygon(&w.corners, p))
+}
+
+/// Follows the loop of lines from the cell of `start` in cells of `cell` metres, trying the
+/// turns `turns` (degrees, relative to the way it goes) in order and taking the first whose
+/// probe point, `probe` metres from the cell's centre that way, lies on a line; east first.
+/// Ends back at the first cell; a lab with no loop gives a one-cell path.
+fn line_loop(start: Point2<Real>, lab: &Lab, cell: Real, turns: &[i64], probe: Real) -> Vec<(i64, i64)> {
+    // Cells centred on multiples of `cell`, numbered by the nearest multiple (truncating
+    // x / cell + 0.5, as the real simulator's integer conversion does).
+    let first = ((start.x / cell + 0.5) as i64, (start.y / cell + 0.5) as i64);
+    let mut path = vec![first];
+    let mut at = (first.0 + 1, first.1);
+    let mut dir: i64 = 0;
+    while at != first {
+        path.push(at);
+        if path.len() > MAX_LOOP_CELLS {
+            return vec![first];
+        }
+        let centre = Point2::new(at.0 as Real * cell, at.1 as Real * cell);
+        let Some(&turn) = turns.iter().find(|&&turn| {
+            let a = ((dir + turn) as Real).to_radians();
+            on_a_wall(lab, centre + nalgebra::Vector2::new(a.cos(), a.sin()) * probe)
+        }) else {
+            return vec![first];
+        };
+        dir = (dir + turn).rem_euclid(360);
+        let a = (dir as Real).to_radians();
+        at = ((at.0 as Real + a.cos()).round() as i64, (at.1 as Real + a.sin()).round() as i64);
+    }
+    path
+}
+
+/// Mode 4's loop: 1 m cells, right, straight or left, probed half a cell ahead.
+fn line_loop_2022(start: Point2<Real>, lab: &Lab) -> Vec<(i64, i64)> {
+    line_loop(start, lab, 1.0, &[-90, 0, 90], 0.5)
+}
+
+/// Mode 7's loop: 0.5 m cells, seven turns from −135° to 135° by 45°, probed 0.2 m ahead.
+fn line_loop_2023(start: Point2<Real>, lab: &Lab) -> Vec<(i64, i64)> {
+    line_loop(start, lab, 0.5, &[-135, -90, -45, 0, 45, 90, 135], 0.2)
 }
 
 /// The distance from `p` to a polygon's boundary.
@@ -855,6 +950,76 @@ mod tests {
         assert_eq!(control_loop(Point2::new(1.0, 1.0), &|a, b| w.segment_clear(a, b)), vec![(0, 0)]);
     }
 
+    /// A rectangle of 0.2 m lines round (1, 1)–(5, 4).
+    fn line_ring() -> Lab {
+        let walls = vec![
+            Wall::rectangle(0.9, 0.9, 5.1, 1.1, 0.0),
+            Wall::rectangle(0.9, 3.9, 5.1, 4.1, 0.0),
+            Wall::rectangle(0.9, 0.9, 1.1, 4.1, 0.0),
+            Wall::rectangle(4.9, 0.9, 5.1, 4.1, 0.0),
+        ];
+        lab(7.0, 6.0, walls, vec![])
+    }
+
+    #[test]
+    fn the_2022_line_loop_follows_the_lines_in_whole_metres_and_pays_cells_in_order() {
+        let l = line_ring();
+        let path = line_loop_2022(Point2::new(1.0, 1.0), &l);
+        let mut want: Vec<(i64, i64)> = (1..=5).map(|x| (x, 1)).collect();
+        want.extend((2..=4).map(|y| (5, y)));
+        want.extend((1..=4).rev().map(|x| (x, 4)));
+        want.extend((2..=3).rev().map(|y| (1, y)));
+        assert_eq!(path, want);
+        let mut c = Challenge::new(&l, Scoring::LineControl2022, Default::default(), 0);
+        c.add(1, (1.0, 1.0), 0.5);
+        // The start cell pays nothing (the next is (2, 1)); each next cell 10, a lap 140.
+        let mut now = 1;
+        for &(x, y) in path.iter().chain(&path[..1]) {
+            c.update(now, &[turn(1, x as Real, y as Real, 0)], open);
+            now += 1;
+        }
+        assert_eq!(c.standing(1).expect("in").score, 140);
+        // Off the loop (the middle of the ring): 10 a tick.
+        for _ in 0..3 {
+            c.update(now, &[turn(1, 3.0, 2.5, 0)], open);
+            now += 1;
+        }
+        assert_eq!(c.standing(1).expect("in").score, 110);
+        c.update(now, &[turn(1, 3.0, 2.5, LED_END)], open);
+        assert_eq!(c.standing(1).expect("in").score, 0);
+    }
+
+    #[test]
+    fn the_2023_line_loop_walks_half_metres_and_a_cut_corner_counts_for_both() {
+        let l = line_ring();
+        let path = line_loop_2023(Point2::new(1.0, 1.0), &l);
+        // 9 cells along the bottom, 6 up the right, 8 along the top, 5 down the left.
+        assert_eq!(path.len(), 28, "{path:?}");
+        assert_eq!((path[0], path[8], path[14], path[22]), ((2, 2), (10, 2), (10, 8), (2, 8)));
+        let mut c = Challenge::new(&l, Scoring::LineControl2023, Default::default(), 0);
+        c.add(1, (1.0, 1.0), 0.5);
+        let mut now = 1;
+        // A lap through the cells' centres: 28 cells, 280.
+        for &(x, y) in path.iter().skip(1).chain(&path[..1]) {
+            c.update(now, &[turn(1, x as Real / 2.0, y as Real / 2.0, 0)], open);
+            now += 1;
+        }
+        assert_eq!(c.standing(1).expect("in").score, 280);
+        // Near no cell of the loop: 10 a tick.
+        c.update(now, &[turn(1, 3.0, 2.5, 0)], open);
+        assert_eq!(c.standing(1).expect("in").score, 270);
+        // A sharp turn (the cells before and after the next one touch): reaching the cell
+        // after it without passing near it counts for both, at 10.
+        let mut c = Challenge::new(&l, Scoring::LineControl2023, Default::default(), 0);
+        c.add(1, (0.0, 0.0), 0.5);
+        c.robots.get_mut(&1).expect("in").path = Some(vec![(0, 0), (1, 0), (2, 0), (1, 1), (0, 1)]);
+        c.update(1, &[turn(1, 0.5, 0.0, 0)], open);
+        assert_eq!((c.standing(1).expect("in").score, c.robots[&1].next), (10, 2));
+        // At (0.6, 0.8) in half metres: within one of (1, 1), not of (2, 0).
+        c.update(2, &[turn(1, 0.3, 0.4, 0)], open);
+        assert_eq!((c.standing(1).expect("in").score, c.robots[&1].next), (20, 4));
+    }
+
     #[test]
     fn line_mapping_pays_each_tick_away_from_every_line() {
         let line = Wall::rectangle(0.0, 2.9, 10.0, 3.1, 0.0);
@@ -888,8 +1053,7 @@ mod tests {
         for s in Scoring::ALL {
             assert_eq!(Scoring::from_number(s.number()), Ok(s));
         }
-        assert_eq!(Scoring::from_number(4), Err(ScoringError::NotImplemented(4)));
-        assert_eq!(Scoring::from_number(7), Err(ScoringError::NotImplemented(7)));
+        assert_eq!(Scoring::ALL.map(Scoring::number), [0, 1, 2, 3, 4, 5, 6, 7]);
         assert_eq!(Scoring::from_number(8), Err(ScoringError::Unknown(8)));
         assert_eq!(Phase::Returning.shown(true), Phase::Stopped);
         assert_eq!(Phase::Finished.shown(true), Phase::Finished);

@@ -1069,7 +1069,7 @@ fn params_from(root: &Element, expected: &'static str) -> Result<Params, MapLoad
             "HomeReward" => p.challenge.home_reward = count()?,
             "Scoring" => {
                 p.challenge.scoring = crate::challenge::Scoring::from_number(count()?)
-                    .map_err(|_| out_of_range(root, attr, "a scoring mode iwsim has: 0, 1, 2, 3, 5 or 6"))?
+                    .map_err(|_| out_of_range(root, attr, "a scoring mode, 0 to 7"))?
             }
             "LineSensorTrueProb" => {
                 let truth = check(root, attr, value()?, |v| (0.0..=1.0).contains(&v), "a probability, from 0 to 1")?;
