@@ -126,8 +126,20 @@ impl Scene<'_> {
                 distances[k] = distances[k].min(d);
             }
         }
+        // A plain Ciber-Rato robot (a disc) reads its IR as Ciber-Rato does, 1/d with the noise
+        // added to that value; a chair's range sensors add it to the distance.
+        let ciber_rato = r.spec.shape == crate::BodyShape::Disc;
         for (k, &d) in distances.iter().enumerate().take(r.sensor_count) {
-            out.proximity_m[k] = if noise.proximity_m > 0.0 { rng.noisy(d, noise.proximity_m).max(0.0) } else { d };
+            out.proximity_m[k] = match noise.proximity_m {
+                sigma if sigma <= 0.0 => d,
+                sigma if ciber_rato => {
+                    // Readings stay within the sensor's range, as every reading does.
+                    let inverse = rng.noisy(1.0 / d.max(1e-9), sigma);
+                    let range = r.sensors[k].range;
+                    if inverse * range > 1.0 { 1.0 / inverse } else { range }
+                }
+                sigma => rng.noisy(d, sigma).max(0.0),
+            };
         }
 
         if self.params.sensors.compass {

@@ -230,6 +230,25 @@ fn readings_are_capped_at_the_range_and_noise_can_be_switched_on() {
 }
 
 #[test]
+fn a_plain_ciber_rato_robot_has_its_ir_noise_on_one_over_the_distance() {
+    // Ciber-Rato adds ObstacleNoise to the IR value 1/d, not to d: at 2 m (0.5) with σ 0.1 the
+    // value spreads by 0.1, where the distance would spread by 0.4 m.
+    let mut noisy = quiet();
+    noisy.noise.proximity_m = 0.1;
+    let mut w = world(empty_lab(10.0, 8.0), noisy);
+    // A disc of diameter 1 at x = 7.5 facing east: its rim sensor is 2 m from the east border.
+    let r = w.add_robot(RobotSpec::at(7.5, 4.0, 0.0).disc(1.0)).expect("valid");
+    let mut values = vec![];
+    for _ in 0..2000 {
+        w.step(&[], 0.1);
+        values.push(1.0 / w.robot(r).expect("alive").readings.proximity()[0]);
+    }
+    let mean = values.iter().sum::<Real>() / values.len() as Real;
+    let sd = (values.iter().map(|s| (s - mean).powi(2)).sum::<Real>() / values.len() as Real).sqrt();
+    assert!(close(mean, 0.5, 0.01) && close(sd, 0.1, 0.01), "mean {mean}, sd {sd}");
+}
+
+#[test]
 fn a_robot_stops_when_its_next_pose_hits_a_wall_and_counts_the_contact_once() {
     let mut lab = empty_lab(20.0, 8.0);
     lab.walls.push(rect_wall(6.0, 0.0, 7.0, 8.0, 2.0));
