@@ -799,10 +799,14 @@ impl HubCore {
 
     /// The robot state of every robot, in id order.
     pub fn robot_states(&self) -> impl Iterator<Item = RobotState> + '_ {
-        self.robots.iter().filter_map(|(&id, e)| {
+        // Both in id order: the standings are read in one pass beside the robots.
+        let mut standings = self.stage.challenge().standings().peekable();
+        self.robots.iter().filter_map(move |(&id, e)| {
             let r = self.stage.robot(id)?;
             let lagging = self.agents.get(&e.agent_id).is_some_and(|a| a.lagging);
-            Some(robot_state(r, id, e.agent_id, lagging, self.stage.standing(id), self.state))
+            while standings.next_if(|&(i, _)| i < id).is_some() {}
+            let standing = standings.next_if(|&(i, _)| i == id).map(|(_, s)| s);
+            Some(robot_state(r, id, e.agent_id, lagging, standing, self.state))
         })
     }
 

@@ -295,12 +295,8 @@ impl Stage {
             turns.push(Turn { id, pose: r.pose, hit_wall: r.collision_wall, hit_robot: r.collision_robot, leds: led });
         }
         let world = &self.world;
-        self.challenge.update(world.tick(), &turns, |a, b| world.segment_clear(a, b));
-        for t in &turns {
-            if self.challenge.finished(t.id)
-                && let Some(&h) = self.handles.get(&t.id)
-                && self.world.robot(h).is_some_and(|r| !r.frozen)
-            {
+        for id in self.challenge.update(world.tick(), &turns, |a, b| world.segment_clear(a, b)) {
+            if let Some(&h) = self.handles.get(&id) {
                 self.world.set_frozen(h, true);
             }
         }

@@ -342,20 +342,32 @@ impl Challenge {
     }
 
     /// Scores the step that ended on tick `now` (1 after the first step), then moves each
-    /// robot's state on. `clear` tells whether a straight segment meets no wall higher than
-    /// the floor (the control loop's test). Robots not in `turns` are left as they were.
-    pub fn update(&mut self, now: u64, turns: &[Turn], clear: impl Fn(Point2<Real>, Point2<Real>) -> bool) {
+    /// robot's state on. `turns` come in increasing id order (one that does not, or names no
+    /// robot of the challenge, is passed over); robots without a turn are left as they were.
+    /// `clear` tells whether a straight segment meets no wall higher than the floor (the
+    /// control loop's test). Returns the robots that finished in this step.
+    pub fn update(&mut self, now: u64, turns: &[Turn], clear: impl Fn(Point2<Real>, Point2<Real>) -> bool) -> Vec<u32> {
+        let mut finished = Vec::new();
         // Out of `self` while scoring, which reads the lab and fills the distance grids.
         let mut robots = std::mem::take(&mut self.robots);
+        // Turns come in id order, as the robots are kept: one pass over both (a hub of 10,000
+        // robots scores every tick).
+        let mut contestants = robots.iter_mut().peekable();
         for t in turns {
-            let Some(c) = robots.get_mut(&t.id) else { continue };
+            while contestants.next_if(|(id, _)| **id < t.id).is_some() {}
+            let Some((_, c)) = contestants.next_if(|(id, _)| **id == t.id) else { continue };
             if let Some(leds) = t.leds {
                 c.leds = leds;
             }
             self.score(c, t, now, &clear);
+            let was = c.standing.phase;
             self.advance(c, t);
+            if was != Phase::Finished && c.standing.phase == Phase::Finished {
+                finished.push(t.id);
+            }
         }
         self.robots = robots;
+        finished
     }
 
     /// The first target whose area holds the whole robot (its centre within the target's
