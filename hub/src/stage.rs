@@ -65,7 +65,8 @@ pub struct Stage {
     challenge: Challenge,
     /// Scratch for the challenge's view of a step.
     turns: Vec<Turn>,
-    leds: Vec<(u32, u32)>,
+    /// Scratch: this step's LEDs by world slot.
+    leds: Vec<Option<u32>>,
 }
 
 impl Stage {
@@ -281,17 +282,23 @@ impl Stage {
 
     /// Scores the step just taken and stops the robots that finished.
     fn score(&mut self, actions: &[RecordedAction]) {
+        // Each robot's LEDs of this step by world slot (the last action of a robot counts),
+        // read back in id order below: no sort, no search, for any number of robots.
         let mut leds = std::mem::take(&mut self.leds);
         leds.clear();
-        leds.extend(actions.iter().map(|a| (a.id, a.leds)));
-        // The last action of a robot in a step is the one that counts (stable sort keeps order).
-        leds.sort_by_key(|&(id, _)| id);
+        leds.resize(self.id_by_slot.len(), None);
+        for a in actions {
+            if let Some(&h) = self.handles.get(&a.id)
+                && let Some(slot) = leds.get_mut(h.index() as usize)
+            {
+                *slot = Some(a.leds);
+            }
+        }
         let mut turns = std::mem::take(&mut self.turns);
         turns.clear();
         for (&id, &h) in &self.handles {
             let Some(r) = self.world.robot(h) else { continue };
-            let end = leds.partition_point(|&(i, _)| i <= id);
-            let led = (end > 0 && leds[end - 1].0 == id).then(|| leds[end - 1].1);
+            let led = leds.get(h.index() as usize).copied().flatten();
             turns.push(Turn { id, pose: r.pose, hit_wall: r.collision_wall, hit_robot: r.collision_robot, leds: led });
         }
         let world = &self.world;
