@@ -262,9 +262,18 @@ impl Stage {
         let tick = self.world.tick();
         let mut scratch = std::mem::take(&mut self.scratch);
         scratch.clear();
+        // Each robot's LEDs of this step by world slot (the last action of a robot counts),
+        // for the challenge: read back beside the robots, no search per robot.
+        let mut leds = std::mem::take(&mut self.leds);
+        leds.clear();
+        leds.resize(self.id_by_slot.len(), None);
         scratch.extend(actions.iter().filter_map(|a| {
+            let robot = *self.handles.get(&a.id)?;
+            if let Some(slot) = leds.get_mut(robot.index() as usize) {
+                *slot = Some(a.leds);
+            }
             Some(Action {
-                robot: *self.handles.get(&a.id)?,
+                robot,
                 motors: a.motors,
                 pose: a.pose,
                 say: a.say.as_deref().and_then(|b| Message::new(b).ok()),
@@ -272,7 +281,8 @@ impl Stage {
         }));
         let stats = self.world.step(&scratch, self.dt_s);
         self.scratch = scratch;
-        self.score(actions);
+        self.score(&leds);
+        self.leds = leds;
         if self.journal.is_some() {
             let hash = self.world.state_hash();
             self.journal(|| Event::Step { tick, actions: actions.to_vec(), hash });
@@ -280,20 +290,9 @@ impl Stage {
         stats
     }
 
-    /// Scores the step just taken and stops the robots that finished.
-    fn score(&mut self, actions: &[RecordedAction]) {
-        // Each robot's LEDs of this step by world slot (the last action of a robot counts),
-        // read back in id order below: no sort, no search, for any number of robots.
-        let mut leds = std::mem::take(&mut self.leds);
-        leds.clear();
-        leds.resize(self.id_by_slot.len(), None);
-        for a in actions {
-            if let Some(&h) = self.handles.get(&a.id)
-                && let Some(slot) = leds.get_mut(h.index() as usize)
-            {
-                *slot = Some(a.leds);
-            }
-        }
+    /// Scores the step just taken with each robot's LEDs of the step by world slot, and
+    /// stops the robots that finished.
+    fn score(&mut self, leds: &[Option<u32>]) {
         let mut turns = std::mem::take(&mut self.turns);
         turns.clear();
         for (&id, &h) in &self.handles {
@@ -308,7 +307,6 @@ impl Stage {
             }
         }
         self.turns = turns;
-        self.leds = leds;
     }
 
     /// The robots' ids, in id order.

@@ -42,8 +42,6 @@
 //!
 //! Where the real simulator finds no loop it exits; here the robot earns nothing.
 
-use std::collections::BTreeMap;
-
 use nalgebra::Point2;
 
 use crate::map::{ChallengeParams, Lab};
@@ -280,7 +278,8 @@ pub struct Challenge {
     params: ChallengeParams,
     lab: Lab,
     time_limit: u64,
-    robots: BTreeMap<u32, Contestant>,
+    /// The contestants in id order (a sorted vector: scored in one pass every tick).
+    robots: Vec<(u32, Contestant)>,
     /// Distance-home grids, by the robots' start and half size (built on a first return).
     homes: Vec<(Point2<Real>, Real, HomeGrid)>,
 }
@@ -288,7 +287,7 @@ pub struct Challenge {
 impl Challenge {
     /// A challenge on `lab` under `scoring` with `params`; `time_limit` ticks (0: none).
     pub fn new(lab: &Lab, scoring: Scoring, params: ChallengeParams, time_limit: u64) -> Self {
-        Self { scoring, params, lab: lab.clone(), time_limit, robots: BTreeMap::new(), homes: Vec::new() }
+        Self { scoring, params, lab: lab.clone(), time_limit, robots: Vec::new(), homes: Vec::new() }
     }
 
     /// Its scoring mode.
@@ -303,42 +302,53 @@ impl Challenge {
             Scoring::Competitive => BASE + BASE * self.lab.targets.len() as i64,
             _ => 0,
         };
-        self.robots.insert(
-            id,
-            Contestant {
-                standing: Standing::default(),
-                leds: 0,
-                home,
-                margin,
-                penalties,
-                progress: 0,
-                collided: false,
-                start_returning: 0,
-                dist_at_arrival: 0.0,
-                path: None,
-                next: 1,
-            },
-        );
+        let c = Contestant {
+            standing: Standing::default(),
+            leds: 0,
+            home,
+            margin,
+            penalties,
+            progress: 0,
+            collided: false,
+            start_returning: 0,
+            dist_at_arrival: 0.0,
+            path: None,
+            next: 1,
+        };
+        match self.find(id) {
+            Ok(k) => self.robots[k].1 = c,
+            Err(k) => self.robots.insert(k, (id, c)),
+        }
+    }
+
+    fn find(&self, id: u32) -> Result<usize, usize> {
+        self.robots.binary_search_by_key(&id, |&(i, _)| i)
+    }
+
+    fn get(&self, id: u32) -> Option<&Contestant> {
+        self.find(id).ok().map(|k| &self.robots[k].1)
     }
 
     /// Takes robot `id` out.
     pub fn remove(&mut self, id: u32) {
-        self.robots.remove(&id);
+        if let Ok(k) = self.find(id) {
+            self.robots.remove(k);
+        }
     }
 
     /// Robot `id`'s standing.
     pub fn standing(&self, id: u32) -> Option<Standing> {
-        self.robots.get(&id).map(|c| c.standing)
+        self.get(id).map(|c| c.standing)
     }
 
     /// Every robot's standing, in id order.
     pub fn standings(&self) -> impl Iterator<Item = (u32, Standing)> + '_ {
-        self.robots.iter().map(|(&id, c)| (id, c.standing))
+        self.robots.iter().map(|(id, c)| (*id, c.standing))
     }
 
     /// Whether robot `id` has finished (it must stand still).
     pub fn finished(&self, id: u32) -> bool {
-        self.robots.get(&id).is_some_and(|c| c.standing.phase == Phase::Finished)
+        self.get(id).is_some_and(|c| c.standing.phase == Phase::Finished)
     }
 
     /// Scores the step that ended on tick `now` (1 after the first step), then moves each
@@ -354,8 +364,8 @@ impl Challenge {
         // robots scores every tick).
         let mut contestants = robots.iter_mut().peekable();
         for t in turns {
-            while contestants.next_if(|(id, _)| **id < t.id).is_some() {}
-            let Some((_, c)) = contestants.next_if(|(id, _)| **id == t.id) else { continue };
+            while contestants.next_if(|(id, _)| *id < t.id).is_some() {}
+            let Some((_, c)) = contestants.next_if(|(id, _)| *id == t.id) else { continue };
             if let Some(leds) = t.leds {
                 c.leds = leds;
             }
@@ -1024,12 +1034,12 @@ mod tests {
         // after it without passing near it counts for both, at 10.
         let mut c = Challenge::new(&l, Scoring::LineControl2023, Default::default(), 0);
         c.add(1, (0.0, 0.0), 0.5);
-        c.robots.get_mut(&1).expect("in").path = Some(vec![(0, 0), (1, 0), (2, 0), (1, 1), (0, 1)]);
+        c.robots[0].1.path = Some(vec![(0, 0), (1, 0), (2, 0), (1, 1), (0, 1)]);
         c.update(1, &[turn(1, 0.5, 0.0, 0)], open);
-        assert_eq!((c.standing(1).expect("in").score, c.robots[&1].next), (10, 2));
+        assert_eq!((c.standing(1).expect("in").score, c.robots[0].1.next), (10, 2));
         // At (0.6, 0.8) in half metres: within one of (1, 1), not of (2, 0).
         c.update(2, &[turn(1, 0.3, 0.4, 0)], open);
-        assert_eq!((c.standing(1).expect("in").score, c.robots[&1].next), (20, 4));
+        assert_eq!((c.standing(1).expect("in").score, c.robots[0].1.next), (20, 4));
     }
 
     #[test]
