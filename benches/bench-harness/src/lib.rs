@@ -812,15 +812,19 @@ pub fn udp_client(args: &UdpClientArgs) -> anyhow::Result<ExitCode> {
     let mut readings = load::Readings::default();
     let mut distances = Vec::with_capacity(ipc_types::MAX_PROXIMITY);
     let mut buf = [0u8; 4096];
-    'run: loop {
+    let mut over = false;
+    'run: while !over {
         for s in &socks {
             // The run is over when the Measures say both Buttons are off (the bridge then
             // goes on sending them until its clients leave, as Ciber-Rato's simulator does),
-            // or when they stop.
+            // or when they stop. The last tick's Measures are read by every robot first.
             let timeout = if answered == 0 { Duration::from_secs(30) } else { Duration::from_millis(1500) };
             s.set_read_timeout(Some(timeout))?;
-            match s.recv(&mut buf) {
-                Ok(n) if answered > 0 && run_over(&buf[..n]) => break 'run,
+            let got = s.recv(&mut buf);
+            if let Ok(n) = got {
+                over |= answered > 0 && run_over(&buf[..n]);
+            }
+            match got {
                 Ok(n) if args.real => {
                     let m = udp_bridge::codec::decode_measures(&buf[..n]).context("a Measures from the bridge")?;
                     // On a tie, turn towards the side the chair already faces.
