@@ -138,6 +138,19 @@ impl Driver {
     }
 }
 
+/// The client leaves, the user stops the run, and both processes end: the hub's stdout.
+fn stop_run(
+    d: Driver,
+    sess: &str,
+    hub: super::common::Proc,
+    bridge: super::common::Proc,
+    lines: &super::common::Lines,
+) -> String {
+    drop(d);
+    assert_eq!(agent_sdk::control(sess, ipc_types::Command::Stop, 0).map(|r| r.status).ok(), Some(0));
+    ended(hub, bridge, lines).0
+}
+
 /// The hub's final table entry of robot 1, from its JSON outcome.
 fn final_entry(stdout: &str) -> records::outcome::ScoreAtEnd {
     let out = HubOutcome::from_stdout(stdout).expect("the hub's JSON line");
@@ -267,9 +280,7 @@ fn a_control_lap_pays_ten_a_cell_until_the_end_led_leaves_the_penalties() {
     // EndLed: the lap points go, the penalties stay.
     let s = d.act(0.0, 0.0, END).clone();
     assert_eq!(s.score, -5, "{s:?}");
-    drop(d);
-    assert_eq!(agent_sdk::control(&sess, ipc_types::Command::Stop, 0).map(|r| r.status).ok(), Some(0));
-    let (stdout, _) = ended(hub, bridge, &lines);
+    let stdout = stop_run(d, &sess, hub, bridge, &lines);
     let e = final_entry(&stdout);
     assert_eq!((e.state.as_str(), e.score, e.collisions), ("Finished", -5, 1));
 }
@@ -304,9 +315,7 @@ fn mapping_and_planning_charge_each_contact_once_and_finish_on_the_end_led() {
         // Nothing visited (no VisitingLed) and no returning: EndLed alone finishes it.
         let s = d.act(0.0, 0.0, END).clone();
         assert_eq!((s.score, s.visited.as_str(), s.arrival), (6, "0", s.time), "{s:?}");
-        drop(d);
-        assert_eq!(agent_sdk::control(&sess, ipc_types::Command::Stop, 0).map(|r| r.status).ok(), Some(0));
-        let (stdout, _) = ended(hub, bridge, &lines);
+        let stdout = stop_run(d, &sess, hub, bridge, &lines);
         let e = final_entry(&stdout);
         assert_eq!((e.state.as_str(), e.score, e.collisions), ("Finished", 6, 2), "mode {mode}");
     }
@@ -343,9 +352,7 @@ fn line_mapping_pays_ten_for_each_tick_away_from_every_line() {
         // The tick EndLed lands on still pays if the robot is clear; the score is then final.
         expected += 10 * i64::from(clear(s.x, s.y));
         assert_eq!(s.score, expected, "{s:?}");
-        drop(d);
-        assert_eq!(agent_sdk::control(&sess, ipc_types::Command::Stop, 0).map(|r| r.status).ok(), Some(0));
-        let (stdout, _) = ended(hub, bridge, &lines);
+        let stdout = stop_run(d, &sess, hub, bridge, &lines);
         assert_eq!(final_entry(&stdout).score, expected, "mode {mode}");
     }
 }
@@ -442,9 +449,7 @@ fn line_control_laps_pay_each_next_cell_and_charge_each_tick_off_the_lines() {
         assert!(paid >= n, "mode {mode}: {paid} of {n} points paid, {off_ticks} ticks off the loop");
         let s = d.act(0.0, 0.0, END).clone();
         assert_eq!(s.score, 0, "{s:?}");
-        drop(d);
-        assert_eq!(agent_sdk::control(&sess, ipc_types::Command::Stop, 0).map(|r| r.status).ok(), Some(0));
-        let (stdout, _) = ended(hub, bridge, &lines);
+        let stdout = stop_run(d, &sess, hub, bridge, &lines);
         assert_eq!(final_entry(&stdout).state, "Finished", "mode {mode}");
     }
 }
