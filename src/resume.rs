@@ -26,31 +26,35 @@ pub fn resume(args: &ResumeArgs) -> anyhow::Result<ExitCode> {
     let name = format!("iwsim-resume-{}", std::process::id());
     let mut observer = observer::Observer::connect_within(session, &name, args.hub.timeout())
         .with_context(|| format!("connecting to the hub of session {session:?}"))?;
-    let robots = observer.world().map(|(_, robots)| robots);
+    // Names come with the robots' info, published beside the world.
+    let robots = observer
+        .world()
+        .and_then(|(_, robots)| Ok(observer.robot_infos_covering(&robots)?.to_vec()))
+        .with_context(|| format!("reading the world of session {session:?}"));
     observer.close();
-    let robots = robots.with_context(|| format!("reading the world of session {session:?}"))?;
+    let robots = robots?;
     let by_name = robots.iter().find(|r| r.name.as_str() == Some(args.chair.as_str()));
     let Some(robot) = by_name.or_else(|| {
         let id: u32 = args.chair.parse().ok()?;
-        robots.iter().find(|r| r.id == id)
+        robots.iter().find(|r| r.robot_id == id)
     }) else {
         let names: Vec<&str> = robots.iter().filter_map(|r| r.name.as_str()).collect();
         bail!("no robot {:?} in session {session:?} (its robots: {})", args.chair, names.join(", "));
     };
-    let label = robot.name.as_str().unwrap_or("?").to_owned();
-    let answer = agent_sdk::control_within(session, Command::ResumeChair, robot.id, args.hub.timeout())
+    let (label, robot_id) = (robot.name.as_str().unwrap_or("?").to_owned(), robot.robot_id);
+    let answer = agent_sdk::control_within(session, Command::ResumeChair, robot_id, args.hub.timeout())
         .with_context(|| format!("asking the hub of session {session:?} to resume {label}"))?;
     match answer.status {
         0 => {
             println!(
                 "iwsim resume: asked to resume {label} (robot {}); its adapter drives it again once every cause of \
                  its stop has cleared, and says so",
-                robot.id
+                robot_id
             );
             Ok(ExitCode::SUCCESS)
         }
-        3 => bail!("{label} (robot {}) is not a physical chair: it has no stop to resume", robot.id),
-        2 => bail!("{label} (robot {}) left the world before the hub got the word", robot.id),
+        3 => bail!("{label} (robot {}) is not a physical chair: it has no stop to resume", robot_id),
+        2 => bail!("{label} (robot {}) left the world before the hub got the word", robot_id),
         s => bail!("the hub refused to resume {label} (status {s})"),
     }
 }

@@ -11,9 +11,9 @@ use ipc_types::{
     DRIVE_RESUMES_SHIFT, FixedName, HAS_COMPASS, HAS_GPS, HAS_GROUND, HAS_SCORE, HubParams, InboxEntry, MAP_BEACON,
     MAP_CHECKPOINT, MAP_CORNER, MAP_GRID, MAP_TARGET, MAP_WALL, MAX_AGENTS, MAX_INBOX_MESSAGES, MAX_PROXIMITY,
     MAX_ROBOTS, MapHeader, MapItem, REG_CHAIR, REG_DISC, REG_HAS_POSE, ROBOT_COLLISION, ROBOT_DISC, ROBOT_FROZEN,
-    ROBOT_LAGGING, Refusal, RobotKind as WireKind, RobotRegistration, RobotSensors, RobotState, RunState,
-    SENSOR_BEACON, SENSOR_COLLISION, SENSOR_COMPASS, SENSOR_GPS, SENSOR_GROUND, SENSOR_OBSTACLE, SENSOR_SCORE,
-    SensorBlock, SensorGeometry, SensorMode, WorldHeader,
+    ROBOT_LAGGING, Refusal, RobotInfo, RobotKind as WireKind, RobotRegistration, RobotState, RunState, SENSOR_BEACON,
+    SENSOR_COLLISION, SENSOR_COMPASS, SENSOR_GPS, SENSOR_GROUND, SENSOR_OBSTACLE, SENSOR_SCORE, SensorBlock,
+    SensorGeometry, SensorMode, WorldHeader,
 };
 
 use recorder::journal::{Event, RecordedAction, RunStart};
@@ -811,9 +811,9 @@ impl HubCore {
     }
 
     /// Every robot's proximity-sensor geometry, in id order.
-    pub fn robot_sensors(&self) -> impl Iterator<Item = RobotSensors> + '_ {
+    pub fn robot_info(&self) -> impl Iterator<Item = RobotInfo> + '_ {
         let default_range = self.stage.world().params().proximity_range();
-        self.robots.keys().filter_map(move |&id| Some(sensor_geometry(self.stage.robot(id)?, id, default_range)))
+        self.robots.keys().filter_map(move |&id| Some(robot_info(self.stage.robot(id)?, id, default_range)))
     }
 
     /// An agent's robot ids, in registration order.
@@ -967,7 +967,6 @@ pub fn robot_state(
         com: r.spec.com as f32,
         agent_id,
         motor_out: [r.motor_out[0] as f32, r.motor_out[1] as f32],
-        name: FixedName::new(&r.spec.name).unwrap_or(FixedName::EMPTY),
         proximity_m: {
             let mut p = [f32::NAN; MAX_PROXIMITY];
             for (o, v) in p.iter_mut().zip(r.readings.proximity()) {
@@ -995,11 +994,17 @@ pub fn challenge_standing(s: Standing, run_state: RunState) -> ChallengeStanding
     }
 }
 
-/// Robot `id`'s proximity-sensor geometry (`default_range_m` for sensors without a range of
-/// their own): what [`HubCore::robot_sensors`] publishes, public so that a replay does too.
-pub fn sensor_geometry(r: &world::Robot, id: u32, default_range_m: f64) -> RobotSensors {
+/// Robot `id`'s name and proximity-sensor geometry (`default_range_m` for sensors without a
+/// range of their own): what [`HubCore::robot_info`] publishes, public so that a replay does
+/// too.
+pub fn robot_info(r: &world::Robot, id: u32, default_range_m: f64) -> RobotInfo {
     let specs = if r.spec.sensors.is_empty() { r.spec.default_sensors() } else { r.spec.sensors.clone() };
-    let mut out = RobotSensors { robot_id: id, count: 0, sensors: [SensorGeometry::default(); MAX_PROXIMITY] };
+    let mut out = RobotInfo {
+        robot_id: id,
+        count: 0,
+        sensors: [SensorGeometry::default(); MAX_PROXIMITY],
+        name: FixedName::truncated(&r.spec.name),
+    };
     for (o, s) in out.sensors.iter_mut().zip(&specs) {
         *o = SensorGeometry {
             x_m: s.x_m as f32,
@@ -1099,6 +1104,8 @@ pub fn merge_chair_readings(
 
 // The world's line sensor fits the sensor block's bits.
 const _: () = assert!(world::LINE_ELEMENTS == ipc_types::LINE_ELEMENTS && ipc_types::LINE_ELEMENTS <= 32);
+// Every name the world accepts fits the wire's name field whole.
+const _: () = assert!(world::MAX_NAME_LEN == ipc_types::NAME_BYTES - 1);
 
 /// The run parameters agents learn from the map header.
 pub fn hub_params(p: &Params, mode: Mode, tick_limit: u64, deadline_ms: u32) -> HubParams {
@@ -1211,11 +1218,12 @@ mod tests {
     #[test]
     fn a_lab_name_too_long_for_the_header_reaches_agents_cut_like_a_robot_name() {
         let mut map = builtin::map("liacc").expect("built in");
-        // 30 ASCII bytes, then "é" (2 bytes) straddles the 31-byte limit: the cut drops it whole.
-        map.lab.name = format!("{}éé and more", "L".repeat(30));
+        // 254 ASCII bytes, then "é" (2 bytes) straddles the 255-byte limit: the cut drops it
+        // whole.
+        map.lab.name = format!("{}éé and more", "L".repeat(254));
         let c = HubCore::new(&map.lab, map.grid, Params::default(), 1, Mode::LockStep, 0).expect("valid");
         let (header, _) = c.map_items(100, 0, MapAudience::Observers);
-        assert_eq!(header.name.as_str(), Some("L".repeat(30).as_str()));
+        assert_eq!(header.name.as_str(), Some("L".repeat(254).as_str()));
         assert_eq!(FixedName::truncated("short lab").as_str(), Some("short lab"));
         assert_eq!(FixedName::truncated("nul\0after").as_str(), Some("nul"));
     }

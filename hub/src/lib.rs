@@ -293,7 +293,6 @@ pub fn run(cfg: HubConfig) -> Result<HubOutcome, HubError> {
             let agents_spin = spins_for_answers(&cfg, &core, cores) && !core.world().steps_on_threads();
             let spin_us = if agents_spin { cfg.answer_spin.as_micros() as u32 } else { 0 };
             publish_tick(&core, &ports.world_pub, &agents, &mut ports.roster, recorded, spin_us)?;
-            ports.roster.publish_if_changed(|| core.robot_sensors())?;
             if core.has_chairs() {
                 let count = core.chair_states().count();
                 ports::publish_chairs(&ports.chairs_pub, core.world().tick(), count, core.chair_states())?;
@@ -683,6 +682,9 @@ fn publish_tick(
         states.clear();
         states.extend_from_slice(sample.payload());
     }
+    // Before the snapshot: an observer that reads a snapshot finds every robot's info (its
+    // name) already published.
+    roster.publish_if_changed(|| core.robot_info())?;
     sample.send().map_err(ipc("send a world snapshot"))?;
     let finished = header.run_state == RunState::Finished as u32;
     for (&id, ports) in agents {

@@ -17,24 +17,24 @@ use ipc_services::iceoryx2::sample_mut_uninit::SampleMutUninit;
 use ipc_services::{Role, SLICE_ALLOCATION, Session, Svc};
 use ipc_types::{
     ActionBlock, ActionHeader, ChairState, ControlRequest, ControlResponse, MapHeader, MapItem, RegisterRequest,
-    RegisterResponse, RobotSensors, RobotState, SensorBlock, TickHeader, WorldHeader,
+    RegisterResponse, RobotInfo, RobotState, SensorBlock, TickHeader, WorldHeader,
 };
 
 use crate::{HubError, ipc};
 
 /// The publisher of every robot's sensor geometry and the robot ids it last published for.
 pub(crate) struct Roster {
-    pub(crate) publisher: Publisher<Svc, [RobotSensors], ()>,
+    pub(crate) publisher: Publisher<Svc, [RobotInfo], ()>,
     /// The robot ids of the last snapshot, in its order.
     ids: Vec<u32>,
     /// Whether the ids changed since the geometry was last published (true at first).
     changed: bool,
     /// The geometry last published, in the robots' order.
-    pub(crate) scratch: Vec<RobotSensors>,
+    pub(crate) scratch: Vec<RobotInfo>,
 }
 
 impl Roster {
-    fn new(publisher: Publisher<Svc, [RobotSensors], ()>) -> Self {
+    fn new(publisher: Publisher<Svc, [RobotInfo], ()>) -> Self {
         Self { publisher, ids: Vec::new(), changed: true, scratch: Vec::new() }
     }
 
@@ -50,7 +50,7 @@ impl Roster {
 
     /// Republishes every robot's sensor geometry when the set of robots noted has changed
     /// since the last time (a robot's sensors are fixed at registration, so ids are enough).
-    pub(crate) fn publish_if_changed<I: Iterator<Item = RobotSensors>>(
+    pub(crate) fn publish_if_changed<I: Iterator<Item = RobotInfo>>(
         &mut self,
         sensors: impl FnOnce() -> I,
     ) -> Result<(), HubError> {
@@ -102,7 +102,7 @@ pub(crate) struct HubPorts {
     pub(crate) world_svc: ipc_services::WorldService,
     _map_svc: ipc_services::MapService,
     _observer_map_svc: ipc_services::MapService,
-    _sensors_svc: ipc_services::RobotSensorsService,
+    _sensors_svc: ipc_services::RobotInfoService,
     _chairs_svc: ipc_services::ChairService,
     _actions_svc: ipc_services::ActionService,
     _register_svc: ipc_services::RegisterService,
@@ -124,7 +124,7 @@ impl HubPorts {
         let world_svc = session.world(node, Role::Hub)?;
         let map_svc = session.map(node, Role::Hub)?;
         let observer_map_svc = session.observer_map(node, Role::Hub)?;
-        let sensors_svc = session.robot_sensors(node, Role::Hub)?;
+        let sensors_svc = session.robot_info(node, Role::Hub)?;
         let actions_svc = session.actions(node, Role::Hub)?;
         let chairs_svc = session.observer_chairs(node, Role::Hub)?;
         let register_svc = session.register(node, Role::Hub)?;
@@ -142,7 +142,7 @@ impl HubPorts {
             .initial_max_slice_len(64)
             .allocation_strategy(SLICE_ALLOCATION)
             .create()
-            .map_err(ipc("create the robot-sensors publisher"))?;
+            .map_err(ipc("create the robot-info publisher"))?;
         let chairs_pub = chairs_svc
             .publisher_builder()
             .initial_max_slice_len(4)

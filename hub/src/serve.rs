@@ -25,14 +25,14 @@ use ipc_services::iceoryx2::port::publisher::Publisher;
 use ipc_services::iceoryx2::prelude::PortFactory as _;
 use ipc_services::{HUB_NODE_NAME, ServicesError, Session, Svc, clean_dead_nodes};
 use ipc_types::{
-    Command, ControlResponse, MAX_AGENTS, MapHeader, MapItem, Refusal, RegisterKind, RegisterResponse, RobotSensors,
+    Command, ControlResponse, MAX_AGENTS, MapHeader, MapItem, Refusal, RegisterKind, RegisterResponse, RobotInfo,
     RobotState, RunState, SensorBlock, TickHeader, WorldHeader,
 };
 use recorder::Recording;
 use recorder::journal::Event;
 use world::WorldBuildError;
 
-use crate::core::{MapAudience, Mode, hub_params, pack_map_for, robot_state, sensor_geometry};
+use crate::core::{MapAudience, Mode, hub_params, pack_map_for, robot_info, robot_state};
 use crate::ports::{HubPorts, agent_sensor_port};
 use crate::replay::outcome_of;
 use crate::stage::{Stage, StageApplyError};
@@ -283,9 +283,9 @@ impl<'a> Player<'a> {
     }
 
     /// Every robot's proximity-sensor geometry, in id order.
-    pub fn robot_sensors(&self) -> impl Iterator<Item = RobotSensors> + '_ {
+    pub fn robot_info(&self) -> impl Iterator<Item = RobotInfo> + '_ {
         let range = self.stage.world().params().proximity_range();
-        self.stage.ids().filter_map(move |id| Some(sensor_geometry(self.stage.robot(id)?, id, range)))
+        self.stage.ids().filter_map(move |id| Some(robot_info(self.stage.robot(id)?, id, range)))
     }
 
     /// The map for `audience` as the recorded hub published it, its start grid included.
@@ -397,10 +397,9 @@ pub fn serve(recording: &Recording, options: &ServeOptions) -> Result<Served, Re
             *sample.user_header_mut() = header;
             let sample = crate::ports::fill(sample, player.robot_states());
             io.roster.note(sample.payload().iter().map(|s| s.id));
+            // Before the snapshot, as the live hub does: its robots' names are there first.
+            io.roster.publish_if_changed(|| player.robot_info()).map_err(|e| ReplayServeError::Ipc(e.to_string()))?;
             sample.send().map_err(ipc("send a world snapshot"))?;
-            io.roster
-                .publish_if_changed(|| player.robot_sensors())
-                .map_err(|e| ReplayServeError::Ipc(e.to_string()))?;
             if finished {
                 // Agents have no robots here, so they get no blocks per tick, but every agent
                 // hears the end.
@@ -620,10 +619,10 @@ mod tests {
         let live: Vec<RobotState> = hub.robot_states().collect();
         assert_eq!(bytemuck::cast_slice::<_, u8>(&played), bytemuck::cast_slice::<_, u8>(&live));
         assert_eq!(p.world_header(0).state_hash, hub.world_header().state_hash);
-        let sensors: Vec<RobotSensors> = p.robot_sensors().collect();
+        let sensors: Vec<RobotInfo> = p.robot_info().collect();
         assert_eq!(
             bytemuck::cast_slice::<_, u8>(&sensors),
-            bytemuck::cast_slice::<_, u8>(&hub.robot_sensors().collect::<Vec<_>>())
+            bytemuck::cast_slice::<_, u8>(&hub.robot_info().collect::<Vec<_>>())
         );
     }
 

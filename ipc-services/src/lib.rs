@@ -24,7 +24,7 @@ use iceoryx2::service::ipc;
 use iceoryx2::service::port_factory::{event, publish_subscribe, request_response};
 use ipc_types::{
     ActionBlock, ActionHeader, ChairState, ControlRequest, ControlResponse, MAX_AGENTS, MapHeader, MapItem, Ping,
-    RegisterRequest, RegisterResponse, RobotSensors, RobotState, SensorBlock, TickHeader, WorldHeader, service,
+    RegisterRequest, RegisterResponse, RobotInfo, RobotState, SensorBlock, TickHeader, WorldHeader, service,
 };
 
 pub use iceoryx2;
@@ -36,7 +36,7 @@ pub type WorldService = publish_subscribe::PortFactory<Svc, [RobotState], WorldH
 /// The map.
 pub type MapService = publish_subscribe::PortFactory<Svc, [MapItem], MapHeader>;
 /// Every robot's sensor geometry.
-pub type RobotSensorsService = publish_subscribe::PortFactory<Svc, [RobotSensors], ()>;
+pub type RobotInfoService = publish_subscribe::PortFactory<Svc, [RobotInfo], ()>;
 /// Physical chairs, for observers.
 pub type ChairService = publish_subscribe::PortFactory<Svc, [ChairState], u64>;
 /// Actions from the agents.
@@ -294,10 +294,10 @@ impl Session {
 
     /// Sensor geometry of every robot: republished with history when the robots change, so
     /// viewers can draw cones without the world snapshot carrying them every tick.
-    pub fn robot_sensors(&self, node: &Node<Svc>, role: Role) -> Result<RobotSensorsService, ServicesError> {
+    pub fn robot_info(&self, node: &Node<Svc>, role: Role) -> Result<RobotInfoService, ServicesError> {
         let b = node
-            .service_builder(&self.iox_name(service::ROBOT_SENSORS)?)
-            .publish_subscribe::<[RobotSensors]>()
+            .service_builder(&self.iox_name(service::ROBOT_INFO)?)
+            .publish_subscribe::<[RobotInfo]>()
             .max_publishers(1)
             .max_subscribers(MAX_AGENTS + MAX_OBSERVERS)
             .max_nodes(MAX_NODES)
@@ -305,7 +305,7 @@ impl Session {
             .subscriber_max_buffer_size(1)
             .subscriber_max_borrowed_samples(1)
             .enable_safe_overflow(true);
-        finish!(self, b, role, service::ROBOT_SENSORS)
+        finish!(self, b, role, service::ROBOT_INFO)
     }
 
     /// Physical chairs for observers: the hub publishes every tick while there are chairs

@@ -18,7 +18,7 @@
 //! let mut reg = RobotRegistration::new("chair-1");
 //! reg.kind = RobotKind::Simulated as u32;
 //! assert_eq!(reg.name.as_str(), Some("chair-1"));
-//! assert_eq!(FixedName::new("x".repeat(40).as_str()), None, "names are at most 31 bytes");
+//! assert_eq!(FixedName::new("x".repeat(300).as_str()), None, "names are at most 255 bytes");
 //! ```
 #![no_std]
 #![warn(missing_docs)]
@@ -35,8 +35,11 @@ pub const MAX_AGENTS: usize = 128;
 pub const MAX_PROXIMITY: usize = 8;
 /// Beacons in a lab.
 pub const MAX_BEACONS: usize = 16;
-/// Bytes of a name, its terminating zero included.
-pub const NAME_BYTES: usize = 32;
+/// Bytes of a name, its terminating zero included: room for any name a Ciber-Rato client or
+/// a lab file gives in practice (the real simulator keeps names whole; a UDP datagram of its
+/// protocol is 1024 bytes). Names travel only where they are static (registration, the
+/// robots' info, the map header), never in the per-tick world snapshot.
+pub const NAME_BYTES: usize = 256;
 /// Bytes a robot may say per tick.
 pub const MESSAGE_BYTES: usize = 100;
 /// Bytes a robot may hear per tick.
@@ -71,9 +74,9 @@ pub mod service {
     /// Per-agent sensor blocks: `agent/<id>/sensors` (pub/sub, slice of
     /// [`crate::SensorBlock`] with a [`crate::TickHeader`]).
     pub const AGENT_SENSORS_PREFIX: &str = "agent";
-    /// Every robot's proximity-sensor geometry (pub/sub with history, slice of
-    /// [`crate::RobotSensors`]), republished when the set of robots changes.
-    pub const ROBOT_SENSORS: &str = "robot-sensors";
+    /// Every robot's static description, its name and proximity-sensor geometry (pub/sub with
+    /// history, slice of [`crate::RobotInfo`]), republished when the set of robots changes.
+    pub const ROBOT_INFO: &str = "robot-info";
     /// `iwsim bench latency`'s raw ping-pong, driver to peer: pub/sub of [`crate::Ping`], and
     /// its doorbell (event) under the same name.
     pub const BENCH_PING: &str = "ping";
@@ -85,12 +88,12 @@ pub mod service {
 /// A name in a fixed buffer: UTF-8, zero-padded, at most `NAME_BYTES − 1` bytes.
 #[repr(C)]
 #[derive(Clone, Copy, PartialEq, Eq, Pod, Zeroable, ZeroCopySend)]
-#[type_name("iwsim::FixedName.v1")]
+#[type_name("iwsim::FixedName.v2")]
 pub struct FixedName {
     /// The bytes, zero-padded.
     pub bytes: [u8; NAME_BYTES],
 }
-const _: () = assert!(core::mem::size_of::<FixedName>() == 32);
+const _: () = assert!(core::mem::size_of::<FixedName>() == 256);
 const _: () = assert!(core::mem::align_of::<FixedName>() == 1);
 
 impl FixedName {
@@ -250,7 +253,7 @@ const _: () = assert!(core::mem::align_of::<ChallengeStanding>() == 8);
 /// One robot in a world snapshot.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable, ZeroCopySend)]
-#[type_name("iwsim::RobotState.v4")]
+#[type_name("iwsim::RobotState.v5")]
 pub struct RobotState {
     /// Robot id (1-based, unique in the run).
     pub id: u32,
@@ -276,8 +279,6 @@ pub struct RobotState {
     pub agent_id: u32,
     /// Motor outputs, left and right, in [−1, 1].
     pub motor_out: [f32; 2],
-    /// Name.
-    pub name: FixedName,
     /// The proximity readings the robot's agent got this tick, metres (noise included);
     /// NaN past the robot's sensor count. Viewers draw the cones with these.
     pub proximity_m: [f32; MAX_PROXIMITY],
@@ -285,7 +286,7 @@ pub struct RobotState {
     /// paused).
     pub standing: ChallengeStanding,
 }
-const _: () = assert!(core::mem::size_of::<RobotState>() == 160);
+const _: () = assert!(core::mem::size_of::<RobotState>() == 128);
 const _: () = assert!(core::mem::align_of::<RobotState>() == 8);
 
 /// One proximity sensor's geometry, as viewers draw it.
@@ -307,21 +308,36 @@ pub struct SensorGeometry {
 const _: () = assert!(core::mem::size_of::<SensorGeometry>() == 20);
 const _: () = assert!(core::mem::align_of::<SensorGeometry>() == 4);
 
-/// A robot's proximity sensors. The hub publishes every robot's, with history, whenever the
-/// set of robots changes, so the world snapshot stays small.
+/// What does not change about a robot while it is in the run: its name and its proximity
+/// sensors. The hub publishes every robot's, with history, whenever the set of robots
+/// changes, so the world snapshot stays small.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable, ZeroCopySend)]
-#[type_name("iwsim::RobotSensors.v1")]
-pub struct RobotSensors {
+#[type_name("iwsim::RobotInfo.v1")]
+pub struct RobotInfo {
     /// Robot id.
     pub robot_id: u32,
     /// Sensors in use.
     pub count: u32,
     /// The sensors, in the robot's order (its readings follow it).
     pub sensors: [SensorGeometry; MAX_PROXIMITY],
+    /// Name, whole.
+    pub name: FixedName,
 }
-const _: () = assert!(core::mem::size_of::<RobotSensors>() == 168);
-const _: () = assert!(core::mem::align_of::<RobotSensors>() == 4);
+const _: () = assert!(core::mem::size_of::<RobotInfo>() == 424);
+const _: () = assert!(core::mem::align_of::<RobotInfo>() == 4);
+
+impl RobotInfo {
+    /// The info of robot `id` among `infos`, looked for at `index` first: the hub publishes
+    /// the infos in the world snapshot's robot order, so a snapshot's `k`-th robot is usually
+    /// the `k`-th info; a subscriber that caught the two at different moments searches.
+    pub fn find(infos: &[RobotInfo], index: usize, id: u32) -> Option<&RobotInfo> {
+        match infos.get(index) {
+            Some(i) if i.robot_id == id => Some(i),
+            _ => infos.iter().find(|i| i.robot_id == id),
+        }
+    }
+}
 
 /// `ChairState::flags`: a live agent controls the chair.
 pub const CHAIR_CONTROLLED: u32 = 1;
@@ -679,7 +695,7 @@ impl SensorMode {
 /// A robot as an agent registers it (thesis Tables 4.3 and 4.4).
 #[repr(C)]
 #[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable, ZeroCopySend)]
-#[type_name("iwsim::RobotRegistration.v2")]
+#[type_name("iwsim::RobotRegistration.v3")]
 pub struct RobotRegistration {
     /// Requested id = 1-based grid slot; 0 takes the first free one.
     pub requested_id: u32,
@@ -706,12 +722,12 @@ pub struct RobotRegistration {
     /// Name.
     pub name: FixedName,
 }
-const _: () = assert!(core::mem::size_of::<RobotRegistration>() == 432);
+const _: () = assert!(core::mem::size_of::<RobotRegistration>() == 656);
 const _: () = assert!(core::mem::align_of::<RobotRegistration>() == 8);
 
 impl RobotRegistration {
     /// A simulated robot with the thesis defaults (1 m × 1 m, COM 0.5, 0.5 m/s, curve 0.5),
-    /// starting at the first free grid slot. Names longer than 31 bytes are cut short.
+    /// starting at the first free grid slot. Names longer than 255 bytes are cut short.
     pub fn new(name: &str) -> Self {
         Self {
             kind: RobotKind::Simulated as u32,
@@ -765,7 +781,7 @@ impl RobotRegistration {
 /// What an agent sends on the register service.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable, ZeroCopySend)]
-#[type_name("iwsim::RegisterRequest.v3")]
+#[type_name("iwsim::RegisterRequest.v4")]
 pub struct RegisterRequest {
     /// [`RegisterKind`] as u32.
     pub kind: u32,
@@ -783,7 +799,7 @@ pub struct RegisterRequest {
     /// The robot (with `RegisterKind::Robot`).
     pub robot: RobotRegistration,
 }
-const _: () = assert!(core::mem::size_of::<RegisterRequest>() == 464);
+const _: () = assert!(core::mem::size_of::<RegisterRequest>() == 688);
 const _: () = assert!(core::mem::align_of::<RegisterRequest>() == 8);
 
 /// What a register request asks for.
@@ -1036,7 +1052,7 @@ pub const SENSOR_SCORE: u32 = 1 << 6;
 /// The header of the map.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable, ZeroCopySend, Default)]
-#[type_name("iwsim::MapHeader.v4")]
+#[type_name("iwsim::MapHeader.v5")]
 pub struct MapHeader {
     /// Lab width, metres.
     pub width_m: f64,
@@ -1059,7 +1075,7 @@ pub struct MapHeader {
     /// The run's parameters.
     pub params: HubParams,
 }
-const _: () = assert!(core::mem::size_of::<MapHeader>() == 232);
+const _: () = assert!(core::mem::size_of::<MapHeader>() == 456);
 const _: () = assert!(core::mem::align_of::<MapHeader>() == 8);
 
 /// `MapItem::kind`: a wall starts; `a` = height in metres, `b` = corner count, `c` = 1 for a
@@ -1136,31 +1152,46 @@ mod tests {
     #[test]
     fn every_payload_has_a_versioned_type_name() {
         assert_eq!(type_name_of::<WorldHeader>(), "iwsim::WorldHeader.v1");
-        assert_eq!(type_name_of::<RobotState>(), "iwsim::RobotState.v4");
-        assert_eq!(type_name_of::<RobotRegistration>(), "iwsim::RobotRegistration.v2");
-        assert_eq!(type_name_of::<RobotSensors>(), "iwsim::RobotSensors.v1");
+        assert_eq!(type_name_of::<RobotState>(), "iwsim::RobotState.v5");
+        assert_eq!(type_name_of::<RobotRegistration>(), "iwsim::RobotRegistration.v3");
+        assert_eq!(type_name_of::<RobotInfo>(), "iwsim::RobotInfo.v1");
         assert_eq!(type_name_of::<SensorBlock>(), "iwsim::SensorBlock.v5");
         assert_eq!(type_name_of::<ActionBlock>(), "iwsim::ActionBlock.v2");
         assert_eq!(type_name_of::<ChairState>(), "iwsim::ChairState.v1");
-        assert_eq!(type_name_of::<RegisterRequest>(), "iwsim::RegisterRequest.v3");
+        assert_eq!(type_name_of::<RegisterRequest>(), "iwsim::RegisterRequest.v4");
         assert_eq!(type_name_of::<MapItem>(), "iwsim::MapItem.v1");
         assert_eq!(type_name_of::<Ping>(), "iwsim::bench::Ping.v5");
         assert_eq!(type_name_of::<HubParams>(), "iwsim::HubParams.v3");
-        assert_eq!(type_name_of::<MapHeader>(), "iwsim::MapHeader.v4");
+        assert_eq!(type_name_of::<MapHeader>(), "iwsim::MapHeader.v5");
     }
 
     #[test]
     fn names_round_trip_and_reject_what_does_not_fit() {
         let n = FixedName::new("chair-7").expect("fits");
         assert_eq!(n.as_str(), Some("chair-7"));
-        assert!(FixedName::new(&"a".repeat(31)).is_some());
-        assert!(FixedName::new(&"a".repeat(32)).is_none());
+        assert!(FixedName::new(&"a".repeat(255)).is_some());
+        assert!(FixedName::new(&"a".repeat(256)).is_none());
         assert!(FixedName::new("a\0b").is_none());
         let junk = FixedName { bytes: [0xff; NAME_BYTES] };
         assert_eq!(junk.as_str(), None);
         // Registration cuts long names at a character boundary.
-        let r = RobotRegistration::new("ééééééééééééééééé"); // 34 bytes
-        assert_eq!(r.name.as_str(), Some("ééééééééééééééé"));
+        let r = RobotRegistration::new(&"é".repeat(128)); // 256 bytes
+        assert_eq!(r.name.as_str(), Some("é".repeat(127).as_str()));
+    }
+
+    #[test]
+    fn a_robots_info_is_found_at_its_index_or_by_search() {
+        let info = |id, name: &str| RobotInfo {
+            robot_id: id,
+            name: FixedName::new(name).expect("fits"),
+            ..Zeroable::zeroed()
+        };
+        let infos = [info(1, "a"), info(4, "b"), info(9, "c")];
+        assert_eq!(RobotInfo::find(&infos, 1, 4).map(|i| i.name), Some(infos[1].name));
+        // Out of step with the snapshot (a robot came or left between the two): searched.
+        assert_eq!(RobotInfo::find(&infos, 0, 9).map(|i| i.robot_id), Some(9));
+        assert_eq!(RobotInfo::find(&infos, 7, 1).map(|i| i.robot_id), Some(1));
+        assert!(RobotInfo::find(&infos, 2, 5).is_none());
     }
 
     #[test]

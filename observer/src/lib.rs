@@ -14,7 +14,7 @@ use agent_sdk::{AgentError, map, ports};
 use ipc_services::iceoryx2::node::Node;
 use ipc_services::iceoryx2::port::subscriber::Subscriber;
 use ipc_services::{Role, ServicesError, Session, Svc};
-use ipc_types::{RobotSensors, RobotState, WorldHeader};
+use ipc_types::{RobotInfo, RobotState, WorldHeader};
 
 use ports::{ANSWER_TIMEOUT, ipc, receive_map, receive_newest};
 
@@ -31,11 +31,13 @@ pub struct Observer {
     hub_pid: Option<u32>,
     _node: Node<Svc>,
     world: Subscriber<Svc, [RobotState], WorldHeader>,
-    sensors: Subscriber<Svc, [RobotSensors], ()>,
+    sensors: Subscriber<Svc, [RobotInfo], ()>,
     map_svc: ipc_services::MapService,
     /// The newest snapshot received, held in shared memory (not copied): what
     /// [`Observer::with_world`] lends and [`Observer::world`] copies.
     last_world: Option<WorldSample>,
+    /// Every robot's info (name, sensor geometry) as last received.
+    infos: Vec<RobotInfo>,
     /// The physical chairs' port, opened at the first look (a served replay has none).
     chairs: Option<(ChairSubscriber, ipc_services::ChairService)>,
     /// Last, so it runs after every port and the node are gone.
@@ -61,7 +63,7 @@ impl Observer {
                 Ok((
                     session.world(&node, Role::Client)?,
                     session.observer_map(&node, Role::Client)?,
-                    session.robot_sensors(&node, Role::Client)?,
+                    session.robot_info(&node, Role::Client)?,
                 ))
             })();
             match opened {
@@ -73,7 +75,7 @@ impl Observer {
             }
         };
         let world = world_svc.subscriber_builder().create().map_err(ipc("create a world subscriber"))?;
-        let sensors = sensors_svc.subscriber_builder().create().map_err(ipc("create a robot-sensors subscriber"))?;
+        let sensors = sensors_svc.subscriber_builder().create().map_err(ipc("create a robot-info subscriber"))?;
         // The hub creates its node before its services, so a hub whose services opened is
         // listed; one that died in between is found dead at the first check.
         let hub_pid = session.hub_pid();
@@ -85,6 +87,7 @@ impl Observer {
             sensors,
             map_svc,
             last_world: None,
+            infos: Vec::new(),
             chairs: None,
             _release: release,
         })
@@ -162,14 +165,51 @@ impl Observer {
         }
     }
 
-    /// Every robot's proximity-sensor geometry, if the hub republished it since the last call
-    /// (it does when the set of robots changes).
-    pub fn try_robot_sensors(&self) -> Result<Option<Vec<RobotSensors>>, AgentError> {
-        let mut newest = None;
-        while let Some(s) = self.sensors.receive().map_err(ipc("receive robot sensors"))? {
-            newest = Some(s.payload().to_vec());
+    /// Takes every robot's info (name, proximity-sensor geometry) if the hub republished it
+    /// since the last look (it does when the set of robots changes); true if it did.
+    pub fn refresh_robot_info(&mut self) -> Result<bool, AgentError> {
+        let mut changed = false;
+        while let Some(s) = self.sensors.receive().map_err(ipc("receive robot info"))? {
+            // The newest, in the hub's robot order; then those of robots that have left, so a
+            // snapshot read before they left still finds their names.
+            let mut ids: Vec<u32> = s.payload().iter().map(|i| i.robot_id).collect();
+            ids.sort_unstable();
+            let left: Vec<RobotInfo> =
+                self.infos.iter().filter(|i| ids.binary_search(&i.robot_id).is_err()).copied().collect();
+            self.infos.clear();
+            self.infos.extend_from_slice(s.payload());
+            self.infos.extend(left);
+            changed = true;
         }
-        Ok(newest)
+        Ok(changed)
+    }
+
+    /// Every robot's info (name, proximity-sensor geometry) as the last
+    /// [`Observer::refresh_robot_info`] took it (empty before): the robots in the hub's order,
+    /// then those that have left. Names live here, not in the per-tick snapshot: match a
+    /// snapshot's robot to its info with [`RobotInfo::find`]. The hub publishes a new robot's
+    /// info before the first snapshot that shows it, so a refresh after reading a snapshot
+    /// finds all of its robots.
+    pub fn robot_infos(&self) -> &[RobotInfo] {
+        &self.infos
+    }
+
+    /// Every robot's info once it covers each robot of `robots` (a snapshot this observer
+    /// read), waiting up to 15 s: a fresh observer gets the kept world and the kept info from
+    /// two publishers, not necessarily together.
+    pub fn robot_infos_covering(&mut self, robots: &[RobotState]) -> Result<&[RobotInfo], AgentError> {
+        let start = Instant::now();
+        loop {
+            self.refresh_robot_info()?;
+            if robots.iter().enumerate().all(|(k, r)| RobotInfo::find(&self.infos, k, r.id).is_some()) {
+                return Ok(&self.infos);
+            }
+            self.check_alive()?;
+            if start.elapsed() > ANSWER_TIMEOUT {
+                return Err(AgentError::NoAnswer(self.session.name().to_owned(), ANSWER_TIMEOUT));
+            }
+            std::thread::sleep(Duration::from_millis(1));
+        }
     }
 
     /// The physical chairs' states (sensor mode, real and virtual readings, the test bench's

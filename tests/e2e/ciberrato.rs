@@ -241,22 +241,34 @@ fn a_registration_with_a_malformed_id_is_refused_at_once() {
 }
 
 #[test]
-fn a_lab_name_of_32_bytes_or_more_reaches_viewers_cut_to_31() {
+fn long_lab_and_robot_names_reach_viewers_whole() {
     let dir = std::env::temp_dir().join(format!("iwsim-cr-lab-{}", std::process::id()));
     std::fs::create_dir_all(&dir).expect("temp dir");
     let lab = dir.join("long-name-lab.xml");
-    let name = "A lab whose name is forty bytes long, ok";
-    assert_eq!(name.len(), 40);
+    // 200 bytes (they were cut to 31 before names left the per-tick snapshot).
+    let name = format!("A lab whose name is long: {}", "ü".repeat(87));
+    assert_eq!(name.len(), 200);
     std::fs::write(&lab, format!("<Lab Name=\"{name}\" Width=\"28\" Height=\"14\">\n</Lab>\n")).expect("lab file");
+    let grid = dir.join("grid.xml");
+    std::fs::write(&grid, "<Grid><Position X=\"5\" Y=\"3.5\" Dir=\"0\"/></Grid>\n").expect("grid");
     let s = session("cr-labname");
-    let (hub, bridge, reg, lines) =
-        hub_and_bridge(&s, &["--lab", lab.to_str().expect("utf-8"), "--start-on-command"], &[]);
+    let (hub, bridge, reg, lines) = hub_and_bridge(
+        &s,
+        &["--lab", lab.to_str().expect("utf-8"), "--grid", grid.to_str().expect("utf-8"), "--start-on-command"],
+        &[],
+    );
+    let robot_name = format!("Team {} robot", "é".repeat(100));
+    let mut robot = StandIn::new();
+    let reply = robot.register(reg, &format!("<Robot Name=\"{robot_name}\" Id=\"1\"/>"));
+    assert!(reply.starts_with("<Reply Status=\"Ok\">"), "{reply}");
     let mut viewer = StandIn::new();
     assert!(viewer.register(reg, "<View/>").starts_with("<Reply Status=\"Ok\">"));
     viewer.send("<LabReq/>");
     let served = viewer.next("Lab");
-    // The hub's map header carries 31 bytes of name; the simulator would serve all 40.
-    assert_eq!(attr(&served, "Lab", "Name"), Some(&name[..31]), "{served}");
+    assert_eq!(attr(&served, "Lab", "Name"), Some(name.as_str()), "{served}");
+    // Every cycle before the start, each robot as viewers see it, named in full.
+    let seen = viewer.next("Robot");
+    assert_eq!(attr(&seen, "Robot", "Name"), Some(robot_name.as_str()), "{seen}");
     stop(&s, hub, bridge, &lines);
     let _ = std::fs::remove_dir_all(&dir);
 }

@@ -166,6 +166,29 @@ pub fn text(b: &[u8]) -> String {
 }
 
 /// Attaches as an observer and waits until the hub's world has reached `tick`.
+/// The names of a snapshot's robots, in its order, from the robots' info (names are not in the
+/// per-tick snapshot); "?" for one whose name is not UTF-8.
+pub fn robot_names(observer: &mut Observer, robots: &[ipc_types::RobotState]) -> Vec<String> {
+    let infos = observer.robot_infos_covering(robots).expect("robot info");
+    robots
+        .iter()
+        .enumerate()
+        .map(|(k, r)| {
+            ipc_types::RobotInfo::find(infos, k, r.id).and_then(|i| i.name.as_str()).unwrap_or("?").to_owned()
+        })
+        .collect()
+}
+
+/// The robot called `name` in `robots`, if it is there (its name looked up in the robots' info).
+pub fn robot_named(
+    observer: &mut Observer,
+    robots: &[ipc_types::RobotState],
+    name: &str,
+) -> Option<ipc_types::RobotState> {
+    let names = robot_names(observer, robots);
+    robots.iter().zip(&names).find(|(_, n)| *n == name).map(|(r, _)| *r)
+}
+
 pub fn wait_for_tick(session: &str, tick: u64, timeout: Duration) -> Observer {
     let mut observer = Observer::connect_within(session, "observer", timeout).expect("hub comes up");
     let start = Instant::now();

@@ -309,7 +309,6 @@ fn the_pages_decoder_reads_the_chairs_the_viewer_encodes() {
         com: 0.5,
         agent_id: 1,
         motor_out: [0.0; 2],
-        name: ipc_types::FixedName::EMPTY,
         proximity_m: [0.5; MAX_PROXIMITY],
         standing: Default::default(),
     };

@@ -10,7 +10,7 @@ use ipc_types::{Command as Cmd, ROBOT_FROZEN, Refusal, RobotRegistration, RobotS
 use observer::Observer;
 use records::outcome::HubOutcome;
 
-use super::common::{Proc, assert_no_shared_memory_left, session, text, wait_for_tick};
+use super::common::{Proc, assert_no_shared_memory_left, robot_names, session, text, wait_for_tick};
 
 /// Sends one datagram to `to` and returns the first reply, without its trailing NUL.
 fn udp_exchange(sock: &UdpSocket, to: SocketAddr, datagram: &str) -> String {
@@ -73,7 +73,7 @@ fn robots_past_the_size_speed_and_range_limits_are_refused_on_every_way_in() {
     let start = Instant::now();
     loop {
         let (_, robots) = observer.world().expect("snapshot");
-        let names: Vec<_> = robots.iter().filter_map(|r| r.name.as_str()).collect();
+        let names = robot_names(&mut observer, &robots);
         if names == ["fits", "largest"] {
             break;
         }
@@ -129,7 +129,9 @@ fn a_restarted_agent_takes_back_the_robot_its_killed_predecessor_left_frozen() {
     let back = robot_one_when(&mut observer, "obeyed its new agent", |r, n| {
         r.flags & ROBOT_FROZEN == 0 && r.agent_id != frozen.agent_id && r.motor_out.iter().all(|&p| p < -0.25) && n == 1
     });
-    assert_eq!(back.name.as_str(), Some("chair1"), "the same robot, not a fresh one beside it");
+    assert_eq!(back.id, frozen.id, "the same robot, not a fresh one beside it");
+    let (_, robots) = observer.world().expect("snapshot");
+    assert_eq!(robot_names(&mut observer, &robots), ["chair1"]);
     observer.close();
 
     assert_eq!(control(&s, Cmd::Stop, 0).expect("hub answers").status, 0);

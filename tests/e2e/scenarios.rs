@@ -10,7 +10,7 @@ use ipc_types::{ActionBlock, REG_HAS_POSE, RobotKind, RobotRegistration};
 use observer::Observer;
 use records::summary::{RobotSummary, RunSummary};
 
-use super::common::{Proc, assert_no_shared_memory_left, session, text, truth};
+use super::common::{Proc, assert_no_shared_memory_left, robot_named, session, text, truth};
 
 fn out_dir(tag: &str) -> PathBuf {
     std::env::temp_dir().join(format!("iwsim-e2e-{tag}-{}", std::process::id()))
@@ -286,12 +286,8 @@ fn the_door_opens_on_request_stops_on_contact_retries_and_closes() {
     let mut in_way_since = 0;
     while let Some(tick) = me.wait_tick(Wait::Blocking).expect("hub alive") {
         let t = tick.tick;
-        let door_heading = referee
-            .world()
-            .expect("world")
-            .1
-            .iter()
-            .find(|r| r.name.as_str() == Some("door1"))
+        let robots = referee.world().expect("world").1;
+        let door_heading = robot_named(&mut referee, &robots, "door1")
             .map(|r| r.heading_deg)
             // The newest snapshot this subscriber holds may predate the door's registration.
             .unwrap_or(90.0);

@@ -13,7 +13,7 @@ use ipc_types::{Command, Refusal, RobotRegistration, RobotState, RunState, World
 use observer::Observer;
 use records::outcome::HubOutcome;
 
-use super::common::{Proc, assert_no_shared_memory_left, session, text, truth};
+use super::common::{Proc, assert_no_shared_memory_left, robot_names, session, text, truth};
 
 const WAIT: Duration = Duration::from_secs(30);
 
@@ -43,11 +43,16 @@ fn truth_at(truth: &BTreeMap<String, Vec<[f64; 4]>>, name: &str, tick: u64) -> [
 }
 
 /// Asserts a snapshot's robots stand exactly where the recording has them.
-fn assert_matches_truth(truth: &BTreeMap<String, Vec<[f64; 4]>>, h: &WorldHeader, robots: &[RobotState]) {
+/// The robots are named from the info the replay publishes beside the world.
+fn assert_matches_truth(
+    o: &mut Observer,
+    truth: &BTreeMap<String, Vec<[f64; 4]>>,
+    h: &WorldHeader,
+    robots: &[RobotState],
+) {
     assert_eq!(robots.len(), truth.len(), "tick {}: every recorded robot", h.tick);
-    for r in robots {
-        let name = r.name.as_str().expect("utf-8 name");
-        assert_eq!([r.x_m, r.y_m, r.heading_deg], truth_at(truth, name, h.tick), "{name} at tick {}", h.tick);
+    for (r, name) in robots.iter().zip(robot_names(o, robots)) {
+        assert_eq!([r.x_m, r.y_m, r.heading_deg], truth_at(truth, &name, h.tick), "{name} at tick {}", h.tick);
     }
 }
 
@@ -94,7 +99,7 @@ fn a_served_replay_shows_the_recorded_run_bit_for_bit_obeys_commands_and_takes_n
     // Waiting at tick 0, the chairs where the recording starts.
     let (h, robots) = o.world().expect("the kept snapshot");
     assert_eq!((h.tick, h.run_state), (0, RunState::Waiting as u32));
-    assert_matches_truth(&truth, &h, &robots);
+    assert_matches_truth(&mut o, &truth, &h, &robots);
 
     // A session served by a replay is refused to another, as to a second hub.
     let twice = Proc::spawn(&["replay", f, "--serve", "--session", &s]).wait(WAIT);
@@ -115,7 +120,7 @@ fn a_served_replay_shows_the_recorded_run_bit_for_bit_obeys_commands_and_takes_n
     assert_eq!(control(&s, Command::Step).run_state, RunState::Waiting as u32);
     let (h, robots) = next_world(&mut o, &h);
     assert_eq!(h.tick, 1);
-    assert_matches_truth(&truth, &h, &robots);
+    assert_matches_truth(&mut o, &truth, &h, &robots);
 
     // Resumed: every snapshot seen matches the recording at its tick, to the end.
     control(&s, Command::Start);
@@ -123,7 +128,7 @@ fn a_served_replay_shows_the_recorded_run_bit_for_bit_obeys_commands_and_takes_n
     let mut seen = 1;
     let (h, robots) = loop {
         let (h, robots) = next_world(&mut o, &last);
-        assert_matches_truth(&truth, &h, &robots);
+        assert_matches_truth(&mut o, &truth, &h, &robots);
         seen += 1;
         if h.run_state == RunState::Finished as u32 {
             break (h, robots);

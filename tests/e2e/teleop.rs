@@ -14,7 +14,7 @@ use agent_sdk::control;
 use ipc_types::{Command as Cmd, RobotState, WorldHeader};
 use observer::Observer;
 
-use super::common::{Proc, assert_no_shared_memory_left, session, text};
+use super::common::{Proc, assert_no_shared_memory_left, robot_named, session, text};
 
 /// Everything the teleop has written to its terminal, collected by a thread draining the
 /// master (a pseudo-terminal whose master is not read blocks its writer once full).
@@ -86,10 +86,9 @@ impl World {
             if let Some(w) = self.observer.try_world().expect("world snapshot") {
                 self.latest = Some(w);
             }
-            let chair = self
-                .latest
-                .as_ref()
-                .and_then(|(h, robots)| robots.iter().find(|r| r.name.as_str() == Some("chair1")).map(|r| (*h, *r)));
+            let observer = &mut self.observer;
+            let chair =
+                self.latest.as_ref().and_then(|(h, robots)| robot_named(observer, robots, "chair1").map(|r| (*h, r)));
             if let Some((h, r)) = chair
                 && ok(&h, &r)
             {

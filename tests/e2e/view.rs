@@ -204,7 +204,6 @@ fn the_pages_decoder_reads_what_the_viewer_encodes() {
         com: 0.8,
         agent_id: 1,
         motor_out: [0.0; 2],
-        name: ipc_types::FixedName::new("c").expect("fits"),
         proximity_m: [0.5, 1.25, f32::NAN, f32::NAN, f32::NAN, f32::NAN, f32::NAN, f32::NAN],
         standing: Default::default(),
     }];

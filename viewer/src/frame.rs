@@ -20,7 +20,7 @@
 use std::fmt::Write as _;
 
 use agent_sdk::map::{Circle, Map};
-use ipc_types::{CHAIR_GHOST, ChairState, MAX_PROXIMITY, RobotSensors, RobotState, WorldHeader};
+use ipc_types::{CHAIR_GHOST, ChairState, MAX_PROXIMITY, RobotInfo, RobotState, WorldHeader};
 
 /// Frame magic.
 pub const MAGIC: &[u8; 4] = b"IWVF";
@@ -266,13 +266,13 @@ pub fn map_json(map: &Map) -> String {
 /// The robots' names and proximity-sensor geometry as a JSON text message, sent when the set
 /// of robots changes: `{"type":"roster","robots":[{"id","name","sensors":[[x,y,angle,cone,range]…]}]}`
 /// (metres and degrees, in the body frame of the centre of movement).
-pub fn roster_json(robots: &[RobotState], sensors: &[RobotSensors]) -> String {
+pub fn roster_json(robots: &[RobotState], sensors: &[RobotInfo]) -> String {
     let entries: Vec<String> = robots
         .iter()
-        .map(|r| {
-            let geometry: Vec<String> = sensors
-                .iter()
-                .find(|s| s.robot_id == r.id)
+        .enumerate()
+        .map(|(k, r)| {
+            let info = RobotInfo::find(sensors, k, r.id);
+            let geometry: Vec<String> = info
                 .map(|s| {
                     s.sensors[..(s.count as usize).min(MAX_PROXIMITY)]
                         .iter()
@@ -283,7 +283,7 @@ pub fn roster_json(robots: &[RobotState], sensors: &[RobotSensors]) -> String {
             format!(
                 "{{\"id\":{},\"name\":{},\"sensors\":[{}]}}",
                 r.id,
-                json_str(r.name.as_str().unwrap_or("")),
+                json_str(info.and_then(|i| i.name.as_str()).unwrap_or("")),
                 geometry.join(",")
             )
         })
@@ -310,7 +310,6 @@ mod tests {
             com: 0.99,
             agent_id: 1,
             motor_out: [0.0; 2],
-            name: FixedName::new("door \"A\"").expect("fits"),
             proximity_m: [0.25, 1.0006, 80.0, f32::NAN, f32::NAN, f32::NAN, f32::NAN, f32::NAN],
             standing: Default::default(),
         }
@@ -487,13 +486,24 @@ mod tests {
 
     #[test]
     fn the_roster_escapes_names_and_carries_sensor_geometry() {
-        let mut s = RobotSensors { robot_id: 1, count: 2, sensors: [ipc_types::SensorGeometry::default(); 8] };
+        let name = FixedName::new("door \"A\"").expect("fits");
+        let mut s = RobotInfo { robot_id: 1, count: 2, sensors: [ipc_types::SensorGeometry::default(); 8], name };
         s.sensors[0] = ipc_types::SensorGeometry { x_m: 0.5, y_m: 0.0, angle_deg: 0.0, cone_deg: 60.0, range_m: 4.0 };
         s.sensors[1] = ipc_types::SensorGeometry { x_m: 0.0, y_m: 0.25, angle_deg: 90.0, cone_deg: 30.0, range_m: 2.5 };
+        // Names of the longest length come whole.
+        let long = RobotInfo { robot_id: 2, count: 0, name: FixedName::new(&"n".repeat(255)).expect("fits"), ..s };
         assert_eq!(
-            roster_json(&[robot(1, 0.0), robot(2, 0.0)], &[s]),
-            "{\"type\":\"roster\",\"robots\":[{\"id\":1,\"name\":\"door \\\"A\\\"\",\"sensors\":[[0.5,0,0,60,4],[0,0.25,90,30,2.5]]},\
-             {\"id\":2,\"name\":\"door \\\"A\\\"\",\"sensors\":[]}]}"
+            roster_json(&[robot(1, 0.0), robot(2, 0.0)], &[s, long]),
+            format!(
+                "{{\"type\":\"roster\",\"robots\":[{{\"id\":1,\"name\":\"door \\\"A\\\"\",\"sensors\":[[0.5,0,0,60,4],[0,0.25,90,30,2.5]]}},\
+                 {{\"id\":2,\"name\":\"{}\",\"sensors\":[]}}]}}",
+                "n".repeat(255)
+            )
+        );
+        // A robot the roster has no info for yet is listed without a name.
+        assert_eq!(
+            roster_json(&[robot(3, 0.0)], &[s]),
+            "{\"type\":\"roster\",\"robots\":[{\"id\":3,\"name\":\"\",\"sensors\":[]}]}"
         );
     }
 }

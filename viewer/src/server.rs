@@ -425,15 +425,15 @@ impl Viewer {
         let listener = self.listener;
         std::thread::spawn(move || accept_connections(&listener, &ctx));
         let mut ids: Vec<u32> = Vec::new();
-        let mut sensors: Vec<ipc_types::RobotSensors> = Vec::new();
+        let mut sensors: Vec<ipc_types::RobotInfo> = Vec::new();
         let mut roster_dirty = false;
         let mut chairs: Option<(u64, Vec<ChairState>)> = None;
         let mut chair_poll = ChairPoll::default();
         loop {
             // The hub republishes sensor geometry when robots come or go; it may land apart
             // from the snapshot that shows them, so either change re-sends the roster.
-            if let Some(s) = self.observer.try_robot_sensors()? {
-                sensors = s;
+            if self.observer.refresh_robot_info()? {
+                sensors = self.observer.robot_infos().to_vec();
                 roster_dirty = true;
             }
             // Read where the hub wrote it: only the roster, when the robots changed, is made

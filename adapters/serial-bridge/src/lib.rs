@@ -411,7 +411,7 @@ mod tests {
             odometry_only: false,
             auto_resume: false,
         };
-        let long = "x".repeat(40);
+        let long = "x".repeat(256);
         for (robot, pose, option) in
             [("", [0.0; 3], "robot"), (long.as_str(), [0.0; 3], "robot"), ("c", [f64::NAN, 0.0, 0.0], "pose")]
         {

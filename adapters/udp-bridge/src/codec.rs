@@ -845,9 +845,8 @@ pub fn encode_viewer_robot_into(r: &ViewerRobot<'_>, out: &mut Vec<u8>) {
 /// `<Lab>` as the simulator sends it to viewers (no border wall, polygons not rows). A
 /// scenario's obstacles are sent as walls: a Ciber-Rato viewer has no other way to draw them.
 ///
-/// The name is the one the hub's map carries: at most 31 bytes (the map header's fixed
-/// name), so a longer lab name reaches viewers cut at a character boundary, where the
-/// simulator serves it whole.
+/// The name is the one the hub's map carries: whole up to 255 bytes (the map header's fixed
+/// name), cut at a character boundary past that, where the simulator serves any length.
 pub fn encode_lab(map: &Map) -> Vec<u8> {
     let mut s = String::with_capacity(4096);
     let _ = writeln!(

@@ -30,7 +30,7 @@ use agent_sdk::pending::PendingRequest;
 use agent_sdk::{Agent, AgentError};
 use ipc_types::{
     ACT_MOTORS, ACT_POSE, ActionBlock, COLLISION, ChallengeStanding, Command, HAS_COMPASS, HAS_GPS, HAS_GROUND,
-    HAS_SCORE, LED_END, LED_RETURNING, LED_VISITING, REG_HAS_POSE, RobotKind, RunState, SENSOR_BEACON,
+    HAS_SCORE, LED_END, LED_RETURNING, LED_VISITING, REG_HAS_POSE, RobotInfo, RobotKind, RunState, SENSOR_BEACON,
     SENSOR_COLLISION, SENSOR_COMPASS, SENSOR_GPS, SENSOR_GROUND, SENSOR_OBSTACLE, SENSOR_SCORE, SensorBlock,
     SensorSpec,
 };
@@ -419,10 +419,15 @@ pub fn measures_into(
     m.messages = messages;
 }
 
-/// A robot of a world snapshot at `tick` as viewers see it.
-fn viewer_robot(s: &ipc_types::RobotState, tick: u64, targets: usize) -> ViewerRobot<'_> {
+/// A robot of a world snapshot at `tick` as viewers see it, named from its info.
+fn viewer_robot<'a>(
+    s: &ipc_types::RobotState,
+    info: Option<&'a RobotInfo>,
+    tick: u64,
+    targets: usize,
+) -> ViewerRobot<'a> {
     ViewerRobot {
-        name: s.name.as_str().unwrap_or(""),
+        name: info.and_then(|i| i.name.as_str()).unwrap_or(""),
         id: s.id,
         time: tick,
         score: score_data(&s.standing, s.flags & ipc_types::ROBOT_COLLISION != 0, targets),
@@ -613,7 +618,7 @@ impl Bridge {
     /// when their EndLed comes back on, or 2 s after the Measures stop) or a termination
     /// signal comes. The session's nodes close first: the hub is gone, and nothing of the
     /// session is left in /dev/shm while the bridge lingers.
-    fn after_the_run(self) -> Counters {
+    fn after_the_run(mut self) -> Counters {
         let tick = self.tick.map_or(0, |t| t.0);
         let blocks = Blocks { blocks: self.agent.sensors(), index: &self.block_index };
         let last: Vec<Option<SensorBlock>> = self
@@ -693,13 +698,17 @@ impl Bridge {
     }
 
     /// Every robot of the last world snapshot as viewers get it.
-    fn viewer_datagrams(&self) -> Vec<Vec<u8>> {
+    fn viewer_datagrams(&mut self) -> Vec<Vec<u8>> {
+        // The names as the hub last published them; a failed look keeps the ones held.
+        let _ = self.observer.refresh_robot_info();
         let targets = self.map.targets.len();
+        let infos = self.observer.robot_infos();
         let mut out = Vec::new();
         let _ = self.observer.with_last_world(|h, robots| {
-            for s in robots {
+            for (k, s) in robots.iter().enumerate() {
                 let mut d = Vec::new();
-                codec::encode_viewer_robot_into(&viewer_robot(s, h.tick, targets), &mut d);
+                let info = RobotInfo::find(infos, k, s.id);
+                codec::encode_viewer_robot_into(&viewer_robot(s, info, h.tick, targets), &mut d);
                 out.push(d);
             }
         });
@@ -1041,12 +1050,15 @@ impl Bridge {
         if !due {
             return Ok(());
         }
+        self.observer.refresh_robot_info()?;
         let (clients, datagram) = (&self.clients, &mut self.scratch.datagram);
         let targets = self.map.targets.len();
+        let infos = self.observer.robot_infos();
         // Encoded from the snapshot where the hub wrote it, one robot at a time into one buffer.
         let sent = self.observer.with_last_world(|h, robots| {
-            for s in robots {
-                codec::encode_viewer_robot_into(&viewer_robot(s, h.tick, targets), datagram);
+            for (k, s) in robots.iter().enumerate() {
+                let info = RobotInfo::find(infos, k, s.id);
+                codec::encode_viewer_robot_into(&viewer_robot(s, info, h.tick, targets), datagram);
                 for c in clients.iter().filter(|c| matches!(c.kind, Kind::Viewer)) {
                     send(&c.socket, c.peer, datagram);
                 }

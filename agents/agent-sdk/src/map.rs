@@ -406,7 +406,10 @@ mod tests {
         let bad = |h: MapHeader| Map::decode(&h, &items).expect_err("refused");
         assert_eq!(bad(MapHeader { width_m: -1.0, ..h }), MapDecodeError::BadSize { width: -1.0, height: 8.0 });
         assert!(matches!(bad(MapHeader { height_m: f64::NAN, ..h }), MapDecodeError::BadSize { .. }));
-        assert_eq!(bad(MapHeader { name: FixedName { bytes: [0xff; 32] }, ..h }), MapDecodeError::BadName);
+        assert_eq!(
+            bad(MapHeader { name: FixedName { bytes: [0xff; ipc_types::NAME_BYTES] }, ..h }),
+            MapDecodeError::BadName
+        );
         assert_eq!(bad(MapHeader { item_count: 3, ..h }), MapDecodeError::ItemCount { announced: 3, got: 13 });
         assert_eq!(
             bad(MapHeader { beacon_count: 2, ..h }),

@@ -82,6 +82,14 @@ fn drive(agent: &mut Agent, args: &NavigatorArgs) -> anyhow::Result<ExitCode> {
     let map = NavMap::new(&map_data);
     let cfg = config(args, &map_data.header)?;
     let name = &args.robot.name;
+    if name.len() > crate::traffic::MAX_NAME_BYTES {
+        anyhow::bail!(
+            "the chair's name {name:?} is {} bytes; a navigator's is at most {} (it travels in every traffic \
+             message the chair says)",
+            name.len(),
+            crate::traffic::MAX_NAME_BYTES
+        );
+    }
 
     let mut reg = RobotRegistration::new(name)
         .id(args.robot.id)
@@ -163,7 +171,7 @@ fn drive(agent: &mut Agent, args: &NavigatorArgs) -> anyhow::Result<ExitCode> {
         if let Some(say) = &out.say
             && !action.with_say(say.as_bytes())
         {
-            // Cannot happen for names the hub accepts (31 bytes) and places on a map; say so
+            // Cannot happen for names of at most `MAX_NAME_BYTES` and places on a map; say so
             // if it does, since the other chairs would not hear this one.
             agent_sdk::report!("navigator {name}: message of {} bytes too long to say: {say}", say.len());
         }

@@ -70,6 +70,10 @@ pub const STILL_RAD: f64 = 0.035;
 
 /// At most this many zones in one claim.
 pub const MAX_CLAIM_ZONES: usize = 4;
+/// Longest name a navigator's chair may have, in bytes: the name travels in every traffic
+/// message, which must fit the hub's 100 bytes with its pose, state and claimed zones (the
+/// hub itself takes names of up to 255 bytes).
+pub const MAX_NAME_BYTES: usize = 31;
 
 /// A claim on one-lane zones, as said.
 #[derive(Debug, Clone, PartialEq)]

@@ -9,7 +9,7 @@
 //! The lab frame is iwsim's world frame, named `world`: x right, y up, z out of the floor,
 //! metres.
 
-use ipc_types::{MAX_PROXIMITY, ROBOT_COLLISION, ROBOT_DISC, ROBOT_FROZEN, RobotSensors, RobotState};
+use ipc_types::{MAX_PROXIMITY, ROBOT_COLLISION, ROBOT_DISC, ROBOT_FROZEN, RobotInfo, RobotState};
 
 use crate::journal::RunStart;
 use crate::proto::Pb;
@@ -240,11 +240,12 @@ pub(crate) fn lab_scene(start: &RunStart, t_ns: u64, out: &mut Vec<u8>) {
     }
 }
 
-/// A robot's name, or its id when the name is not UTF-8 or empty (every frame needs a name).
-pub(crate) fn robot_name(s: &RobotState, scratch: &mut String) {
+/// A robot's name (from its info), or its id when the name is unknown, not UTF-8 or empty
+/// (every frame needs a name).
+pub(crate) fn robot_name(s: &RobotState, info: Option<&RobotInfo>, scratch: &mut String) {
     use std::fmt::Write;
     scratch.clear();
-    match s.name.as_str() {
+    match info.and_then(|i| i.name.as_str()) {
         Some(n) if !n.is_empty() => scratch.push_str(n),
         _ => {
             let _ = write!(scratch, "robot{}", s.id);
@@ -255,12 +256,19 @@ pub(crate) fn robot_name(s: &RobotState, scratch: &mut String) {
 /// `/robots`: each chair a box of its length × width at its body centre (a disc robot a
 /// cylinder of its diameter, with a line from its centre to the rim along its heading),
 /// coloured by its state, with its name above it.
-pub(crate) fn robots_scene(states: &[RobotState], t_ns: u64, out: &mut Vec<u8>, id: &mut String, name: &mut String) {
+pub(crate) fn robots_scene(
+    states: &[RobotState],
+    infos: &[RobotInfo],
+    t_ns: u64,
+    out: &mut Vec<u8>,
+    id: &mut String,
+    name: &mut String,
+) {
     use std::fmt::Write;
     let mut m = Pb::new(out);
     delete_all(&mut m, t_ns);
-    for s in states {
-        robot_name(s, name);
+    for (k, s) in states.iter().enumerate() {
+        robot_name(s, RobotInfo::find(infos, k, s.id), name);
         id.clear();
         let _ = write!(id, "robot/{}", s.id);
         let yaw = s.heading_deg.to_radians();
@@ -295,10 +303,10 @@ pub(crate) fn robots_scene(states: &[RobotState], t_ns: u64, out: &mut Vec<u8>, 
 }
 
 /// `/tf`: `world` → each robot's name, at its centre of movement.
-pub(crate) fn transforms(states: &[RobotState], t_ns: u64, out: &mut Vec<u8>, name: &mut String) {
+pub(crate) fn transforms(states: &[RobotState], infos: &[RobotInfo], t_ns: u64, out: &mut Vec<u8>, name: &mut String) {
     let mut m = Pb::new(out);
-    for s in states {
-        robot_name(s, name);
+    for (k, s) in states.iter().enumerate() {
+        robot_name(s, RobotInfo::find(infos, k, s.id), name);
         m.message(f::TRANSFORMS, |t| {
             timestamp(t, f::TF_TIMESTAMP, t_ns);
             t.string(f::TF_PARENT, WORLD_FRAME);
@@ -312,7 +320,7 @@ pub(crate) fn transforms(states: &[RobotState], t_ns: u64, out: &mut Vec<u8>, na
 /// `/proximity`: each sensor's cone as a filled wedge out to the distance it measured.
 pub(crate) fn proximity_scene(
     states: &[RobotState],
-    sensors: &[RobotSensors],
+    sensors: &[RobotInfo],
     t_ns: u64,
     out: &mut Vec<u8>,
     id: &mut String,
@@ -321,12 +329,7 @@ pub(crate) fn proximity_scene(
     let mut m = Pb::new(out);
     delete_all(&mut m, t_ns);
     for (k, s) in states.iter().enumerate() {
-        // The hub passes both slices in robot order; look further only when it did not.
-        let geometry = match sensors.get(k) {
-            Some(g) if g.robot_id == s.id => Some(g),
-            _ => sensors.iter().find(|g| g.robot_id == s.id),
-        };
-        let Some(g) = geometry else { continue };
+        let Some(g) = RobotInfo::find(sensors, k, s.id) else { continue };
         let count = (g.count as usize).min(MAX_PROXIMITY);
         if count == 0 {
             continue;
@@ -391,7 +394,7 @@ mod tests {
         let chair = RobotState { id: 1, width_m: 1.2, height_m: 0.7, com: 0.8, ..RobotState::zeroed() };
         let disc = RobotState { id: 2, flags: ROBOT_DISC, width_m: 1.0, height_m: 1.0, com: 0.5, ..chair };
         let mut out = Vec::new();
-        robots_scene(&[chair, disc], 5, &mut out, &mut String::new(), &mut String::new());
+        robots_scene(&[chair, disc], &[], 5, &mut out, &mut String::new(), &mut String::new());
         assert_eq!(shapes(&out), [vec![f::ENTITY_CUBES], vec![f::ENTITY_CYLINDERS]]);
     }
 }

@@ -13,7 +13,7 @@ use std::sync::mpsc::{Receiver, SyncSender, TrySendError, sync_channel};
 use std::thread::JoinHandle;
 use std::time::{SystemTime, UNIX_EPOCH};
 
-use ipc_types::{RobotSensors, RobotState};
+use ipc_types::{RobotInfo, RobotState};
 use mcap::records::{MessageHeader, Metadata};
 
 use crate::foxglove;
@@ -122,7 +122,7 @@ pub enum RecorderFinishError {
 struct Frame {
     t_ns: u64,
     states: Vec<RobotState>,
-    sensors: Vec<RobotSensors>,
+    sensors: Vec<RobotInfo>,
 }
 
 /// What the tick thread sends the writer thread.
@@ -235,7 +235,7 @@ impl Recorder {
     /// Records what the world looks like at `tick` (after the step that led to it) for people.
     /// When the writer thread is behind, dropped and counted (the tick never waits for it), or
     /// with [`RecorderOptions::keep_every_frame`] waited for (counted as a stall).
-    pub fn world(&mut self, tick: u64, states: &[RobotState], sensors: &[RobotSensors]) {
+    pub fn world(&mut self, tick: u64, states: &[RobotState], sensors: &[RobotInfo]) {
         let Some(jobs) = &self.jobs else { return };
         let mut frame = self.spare_frames.try_recv().unwrap_or_default();
         frame.t_ns = self.t_ns(tick);
@@ -451,10 +451,10 @@ impl Output {
                     let t_ns = frame.t_ns;
                     let mut buf = std::mem::take(&mut self.buf);
                     buf.clear();
-                    foxglove::robots_scene(&frame.states, t_ns, &mut buf, &mut self.id, &mut self.name);
+                    foxglove::robots_scene(&frame.states, &frame.sensors, t_ns, &mut buf, &mut self.id, &mut self.name);
                     self.write(robots, t_ns, &buf)?;
                     buf.clear();
-                    foxglove::transforms(&frame.states, t_ns, &mut buf, &mut self.name);
+                    foxglove::transforms(&frame.states, &frame.sensors, t_ns, &mut buf, &mut self.name);
                     self.write(tf, t_ns, &buf)?;
                     buf.clear();
                     foxglove::proximity_scene(&frame.states, &frame.sensors, t_ns, &mut buf, &mut self.id);

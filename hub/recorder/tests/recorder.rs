@@ -3,7 +3,7 @@
 
 use std::path::{Path, PathBuf};
 
-use ipc_types::{FixedName, ROBOT_COLLISION, RobotSensors, RobotState, SensorGeometry};
+use ipc_types::{FixedName, ROBOT_COLLISION, RobotInfo, RobotState, SensorGeometry};
 use recorder::journal::{Event, RecordedAction, RunStart};
 use records::places::Checkpoint;
 use world::map::{Params, Wall, builtin};
@@ -54,11 +54,11 @@ fn run_start() -> RunStart {
 /// What the hub hands the recorder, in order.
 enum Call {
     Event(Event),
-    World(u64, Vec<RobotState>, Vec<RobotSensors>),
+    World(u64, Vec<RobotState>, Vec<RobotInfo>),
 }
 
 /// The world's robots as the hub publishes them.
-fn snapshot(world: &World, ids: &[(u32, RobotHandle)]) -> (Vec<RobotState>, Vec<RobotSensors>) {
+fn snapshot(world: &World, ids: &[(u32, RobotHandle)]) -> (Vec<RobotState>, Vec<RobotInfo>) {
     let mut states = Vec::new();
     let mut sensors = Vec::new();
     for &(id, h) in ids {
@@ -77,11 +77,11 @@ fn snapshot(world: &World, ids: &[(u32, RobotHandle)]) -> (Vec<RobotState>, Vec<
             height_m: r.spec.height_m as f32,
             com: r.spec.com as f32,
             agent_id: 1,
-            name: FixedName::truncated(&r.spec.name),
             proximity_m,
             ..bytemuck::Zeroable::zeroed()
         });
-        let mut g = RobotSensors { robot_id: id, ..bytemuck::Zeroable::zeroed() };
+        let mut g =
+            RobotInfo { robot_id: id, name: FixedName::truncated(&r.spec.name), ..bytemuck::Zeroable::zeroed() };
         // Four cones to the front and sides, as viewers get them.
         for (k, angle) in [0.0f32, 60.0, -60.0, 180.0].into_iter().enumerate() {
             g.sensors[k] = SensorGeometry { x_m: 0.5, y_m: 0.0, angle_deg: angle, cone_deg: 60.0, range_m: 3.0 };

@@ -1127,7 +1127,11 @@ fn watch_loop(session: &str, ticks: u64, verbose: bool, chair: Option<&str>, wat
         if let Ok(Some((h, robots))) = &seen {
             last_tick = h.tick;
             if let Some(name) = chair
-                && robots.iter().any(|r| r.name.as_str() == Some(name))
+                && obs.refresh_robot_info().is_ok()
+                && obs
+                    .robot_infos()
+                    .iter()
+                    .any(|i| i.name.as_str() == Some(name) && robots.iter().any(|r| r.id == i.robot_id))
             {
                 watch.chair_seen.store(true, Ordering::SeqCst);
             }

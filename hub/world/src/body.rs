@@ -9,7 +9,7 @@ use crate::math::{Pose, Real};
 /// At most this many proximity sensors per robot (thesis §4.3.5).
 pub const MAX_PROXIMITY: usize = 8;
 /// Longest robot name, in bytes.
-pub const MAX_NAME_LEN: usize = 31;
+pub const MAX_NAME_LEN: usize = 255;
 
 /// The longest side of a robot's body, metres (`Width` and `Height` alike).
 ///
@@ -527,8 +527,8 @@ mod tests {
         assert!(matches!(ok.clone().sensors(nine).validate(), Err(AddRobotError::TooManySensors { count: 9, max: 8 })));
         let bad_cone = vec![ProximitySpec::deg(0.0, 0.0, 0.0, 0.0)];
         assert!(matches!(ok.clone().sensors(bad_cone).validate(), Err(AddRobotError::BadSensor { index: 0, .. })));
-        let long = "x".repeat(40);
-        assert!(matches!(ok.named(&long).validate(), Err(AddRobotError::NameTooLong { len: 40, .. })));
+        let long = "x".repeat(256);
+        assert!(matches!(ok.named(&long).validate(), Err(AddRobotError::NameTooLong { len: 256, .. })));
     }
 
     #[test]

@@ -146,7 +146,7 @@ pub fn lab_and_obstacles(start: &RunStart) -> (world::map::Lab, Vec<Obstacle>) {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use ipc_types::{FixedName, RobotState};
+    use ipc_types::{FixedName, RobotInfo, RobotState};
     use recorder::journal::Event;
     use recorder::{Recorder, RecorderOptions};
     use records::places::Checkpoint;
@@ -189,8 +189,9 @@ mod tests {
         }
     }
 
-    fn state(id: u32, name: &str, x_m: f64, y_m: f64, heading_deg: f64) -> RobotState {
-        RobotState {
+    /// A robot's state in a snapshot and its info (which names it).
+    fn state(id: u32, name: &str, x_m: f64, y_m: f64, heading_deg: f64) -> (RobotState, RobotInfo) {
+        let state = RobotState {
             id,
             x_m,
             y_m,
@@ -198,18 +199,19 @@ mod tests {
             width_m: 1.1,
             height_m: 0.65,
             com: 0.5,
-            name: FixedName::truncated(name),
             ..bytemuck::Zeroable::zeroed()
-        }
+        };
+        (state, RobotInfo { robot_id: id, name: FixedName::truncated(name), ..bytemuck::Zeroable::zeroed() })
     }
 
     /// Records `frames` (tick, robots) as the hub does, one step event before each.
-    fn record(path: &Path, start: &RunStart, frames: &[(u64, Vec<RobotState>)]) {
+    fn record(path: &Path, start: &RunStart, frames: &[(u64, Vec<(RobotState, RobotInfo)>)]) {
         let mut rec = Recorder::create(path, start, RecorderOptions::default()).expect("created");
         rec.event(&Event::Settle);
-        for (tick, states) in frames {
+        for (tick, robots) in frames {
             rec.event(&Event::Step { tick: tick - 1, actions: Vec::new(), hash: 0 });
-            rec.world(*tick, states, &[]);
+            let (states, infos): (Vec<RobotState>, Vec<RobotInfo>) = robots.iter().copied().unzip();
+            rec.world(*tick, &states, &infos);
         }
         let stats = rec.finish().expect("finished");
         assert_eq!(stats.dropped_world_frames, 0, "the test's frames are all written");

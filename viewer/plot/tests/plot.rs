@@ -335,7 +335,7 @@ fn several_logs_of_one_run_are_drawn_together_a_colour_each() {
 /// stays put, one frame every 0.1 s, the liacc lab with one scenario obstacle and two
 /// checkpoints.
 fn write_recording(path: &Path) -> Vec<(f64, f64)> {
-    use ipc_types::{FixedName, RobotState};
+    use ipc_types::{FixedName, RobotInfo, RobotState};
     use recorder::journal::{Event, RunStart};
     use world::map::{Params, Wall, builtin};
 
@@ -359,22 +359,24 @@ fn write_recording(path: &Path) -> Vec<(f64, f64)> {
             plot::scene::Checkpoint { x: 13.0, y: 8.0, radius: 0.5 },
         ],
     };
-    let robot = |id, name: &str, (x_m, y_m): (f64, f64)| RobotState {
+    let robot = |id, (x_m, y_m): (f64, f64)| RobotState {
         id,
         x_m,
         y_m,
         width_m: 1.1,
         height_m: 0.65,
         com: 0.5,
-        name: FixedName::truncated(name),
         ..bytemuck::Zeroable::zeroed()
     };
+    let info =
+        |id, name: &str| RobotInfo { robot_id: id, name: FixedName::truncated(name), ..bytemuck::Zeroable::zeroed() };
+    let infos = [info(1, "chair1"), info(2, "door1")];
     let positions = run_positions();
     let mut rec = recorder::Recorder::create(path, &start, recorder::RecorderOptions::default()).expect("created");
     for (k, &p) in positions.iter().enumerate() {
         let tick = k as u64 + 1;
         rec.event(&Event::Step { tick: tick - 1, actions: Vec::new(), hash: 0 });
-        rec.world(tick, &[robot(1, "chair1", p), robot(2, "door1", (9.445, 5.46))], &[]);
+        rec.world(tick, &[robot(1, p), robot(2, (9.445, 5.46))], &infos);
     }
     let stats = rec.finish().expect("finished");
     assert_eq!(stats.dropped_world_frames, 0);
