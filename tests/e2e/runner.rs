@@ -312,6 +312,29 @@ fn every_iwsim_command_in_the_readme_takes_the_options_it_shows() {
     assert!(refused.is_empty(), "{}", refused.join("\n"));
 }
 
+/// The first ```toml block of README's section `heading` (up to the next heading of that level).
+fn readme_toml(readme: &str, heading: &str) -> String {
+    let section = readme.split(heading).nth(1).unwrap_or_else(|| panic!("README has {heading:?}"));
+    let block = section.split("```toml\n").nth(1).unwrap_or_else(|| panic!("{heading:?} shows a TOML file"));
+    block.split("```").next().unwrap_or_default().to_owned()
+}
+
+#[test]
+fn the_readme_scenario_file_runs_as_copied_and_passes() {
+    let readme = std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("README.md")).expect("README");
+    let dir = work_dir("readme-scenario");
+    let file = dir.join("slalom.toml");
+    std::fs::write(&file, readme_toml(&readme, "### The scenario file")).expect("scenario written");
+    let out = dir.join("out");
+    let args =
+        ["run", file.to_str().expect("utf-8"), "--lockstep", "--headless", "--out", out.to_str().expect("utf-8")];
+    let output = Proc::spawn(&args).wait(Duration::from_secs(120));
+    assert_eq!(output.status.code(), Some(0), "{}\n{}", text(&output.stdout), text(&output.stderr));
+    let summary = RunSummary::read(&out.join("summary.json")).unwrap_or_else(|e| panic!("{e}"));
+    assert!(summary.passed, "{:?}", summary.failures);
+    let _ = std::fs::remove_dir_all(dir);
+}
+
 /// README's test command, from "The two commands": the `cargo test` line of its first code
 /// block that has one.
 fn readme_test_command(readme: &str) -> String {

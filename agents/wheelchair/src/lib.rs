@@ -21,8 +21,8 @@ use std::path::PathBuf;
 /// Options of `iwsim agent wheelchair`.
 #[derive(Debug, Args, Clone)]
 #[command(long_about = "Registers one or more wheelchairs and drives each by a script: constant motor \
-powers, or a list of waypoints it drives to in turn (steering on the hub's pose: this is a scripted \
-test agent, not a navigator) before it stops.
+powers, or a list of waypoints it drives to in turn (steering on its own odometry, its heading held \
+by the compass: this is a scripted test agent, not a navigator) before it stops.
 
 With --config FILE the chairs come from a TOML file, one [[chairs]] table each:
 
