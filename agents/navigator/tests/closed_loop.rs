@@ -906,3 +906,54 @@ mod corridor_swap {
         untouched("half the messages lost", &chairs, &runs, true);
     }
 }
+
+/// The navigator's expected reading (its own cone geometry, used by its safety layer and to
+/// tell walls from obstacles) against the hub's world (the readings agents get), noise off, at
+/// 300 poses of the ward, each chair at least 5 cm clear of every wall (a sensor inside a wall
+/// is no case to agree on: the world reads past a wall it starts in).
+mod cone_geometry {
+    use super::*;
+
+    #[test]
+    fn the_navigators_expected_readings_are_the_worlds() {
+        let lab = builtin::map("ward").expect("a built-in map").lab.clone();
+        let mut params = Params::default();
+        params.noise = NoiseParams::NONE;
+        let cfg = NavConfig::intellwheels();
+        let (header, items) = map_items(&lab, &params, lab.walls.len(), &[]);
+        let nav_map = NavMap::from_items(&header, &items).expect("the published map reads back");
+        let model = navigator::model::WorldModel::new(nav_map, cfg.body.footprint());
+        let mut worst = (0.0f64, String::new());
+        let (mut readings, mut walls_seen) = (0, 0);
+        // A fixed LCG: the same poses every run.
+        let mut state = 12345u64;
+        let mut next = || {
+            state = state.wrapping_mul(6_364_136_223_846_793_005).wrapping_add(1_442_695_040_888_963_407);
+            (state >> 11) as f64 / (1u64 << 53) as f64
+        };
+        let mut placed = 0;
+        while placed < 300 {
+            let pose = Pose::from_deg(1.0 + 38.0 * next(), 1.0 + 12.0 * next(), -180.0 + 360.0 * next());
+            if model.wall_clearance(&pose, 1.0) < 0.05 {
+                continue;
+            }
+            let mut world = World::new(&lab, params.clone(), 1).expect("a valid world");
+            let cfg = NavConfig { start: pose, ..NavConfig::intellwheels() };
+            let handle = world.add_robot(chair_spec(&cfg, "chair")).expect("a chair clear of the walls");
+            world.refresh_sensors();
+            let r = world.robot(handle).expect("placed");
+            placed += 1;
+            for (k, (mount, &got)) in cfg.sensors.iter().zip(r.readings.proximity()).enumerate() {
+                let expected = model.expected_reading(&mount.cone(&pose), mount.range_m);
+                readings += 1;
+                walls_seen += usize::from(got < mount.range_m);
+                let d = (expected - got).abs();
+                if d > worst.0 {
+                    worst = (d, format!("{pose:?} sensor {k}: navigator {expected:.4}, world {got:.4}"));
+                }
+            }
+        }
+        assert!(walls_seen > readings / 4, "{walls_seen} of {readings} readings saw a wall");
+        assert!(worst.0 < 1e-6, "they differ by up to {} m: {}", worst.0, worst.1);
+    }
+}
