@@ -74,6 +74,8 @@ fn config(args: &NavigatorArgs, header: &ipc_types::MapHeader) -> anyhow::Result
         margin_m: defaults.margin_m,
         keep_right: args.keep_right,
         plan_allowance: args.plan_allowance.map(|n| n as usize),
+        proximity_noise_m: if p.noise_proximity_m.is_finite() { p.noise_proximity_m.max(0.0) } else { 0.0 },
+        wall_fix_gain: args.wall_fix,
     })
 }
 

@@ -75,7 +75,7 @@ pub mod zones;
 use agent_sdk::cli::{CommonArgs, RobotArgs};
 
 pub use agent::run;
-pub use navigator::{Body, Checkpoint, NavConfig, NavEvent, NavStats, Navigator, Output};
+pub use navigator::{Body, Checkpoint, NavConfig, NavEvent, NavStats, Navigator, Output, WALL_FIX_GAIN};
 pub use pilot::{Pilot, PilotOutput};
 pub use pose::PoseSourceKind;
 pub use sensors::Mode;
@@ -162,6 +162,18 @@ pub struct NavigatorArgs {
     /// search from holding the run, and changes how traffic goes.
     #[arg(long, value_name = "N", value_parser = clap::value_parser!(u64).range(100..))]
     pub plan_allowance: Option<u64>,
+    /// Correct the pose estimate's position from proximity readings of the map's walls: the
+    /// share of each reading's disagreement taken per tick (0, the default: off; 0.01 works).
+    /// Fewer wall contacts, but not more chairs home in a crowd (README).
+    #[arg(long, value_name = "GAIN", default_value_t = 0.0, value_parser = parse_gain)]
+    pub wall_fix: f64,
+}
+
+fn parse_gain(s: &str) -> Result<f64, String> {
+    match s.parse::<f64>() {
+        Ok(v) if v.is_finite() && (0.0..=0.5).contains(&v) => Ok(v),
+        _ => Err(format!("{s:?}: a gain from 0 to 0.5")),
+    }
 }
 
 fn parse_keep_right(s: &str) -> Result<f64, String> {

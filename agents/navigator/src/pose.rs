@@ -15,6 +15,10 @@ use crate::sensors::Input;
 pub trait PoseSource: std::fmt::Debug {
     /// The estimate after this tick's readings.
     fn update(&mut self, input: &Input) -> Pose;
+
+    /// Moves the estimate's position to `pos` (a correction from another sensor), keeping
+    /// its heading.
+    fn set_position(&mut self, pos: V2);
 }
 
 /// The share of the compass's disagreement with odometry's heading taken each tick (the SDK's,
@@ -89,6 +93,11 @@ impl PoseSource for Odometry {
     fn update(&mut self, input: &Input) -> Pose {
         self.update_with_compass(input)
     }
+
+    fn set_position(&mut self, pos: V2) {
+        let theta = self.pose().theta;
+        self.set_pose(Pose::new(pos.x, pos.y, theta));
+    }
 }
 
 /// The GPS fix, held between fixes.
@@ -114,6 +123,10 @@ impl PoseSource for GpsPose {
             self.pose = Pose::from_deg(g.x_m, g.y_m, g.heading_deg);
         }
         self.pose
+    }
+
+    fn set_position(&mut self, pos: V2) {
+        self.pose = Pose::new(pos.x, pos.y, self.pose.theta);
     }
 }
 
@@ -145,6 +158,10 @@ impl PoseSource for Fused {
             self.odometry.set_pose(p);
         }
         p
+    }
+
+    fn set_position(&mut self, pos: V2) {
+        self.odometry.set_position(pos);
     }
 }
 

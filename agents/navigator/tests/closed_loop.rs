@@ -185,6 +185,8 @@ fn simulate(s: &Scenario, seed: u64) -> Outcome {
         start: Pose::from_deg(s.start[0], s.start[1], s.start[2]),
         encoder_ticks_per_m: ticks_per_m,
         pose_source: s.pose_source,
+        // As the agent reads it from the hub's map header.
+        proximity_noise_m: header.params.noise_proximity_m,
         ..base
     };
     let handle = world.add_robot(chair_spec(&cfg, "chair")).expect("a valid chair");
@@ -620,6 +622,7 @@ mod corridor_swap {
                 start: Pose::from_deg(c.start[0], c.start[1], c.start[2]),
                 encoder_ticks_per_m: ticks_per_m,
                 keep_right,
+                proximity_noise_m: header.params.noise_proximity_m,
                 ..NavConfig::intellwheels()
             };
             let handle = world.add_robot(chair_spec(&cfg, c.name)).expect("a valid chair");
@@ -917,8 +920,7 @@ mod cone_geometry {
     #[test]
     fn the_navigators_expected_readings_are_the_worlds() {
         let lab = builtin::map("ward").expect("a built-in map").lab.clone();
-        let mut params = Params::default();
-        params.noise = NoiseParams::NONE;
+        let params = Params { noise: NoiseParams::NONE, ..Params::default() };
         let cfg = NavConfig::intellwheels();
         let (header, items) = map_items(&lab, &params, lab.walls.len(), &[]);
         let nav_map = NavMap::from_items(&header, &items).expect("the published map reads back");
