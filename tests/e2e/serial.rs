@@ -320,7 +320,9 @@ fn the_bridge_drives_the_emulated_chair_and_its_pose_in_the_hub_follows() {
         if let Some(v) = rig.truth.find(0, |v| v["x"].as_f64().is_some_and(|x| x > 10.5)) {
             break v;
         }
-        while let Next::Line(line) = rig.adapter_log.next_by(Instant::now()) {
+        // Waits for the adapter's next line, or 5 ms, then looks at the truth again (the
+        // emulator's file has nothing to wait on).
+        while let Next::Line(line) = rig.adapter_log.next_by(Instant::now() + Duration::from_millis(5)) {
             if line.contains("stopping the chair:") {
                 let quiet =
                     ["the hub stopped ticking", "the controlling agent stopped answering", "the board went silent"];
@@ -337,7 +339,6 @@ fn the_bridge_drives_the_emulated_chair_and_its_pose_in_the_hub_follows() {
             "half a metre not driven within 60 s; the adapter said:\n{}",
             said.join("\n")
         );
-        std::thread::sleep(Duration::from_millis(5));
     };
     let hub = rig.hub_pose();
     let truth = rig.truth.last_step().expect("steps");
