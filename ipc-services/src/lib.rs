@@ -89,18 +89,31 @@ macro_rules! report {
     }};
 }
 
-/// Whether process `pid` still runs: it exists and is not a zombie (a killed process whose
-/// parent has not reaped it yet has exited all the same).
+/// Whether process `pid` still runs: one of its threads has not exited yet. A killed process
+/// whose parent has not reaped it yet has exited all the same (a zombie).
+///
+/// Every thread counts, not only the first: after a SIGKILL the main thread turns zombie while
+/// the others are still exiting, and until the last of them has, the process keeps its files,
+/// so iceoryx2 still sees its node alive (its monitor lock is held). A viewer that took the
+/// zombie main thread for the end of a killed three-thread hub cleaned up too early, found the
+/// hub's node "alive", and left the dead hub's shared memory in /dev/shm.
 pub fn process_alive(pid: u32) -> bool {
-    match std::fs::read_to_string(format!("/proc/{pid}/stat")) {
-        // The state follows the command name, which is in parentheses and may hold anything.
-        Ok(stat) => stat
-            .rsplit_once(')')
-            .and_then(|(_, rest)| rest.split_whitespace().next())
-            .is_none_or(|state| state != "Z" && state != "X"),
-        Err(_) => false,
-    }
+    let Ok(tasks) = std::fs::read_dir(format!("/proc/{pid}/task")) else {
+        return false;
+    };
+    tasks.flatten().any(|task| {
+        match std::fs::read_to_string(task.path().join("stat")) {
+            // The state follows the command name, which is in parentheses and may hold anything.
+            Ok(stat) => stat
+                .rsplit_once(')')
+                .and_then(|(_, rest)| rest.split_whitespace().next())
+                .is_none_or(|state| state != "Z" && state != "X"),
+            // The thread left between the listing and the read.
+            Err(_) => false,
+        }
+    })
 }
+
 /// Nodes one service admits: every agent, every observer, the hub.
 pub const MAX_NODES: usize = MAX_AGENTS + MAX_OBSERVERS + 1;
 
