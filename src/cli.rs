@@ -30,6 +30,9 @@ pub enum Command {
     Replay(hub::replay::ReplayArgs),
     /// Serves the Ciber-Rato / Intellwheels UDP/XML protocol to remote agents and viewers.
     Udp(udp_bridge::cli::UdpArgs),
+    /// Serves a session to agents on other machines over Zenoh (`iwsim agent … --zenoh
+    /// tcp/HOST:7447` on theirs), in lock-step, with the shared-memory payloads.
+    Zenoh(zenoh_bridge::cli::ZenohArgs),
     /// Joins a physical wheelchair to a hub over its board's serial port (RS232): the chair
     /// becomes a Real robot that the agent registering the same name drives.
     Serial(serial_bridge::SerialArgs),

@@ -60,6 +60,7 @@ pub fn run(cli: Cli) -> anyhow::Result<ExitCode> {
         Command::Hub(args) => hub::cli::run(&args),
         Command::Replay(args) => hub::replay::run(&args),
         Command::Udp(args) => udp_bridge::cli::run(&args),
+        Command::Zenoh(args) => zenoh_bridge::cli::run(&args),
         Command::View(args) => viewer::cli::run(&args),
         Command::Agent { agent: AgentCommand::Wheelchair(args) } => wheelchair::run(&args),
         Command::Agent { agent: AgentCommand::Navigator(args) } => navigator::run(&args),

@@ -9,7 +9,7 @@
 //! versioned type name, never by accident). Units are SI and degrees, as on every iwsim wire;
 //! the unit is in the field name where it is not obvious.
 //!
-//! The crate is `no_std` and free of iceoryx2 proper and of any clock: the services and
+//! The crate is `no_std` (with `alloc`, for the [`remote`] framing) and free of iceoryx2 proper and of any clock: the services and
 //! `monotonic_ns` live in `ipc-services`.
 //!
 //! ```
@@ -22,6 +22,9 @@
 //! ```
 #![no_std]
 #![warn(missing_docs)]
+
+// The remote framing (`remote`) builds owned payloads; nothing else allocates.
+extern crate alloc;
 
 use bytemuck::{Pod, Zeroable};
 use iceoryx2_bb_derive_macros::ZeroCopySend;
@@ -48,6 +51,8 @@ pub const INBOX_BYTES: usize = 400;
 pub const MAX_INBOX_MESSAGES: usize = 16;
 /// Elements of the line sensor.
 pub const LINE_ELEMENTS: usize = 7;
+
+pub mod remote;
 
 /// Service name parts, below `iwsim/<session>/`. The services crate builds full names.
 pub mod service {

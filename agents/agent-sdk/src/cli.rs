@@ -60,12 +60,25 @@ pub struct CommonArgs {
     /// directory.
     #[arg(long, value_name = "DIR")]
     pub log: Option<PathBuf>,
+    /// Join a hub on another machine through its Zenoh bridge (`iwsim zenoh` there) at this
+    /// endpoint, e.g. tcp/10.0.0.5:7447 (the bridge's, or a Zenoh router's).
+    #[arg(long, value_name = "ENDPOINT")]
+    pub zenoh: Option<String>,
+    /// With --zenoh: a Zenoh configuration file (JSON5) to start from (TLS, authentication).
+    #[arg(long, value_name = "FILE", requires = "zenoh")]
+    pub zenoh_config: Option<PathBuf>,
 }
 
 impl CommonArgs {
     /// Joins the session, waiting up to `--connect-timeout` for its hub. The agent's name is
     /// `role` and the process id (`navigator-4711`), unique on the machine.
+    /// With `--zenoh`, it joins through the hub's Zenoh bridge instead.
     pub fn connect(&self, role: &str) -> Result<Agent, AgentError> {
+        if let Some(endpoint) = &self.zenoh {
+            let remote =
+                crate::remote::Remote { endpoint: endpoint.clone(), config: self.zenoh_config.clone(), prefix: None };
+            return Agent::connect_zenoh(&remote, &self.hub.session, self.hub.timeout());
+        }
         Agent::connect_within(&self.hub.session, &format!("{role}-{}", std::process::id()), self.hub.timeout())
     }
 }
@@ -117,7 +130,7 @@ mod tests {
     fn defaults_and_values_parse() {
         let c = Cli::parse_from(["agent"]).common;
         let hub = SessionArgs { session: "default".into(), connect_timeout: 5.0 };
-        assert_eq!(c, CommonArgs { hub, log: None });
+        assert_eq!(c, CommonArgs { hub, log: None, zenoh: None, zenoh_config: None });
         assert_eq!(c.hub.timeout(), Duration::from_secs(5));
         let c = Cli::parse_from(["agent", "--session", "s", "--connect-timeout", "0.25", "--log", "d"]).common;
         assert_eq!(

@@ -50,12 +50,13 @@ pub mod logs;
 pub mod map;
 pub mod odometry;
 pub mod pending;
+pub mod remote;
 
 /// Building blocks for other clients of a hub (the observer crate): newest-sample receiving,
 /// the kept map sample, error mapping. None of them opens a service: what a client may read
 /// is decided by the services it can open.
 pub mod ports {
-    pub use super::{ANSWER_TIMEOUT, ipc, receive_map, receive_newest};
+    pub use super::{ANSWER_TIMEOUT, ipc, receive_map, receive_map_items, receive_newest};
 }
 
 use std::time::{Duration, Instant};
@@ -175,6 +176,23 @@ pub enum AgentError {
     /// The hub's map did not decode.
     #[error("the hub's map is malformed: {0}")]
     Map(#[from] map::MapDecodeError),
+    /// No Zenoh bridge serves the session where the agent looked.
+    #[error("no Zenoh bridge answered for session {0:?} (is `iwsim zenoh` running there, and reachable?)")]
+    NoBridge(String),
+    /// The Zenoh bridge the agent reached its hub through is gone (it, its hub or the link).
+    #[error("the Zenoh bridge of session {0:?} is gone")]
+    BridgeGone(String),
+    /// Zenoh failed.
+    #[error("zenoh failed to {0}")]
+    Zenoh(String),
+    /// The other end sent bytes that are not the payload they should be.
+    #[error("a malformed {what} came over the network: {error}")]
+    Frame {
+        /// Which payload.
+        what: &'static str,
+        /// What was wrong with it.
+        error: ipc_types::remote::FrameError,
+    },
 }
 
 /// Turns an iceoryx2 error met while trying to `what` into [`AgentError::Ipc`].
@@ -377,14 +395,24 @@ impl ControlClient {
 pub fn receive_map(
     svc: &ipc_services::MapService,
     session: &Session,
-    mut alive: impl FnMut() -> Result<(), AgentError>,
+    alive: impl FnMut() -> Result<(), AgentError>,
 ) -> Result<map::Map, AgentError> {
+    let (header, items) = receive_map_items(svc, session, alive)?;
+    Ok(map::Map::decode(&header, &items)?)
+}
+
+/// [`receive_map`] without the decoding: the map sample's header and items, copied out.
+pub fn receive_map_items(
+    svc: &ipc_services::MapService,
+    session: &Session,
+    mut alive: impl FnMut() -> Result<(), AgentError>,
+) -> Result<(MapHeader, Vec<MapItem>), AgentError> {
     let sub: Subscriber<Svc, [MapItem], MapHeader> =
         svc.subscriber_builder().create().map_err(ipc("create a map subscriber"))?;
     let start = Instant::now();
     loop {
         if let Some(s) = sub.receive().map_err(ipc("receive the map"))? {
-            return Ok(map::Map::decode(s.user_header(), s.payload())?);
+            return Ok((*s.user_header(), s.payload().to_vec()));
         }
         alive()?;
         if start.elapsed() > ANSWER_TIMEOUT {
@@ -394,12 +422,18 @@ pub fn receive_map(
     }
 }
 
-/// A connection to a hub.
-pub struct Agent {
+/// The link an [`Agent`] reaches its hub by.
+enum Link {
+    /// Shared memory, on the hub's machine.
+    Shm(Box<ShmLink>),
+    /// Zenoh, through the bridge (`iwsim zenoh`), from any machine.
+    Zenoh(Box<remote::ZenohLink>),
+}
+
+/// The ports of an agent on the hub's machine.
+struct ShmLink {
     session: Session,
     node: Node<Svc>,
-    agent_id: u32,
-    hub_pid: u32,
     register: Client<Svc, RegisterRequest, (), RegisterResponse, ()>,
     /// The register service, kept to [`nudge`] the hub with.
     register_svc: ipc_services::RegisterService,
@@ -409,21 +443,67 @@ pub struct Agent {
     actions: Publisher<Svc, [ActionBlock], ActionHeader>,
     tick_listener: Listener<Svc>,
     doorbell: Notifier<Svc>,
-    robots: Vec<u32>,
-    last_tick: Option<u64>,
-    last_header: TickHeader,
-    received_ns: u64,
     /// The sensor sample of the last tick, held in shared memory: [`Agent::sensors`] lends it,
     /// nothing copies it.
     held: Option<SensorSample>,
-    /// The robot ids of the held sample, in its order (kept to tell a republished tick's
-    /// newcomers, since the sample must be let go before the next can be received).
-    held_ids: Vec<u32>,
-    finished: bool,
     /// Last, so it runs after every port and the node are gone: an agent that ends any way
     /// (an error, a signal, the end of the run) leaves nothing in /dev/shm if it was the
     /// session's last process.
     _release: ipc_services::SessionRelease,
+}
+
+/// Which tick an agent has in hand, whichever link brought it.
+#[derive(Debug, Default)]
+struct TickState {
+    last_tick: Option<u64>,
+    last_header: TickHeader,
+    received_ns: u64,
+    /// The robot ids of the held sample, in its order (kept to tell a republished tick's
+    /// newcomers, since the sample must be let go before the next can be received).
+    held_ids: Vec<u32>,
+}
+
+impl TickState {
+    /// Takes note of a sample with header `h` and `blocks` that arrived at `received_ns`;
+    /// whether it is fresh: a tick not seen yet, the tick in hand with another set of robots
+    /// (the hub re-publishes the tick when this agent's robot joins or leaves, and while a run
+    /// waits for its Start that is the only way a robot registered after the first gets its
+    /// readings), or the run's end.
+    fn note(&mut self, h: &TickHeader, blocks: &[SensorBlock], received_ns: u64) -> bool {
+        let finished = RunState::from_u32(h.run_state) == Some(RunState::Finished);
+        let same = same_robots(&self.held_ids, blocks);
+        let seen = match self.last_tick {
+            Some(t) if h.tick < t => true,
+            Some(t) if h.tick == t => same,
+            _ => false,
+        };
+        if !same {
+            self.held_ids.clear();
+            self.held_ids.extend(blocks.iter().map(|b| b.robot_id));
+        }
+        // A tick seen already brings nothing new, so the tick in hand and its header stay.
+        if seen && !finished {
+            return false;
+        }
+        self.last_tick = Some(h.tick);
+        self.last_header = *h;
+        self.received_ns = received_ns;
+        true
+    }
+}
+
+/// A connection to a hub: on its machine through shared memory ([`Agent::connect`]), or from
+/// any machine through its Zenoh bridge ([`Agent::connect_zenoh`]). Both serve the same calls
+/// with the same payloads.
+pub struct Agent {
+    link: Link,
+    /// The session's name.
+    session: String,
+    agent_id: u32,
+    hub_pid: u32,
+    robots: Vec<u32>,
+    ticks: TickState,
+    finished: bool,
 }
 
 impl Drop for Agent {
@@ -446,7 +526,14 @@ fn wait_readable(fd: i32, timeout: Duration) -> bool {
 impl std::fmt::Debug for Agent {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.debug_struct("Agent")
-            .field("session", &self.session.name())
+            .field("session", &self.session)
+            .field(
+                "link",
+                &match self.link {
+                    Link::Shm(_) => "shared memory",
+                    Link::Zenoh(_) => "zenoh",
+                },
+            )
             .field("agent_id", &self.agent_id)
             .field("robots", &self.robots)
             .finish()
@@ -454,6 +541,18 @@ impl std::fmt::Debug for Agent {
 }
 
 impl Agent {
+    fn with_link(link: Link, session: &str) -> Self {
+        Self {
+            link,
+            session: session.to_owned(),
+            agent_id: 0,
+            hub_pid: 0,
+            robots: Vec::new(),
+            ticks: TickState::default(),
+            finished: false,
+        }
+    }
+
     /// Connects to the hub serving `session` and says hello.
     pub fn connect(session: &str, name: &str) -> Result<Self, AgentError> {
         let session = Session::new(session)?;
@@ -485,11 +584,10 @@ impl Agent {
             .map_err(ipc("create the actions publisher"))?;
         let tick_listener = tick_svc.listener_builder().create().map_err(ipc("create the tick listener"))?;
         let doorbell = doorbell_svc.notifier_builder().create().map_err(ipc("create the hub doorbell"))?;
-        let mut agent = Self {
+        let name = session.name().to_owned();
+        let link = ShmLink {
             session,
             node,
-            agent_id: 0,
-            hub_pid: 0,
             register,
             register_svc,
             nudge: Nudge::new(),
@@ -497,20 +595,16 @@ impl Agent {
             actions,
             tick_listener,
             doorbell,
-            robots: Vec::new(),
-            last_tick: None,
-            last_header: TickHeader::default(),
-            received_ns: 0,
             held: None,
-            held_ids: Vec::new(),
-            finished: false,
             _release: release,
         };
+        let mut agent = Self::with_link(Link::Shm(Box::new(link)), &name);
         let resp = agent.request(RegisterKind::Hello, None)?;
         agent.agent_id = resp.agent_id;
         agent.hub_pid = resp.hub_pid;
-        let sensors_svc = agent.session.agent_sensors(&agent.node, agent.agent_id, Role::Client)?;
-        agent.sensors = Some(sensors_svc.subscriber_builder().create().map_err(ipc("create the sensor subscriber"))?);
+        let Link::Shm(link) = &mut agent.link else { unreachable!("built above") };
+        let sensors_svc = link.session.agent_sensors(&link.node, agent.agent_id, Role::Client)?;
+        link.sensors = Some(sensors_svc.subscriber_builder().create().map_err(ipc("create the sensor subscriber"))?);
         Ok(agent)
     }
 
@@ -529,12 +623,36 @@ impl Agent {
         }
     }
 
+    /// Connects to the hub serving `session` on another machine, through its Zenoh bridge
+    /// (`iwsim zenoh`) at `remote.endpoint` (e.g. `tcp/10.0.0.5:7447`, the bridge's or a Zenoh
+    /// router's), and says hello; waits up to `timeout` for the bridge to answer. Every call
+    /// after this works as on the hub's machine.
+    pub fn connect_zenoh(remote: &remote::Remote, session: &str, timeout: Duration) -> Result<Self, AgentError> {
+        let link = remote::ZenohLink::open(remote, session, timeout)?;
+        let mut agent = Self::with_link(Link::Zenoh(Box::new(link)), session);
+        let start = Instant::now();
+        let resp = loop {
+            match agent.request(RegisterKind::Hello, None) {
+                // No bridge answered yet: it may still be starting.
+                Err(AgentError::NoBridge(_)) if start.elapsed() < timeout => {
+                    std::thread::sleep(Duration::from_millis(50));
+                }
+                other => break other?,
+            }
+        };
+        agent.agent_id = resp.agent_id;
+        agent.hub_pid = 0;
+        let Link::Zenoh(link) = &mut agent.link else { unreachable!("built above") };
+        link.joined(resp.agent_id)?;
+        Ok(agent)
+    }
+
     /// The id the hub gave this agent.
     pub fn id(&self) -> u32 {
         self.agent_id
     }
 
-    /// The hub's process id.
+    /// The hub's process id (0 through a Zenoh bridge: the hub is on another machine).
     pub fn hub_pid(&self) -> u32 {
         self.hub_pid
     }
@@ -545,20 +663,35 @@ impl Agent {
     }
 
     fn hub_alive(&self) -> bool {
-        self.hub_pid == 0 || ipc_services::process_alive(self.hub_pid)
+        match &self.link {
+            Link::Shm(_) => self.hub_pid == 0 || ipc_services::process_alive(self.hub_pid),
+            Link::Zenoh(z) => z.bridge_alive(),
+        }
     }
 
     fn check(&self) -> Result<(), AgentError> {
-        if ipc_services::stop_requested(&self.node) {
-            return Err(AgentError::Interrupted);
+        match &self.link {
+            Link::Shm(l) => {
+                if ipc_services::stop_requested(&l.node) {
+                    return Err(AgentError::Interrupted);
+                }
+            }
+            Link::Zenoh(_) => {
+                if ipc_services::stop_signalled() {
+                    return Err(AgentError::Interrupted);
+                }
+            }
         }
         if !self.hub_alive() {
-            return Err(AgentError::HubGone { pid: self.hub_pid, session: self.session.name().to_owned() });
+            return Err(match &self.link {
+                Link::Shm(_) => AgentError::HubGone { pid: self.hub_pid, session: self.session.clone() },
+                Link::Zenoh(_) => AgentError::BridgeGone(self.session.clone()),
+            });
         }
         Ok(())
     }
 
-    /// Sends a request and waits for the hub's answer (at most 5 s).
+    /// Sends a request and waits for the hub's answer (at most [`ANSWER_TIMEOUT`]).
     fn request(
         &mut self,
         kind: RegisterKind,
@@ -601,21 +734,25 @@ impl Agent {
             // Wait for the next sample; check the hub's liveness only when a wait slice
             // ends with nothing, so the check's syscalls never sit between a sample's arrival
             // and its reading.
-            let arrived = match wait {
-                Wait::Blocking => {
+            let arrived = match (&mut self.link, wait) {
+                // Frames from the network arrive on the link's own threads, which ring the
+                // link's socket: sleep on it (a busy poll would gain nothing on a network).
+                (Link::Zenoh(z), _) => wait_readable(z.wake_fd(), LIVENESS_SLICE),
+                (Link::Shm(_), Wait::Blocking) => {
                     // The hub says when spinning takes no core another process needs (lock-step,
                     // fewer agents than cores): then look for the sample for a while first, with
                     // no syscall, so a tick that comes within the spin costs no wake-up.
-                    let spin = Duration::from_micros(u64::from(self.last_header.spin_us));
+                    let spin = Duration::from_micros(u64::from(self.ticks.last_header.spin_us));
                     if !spin.is_zero() && self.sample_within(spin) {
                         continue;
                     }
+                    let Link::Shm(link) = &mut self.link else { unreachable!("matched above") };
                     // Drain the rings already read, look once more (a sample whose ring was
                     // just drained is found here), then sleep in poll(2) until the next ring.
                     // The socket stays non-blocking throughout: iceoryx2's own timed wait
                     // switches it to blocking and sets a receive timeout (three syscalls),
                     // and its drain switches it back (two more), on every tick.
-                    match self.tick_listener.try_wait(|_| {}) {
+                    match link.tick_listener.try_wait(|_| {}) {
                         Ok(_) => {}
                         // Any signal cuts the wait short (SIGSTOP/SIGCONT, a debugger); a
                         // termination request is caught by the check below, anything else is
@@ -628,7 +765,7 @@ impl Agent {
                     }
                     wait_readable(self.tick_fd(), LIVENESS_SLICE)
                 }
-                Wait::BusyPoll => {
+                (Link::Shm(_), Wait::BusyPoll) => {
                     // Spin on receive itself, as a bare subscriber would: the sample is read
                     // the moment it lands.
                     let spin_until = Instant::now() + LIVENESS_SLICE;
@@ -663,22 +800,29 @@ impl Agent {
         if self.finished {
             return Ok(None);
         }
-        let _ = self.tick_listener.try_wait(|_| {});
+        if let Link::Shm(link) = &self.link {
+            let _ = link.tick_listener.try_wait(|_| {});
+        }
         if self.take_sensors()? {
-            let h = self.last_header;
+            let h = self.ticks.last_header;
             if RunState::from_u32(h.run_state) == Some(RunState::Finished) {
                 self.finished = true;
                 return Ok(Some(Tick {
                     tick: h.tick,
                     sim_time_s: h.sim_time_s,
                     run_state: RunState::Finished,
-                    latency_ns: self.received_ns.saturating_sub(h.t_pub_ns),
+                    latency_ns: self.ticks.received_ns.saturating_sub(h.t_pub_ns),
                     lockstep: h.flags & ipc_types::TICK_LOCKSTEP != 0,
                 }));
             }
             return self.tick_from_last();
         }
         Ok(None)
+    }
+
+    /// The header of the last tick returned (for a bridge that passes the tick on).
+    pub fn tick_header(&self) -> &TickHeader {
+        &self.ticks.last_header
     }
 
     /// Whether the hub has said the run is over.
@@ -688,7 +832,7 @@ impl Agent {
 
     /// The session's name.
     pub fn session(&self) -> &str {
-        self.session.name()
+        &self.session
     }
 
     /// Checks the hub is alive and no termination signal arrived.
@@ -696,26 +840,34 @@ impl Agent {
         self.check()
     }
 
-    /// A file descriptor that becomes readable when the hub rings a tick, for `poll(2)`.
+    /// A file descriptor that becomes readable when a tick arrives, for `poll(2)`.
     pub fn tick_fd(&self) -> i32 {
-        use ipc_services::iceoryx2::prelude::FileDescriptorBased;
-        #[allow(unsafe_code)]
-        // SAFETY: reads the fd number of a listener this agent owns for as long as it lives.
-        unsafe {
-            self.tick_listener.file_descriptor().native_handle()
+        match &self.link {
+            Link::Shm(link) => {
+                use ipc_services::iceoryx2::prelude::FileDescriptorBased;
+                #[allow(unsafe_code)]
+                // SAFETY: reads the fd number of a listener this agent owns for as long as it lives.
+                unsafe {
+                    link.tick_listener.file_descriptor().native_handle()
+                }
+            }
+            Link::Zenoh(z) => z.wake_fd(),
         }
     }
 
     /// This agent's robots' sensor blocks of the last tick returned by [`Agent::wait_tick`],
-    /// in registration order: a view of the sample where the hub wrote it in shared memory,
-    /// nothing copied (copy the blocks out, e.g. with `to_vec()`, to keep them past the next
-    /// tick).
+    /// in registration order: on the hub's machine a view of the sample where the hub wrote
+    /// it in shared memory, nothing copied (copy the blocks out, e.g. with `to_vec()`, to keep
+    /// them past the next tick).
     pub fn sensors(&self) -> &[SensorBlock] {
-        self.held.as_ref().map_or(&[], |s| s.payload())
+        match &self.link {
+            Link::Shm(link) => link.held.as_ref().map_or(&[], |s| s.payload()),
+            Link::Zenoh(z) => &z.held,
+        }
     }
 
     fn tick_from_last(&mut self) -> Result<Option<Tick>, AgentError> {
-        let h = self.last_header;
+        let h = self.ticks.last_header;
         if RunState::from_u32(h.run_state) == Some(RunState::Finished) {
             self.finished = true;
             return Ok(None);
@@ -724,18 +876,15 @@ impl Agent {
             tick: h.tick,
             sim_time_s: h.sim_time_s,
             run_state: RunState::from_u32(h.run_state).unwrap_or(RunState::Running),
-            latency_ns: self.received_ns.saturating_sub(h.t_pub_ns),
+            latency_ns: self.ticks.received_ns.saturating_sub(h.t_pub_ns),
             lockstep: h.flags & ipc_types::TICK_LOCKSTEP != 0,
         }))
     }
 
-    /// Reads the newest sensor sample if it is for a tick not seen yet, or for the tick in
-    /// hand with another set of robots: the hub re-publishes the tick when this agent's robot
-    /// joins (or leaves), and while a run waits for its Start that is the only way a robot
-    /// registered after the first gets its readings.
     /// Spins for at most `spin` until a sensor sample waits to be taken; whether one does.
     fn sample_within(&self, spin: Duration) -> bool {
-        let Some(sub) = &self.sensors else { return false };
+        let Link::Shm(link) = &self.link else { return false };
+        let Some(sub) = &link.sensors else { return false };
         let until = Instant::now() + spin;
         loop {
             // An error is left for `take_sensors` to report.
@@ -749,52 +898,54 @@ impl Agent {
         }
     }
 
+    /// Reads the newest sensor sample if it is fresh (see [`TickState::note`]); whether one was.
     fn take_sensors(&mut self) -> Result<bool, AgentError> {
-        let Some(sub) = &self.sensors else { return Ok(false) };
-        let mut fresh = false;
-        loop {
-            let sample = match sub.receive() {
-                Ok(Some(sample)) => sample,
-                Ok(None) => return Ok(fresh),
-                // A newer sample waits, and the subscriber may borrow one at a time.
-                Err(ReceiveError::ExceedsMaxBorrows) if self.held.is_some() => {
-                    self.held = None;
-                    continue;
+        match &mut self.link {
+            Link::Shm(link) => {
+                let Some(sub) = &link.sensors else { return Ok(false) };
+                let mut fresh = false;
+                loop {
+                    let sample = match sub.receive() {
+                        Ok(Some(sample)) => sample,
+                        Ok(None) => return Ok(fresh),
+                        // A newer sample waits, and the subscriber may borrow one at a time.
+                        Err(ReceiveError::ExceedsMaxBorrows) if link.held.is_some() => {
+                            link.held = None;
+                            continue;
+                        }
+                        Err(e) => return Err(AgentError::Ipc(format!("receive sensor blocks: {e:?}"))),
+                    };
+                    let received_ns = ipc_services::monotonic_ns();
+                    fresh |= self.ticks.note(sample.user_header(), sample.payload(), received_ns);
+                    // Held in any case (the one before had to go to receive it).
+                    link.held = Some(sample);
                 }
-                Err(e) => return Err(AgentError::Ipc(format!("receive sensor blocks: {e:?}"))),
-            };
-            let received_ns = ipc_services::monotonic_ns();
-            let h = *sample.user_header();
-            let finished = RunState::from_u32(h.run_state) == Some(RunState::Finished);
-            let same = same_robots(&self.held_ids, sample.payload());
-            let seen = match self.last_tick {
-                Some(t) if h.tick < t => true,
-                Some(t) if h.tick == t => same,
-                _ => false,
-            };
-            if !same {
-                self.held_ids.clear();
-                self.held_ids.extend(sample.payload().iter().map(|b| b.robot_id));
             }
-            // Held in any case (the one before had to go to receive it); a tick seen already
-            // brings nothing new, so the tick in hand and its header stay.
-            self.held = Some(sample);
-            if seen && !finished {
-                continue;
+            Link::Zenoh(z) => {
+                let mut fresh = false;
+                while let Some((h, blocks)) = z.take()? {
+                    if self.ticks.note(&h, &blocks, ipc_services::monotonic_ns()) {
+                        z.held = blocks;
+                        fresh = true;
+                    }
+                }
+                Ok(fresh)
             }
-            self.last_tick = Some(h.tick);
-            self.last_header = h;
-            self.received_ns = received_ns;
-            fresh = true;
         }
     }
 
     /// Sends this agent's actions answering `tick` and rings the hub.
     pub fn send(&mut self, tick: u64, actions: &[ActionBlock]) -> Result<(), AgentError> {
-        let mut sample = self.actions.loan_slice_uninit(actions.len()).map_err(ipc("loan actions"))?;
-        *sample.user_header_mut() = ActionHeader { tick, agent_id: self.agent_id, count: actions.len() as u32 };
-        sample.write_from_slice(actions).send().map_err(ipc("send actions"))?;
-        self.doorbell.notify().map_err(ipc("ring the hub"))?;
+        let header = ActionHeader { tick, agent_id: self.agent_id, count: actions.len() as u32 };
+        match &mut self.link {
+            Link::Shm(link) => {
+                let mut sample = link.actions.loan_slice_uninit(actions.len()).map_err(ipc("loan actions"))?;
+                *sample.user_header_mut() = header;
+                sample.write_from_slice(actions).send().map_err(ipc("send actions"))?;
+                link.doorbell.notify().map_err(ipc("ring the hub"))?;
+            }
+            Link::Zenoh(z) => z.send(&header, actions)?,
+        }
         Ok(())
     }
 
@@ -806,11 +957,14 @@ impl Agent {
         drop(self);
     }
 
-    /// A register request of this agent. Every one names the publisher its actions come
-    /// from: the hub ties this agent's id to it (and to the client the hello came from), so
-    /// no other process's port can act in its name.
+    /// A register request of this agent. On the hub's machine every one names the publisher
+    /// its actions come from: the hub ties this agent's id to it (and to the client the hello
+    /// came from), so no other process's port can act in its name.
     pub(crate) fn request_of(&self, kind: RegisterKind, robot: Option<&RobotRegistration>) -> RegisterRequest {
-        let publisher = self.actions.id().value();
+        let publisher = match &self.link {
+            Link::Shm(link) => link.actions.id().value(),
+            Link::Zenoh(_) => 0,
+        };
         RegisterRequest {
             kind: kind as u32,
             pid: std::process::id(),
@@ -824,8 +978,13 @@ impl Agent {
     fn goodbye(&mut self) {
         if !self.finished && self.agent_id != 0 && self.hub_alive() {
             let req = self.request_of(RegisterKind::Bye, None);
-            if self.register.send_copy(req).is_ok() {
-                let _ = self.doorbell.notify();
+            match &self.link {
+                Link::Shm(link) => {
+                    if link.register.send_copy(req).is_ok() {
+                        let _ = link.doorbell.notify();
+                    }
+                }
+                Link::Zenoh(z) => z.say_goodbye(&req),
             }
             // Said once: the hub needs no answer, and a second goodbye would name a stranger.
             self.finished = true;
@@ -836,8 +995,20 @@ impl Agent {
     /// route, without the scenario's obstacles (its sensors must find those). Waits up to 15 s
     /// for the hub's kept sample.
     pub fn map(&self) -> Result<map::Map, AgentError> {
-        let svc = self.session.map(&self.node, Role::Client)?;
-        receive_map(&svc, &self.session, || self.check())
+        let (header, items) = self.map_items()?;
+        Ok(map::Map::decode(&header, &items)?)
+    }
+
+    /// The map as [`Agent::map`] gives it, as it came over the wire: its header and items (for
+    /// a bridge that passes it on).
+    pub fn map_items(&self) -> Result<(MapHeader, Vec<MapItem>), AgentError> {
+        match &self.link {
+            Link::Shm(link) => {
+                let svc = link.session.map(&link.node, Role::Client)?;
+                receive_map_items(&svc, &link.session, || self.check())
+            }
+            Link::Zenoh(z) => z.map(&self.session),
+        }
     }
 }
 

@@ -115,7 +115,7 @@ impl RobotLogs {
     pub fn finish(&mut self, agent: &Agent) -> Result<(), LogWriteError> {
         if agent.finished() {
             // The Finished tick's own time: the tick loop never returned it.
-            self.final_rows(agent.sensors(), agent.last_header.sim_time_s)
+            self.final_rows(agent.sensors(), agent.ticks.last_header.sim_time_s)
         } else {
             self.flush()
         }

@@ -23,13 +23,13 @@ use ipc_services::Svc;
 use ipc_services::iceoryx2::pending_response::PendingResponse;
 use ipc_types::{Refusal, RegisterKind, RegisterRequest, RegisterResponse, RobotRegistration};
 
-use crate::{ANSWER_TIMEOUT, Agent, AgentError, NUDGE_EVERY, ipc};
+use crate::{ANSWER_TIMEOUT, Agent, AgentError, Link, NUDGE_EVERY, ipc};
 
 /// A request sent to the hub whose answer has not been read yet. The hub's register service
 /// holds at most 4 requests of one agent in flight: keep fewer than that outstanding (one
 /// slot stays free for the goodbye).
 pub struct PendingRequest {
-    pending: PendingResponse<Svc, RegisterRequest, (), RegisterResponse, ()>,
+    pending: Pending,
     kind: RegisterKind,
     sent: Instant,
 }
@@ -38,6 +38,12 @@ impl std::fmt::Debug for PendingRequest {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.debug_struct("PendingRequest").field("kind", &self.kind).field("sent", &self.sent).finish()
     }
+}
+
+/// Where the answer will come from.
+enum Pending {
+    Shm(PendingResponse<Svc, RegisterRequest, (), RegisterResponse, ()>),
+    Zenoh(crate::remote::PendingReply),
 }
 
 /// The hub's acceptance of a pending request.
@@ -65,8 +71,14 @@ impl Agent {
         robot: Option<&RobotRegistration>,
     ) -> Result<PendingRequest, AgentError> {
         let req = self.request_of(kind, robot);
-        let pending = self.register.send_copy(req).map_err(ipc("send a registration"))?;
-        let _ = self.doorbell.notify();
+        let pending = match &self.link {
+            Link::Shm(link) => {
+                let pending = link.register.send_copy(req).map_err(ipc("send a registration"))?;
+                let _ = link.doorbell.notify();
+                Pending::Shm(pending)
+            }
+            Link::Zenoh(z) => Pending::Zenoh(z.request(&req)?),
+        };
         Ok(PendingRequest { pending, kind, sent: Instant::now() })
     }
 
@@ -75,20 +87,29 @@ impl Agent {
     /// refusal. Fails with [`AgentError::NoAnswer`] once the request is [`ANSWER_TIMEOUT`] (15 s) old, and like
     /// [`Agent::check_alive`] when the hub is gone or a termination signal arrived.
     pub fn poll_pending(&mut self, request: &PendingRequest) -> Result<Option<Accepted>, AgentError> {
+        let answer = self.poll_answer(request)?;
+        Ok(answer.map(|r| Accepted { robot_id: if request.kind == RegisterKind::Robot { r.robot_id } else { 0 } }))
+    }
+
+    /// [`Agent::poll_pending`] with the hub's whole answer (the robot's sensor count, the
+    /// tick), for a bridge that passes it on.
+    pub fn poll_answer(&mut self, request: &PendingRequest) -> Result<Option<RegisterResponse>, AgentError> {
         let Some(r) = self.poll_response(request)? else { return Ok(None) };
         if request.kind == RegisterKind::Robot {
             self.robots.push(r.robot_id);
-            Ok(Some(Accepted { robot_id: r.robot_id }))
-        } else {
-            Ok(Some(Accepted { robot_id: 0 }))
         }
+        Ok(Some(r))
     }
 
     /// The hub's accepted answer to `request` as it came, if it has come: what the blocking
     /// requests (hello, register, ready) and [`Agent::poll_pending`] are built on.
     pub(crate) fn poll_response(&mut self, request: &PendingRequest) -> Result<Option<RegisterResponse>, AgentError> {
-        if let Some(resp) = request.pending.receive().map_err(ipc("receive an answer"))? {
-            let r = *resp.payload();
+        let answer = match (&request.pending, &self.link) {
+            (Pending::Shm(pending), _) => pending.receive().map_err(ipc("receive an answer"))?.map(|r| *r.payload()),
+            (Pending::Zenoh(pending), Link::Zenoh(z)) => z.poll(pending, &self.session)?,
+            (Pending::Zenoh(_), Link::Shm(_)) => unreachable!("a request is answered by the link that sent it"),
+        };
+        if let Some(r) = answer {
             return match Refusal::from_u32(r.status) {
                 Some(Refusal::Accepted) => Ok(Some(r)),
                 reason => Err(AgentError::Refused {
@@ -99,12 +120,14 @@ impl Agent {
         }
         self.check()?;
         if request.sent.elapsed() > ANSWER_TIMEOUT {
-            return Err(AgentError::NoAnswer(self.session.name().to_owned(), ANSWER_TIMEOUT));
+            return Err(AgentError::NoAnswer(self.session.clone(), ANSWER_TIMEOUT));
         }
         // One clock for all of this agent's requests: the first nudge comes a second after
         // the agent's previous one, at most, and never for a request younger than that.
-        if request.sent.elapsed() > NUDGE_EVERY {
-            self.nudge.if_due(&self.register_svc, &self.doorbell);
+        if request.sent.elapsed() > NUDGE_EVERY
+            && let Link::Shm(link) = &mut self.link
+        {
+            link.nudge.if_due(&link.register_svc, &link.doorbell);
         }
         Ok(None)
     }

@@ -1,0 +1,68 @@
+//! `iwsim zenoh`: the bridge's command line and its run, printing what the user needs to know.
+
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+use agent_sdk::cli::SessionArgs;
+
+use crate::{Bridge, BridgeConfig};
+
+/// Options of `iwsim zenoh`.
+#[derive(Debug, clap::Args, Clone)]
+#[command(mut_arg("session", |a| a.help("Session of the hub to serve")))]
+#[command(mut_arg("connect_timeout", |a| a.help("Seconds to wait for the hub to come up").value_name("CONNECT_TIMEOUT")))]
+pub struct ZenohArgs {
+    /// `--session`, `--connect-timeout`.
+    #[command(flatten)]
+    pub hub: SessionArgs,
+    /// Zenoh endpoint to listen on for agents (repeatable). Without --listen and --connect:
+    /// tcp/0.0.0.0:7447, every interface.
+    #[arg(long, value_name = "ENDPOINT")]
+    pub listen: Vec<String>,
+    /// Zenoh endpoint to connect to, e.g. a router's tcp/HOST:7447 (repeatable).
+    #[arg(long, value_name = "ENDPOINT")]
+    pub connect: Vec<String>,
+    /// A Zenoh configuration file (JSON5) to start from: TLS, authentication, and the like.
+    #[arg(long, value_name = "FILE")]
+    pub zenoh_config: Option<PathBuf>,
+    /// Key prefix the session is served under [default: iwsim/<SESSION>].
+    #[arg(long, value_name = "PREFIX")]
+    pub prefix: Option<String>,
+}
+
+/// The endpoint listened on when neither `--listen` nor `--connect` is given.
+pub const DEFAULT_LISTEN: &str = "tcp/0.0.0.0:7447";
+
+/// Serves Zenoh until the hub ends the run or goes away.
+pub fn run(args: &ZenohArgs) -> anyhow::Result<ExitCode> {
+    let listen = if args.listen.is_empty() && args.connect.is_empty() {
+        vec![DEFAULT_LISTEN.to_owned()]
+    } else {
+        args.listen.clone()
+    };
+    let cfg = BridgeConfig {
+        session: args.hub.session.clone(),
+        connect_timeout: args.hub.timeout(),
+        listen: listen.clone(),
+        connect: args.connect.clone(),
+        config: args.zenoh_config.clone(),
+        prefix: args.prefix.clone(),
+    };
+    let bridge = Bridge::start(&cfg)?;
+    agent_sdk::report!(
+        "iwsim zenoh: session {:?} served under {}/ (listening on {}{})",
+        args.hub.session,
+        bridge.prefix(),
+        if listen.is_empty() { "nothing".to_owned() } else { listen.join(", ") },
+        if args.connect.is_empty() { String::new() } else { format!("; connected to {}", args.connect.join(", ")) }
+    );
+    let counters = bridge.run()?;
+    agent_sdk::report!(
+        "iwsim zenoh: run over ({} malformed, {} foreign, {} hellos refused, {} agents lost)",
+        counters.malformed,
+        counters.foreign,
+        counters.refused,
+        counters.lost
+    );
+    Ok(ExitCode::SUCCESS)
+}

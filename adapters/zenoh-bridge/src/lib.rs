@@ -1,0 +1,609 @@
+//! The Zenoh bridge (`iwsim zenoh`): serves one hub session to agents on other machines.
+//!
+//! To the hub it is one agent, as the UDP bridge is: it registers the remote agents' robots,
+//! stands in the lock-step barrier for them, and answers each tick when every remote agent
+//! that got the tick's sensor blocks has answered, or a little before the hub's deadline. It
+//! never links the hub or the world. To the remote agents it is their hub: the same payloads
+//! as in shared memory (`ipc_types::remote`), each agent getting its own robots' sensor blocks
+//! only, never the truth.
+//!
+//! A remote agent that goes (its process, its host or its link) takes its liveliness token
+//! with it: its robots then stand with their motors at rest, answered for at once, until an
+//! agent registers a robot of the same name (and id, or id 0) and so takes it back, as the hub
+//! does for a local agent that died.
+
+pub mod cli;
+
+use std::collections::{BTreeMap, VecDeque};
+use std::io::{Read as _, Write as _};
+use std::os::fd::AsRawFd as _;
+use std::os::unix::net::UnixStream;
+use std::path::PathBuf;
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+
+use agent_sdk::pending::PendingRequest;
+use agent_sdk::{Agent, AgentError};
+use ipc_types::remote as wire;
+use ipc_types::{
+    ActionBlock, ActionHeader, Command, MapHeader, MapItem, Refusal, RegisterKind, RegisterRequest, RegisterResponse,
+    RunState, SensorBlock, TickHeader,
+};
+use zenoh::Wait as _;
+
+/// Why the bridge stopped.
+#[derive(Debug, thiserror::Error)]
+pub enum BridgeError {
+    /// The hub side failed (or the hub went away).
+    #[error(transparent)]
+    Agent(#[from] AgentError),
+    /// Zenoh failed.
+    #[error("zenoh failed to {0}")]
+    Zenoh(String),
+}
+
+fn zerr<E: std::fmt::Display>(what: &str) -> impl FnOnce(E) -> BridgeError + '_ {
+    move |e| BridgeError::Zenoh(format!("{what}: {e}"))
+}
+
+/// How the bridge is set up.
+#[derive(Debug, Clone)]
+pub struct BridgeConfig {
+    /// The hub's session.
+    pub session: String,
+    /// How long to wait for the hub.
+    pub connect_timeout: Duration,
+    /// Zenoh endpoints to listen on (`tcp/0.0.0.0:7447`).
+    pub listen: Vec<String>,
+    /// Zenoh endpoints to connect to (a router).
+    pub connect: Vec<String>,
+    /// A Zenoh configuration file to start from.
+    pub config: Option<PathBuf>,
+    /// The key prefix; `iwsim/<session>` when `None`.
+    pub prefix: Option<String>,
+}
+
+/// Input the bridge refused, by kind.
+#[derive(Debug, Default, Clone, Copy, PartialEq, Eq)]
+pub struct Counters {
+    /// Payloads of the wrong size or count.
+    pub malformed: u64,
+    /// Actions for a robot the sending agent does not own, or in another agent's name.
+    pub foreign: u64,
+    /// Hellos refused (other layouts, too many agents).
+    pub refused: u64,
+    /// Remote agents that went without saying goodbye.
+    pub lost: u64,
+}
+
+/// What Zenoh's threads hand the bridge's loop.
+enum Event {
+    Query(zenoh::query::Query),
+    Actions { agent_id: Option<u32>, bytes: Vec<u8> },
+    Alive { agent_id: Option<u32>, up: bool },
+}
+
+/// Events in arrival order, and the socket that rings the loop for each.
+struct Events {
+    queue: Mutex<VecDeque<Event>>,
+    ring: UnixStream,
+}
+
+impl Events {
+    fn push(&self, e: Event) {
+        let mut q = self.queue.lock().unwrap_or_else(|p| p.into_inner());
+        // Bounded: a flood waits in Zenoh's own queues (or is dropped there), not here.
+        if q.len() < MAX_EVENTS {
+            q.push_back(e);
+        }
+        drop(q);
+        let _ = (&self.ring).write(&[1]);
+    }
+
+    fn take(&self) -> Option<Event> {
+        self.queue.lock().unwrap_or_else(|p| p.into_inner()).pop_front()
+    }
+}
+
+/// Events kept for the loop at most.
+const MAX_EVENTS: usize = 4096;
+/// Remote agents one bridge serves.
+const MAX_REMOTE_AGENTS: usize = 256;
+/// Robot registrations sent to the hub and not answered yet, counting the ready request: the
+/// hub holds 4 requests per agent, and one slot stays free for the bridge's goodbye.
+const MAX_REQUESTS_IN_FLIGHT: usize = 2;
+
+/// A remote agent.
+struct RemoteAgent {
+    robots: Vec<u32>,
+    sensors: zenoh::pubsub::Publisher<'static>,
+    /// The last tick this agent was sent sensor blocks for.
+    sent: Option<u64>,
+    /// The tick its last actions answer.
+    answered: Option<u64>,
+    /// Its last actions, one per robot.
+    actions: BTreeMap<u32, ActionBlock>,
+    /// Answered at the deadline without it: not waited for until it speaks again.
+    waited_out: bool,
+}
+
+/// A robot whose remote agent went: it stands until an agent takes it back.
+struct Orphan {
+    robot_id: u32,
+    name: String,
+    answer: RegisterResponse,
+}
+
+/// A registration the hub has not answered yet.
+struct Joining {
+    query: zenoh::query::Query,
+    agent_id: u32,
+    name: String,
+    pending: PendingRequest,
+}
+
+/// A running bridge.
+pub struct Bridge {
+    agent: Agent,
+    control: Option<agent_sdk::ControlClient>,
+    session: String,
+    map: (MapHeader, Vec<MapItem>),
+    z: zenoh::Session,
+    prefix: String,
+    events: Arc<Events>,
+    wake: UnixStream,
+    _queryables: Vec<zenoh::query::Queryable<()>>,
+    _subscribers: Vec<zenoh::pubsub::Subscriber<()>>,
+    _token: zenoh::liveliness::LivelinessToken,
+    remotes: BTreeMap<u32, RemoteAgent>,
+    next_id: u32,
+    /// Registrations forwarded to the hub, and those waiting for a free slot.
+    joining: Vec<Joining>,
+    queued: VecDeque<(zenoh::query::Query, RegisterRequest)>,
+    /// The bridge's own ready request, and the remote ready requests waiting on it.
+    ready: Option<PendingRequest>,
+    ready_waiting: Vec<zenoh::query::Query>,
+    is_ready: bool,
+    orphans: Vec<Orphan>,
+    /// The robots' names, for taking a robot back.
+    names: BTreeMap<u32, (String, RegisterResponse)>,
+    /// The hub tick in hand and when it came.
+    tick: Option<(u64, Instant)>,
+    answered: bool,
+    /// Actions arrived since the last answer (what real time answers on).
+    changed: bool,
+    /// Refused input.
+    pub counters: Counters,
+}
+
+impl std::fmt::Debug for Bridge {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Bridge").field("session", &self.session).field("prefix", &self.prefix).finish()
+    }
+}
+
+impl Bridge {
+    /// Connects to the hub and opens the Zenoh side.
+    pub fn start(cfg: &BridgeConfig) -> Result<Self, BridgeError> {
+        let agent =
+            Agent::connect_within(&cfg.session, &format!("zenoh-bridge-{}", std::process::id()), cfg.connect_timeout)?;
+        let map = agent.map_items()?;
+        let zcfg = agent_sdk::remote::config(cfg.config.as_deref(), "peer", &cfg.listen, &cfg.connect)
+            .map_err(|e| BridgeError::Zenoh(e.to_string()))?;
+        let z = zenoh::open(zcfg).wait().map_err(zerr("open a session"))?;
+        let prefix = cfg.prefix.clone().unwrap_or_else(|| wire::prefix(&cfg.session));
+        let (wake, ring) = UnixStream::pair().map_err(zerr("make a wake-up socket"))?;
+        for s in [&wake, &ring] {
+            s.set_nonblocking(true).map_err(zerr("make a wake-up socket"))?;
+        }
+        let events = Arc::new(Events { queue: Mutex::new(VecDeque::new()), ring });
+        let mut queryables = Vec::new();
+        for key in [wire::register_key(&prefix), wire::map_key(&prefix)] {
+            let ev = events.clone();
+            queryables.push(
+                z.declare_queryable(key)
+                    .callback(move |q| ev.push(Event::Query(q)))
+                    .wait()
+                    .map_err(zerr("declare a queryable"))?,
+            );
+        }
+        let mut subscribers = Vec::new();
+        let (ev, p) = (events.clone(), prefix.clone());
+        subscribers.push(
+            z.declare_subscriber(wire::all_actions_key(&prefix))
+                .callback(move |s: zenoh::sample::Sample| {
+                    let agent_id = wire::agent_of_key(&p, s.key_expr().as_str());
+                    ev.push(Event::Actions { agent_id, bytes: s.payload().to_bytes().into_owned() });
+                })
+                .wait()
+                .map_err(zerr("subscribe to actions"))?,
+        );
+        let (ev, p) = (events.clone(), prefix.clone());
+        subscribers.push(
+            z.liveliness()
+                .declare_subscriber(wire::all_alive_key(&prefix))
+                .callback(move |s: zenoh::sample::Sample| {
+                    let agent_id = wire::agent_of_key(&p, s.key_expr().as_str());
+                    ev.push(Event::Alive { agent_id, up: s.kind() == zenoh::sample::SampleKind::Put });
+                })
+                .wait()
+                .map_err(zerr("watch the agents"))?,
+        );
+        let token =
+            z.liveliness().declare_token(wire::bridge_key(&prefix)).wait().map_err(zerr("declare the bridge"))?;
+        Ok(Self {
+            agent,
+            control: None,
+            session: cfg.session.clone(),
+            map,
+            z,
+            prefix,
+            events,
+            wake,
+            _queryables: queryables,
+            _subscribers: subscribers,
+            _token: token,
+            remotes: BTreeMap::new(),
+            next_id: 1,
+            joining: Vec::new(),
+            queued: VecDeque::new(),
+            ready: None,
+            ready_waiting: Vec::new(),
+            is_ready: false,
+            orphans: Vec::new(),
+            names: BTreeMap::new(),
+            tick: None,
+            answered: true,
+            changed: false,
+            counters: Counters::default(),
+        })
+    }
+
+    /// The key prefix served.
+    pub fn prefix(&self) -> &str {
+        &self.prefix
+    }
+
+    /// Serves until the hub ends the run or goes away.
+    pub fn run(mut self) -> Result<Counters, BridgeError> {
+        loop {
+            let timeout = self.next_wake();
+            let mut fds = [
+                libc::pollfd { fd: self.agent.tick_fd(), events: libc::POLLIN, revents: 0 },
+                libc::pollfd { fd: self.wake.as_raw_fd(), events: libc::POLLIN, revents: 0 },
+            ];
+            #[allow(unsafe_code)]
+            // SAFETY: fds is a live array of pollfd for the duration of the call.
+            unsafe {
+                libc::poll(fds.as_mut_ptr(), fds.len() as libc::nfds_t, timeout.as_millis() as i32);
+            }
+            let mut drained = [0u8; 256];
+            while matches!((&self.wake).read(&mut drained), Ok(n) if n > 0) {}
+            while let Some(e) = self.events.take() {
+                self.on_event(e);
+            }
+            self.serve_joining()?;
+            // Read the hub before judging its liveness: its last tick may be waiting.
+            if let Some(tick) = self.agent.try_tick()? {
+                self.on_tick(tick.tick);
+            }
+            if self.agent.finished() {
+                tracing::info!("the hub ended the run");
+                return Ok(self.counters);
+            }
+            self.agent.check_alive()?;
+            self.answer_hub()?;
+        }
+    }
+
+    /// How long the loop may sleep: until the answer to the hub is due at the latest.
+    fn next_wake(&self) -> Duration {
+        let idle = Duration::from_millis(20);
+        match self.tick {
+            Some((_, since)) if !self.answered && self.map.0.params.lockstep != 0 => {
+                let due = Duration::from_millis(u64::from(self.map.0.params.deadline_ms) * 9 / 10);
+                due.saturating_sub(since.elapsed()).clamp(Duration::from_millis(1), idle)
+            }
+            _ => idle,
+        }
+    }
+
+    fn on_event(&mut self, e: Event) {
+        match e {
+            Event::Query(q) => {
+                if q.key_expr().as_str() == wire::map_key(&self.prefix) {
+                    let _ = q.reply(q.key_expr().clone(), wire::frame(&self.map.0, &self.map.1)).wait();
+                } else {
+                    self.on_register(q);
+                }
+            }
+            Event::Actions { agent_id, bytes } => self.on_actions(agent_id, &bytes),
+            Event::Alive { agent_id: Some(id), up: false } => self.lost(id),
+            Event::Alive { .. } => {}
+        }
+    }
+
+    fn on_register(&mut self, q: zenoh::query::Query) {
+        let Some(req) = q.payload().and_then(|p| wire::one::<RegisterRequest>(&p.to_bytes()).ok()) else {
+            self.counters.malformed += 1;
+            let _ = q.reply_err(format!("a register request is {} bytes", size_of::<RegisterRequest>())).wait();
+            return;
+        };
+        let refuse = |q: &zenoh::query::Query, status: Refusal, detail: &str| {
+            let mut r = RegisterResponse { status: status as u32, ..bytemuck::Zeroable::zeroed() };
+            r.set_detail(detail);
+            let _ = q.reply(q.key_expr().clone(), bytemuck::bytes_of(&r).to_vec()).wait();
+        };
+        match RegisterKind::from_u32(req.kind) {
+            Some(RegisterKind::Hello) => {
+                let schema = q.attachment().map(|a| a.to_bytes().into_owned()).unwrap_or_default();
+                if schema != wire::schema().as_bytes() {
+                    self.counters.refused += 1;
+                    let _ = q
+                        .reply_err(format!(
+                            "this bridge speaks {:?}, the agent {:?}: build both from the same iwsim",
+                            wire::schema(),
+                            String::from_utf8_lossy(&schema)
+                        ))
+                        .wait();
+                    return;
+                }
+                if self.remotes.len() >= MAX_REMOTE_AGENTS {
+                    self.counters.refused += 1;
+                    return refuse(&q, Refusal::Capacity, "the bridge serves no more agents");
+                }
+                let id = self.next_id;
+                let publisher = match self.z.declare_publisher(wire::sensors_key(&self.prefix, id)).express(true).wait()
+                {
+                    Ok(p) => p,
+                    Err(e) => {
+                        let _ = q.reply_err(format!("the bridge could not declare the agent's sensors: {e}")).wait();
+                        return;
+                    }
+                };
+                self.next_id += 1;
+                self.remotes.insert(
+                    id,
+                    RemoteAgent {
+                        robots: Vec::new(),
+                        sensors: publisher,
+                        sent: None,
+                        answered: None,
+                        actions: BTreeMap::new(),
+                        waited_out: false,
+                    },
+                );
+                tracing::info!("remote agent {id} said hello");
+                let r = RegisterResponse { agent_id: id, ..bytemuck::Zeroable::zeroed() };
+                let _ = q.reply(q.key_expr().clone(), bytemuck::bytes_of(&r).to_vec()).wait();
+            }
+            _ if !self.remotes.contains_key(&req.agent_id) => {
+                refuse(&q, Refusal::UnknownAgent, &format!("agent {} has not said hello", req.agent_id));
+            }
+            Some(RegisterKind::Robot) => self.queued.push_back((q, req)),
+            Some(RegisterKind::Ready) => {
+                if self.is_ready {
+                    let r = RegisterResponse { agent_id: req.agent_id, ..bytemuck::Zeroable::zeroed() };
+                    let _ = q.reply(q.key_expr().clone(), bytemuck::bytes_of(&r).to_vec()).wait();
+                } else {
+                    self.ready_waiting.push(q);
+                }
+            }
+            Some(RegisterKind::Bye) => {
+                // As a local agent's goodbye: its robots leave the run.
+                if let Some(r) = self.remotes.remove(&req.agent_id) {
+                    tracing::info!("remote agent {} said goodbye", req.agent_id);
+                    for id in r.robots {
+                        self.names.remove(&id);
+                        self.command(Command::RemoveRobot, id);
+                    }
+                }
+                let _ = q.reply(q.key_expr().clone(), vec![0u8; size_of::<RegisterResponse>()]).wait();
+            }
+            None => refuse(&q, Refusal::Malformed, &format!("unknown request kind {}", req.kind)),
+        }
+    }
+
+    /// Forwards queued registrations to the hub, and the answers back.
+    fn serve_joining(&mut self) -> Result<(), BridgeError> {
+        // Ready once a remote robot exists (a bridge with no robots must not count towards a
+        // hub's --wait-agents), and once some remote agent says it is.
+        if !self.is_ready && self.ready.is_none() && !self.ready_waiting.is_empty() && self.joining.is_empty() {
+            self.ready = Some(self.agent.start_ready()?);
+        }
+        if let Some(p) = &self.ready {
+            match self.agent.poll_answer(p) {
+                Ok(Some(_)) | Err(AgentError::Refused { .. }) => {
+                    self.ready = None;
+                    self.is_ready = true;
+                    for q in self.ready_waiting.drain(..) {
+                        let _ = q.reply(q.key_expr().clone(), vec![0u8; size_of::<RegisterResponse>()]).wait();
+                    }
+                }
+                Ok(None) => {}
+                Err(e) => return Err(e.into()),
+            }
+        }
+        while self.joining.len() + usize::from(self.ready.is_some()) < MAX_REQUESTS_IN_FLIGHT {
+            let Some((q, req)) = self.queued.pop_front() else { break };
+            let name = req.robot.name.as_str().unwrap_or("").to_owned();
+            // A robot whose remote agent went is taken back by a registration that names it.
+            if let Some(i) = self
+                .orphans
+                .iter()
+                .position(|o| o.name == name && (req.robot.requested_id == 0 || req.robot.requested_id == o.robot_id))
+            {
+                let o = self.orphans.remove(i);
+                if let Some(r) = self.remotes.get_mut(&req.agent_id) {
+                    r.robots.push(o.robot_id);
+                }
+                tracing::info!("remote agent {} took robot {} ({name:?}) back", req.agent_id, o.robot_id);
+                let answer = RegisterResponse { agent_id: req.agent_id, ..o.answer };
+                let _ = q.reply(q.key_expr().clone(), bytemuck::bytes_of(&answer).to_vec()).wait();
+                continue;
+            }
+            let pending = self.agent.start_register(&req.robot)?;
+            self.joining.push(Joining { query: q, agent_id: req.agent_id, name, pending });
+        }
+        let mut i = 0;
+        while i < self.joining.len() {
+            let j = &self.joining[i];
+            let answer = match self.agent.poll_answer(&j.pending) {
+                Ok(None) => {
+                    i += 1;
+                    continue;
+                }
+                Ok(Some(r)) => r,
+                Err(AgentError::Refused { reason, detail }) => {
+                    let mut r = RegisterResponse { status: reason as u32, ..bytemuck::Zeroable::zeroed() };
+                    r.set_detail(&detail);
+                    r
+                }
+                Err(e) => return Err(e.into()),
+            };
+            let j = self.joining.remove(i);
+            let answer = RegisterResponse { agent_id: j.agent_id, hub_pid: 0, ..answer };
+            if answer.status == Refusal::Accepted as u32 {
+                match self.remotes.get_mut(&j.agent_id) {
+                    Some(r) => {
+                        r.robots.push(answer.robot_id);
+                        self.names.insert(answer.robot_id, (j.name.clone(), answer));
+                    }
+                    // Its agent went while the hub thought: the robot stands as an orphan.
+                    None => self.orphans.push(Orphan { robot_id: answer.robot_id, name: j.name.clone(), answer }),
+                }
+            }
+            let _ = j.query.reply(j.query.key_expr().clone(), bytemuck::bytes_of(&answer).to_vec()).wait();
+        }
+        Ok(())
+    }
+
+    fn on_actions(&mut self, agent_id: Option<u32>, bytes: &[u8]) {
+        let Some(id) = agent_id else {
+            self.counters.malformed += 1;
+            return;
+        };
+        let Ok((h, blocks)) = wire::unframe::<ActionHeader, ActionBlock>(bytes) else {
+            self.counters.malformed += 1;
+            return;
+        };
+        if wire::check_count(h.count, blocks.len()).is_err() {
+            self.counters.malformed += 1;
+            return;
+        }
+        let Some(r) = self.remotes.get_mut(&id) else {
+            self.counters.foreign += 1;
+            return;
+        };
+        if h.agent_id != id {
+            self.counters.foreign += 1;
+            return;
+        }
+        for b in blocks {
+            if r.robots.contains(&b.robot_id) {
+                r.actions.insert(b.robot_id, b);
+            } else {
+                self.counters.foreign += 1;
+            }
+        }
+        r.answered = Some(r.answered.map_or(h.tick, |t| t.max(h.tick)));
+        r.waited_out = false;
+        self.changed = true;
+    }
+
+    /// A remote agent's liveliness token went: its robots stand until an agent takes them back.
+    fn lost(&mut self, id: u32) {
+        let Some(r) = self.remotes.remove(&id) else { return };
+        self.counters.lost += 1;
+        tracing::warn!("remote agent {id} is gone: its robots {:?} stand until it comes back", r.robots);
+        for robot_id in r.robots {
+            if let Some((name, answer)) = self.names.remove(&robot_id) {
+                self.orphans.push(Orphan { robot_id, name, answer });
+            }
+        }
+        self.changed = true;
+    }
+
+    fn on_tick(&mut self, tick: u64) {
+        if self.tick.map(|t| t.0) != Some(tick) {
+            self.tick = Some((tick, Instant::now()));
+            self.answered = false;
+        }
+        let header = *self.agent.tick_header();
+        let blocks = self.agent.sensors();
+        let mut index: Vec<(u32, usize)> = blocks.iter().enumerate().map(|(i, b)| (b.robot_id, i)).collect();
+        index.sort_unstable();
+        let mut mine: Vec<SensorBlock> = Vec::new();
+        for r in self.remotes.values_mut() {
+            mine.clear();
+            mine.extend(
+                r.robots
+                    .iter()
+                    .filter_map(|id| index.binary_search_by_key(id, |&(rid, _)| rid).ok().map(|k| blocks[index[k].1])),
+            );
+            if mine.is_empty() && RunState::from_u32(header.run_state) != Some(RunState::Finished) {
+                continue;
+            }
+            // The remote agent spins for nothing: its ticks come over a network.
+            let h = TickHeader { count: mine.len() as u32, spin_us: 0, ..header };
+            if let Err(e) = r.sensors.put(wire::frame(&h, &mine)).wait() {
+                tracing::warn!("sensor blocks for a remote agent: {e}");
+            }
+            r.sent = Some(tick);
+        }
+    }
+
+    /// Sends the remote agents' actions to the hub. In lock-step: once per tick, when every
+    /// remote agent sent this tick's blocks has answered, or the hub's deadline is near (a
+    /// silent agent then lags like any agent). In real time: whenever some actions came.
+    fn answer_hub(&mut self) -> Result<(), BridgeError> {
+        let Some((tick, since)) = self.tick else { return Ok(()) };
+        let p = &self.map.0.params;
+        let mut late = false;
+        let due = if p.lockstep != 0 {
+            let all = self.queued.is_empty()
+                && self.joining.is_empty()
+                && self.ready.is_none()
+                && self.remotes.values().all(|r| r.waited_out || r.sent != Some(tick) || r.answered >= Some(tick));
+            let near_deadline = since.elapsed() >= Duration::from_millis(u64::from(p.deadline_ms) * 9 / 10);
+            late = !all;
+            !self.answered && (all || near_deadline)
+        } else {
+            std::mem::take(&mut self.changed)
+        };
+        if !due {
+            return Ok(());
+        }
+        let mut actions: Vec<ActionBlock> = self.remotes.values().flat_map(|r| r.actions.values().copied()).collect();
+        // A robot whose agent went stands: its motors at rest, until it is taken back.
+        actions.extend(self.orphans.iter().map(|o| ActionBlock::motors(o.robot_id, 0.0, 0.0)));
+        self.agent.send(tick, &actions)?;
+        self.answered = true;
+        if late {
+            for r in self.remotes.values_mut() {
+                if r.sent == Some(tick) && r.answered < Some(tick) {
+                    r.waited_out = true;
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// Sends a run-control command without waiting for the hub's answer.
+    fn command(&mut self, command: Command, robot_id: u32) {
+        if self.control.is_none() {
+            match agent_sdk::ControlClient::connect(&self.session) {
+                Ok(c) => self.control = Some(c),
+                Err(e) => {
+                    tracing::warn!("{command:?} for the hub failed: {e}");
+                    return;
+                }
+            }
+        }
+        if let Some(c) = self.control.as_mut()
+            && let Err(e) = c.send(command, robot_id)
+        {
+            tracing::warn!("{command:?} for the hub failed: {e}");
+        }
+    }
+}

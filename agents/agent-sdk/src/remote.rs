@@ -1,0 +1,297 @@
+//! An agent's link to a hub on another machine: Zenoh, through the hub's bridge (`iwsim
+//! zenoh`). The payloads are the shared-memory ones, byte for byte (`ipc_types::remote`), so an
+//! [`Agent`](crate::Agent) on this link serves the same calls as on the hub's machine; only
+//! its sensor blocks are copied (out of the network buffer) instead of lent in place.
+//!
+//! ```no_run
+//! use agent_sdk::{Agent, Wait, remote::Remote};
+//! use std::time::Duration;
+//!
+//! let remote = Remote::new("tcp/10.0.0.5:7447");
+//! let mut agent = Agent::connect_zenoh(&remote, "demo", Duration::from_secs(5)).expect("a bridge answers");
+//! # let _ = agent.wait_tick(Wait::Blocking);
+//! ```
+
+use std::collections::VecDeque;
+use std::io::{Read as _, Write as _};
+use std::os::fd::AsRawFd as _;
+use std::os::unix::net::UnixStream;
+use std::path::PathBuf;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+
+use ipc_types::remote::{self as wire, FrameError};
+use ipc_types::{
+    ActionBlock, ActionHeader, MapHeader, MapItem, RegisterRequest, RegisterResponse, SensorBlock, TickHeader,
+};
+use zenoh::Wait as _;
+
+use crate::{ANSWER_TIMEOUT, AgentError};
+
+/// Sensor frames kept between two reads of the agent. More means it fell behind: the oldest
+/// go, since only the newest tick matters (as in shared memory, where the hub keeps one).
+const INBOX_FRAMES: usize = 8;
+
+/// Where a hub's Zenoh bridge is and how to reach it.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Remote {
+    /// The endpoint to connect to: the bridge's `--listen`, or a Zenoh router's.
+    pub endpoint: String,
+    /// A Zenoh configuration file (JSON5) to start from, for TLS, authentication and the
+    /// like; the endpoint is added to it.
+    pub config: Option<PathBuf>,
+    /// The key prefix the bridge serves the session under; `iwsim/<session>` when `None`.
+    pub prefix: Option<String>,
+}
+
+impl Remote {
+    /// A bridge at `endpoint`, with Zenoh's defaults and the default key prefix.
+    pub fn new(endpoint: &str) -> Self {
+        Self { endpoint: endpoint.to_owned(), config: None, prefix: None }
+    }
+}
+
+fn zerr<E: std::fmt::Display>(what: &str) -> impl FnOnce(E) -> AgentError + '_ {
+    move |e| AgentError::Zenoh(format!("{what}: {e}"))
+}
+
+/// A Zenoh configuration: the file's, or the defaults, with multicast scouting off (the peers
+/// are named, and a lab's multicast must not join one session to another's) and `mode` and
+/// `endpoints` set as given.
+pub fn config(
+    file: Option<&std::path::Path>,
+    mode: &str,
+    listen: &[String],
+    connect: &[String],
+) -> Result<zenoh::Config, AgentError> {
+    let mut c = match file {
+        Some(path) => zenoh::Config::from_file(path)
+            .map_err(|e| AgentError::Zenoh(format!("read the Zenoh configuration {}: {e}", path.display())))?,
+        None => zenoh::Config::default(),
+    };
+    let json = |v: &[String]| format!("[{}]", v.iter().map(|e| format!("{e:?}")).collect::<Vec<_>>().join(","));
+    c.insert_json5("mode", &format!("{mode:?}")).map_err(zerr("set the mode"))?;
+    c.insert_json5("scouting/multicast/enabled", "false").map_err(zerr("turn multicast scouting off"))?;
+    if !listen.is_empty() {
+        c.insert_json5("listen/endpoints", &json(listen)).map_err(zerr("set the listen endpoints"))?;
+    }
+    if !connect.is_empty() {
+        c.insert_json5("connect/endpoints", &json(connect)).map_err(zerr("set the connect endpoints"))?;
+    }
+    Ok(c)
+}
+
+/// The sensor frames the link's subscriber received, and a socket it rings for each.
+struct Inbox {
+    frames: Mutex<VecDeque<Vec<u8>>>,
+    ring: UnixStream,
+}
+
+impl Inbox {
+    fn push(&self, bytes: Vec<u8>) {
+        let mut q = self.frames.lock().unwrap_or_else(|p| p.into_inner());
+        if q.len() >= INBOX_FRAMES {
+            q.pop_front();
+        }
+        q.push_back(bytes);
+        drop(q);
+        // A full socket already rings; nothing is lost by a byte not written.
+        let _ = (&self.ring).write(&[1]);
+    }
+}
+
+/// A request sent over Zenoh whose answer has not been read yet.
+pub struct PendingReply {
+    replies: zenoh::handlers::FifoChannelHandler<zenoh::query::Reply>,
+}
+
+impl std::fmt::Debug for PendingReply {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("PendingReply")
+    }
+}
+
+/// An agent's Zenoh session with its hub's bridge.
+pub(crate) struct ZenohLink {
+    session: zenoh::Session,
+    prefix: String,
+    inbox: Arc<Inbox>,
+    /// The read end of the inbox's ring.
+    wake: UnixStream,
+    sensors: Option<zenoh::pubsub::Subscriber<()>>,
+    actions: Option<zenoh::pubsub::Publisher<'static>>,
+    /// Held while the agent lives: the bridge sees it go when the agent's process or link does.
+    _token: Option<zenoh::liveliness::LivelinessToken>,
+    bridge_up: Arc<AtomicBool>,
+    _bridge_watch: zenoh::pubsub::Subscriber<()>,
+    /// The blocks of the tick in hand.
+    pub(crate) held: Vec<SensorBlock>,
+}
+
+impl ZenohLink {
+    /// Opens a Zenoh session to `remote`, trying until `timeout` passes.
+    pub(crate) fn open(remote: &Remote, session: &str, timeout: Duration) -> Result<Self, AgentError> {
+        let cfg = config(remote.config.as_deref(), "client", &[], std::slice::from_ref(&remote.endpoint))?;
+        let start = Instant::now();
+        let z = loop {
+            match zenoh::open(cfg.clone()).wait() {
+                Ok(z) => break z,
+                Err(_) if start.elapsed() < timeout && !ipc_services::stop_signalled() => {
+                    std::thread::sleep(Duration::from_millis(50));
+                }
+                Err(e) => {
+                    return Err(AgentError::Zenoh(format!("connect to {}: {e}", remote.endpoint)));
+                }
+            }
+        };
+        let prefix = remote.prefix.clone().unwrap_or_else(|| wire::prefix(session));
+        let (wake, ring) = UnixStream::pair().map_err(|e| AgentError::Zenoh(format!("make a wake-up socket: {e}")))?;
+        for s in [&wake, &ring] {
+            s.set_nonblocking(true).map_err(|e| AgentError::Zenoh(format!("make a wake-up socket: {e}")))?;
+        }
+        let bridge_up = Arc::new(AtomicBool::new(true));
+        let up = bridge_up.clone();
+        let bridge_watch = z
+            .liveliness()
+            .declare_subscriber(wire::bridge_key(&prefix))
+            .callback(move |s: zenoh::sample::Sample| {
+                up.store(s.kind() == zenoh::sample::SampleKind::Put, Ordering::SeqCst);
+            })
+            .wait()
+            .map_err(zerr("watch the bridge"))?;
+        Ok(Self {
+            session: z,
+            prefix,
+            inbox: Arc::new(Inbox { frames: Mutex::new(VecDeque::new()), ring }),
+            wake,
+            sensors: None,
+            actions: None,
+            _token: None,
+            bridge_up,
+            _bridge_watch: bridge_watch,
+            held: Vec::new(),
+        })
+    }
+
+    /// After the bridge's welcome: subscribes to agent `id`'s sensor blocks, declares its
+    /// actions publisher, and shows the bridge it is there.
+    pub(crate) fn joined(&mut self, id: u32) -> Result<(), AgentError> {
+        let inbox = self.inbox.clone();
+        self.sensors = Some(
+            self.session
+                .declare_subscriber(wire::sensors_key(&self.prefix, id))
+                .callback(move |s: zenoh::sample::Sample| inbox.push(s.payload().to_bytes().into_owned()))
+                .wait()
+                .map_err(zerr("subscribe to the sensor blocks"))?,
+        );
+        self.actions = Some(
+            self.session
+                .declare_publisher(wire::actions_key(&self.prefix, id))
+                // One tick's actions go at once, not batched with the next.
+                .express(true)
+                .wait()
+                .map_err(zerr("declare the actions publisher"))?,
+        );
+        self._token = Some(
+            self.session
+                .liveliness()
+                .declare_token(wire::alive_key(&self.prefix, id))
+                .wait()
+                .map_err(zerr("declare the agent's liveliness token"))?,
+        );
+        Ok(())
+    }
+
+    /// Sends a register request; read the answer with [`ZenohLink::poll`].
+    pub(crate) fn request(&self, req: &RegisterRequest) -> Result<PendingReply, AgentError> {
+        let replies = self
+            .session
+            .get(wire::register_key(&self.prefix))
+            .payload(bytemuck::bytes_of(req).to_vec())
+            .attachment(wire::schema())
+            // The bridge answers once the hub has (which may take up to ANSWER_TIMEOUT).
+            .timeout(ANSWER_TIMEOUT + Duration::from_secs(1))
+            .wait()
+            .map_err(zerr("send a registration"))?;
+        Ok(PendingReply { replies })
+    }
+
+    /// The answer to `pending`, if it came.
+    pub(crate) fn poll(&self, pending: &PendingReply, session: &str) -> Result<Option<RegisterResponse>, AgentError> {
+        match pending.replies.try_recv() {
+            Ok(Some(reply)) => match reply.result() {
+                Ok(sample) => wire::one::<RegisterResponse>(&sample.payload().to_bytes())
+                    .map(Some)
+                    .map_err(|error| AgentError::Frame { what: "registration answer", error }),
+                Err(e) => Err(AgentError::Zenoh(format!(
+                    "register: the bridge said: {}",
+                    String::from_utf8_lossy(&e.payload().to_bytes())
+                ))),
+            },
+            Ok(None) => Ok(None),
+            // The query ended with no reply: no bridge serves the session's keys.
+            Err(_) => Err(AgentError::NoBridge(session.to_owned())),
+        }
+    }
+
+    /// Says goodbye without waiting for an answer.
+    pub(crate) fn say_goodbye(&self, req: &RegisterRequest) {
+        let _ = self
+            .session
+            .get(wire::register_key(&self.prefix))
+            .payload(bytemuck::bytes_of(req).to_vec())
+            .attachment(wire::schema())
+            .callback(|_| {})
+            .wait();
+    }
+
+    /// Sends actions.
+    pub(crate) fn send(&self, header: &ActionHeader, actions: &[ActionBlock]) -> Result<(), AgentError> {
+        let Some(p) = &self.actions else { return Err(AgentError::Zenoh("send actions before hello".into())) };
+        p.put(wire::frame(header, actions)).wait().map_err(zerr("send actions"))
+    }
+
+    /// The oldest sensor frame not read yet, checked; `None` when there is none.
+    pub(crate) fn take(&mut self) -> Result<Option<(TickHeader, Vec<SensorBlock>)>, AgentError> {
+        let mut drained = [0u8; 64];
+        while matches!((&self.wake).read(&mut drained), Ok(n) if n > 0) {}
+        let next = self.inbox.frames.lock().unwrap_or_else(|p| p.into_inner()).pop_front();
+        let Some(bytes) = next else { return Ok(None) };
+        let frame = |error: FrameError| AgentError::Frame { what: "sensor frame", error };
+        let (h, blocks): (TickHeader, Vec<SensorBlock>) = wire::unframe(&bytes).map_err(frame)?;
+        wire::check_count(h.count, blocks.len()).map_err(frame)?;
+        Ok(Some((h, blocks)))
+    }
+
+    /// Readable when a sensor frame arrived.
+    pub(crate) fn wake_fd(&self) -> i32 {
+        self.wake.as_raw_fd()
+    }
+
+    /// Whether the bridge's liveliness token is still there.
+    pub(crate) fn bridge_alive(&self) -> bool {
+        self.bridge_up.load(Ordering::SeqCst)
+    }
+
+    /// The agents' map, from the bridge.
+    pub(crate) fn map(&self, session: &str) -> Result<(MapHeader, Vec<MapItem>), AgentError> {
+        let replies = self
+            .session
+            .get(wire::map_key(&self.prefix))
+            .timeout(ANSWER_TIMEOUT)
+            .wait()
+            .map_err(zerr("ask for the map"))?;
+        let reply = replies.recv().map_err(|_| AgentError::NoBridge(session.to_owned()))?;
+        let sample = reply.result().map_err(|e| {
+            AgentError::Zenoh(format!(
+                "get the map: the bridge said: {}",
+                String::from_utf8_lossy(&e.payload().to_bytes())
+            ))
+        })?;
+        let frame = |error: FrameError| AgentError::Frame { what: "map", error };
+        let (h, items): (MapHeader, Vec<MapItem>) = wire::unframe(&sample.payload().to_bytes()).map_err(frame)?;
+        wire::check_count(h.item_count, items.len()).map_err(frame)?;
+        Ok((h, items))
+    }
+}
