@@ -607,8 +607,10 @@ pub fn stop_signalled() -> bool {
 }
 
 /// Installs the handlers that set [`STOP`], after iceoryx2's (which a node's creation may
-/// install): SIGINT, SIGTERM, and SIGHUP unless it was ignored (as under `nohup`).
-fn install_stop_handlers() {
+/// install): SIGINT, SIGTERM, and SIGHUP unless it was ignored (as under `nohup`). Creating
+/// a node calls it; a process with no node (an agent on another machine, joined over Zenoh)
+/// calls it itself, so that it too stops cleanly on those signals.
+pub fn install_stop_handlers() {
     extern "C" fn on_stop(_: libc::c_int) {
         // Only an atomic store: the one thing this handler may safely do.
         STOP.store(true, std::sync::atomic::Ordering::SeqCst);

@@ -21,3 +21,4 @@ mod serve;
 mod teleop;
 mod udp;
 mod view;
+mod zenoh;

@@ -628,6 +628,9 @@ impl Agent {
     /// router's), and says hello; waits up to `timeout` for the bridge to answer. Every call
     /// after this works as on the hub's machine.
     pub fn connect_zenoh(remote: &remote::Remote, session: &str, timeout: Duration) -> Result<Self, AgentError> {
+        // No iceoryx2 node installs them here: a signal must end the agent cleanly all the same
+        // (its goodbye said, its logs whole).
+        ipc_services::install_stop_handlers();
         let link = remote::ZenohLink::open(remote, session, timeout)?;
         let mut agent = Self::with_link(Link::Zenoh(Box::new(link)), session);
         let start = Instant::now();

@@ -66,6 +66,19 @@ pub struct RunArgs {
     /// each agent it waits for can have a core (0: never); timing only, never the run.
     #[arg(long, default_value_t = hub::ANSWER_SPIN_US, value_parser = clap::builder::RangedU64ValueParser::<u64>::new().range(0..=100_000))]
     pub answer_spin_us: u64,
+    /// Run these agents as on other machines: through a Zenoh bridge (`iwsim zenoh`) the run
+    /// starts beside its hub, each agent with `--zenoh`. `all`, or agent numbers as the
+    /// scenario lists them (`2` or `1,3`).
+    #[arg(long, value_name = "all|N,…", value_parser = crate::run::ZenohAgents::parse)]
+    pub zenoh_agents: Option<crate::run::ZenohAgents>,
+    /// With --zenoh-agents: where the bridge listens (and those agents connect) [default:
+    /// tcp/127.0.0.1 on a free port].
+    #[arg(long, value_name = "ENDPOINT", requires = "zenoh_agents")]
+    pub zenoh_listen: Option<String>,
+    /// With --zenoh-agents: start those agents in this network namespace (`ip netns exec NS`,
+    /// as root), another host as far as the network goes.
+    #[arg(long, value_name = "NS", requires = "zenoh_agents")]
+    pub zenoh_netns: Option<String>,
 }
 
 /// Options of `iwsim demo`.

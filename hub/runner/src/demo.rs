@@ -63,6 +63,7 @@ pub fn run(args: &DemoArgs) -> anyhow::Result<ExitCode> {
         verbose: true,
         session: args.session.clone(),
         hub_options: Vec::new(),
+        zenoh: None,
     };
     let end = crate::run::run_once(&scenario, args.seed, &args.out, &opts, &signals)?;
     crate::run::print_summary(&end.summary, end.chair.as_ref(), &args.out);

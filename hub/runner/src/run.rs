@@ -260,7 +260,20 @@ struct Kid {
 impl Kid {
     /// Starts `iwsim ARGS`; only the hub's stdout (its JSON summary) is kept.
     fn spawn(args: &[String], what: &str, keep_stdout: bool) -> anyhow::Result<Self> {
-        let mut command = Command::new(iwsim()?);
+        Self::spawn_in(None, args, what, keep_stdout)
+    }
+
+    /// [`Kid::spawn`], in network namespace `netns` when given (`ip netns exec NS iwsim …`,
+    /// which execs iwsim in place: the child is iwsim itself, and signals reach it).
+    fn spawn_in(netns: Option<&str>, args: &[String], what: &str, keep_stdout: bool) -> anyhow::Result<Self> {
+        let mut command = match netns {
+            Some(ns) => {
+                let mut c = Command::new("ip");
+                c.args(["netns", "exec", ns]).arg(iwsim()?);
+                c
+            }
+            None => Command::new(iwsim()?),
+        };
         command.args(args).stdin(Stdio::null()).stderr(Stdio::piped()).stdout(if keep_stdout {
             Stdio::piped()
         } else {
@@ -427,6 +440,8 @@ struct Procs {
     emulator: Option<Kid>,
     agents: Vec<Kid>,
     viewer: Option<Kid>,
+    /// The Zenoh bridge of the agents run as on other machines.
+    bridge: Option<Kid>,
 }
 
 /// One of the run's processes that the run needs until its end.
@@ -438,6 +453,8 @@ enum Who {
     Adapter,
     /// The chair emulator.
     Emulator,
+    /// The Zenoh bridge.
+    Bridge,
 }
 
 impl Procs {
@@ -446,6 +463,7 @@ impl Procs {
             .chain(self.adapter.iter_mut())
             .chain(self.emulator.iter_mut())
             .chain(self.agents.iter_mut())
+            .chain(self.bridge.iter_mut())
             .chain(self.viewer.iter_mut())
     }
 
@@ -454,6 +472,7 @@ impl Procs {
             Who::Agent(k) => self.agents.get_mut(k),
             Who::Adapter => self.adapter.as_mut(),
             Who::Emulator => self.emulator.as_mut(),
+            Who::Bridge => self.bridge.as_mut(),
         }
     }
 
@@ -465,6 +484,9 @@ impl Procs {
         }
         if self.adapter.as_mut().is_some_and(|a| a.exited().is_some_and(|s| !s.success())) {
             return Some(Who::Adapter);
+        }
+        if self.bridge.as_mut().is_some_and(|a| a.exited().is_some_and(|s| !s.success())) {
+            return Some(Who::Bridge);
         }
         self.agents.iter_mut().position(|a| a.exited().is_some_and(|s| !s.success())).map(Who::Agent)
     }
@@ -654,6 +676,72 @@ pub struct RunOptions {
     pub session: Option<String>,
     /// More options for `iwsim hub` (e.g. `--threads 2`).
     pub hub_options: Vec<String>,
+    /// Agents run as on other machines, through a Zenoh bridge.
+    pub zenoh: Option<ZenohRun>,
+}
+
+/// Which of a scenario's agents join through Zenoh (`--zenoh-agents`).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum ZenohAgents {
+    /// Every agent.
+    All,
+    /// These agents, numbered from 1 as the scenario lists them.
+    Some(Vec<usize>),
+}
+
+impl ZenohAgents {
+    /// Parses `all` or `1,3`.
+    pub fn parse(text: &str) -> Result<Self, String> {
+        if text.trim() == "all" {
+            return Ok(Self::All);
+        }
+        let numbers = text
+            .split(',')
+            .map(|n| match n.trim().parse::<usize>() {
+                Ok(k) if k >= 1 => Ok(k),
+                _ => Err(format!("{n:?} is not an agent number (1, 2, …)")),
+            })
+            .collect::<Result<Vec<_>, _>>()?;
+        Ok(Self::Some(numbers))
+    }
+
+    /// Whether agent `index` (from 0) is one of them.
+    fn includes(&self, index: usize) -> bool {
+        match self {
+            Self::All => true,
+            Self::Some(v) => v.contains(&(index + 1)),
+        }
+    }
+}
+
+/// Agents of a run through Zenoh: which, where the bridge listens, and which network
+/// namespace they run in.
+#[derive(Debug, Clone)]
+pub struct ZenohRun {
+    /// Which agents.
+    pub agents: ZenohAgents,
+    /// The bridge's listen endpoint (a free loopback port when `None`).
+    pub listen: Option<String>,
+    /// A network namespace for those agents.
+    pub netns: Option<String>,
+}
+
+impl ZenohRun {
+    /// The endpoint the bridge listens on, and the one its agents connect to.
+    fn endpoints(&self) -> anyhow::Result<(String, String)> {
+        let listen = match &self.listen {
+            Some(e) => e.clone(),
+            None => {
+                // The kernel's free port of the moment: nothing holds it until the bridge binds
+                // it a moment later, which is as good as a fixed port and never clashes with a
+                // run beside this one.
+                let l = std::net::TcpListener::bind("127.0.0.1:0").context("finding a free port for the bridge")?;
+                format!("tcp/127.0.0.1:{}", l.local_addr()?.port())
+            }
+        };
+        let connect = listen.replace("/0.0.0.0:", "/127.0.0.1:").replace("/[::]:", "/[::1]:");
+        Ok((listen, connect))
+    }
 }
 
 /// The physical chair of one run: the scenario's `[chair]` and where its files go.
@@ -826,6 +914,7 @@ pub fn run_once(
         emulator: None,
         agents: Vec::new(),
         viewer: None,
+        bridge: None,
     };
     procs.hub.forward_stderr(s("hub: "), false, tx.clone(), Some((HUB_BANNER, banner_tx)));
     let watch = std::sync::Arc::new(Watch::default());
@@ -863,6 +952,25 @@ pub fn run_once(
                             scenario.agents.len()
                         );
                     }
+                    let zenoh = match &opts.zenoh {
+                        Some(z) => {
+                            let (listen, connect) = z.endpoints()?;
+                            let args = vec![
+                                s("zenoh"),
+                                s("--session"),
+                                session.clone(),
+                                s("--listen"),
+                                listen,
+                                s("--connect-timeout"),
+                                s("30"),
+                            ];
+                            let mut kid = Kid::spawn(&args, "Zenoh bridge", false)?;
+                            kid.forward_stderr(s("zenoh: "), opts.verbose, tx.clone(), None);
+                            procs.bridge = Some(kid);
+                            Some((z, connect))
+                        }
+                        None => None,
+                    };
                     for (k, a) in scenario.agents.iter().enumerate() {
                         let mut args = vec![
                             s("agent"),
@@ -883,7 +991,15 @@ pub fn run_once(
                             option_flags(&a.options)
                                 .map_err(|e| anyhow::anyhow!("agent {} ({}): {e}", k + 1, a.kind))?,
                         );
-                        let mut kid = Kid::spawn(&args, &format!("agent {} ({})", k + 1, a.kind), false)?;
+                        let mut netns = None;
+                        if let Some((z, connect)) = &zenoh
+                            && z.agents.includes(k)
+                        {
+                            // Agents retry for their --connect-timeout while the bridge comes up.
+                            args.extend([s("--zenoh"), connect.clone()]);
+                            netns = z.netns.as_deref();
+                        }
+                        let mut kid = Kid::spawn_in(netns, &args, &format!("agent {} ({})", k + 1, a.kind), false)?;
                         kid.forward_stderr(format!("{}: ", a.kind), opts.verbose, tx.clone(), None);
                         procs.agents.push(kid);
                     }
@@ -946,14 +1062,19 @@ pub fn run_once(
                 let until = Instant::now() + AGENTS_LEAVE_BOUND;
                 let mut signal = None;
                 while signal.is_none()
-                    && procs.agents.iter_mut().chain(procs.adapter.iter_mut()).any(|a| a.exited().is_none())
+                    && procs
+                        .agents
+                        .iter_mut()
+                        .chain(procs.adapter.iter_mut())
+                        .chain(procs.bridge.iter_mut())
+                        .any(|a| a.exited().is_none())
                 {
                     if Instant::now() > until {
                         break;
                     }
                     signal = signals.wait(POLL);
                 }
-                for a in procs.agents.iter_mut().chain(procs.adapter.iter_mut()) {
+                for a in procs.agents.iter_mut().chain(procs.adapter.iter_mut()).chain(procs.bridge.iter_mut()) {
                     if a.exited().is_none() && signal.is_none() {
                         a.kill();
                         agent_failures.push(format!(
@@ -1307,6 +1428,11 @@ pub fn run(args: &RunArgs) -> anyhow::Result<ExitCode> {
             "--answer-spin-us".into(),
             args.answer_spin_us.to_string(),
         ],
+        zenoh: args.zenoh_agents.clone().map(|agents| ZenohRun {
+            agents,
+            listen: args.zenoh_listen.clone(),
+            netns: args.zenoh_netns.clone(),
+        }),
     };
     let Some(seeds) = &args.seeds else {
         let seed = args.seed.unwrap_or(scenario.seed);

@@ -1,0 +1,185 @@
+//! Agents on other machines, through the Zenoh bridge (`iwsim zenoh`): another host is a
+//! network namespace joined to this one by a veth pair, so the agents' traffic crosses a real
+//! network link. Making namespaces needs root (CI runs as root); a test that cannot make them
+//! fails and says so.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+use std::sync::atomic::{AtomicU32, Ordering};
+use std::time::Duration;
+
+use records::summary::RunSummary;
+
+use super::common::{Proc, assert_no_shared_memory_left, session, text};
+
+/// Another host as far as the network goes: a network namespace with one end of a veth pair,
+/// the other end here. Removed (namespace and link) when dropped.
+struct Host {
+    ns: String,
+    link: String,
+    /// This side's address, which the other host reaches us at.
+    here: String,
+}
+
+impl Host {
+    fn new() -> Self {
+        static N: AtomicU32 = AtomicU32::new(0);
+        #[allow(unsafe_code)]
+        // SAFETY: geteuid has no preconditions.
+        let root = unsafe { libc::geteuid() } == 0;
+        assert!(
+            root,
+            "the Zenoh tests make network namespaces (`ip netns add`), which needs root: run the suite as root (CI does)"
+        );
+        let n = N.fetch_add(1, Ordering::Relaxed);
+        let pid = std::process::id() % 100_000;
+        let (ns, link, peer) = (format!("iwz{pid}n{n}"), format!("iwz{pid}h{n}"), format!("iwz{pid}p{n}"));
+        let subnet = format!("10.{}.{}", 200 + n % 50, pid % 250);
+        let here = format!("{subnet}.1");
+        let host = Self { ns: ns.clone(), link: link.clone(), here: here.clone() };
+        for args in [
+            vec!["netns", "add", &ns],
+            vec!["link", "add", &link, "type", "veth", "peer", "name", &peer],
+            vec!["link", "set", &peer, "netns", &ns],
+            vec!["addr", "add", &format!("{here}/30"), "dev", &link],
+            vec!["link", "set", &link, "up"],
+            vec!["-n", &ns, "addr", "add", &format!("{subnet}.2/30"), "dev", &peer],
+            vec!["-n", &ns, "link", "set", &peer, "up"],
+            vec!["-n", &ns, "link", "set", "lo", "up"],
+        ] {
+            ip(&args);
+        }
+        host
+    }
+
+    /// An endpoint on this side, on a port no one uses.
+    fn endpoint_here(&self) -> String {
+        format!("tcp/{}:{}", self.here, free_port())
+    }
+}
+
+impl Drop for Host {
+    fn drop(&mut self) {
+        // Deleting one end of a veth pair deletes both.
+        let _ = Command::new("ip").args(["link", "del", &self.link]).status();
+        let _ = Command::new("ip").args(["netns", "del", &self.ns]).status();
+    }
+}
+
+fn ip(args: &[&str]) {
+    let out = Command::new("ip").args(args).output().expect("ip (iproute2) runs");
+    assert!(out.status.success(), "ip {}: {}", args.join(" "), text(&out.stderr));
+}
+
+/// A TCP port free at the moment (the kernel's pick).
+fn free_port() -> u16 {
+    let l = std::net::TcpListener::bind("0.0.0.0:0").expect("a free port");
+    l.local_addr().expect("its address").port()
+}
+
+fn work_dir(tag: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("iwsim-e2e-zenoh-{tag}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).expect("work dir");
+    dir
+}
+
+/// `iwsim run ARGS --out DIR/NAME`; its summary.
+fn run(dir: &Path, name: &str, args: &[&str]) -> RunSummary {
+    let out = dir.join(name);
+    let mut full = vec!["run"];
+    full.extend_from_slice(args);
+    full.extend(["--headless", "--quiet", "--out", out.to_str().expect("utf-8")]);
+    let o = Proc::spawn(&full).wait(Duration::from_secs(300));
+    assert!(o.status.success(), "iwsim {}: {}\n{}", full.join(" "), text(&o.stdout), text(&o.stderr));
+    RunSummary::read(&out.join("summary.json")).unwrap_or_else(|e| panic!("{e}"))
+}
+
+#[test]
+fn the_navigator_on_another_host_drives_the_slalom_bit_for_bit_as_it_does_here() {
+    let dir = work_dir("slalom");
+    let host = Host::new();
+    let here = run(&dir, "here", &["builtin:slalom", "--lockstep", "--seed", "3"]);
+    let listen = host.endpoint_here();
+    let remote = run(
+        &dir,
+        "remote",
+        &[
+            "builtin:slalom",
+            "--lockstep",
+            "--seed",
+            "3",
+            "--zenoh-agents",
+            "all",
+            "--zenoh-listen",
+            &listen,
+            "--zenoh-netns",
+            &host.ns,
+        ],
+    );
+    assert_eq!((remote.ticks, remote.state_hash), (here.ticks, here.state_hash));
+    assert!(remote.passed, "the slalom is passed from the other host too");
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+#[test]
+fn corridor_swap_with_one_chair_on_another_host_is_the_local_run() {
+    let dir = work_dir("swap");
+    let host = Host::new();
+    let here = run(&dir, "here", &["builtin:corridor-swap", "--lockstep"]);
+    let listen = host.endpoint_here();
+    let mixed = run(
+        &dir,
+        "mixed",
+        &[
+            "builtin:corridor-swap",
+            "--lockstep",
+            "--zenoh-agents",
+            "2",
+            "--zenoh-listen",
+            &listen,
+            "--zenoh-netns",
+            &host.ns,
+        ],
+    );
+    assert_eq!((mixed.ticks, mixed.state_hash), (here.ticks, here.state_hash));
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+#[test]
+fn an_agent_written_with_the_official_zenoh_binding_registers_reads_its_blocks_and_drives() {
+    let s = session("zenoh-third-party");
+    let python = recorder::python::checker_python().unwrap_or_else(|e| panic!("{e}"));
+    let hub = Proc::spawn(&["hub", "--session", &s, "--lockstep", "--ticks", "60", "--wait-agents", "1"]);
+    let endpoint = format!("tcp/127.0.0.1:{}", free_port());
+    let mut bridge = Proc::spawn(&["zenoh", "--session", &s, "--listen", &endpoint, "--connect-timeout", "20"]);
+    bridge.announced("served under", Duration::from_secs(20));
+    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/zenoh/third_party_agent.py");
+    let agent = Command::new(python)
+        .arg(&script)
+        .args([&endpoint, &s, "py-chair", "10.0", "6.1", "0.8"])
+        .output()
+        .expect("python runs");
+    assert!(agent.status.success(), "{}\n{}", text(&agent.stdout), text(&agent.stderr));
+    let said = text(&agent.stdout);
+    let value = |key: &str| -> u64 {
+        said.lines()
+            .find_map(|l| l.strip_prefix(key).and_then(|v| v.trim().parse().ok()))
+            .unwrap_or_else(|| panic!("{key} in {said}"))
+    };
+    // Every tick brought its own robot's block, and only it; it answered each.
+    assert_eq!((value("answered "), value("own_blocks ")), (60, 61), "{said}");
+    let h = hub.wait(Duration::from_secs(30));
+    let out = text(&h.stdout) + &text(&h.stderr);
+    // Judged from the hub: the robot it registered drove forward from x = 10 m.
+    let robot = value("robot ");
+    let x: f64 = out
+        .lines()
+        .find_map(|l| l.strip_prefix(&format!("robot {robot}: x ")))
+        .and_then(|rest| rest.split_whitespace().next())
+        .and_then(|x| x.parse().ok())
+        .unwrap_or_else(|| panic!("the hub's final pose of robot {robot}: {out}"));
+    assert!(x > 11.0, "robot {robot} ended at x = {x}: {out}");
+    bridge.wait(Duration::from_secs(20));
+    assert_no_shared_memory_left(&s);
+}

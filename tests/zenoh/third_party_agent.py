@@ -1,0 +1,97 @@
+"""A remote agent written with the official Zenoh binding (PyPI `eclipse-zenoh`), from iwsim's
+documented wire layouts alone (`ipc_types::remote` and the structs it names): no iwsim code.
+
+It says hello, registers one robot at a pose, says it is ready, then answers every tick with
+its motors at POWER until the run ends. It prints what it saw, one `key value` per line.
+
+    python third_party_agent.py ENDPOINT SESSION NAME X Y POWER
+"""
+
+import os
+import queue
+import struct
+import sys
+
+import zenoh
+
+# The layouts, by their versioned names: sent with the hello, which a bridge built with other
+# layouts refuses.
+SCHEMA = " ".join([
+    "iwsim::RegisterRequest.v4", "iwsim::RegisterResponse.v1", "iwsim::TickHeader.v2",
+    "iwsim::SensorBlock.v5", "iwsim::ActionHeader.v1", "iwsim::ActionBlock.v2",
+    "iwsim::MapHeader.v5", "iwsim::MapItem.v1",
+])
+HELLO, ROBOT, READY = 0, 1, 2
+REG_HAS_POSE = 1
+ACT_MOTORS = 1
+FINISHED = 3
+SENSOR_BLOCK = 864
+ACTION_BLOCK = 232
+TICK_HEADER = struct.Struct("<QdIIQII")          # 40 bytes
+RESPONSE = struct.Struct("<IIIIII64s")           # 88 bytes
+ACTION_HEADER = struct.Struct("<QII")            # 16 bytes
+
+
+def registration(name, x, y):
+    """RobotRegistration.v3, 656 bytes: a 1 m x 1 m chair at (x, y), heading 0."""
+    head = struct.pack("<IIII5d3d", 0, 0, REG_HAS_POSE, 0, 1.0, 1.0, 0.5, 0.5, 0.5, x, y, 0.0)
+    sensors = bytes(8 * 40)
+    return head + sensors + name.encode().ljust(256, b"\0")
+
+
+def request(kind, agent_id, robot=None):
+    """RegisterRequest.v4, 688 bytes."""
+    return struct.pack("<IIII2Q", kind, os.getpid(), agent_id, 0, 0, 0) + (robot or bytes(656))
+
+
+def ask(session, key, payload):
+    replies = session.get(key, payload=payload, attachment=SCHEMA, timeout=20.0)
+    for reply in replies:
+        if reply.ok is None:
+            sys.exit(f"the bridge said: {reply.err.payload.to_bytes()!r}")
+        status, agent_id, robot_id, sensors, _pid, _tick, detail = RESPONSE.unpack(reply.ok.payload.to_bytes())
+        if status != 0:
+            sys.exit(f"refused ({status}): {detail.rstrip(bytes(1)).decode()}")
+        return agent_id, robot_id
+    sys.exit("no bridge answered")
+
+
+def main():
+    endpoint, session_name, name, x, y, power = sys.argv[1:7]
+    prefix = f"iwsim/{session_name}"
+    conf = zenoh.Config()
+    conf.insert_json5("mode", '"client"')
+    conf.insert_json5("connect/endpoints", f'["{endpoint}"]')
+    conf.insert_json5("scouting/multicast/enabled", "false")
+    with zenoh.open(conf) as session:
+        agent_id, _ = ask(session, f"{prefix}/register", request(HELLO, 0))
+        print("agent", agent_id, flush=True)
+        token = session.liveliness().declare_token(f"{prefix}/agent/{agent_id}/alive")
+        frames = queue.Queue()
+        sub = session.declare_subscriber(
+            f"{prefix}/agent/{agent_id}/sensors", lambda s: frames.put(s.payload.to_bytes()))
+        _, robot_id = ask(session, f"{prefix}/register", request(ROBOT, agent_id, registration(name, float(x), float(y))))
+        print("robot", robot_id, flush=True)
+        ask(session, f"{prefix}/register", request(READY, agent_id))
+        actions = session.declare_publisher(f"{prefix}/agent/{agent_id}/actions")
+        answered, mine = 0, 0
+        while True:
+            frame = frames.get(timeout=30)
+            tick, _sim, state, count, _t, _spin, _flags = TICK_HEADER.unpack_from(frame)
+            assert len(frame) == TICK_HEADER.size + count * SENSOR_BLOCK, f"a frame of {len(frame)} bytes"
+            # SensorBlock.v5 starts with its tick (u64) and its robot's id (u32).
+            blocks = [struct.unpack_from("<QI", frame, TICK_HEADER.size + k * SENSOR_BLOCK) for k in range(count)]
+            mine += blocks == [(tick, robot_id)]
+            if state == FINISHED:
+                break
+            block = struct.pack("<II2d3dII", robot_id, ACT_MOTORS, float(power), float(power), 0, 0, 0, 0, 0)
+            block = block.ljust(ACTION_BLOCK, b"\0")
+            actions.put(ACTION_HEADER.pack(tick, agent_id, 1) + block)
+            answered += 1
+        print("answered", answered, flush=True)
+        print("own_blocks", mine, flush=True)
+        del sub, token
+
+
+if __name__ == "__main__":
+    main()
