@@ -188,9 +188,13 @@ class Agent:
         self.close()
 
 
-def connect(session: str, name: str = "python", timeout: float = 5.0) -> Agent:
+def connect(session: str, name: str = "python", timeout: float = 5.0, zenoh: Optional[str] = None) -> Agent:
     """Connects to the hub of ``session``, waiting up to ``timeout`` seconds for it.
 
-    Raises ``SessionNotFound`` when no hub serves the session by then.
+    With ``zenoh`` (an endpoint such as ``"tcp/10.0.0.5:7447"``), the hub is on another
+    machine and the agent joins through its Zenoh bridge (``iwsim zenoh`` there); every call
+    after this works the same.
+
+    Raises ``SessionNotFound`` when no hub (or bridge) serves the session by then.
     """
-    return Agent(_iwsim.connect(session, name, timeout))
+    return Agent(_iwsim.connect(session, name, timeout, zenoh))

@@ -41,12 +41,14 @@ const MAX_SPIN: Duration = Duration::from_millis(1);
 pub(crate) fn to_py(e: AgentError) -> PyErr {
     let text = e.to_string();
     match e {
-        AgentError::Services(_) => SessionNotFound::new_err(text),
+        AgentError::Services(_) | AgentError::NoBridge(_) => SessionNotFound::new_err(text),
         AgentError::Refused { .. } => Refused::new_err(text),
-        AgentError::HubGone { .. } => HubGone::new_err(text),
+        AgentError::HubGone { .. } | AgentError::BridgeGone(_) => HubGone::new_err(text),
         AgentError::NoAnswer(..) => NoAnswer::new_err(text),
         AgentError::Interrupted => PyKeyboardInterrupt::new_err(text),
-        AgentError::Ipc(_) | AgentError::Map(_) => IwsimError::new_err(text),
+        AgentError::Ipc(_) | AgentError::Map(_) | AgentError::Zenoh(_) | AgentError::Frame { .. } => {
+            IwsimError::new_err(text)
+        }
     }
 }
 
@@ -56,12 +58,17 @@ pub(crate) fn seconds(what: &str, s: f64) -> PyResult<Duration> {
 }
 
 /// Connects to the hub of `session` as an agent named `name`, waiting up to `timeout` seconds
-/// for the hub to appear.
+/// for the hub to appear; with `zenoh` (an endpoint, `tcp/HOST:7447`), to a hub on another
+/// machine through its Zenoh bridge.
 #[pyfunction]
-#[pyo3(signature = (session, name = "python", timeout = 5.0))]
-fn connect(session: &str, name: &str, timeout: f64) -> PyResult<Agent> {
+#[pyo3(signature = (session, name = "python", timeout = 5.0, zenoh = None))]
+fn connect(session: &str, name: &str, timeout: f64, zenoh: Option<&str>) -> PyResult<Agent> {
     let timeout = seconds("timeout", timeout)?;
-    SdkAgent::connect_within(session, name, timeout).map(|a| Agent { sdk: Some(a) }).map_err(to_py)
+    let agent = match zenoh {
+        Some(endpoint) => SdkAgent::connect_zenoh(&agent_sdk::remote::Remote::new(endpoint), session, timeout),
+        None => SdkAgent::connect_within(session, name, timeout),
+    };
+    agent.map(|a| Agent { sdk: Some(a) }).map_err(to_py)
 }
 
 /// An agent process's connection to a hub (one per process is the rule; several work).

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import subprocess
 
 import numpy as np
 import pytest
@@ -212,3 +213,43 @@ def test_a_python_agent_and_a_rust_agent_share_one_lock_step_run(hub_factory):
     xs = {int(i): float(x) for i, x in re.findall(r"robot (\d+): x ([0-9.]+) m", out)}
     assert len(xs) == 2, out
     assert sorted(xs.values())[0] > 10.2 and sorted(xs.values())[1] > 12.7, out
+
+
+def _free_port() -> int:
+    import socket
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def test_a_python_agent_through_zenoh_drives_as_it_does_in_shared_memory(hub_factory):
+    from conftest import iwsim_bin
+
+    def drive(zenoh):
+        hub = hub_factory("--lockstep", "--ticks", "30", "--wait-agents", "1", "--no-noise")
+        bridge = None
+        if zenoh:
+            bridge = subprocess.Popen(
+                [iwsim_bin(), "zenoh", "--session", hub.session, "--listen", zenoh, "--connect-timeout", "20"],
+                stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
+            )
+        try:
+            with iwsim.connect(hub.session, "pytest", timeout=20, zenoh=zenoh) as agent:
+                me = agent.register("chair1", body=(1.1, 0.65, 0.8), pose=(10.0, 6.1, 0.0), motors=(0.49, 0.83))
+                agent.ready()
+                encoders = []
+                while (tick := agent.wait_tick(timeout=20)) is not None:
+                    b = agent.sensors()[0]
+                    assert b["robot_id"] == me and b["tick"] == tick.tick
+                    encoders.append(tuple(b["encoder_ticks"]))
+                    agent.send(tick, {me: (1.0, 0.5)})
+        finally:
+            if bridge is not None:
+                assert bridge.wait(timeout=20) == 0, bridge.stderr.read()
+        out = hub.stop()
+        return encoders, [line for line in out.splitlines() if line.startswith(("robot 1:", "tick "))]
+
+    here = drive(None)
+    remote = drive(f"tcp/127.0.0.1:{_free_port()}")
+    assert len(here[0]) == 31 and remote == here, (remote, here)
