@@ -126,6 +126,7 @@ fn agents_adapters_and_the_viewer_never_link_the_hub_or_the_world() {
         "teleop",
         "wheelchair",
         "udp-bridge",
+        "zenoh-bridge",
         "serial-bridge",
         "viewer",
         "iwsim-python",
