@@ -183,3 +183,121 @@ fn an_agent_written_with_the_official_zenoh_binding_registers_reads_its_blocks_a
     bridge.wait(Duration::from_secs(20));
     assert_no_shared_memory_left(&s);
 }
+
+/// The newest world snapshot's tick and robot `id`'s x, metres.
+fn tick_and_x(observer: &mut observer::Observer, id: u32) -> (u64, f64) {
+    let (h, robots) = observer.world().expect("world snapshot");
+    let r = robots.iter().find(|r| r.id == id).unwrap_or_else(|| panic!("robot {id} in the world"));
+    (h.tick, r.x_m)
+}
+
+/// Waits until the hub reaches `tick`; robot `id`'s x then.
+fn x_at(observer: &mut observer::Observer, id: u32, tick: u64) -> f64 {
+    let start = std::time::Instant::now();
+    loop {
+        let (t, x) = tick_and_x(observer, id);
+        if t >= tick {
+            return x;
+        }
+        assert!(start.elapsed() < Duration::from_secs(60), "the hub stayed at tick {t} (< {tick})");
+        std::thread::sleep(Duration::from_millis(2));
+    }
+}
+
+#[test]
+fn a_remote_agent_killed_mid_run_leaves_its_chair_standing_and_takes_it_back_when_restarted() {
+    let s = session("zenoh-agent-killed");
+    // Lock-step with a deadline no test waits out: a remote agent that goes is noticed by its
+    // liveliness token, at once, not at the deadline.
+    // Ticks without end (the hub runs free while no agent drives): the test stops the run.
+    let hub = Proc::spawn(&[
+        "hub",
+        "--session",
+        &s,
+        "--lockstep",
+        "--ticks",
+        "10000000",
+        "--wait-agents",
+        "1",
+        "--deadline-ms",
+        "60000",
+    ]);
+    let endpoint = format!("tcp/127.0.0.1:{}", free_port());
+    let mut bridge = Proc::spawn(&["zenoh", "--session", &s, "--listen", &endpoint, "--connect-timeout", "20"]);
+    let bridge_said = bridge.stderr_lines();
+    bridge_said.said("served under", Duration::from_secs(20));
+    let agent =
+        ["agent", "wheelchair", "--session", &s, "--zenoh", &endpoint, "--connect-timeout", "20", "--name", "chair1"];
+    let mut first = Proc::spawn(&agent);
+    let robots = first.announced("drives robots ", Duration::from_secs(30));
+    assert!(robots.starts_with("[1]"), "{robots}");
+    let mut observer = super::common::wait_for_tick(&s, 1, Duration::from_secs(30));
+    let moving = x_at(&mut observer, 1, 50);
+    first.kill9();
+    // Its chair stops where it is (motors at rest) and the run goes on without it.
+    let (killed_at, _) = tick_and_x(&mut observer, 1);
+    let standing = x_at(&mut observer, 1, killed_at + 60);
+    let still = x_at(&mut observer, 1, killed_at + 120);
+    assert!(standing > moving, "it drove before: {moving} → {standing}");
+    assert!((still - standing).abs() < 1e-3, "a chair whose agent went stands: {standing} → {still}");
+    // A new agent registering the same name takes the same chair back, and drives it again.
+    let mut second = Proc::spawn(&agent);
+    let robots = second.announced("drives robots ", Duration::from_secs(30));
+    assert!(robots.starts_with("[1]"), "the same robot taken back: {robots}");
+    let (back_at, _) = tick_and_x(&mut observer, 1);
+    let again = x_at(&mut observer, 1, back_at + 60);
+    assert!(again > still + 0.1, "driven again after it was taken back: {still} → {again}");
+    drop(observer);
+    assert_eq!(agent_sdk::control(&s, ipc_types::Command::Stop, 0).expect("the hub answers").status, 0);
+    let h = hub.wait(Duration::from_secs(120));
+    assert!(h.status.success(), "{}", text(&h.stderr));
+    let s2 = second.wait(Duration::from_secs(20));
+    assert!(s2.status.success(), "{}", text(&s2.stderr));
+    let b = bridge.wait(Duration::from_secs(20));
+    assert!(b.status.success());
+    assert!(bridge_said.to_end(Duration::from_secs(5)).iter().any(|l| l.contains("1 agents lost")));
+    assert_no_shared_memory_left(&s);
+}
+
+#[test]
+fn a_killed_bridge_is_a_dead_agent_to_the_hub_and_its_remote_agents_say_so() {
+    let s = session("zenoh-bridge-killed");
+    let hub = Proc::spawn(&[
+        "hub",
+        "--session",
+        &s,
+        "--lockstep",
+        "--ticks",
+        "10000000",
+        "--wait-agents",
+        "1",
+        "--deadline-ms",
+        "200",
+    ]);
+    let endpoint = format!("tcp/127.0.0.1:{}", free_port());
+    let mut bridge = Proc::spawn(&["zenoh", "--session", &s, "--listen", &endpoint, "--connect-timeout", "20"]);
+    bridge.announced("served under", Duration::from_secs(20));
+    let mut agent =
+        Proc::spawn(&["agent", "wheelchair", "--session", &s, "--zenoh", &endpoint, "--connect-timeout", "20"]);
+    let agent_said = agent.stderr_lines();
+    agent_said.said("drives robots ", Duration::from_secs(30));
+    let mut observer = super::common::wait_for_tick(&s, 20, Duration::from_secs(30));
+    bridge.kill9();
+    // The remote agent learns it at once (its link to the bridge closed)…
+    let a = agent.wait(Duration::from_secs(20));
+    assert!(!a.status.success(), "an agent whose bridge died must say so in its exit status");
+    let said = agent_said.to_end(Duration::from_secs(5)).join("\n");
+    assert!(said.contains("Zenoh bridge of session"), "{said}");
+    // …and the hub, whose agent the bridge was, keeps its policy for a dead agent: the robot
+    // frozen where it stands, the run stepped at the deadline's pace until an agent comes back.
+    let (t, _) = tick_and_x(&mut observer, 1);
+    x_at(&mut observer, 1, t + 5);
+    let (_, robots) = observer.world().expect("world snapshot");
+    assert!(robots[0].flags & ipc_types::ROBOT_FROZEN != 0, "{:?}", robots[0]);
+    drop(observer);
+    assert_eq!(agent_sdk::control(&s, ipc_types::Command::Stop, 0).expect("the hub answers").status, 0);
+    let h = hub.wait(Duration::from_secs(30));
+    assert!(h.status.success(), "{}", text(&h.stderr));
+    assert!(text(&h.stdout).contains("agents: 1 connected, 1 died"), "{}", text(&h.stdout));
+    assert_no_shared_memory_left(&s);
+}

@@ -269,9 +269,15 @@ impl ZenohLink {
         self.wake.as_raw_fd()
     }
 
-    /// Whether the bridge's liveliness token is still there.
+    /// Whether the bridge is still there: its liveliness token has not gone, and this session
+    /// is still connected to something (a client whose one peer or router went has no
+    /// transport left; Zenoh then tries to reconnect, but no token news can reach it).
     pub(crate) fn bridge_alive(&self) -> bool {
-        self.bridge_up.load(Ordering::SeqCst)
+        if !self.bridge_up.load(Ordering::SeqCst) {
+            return false;
+        }
+        let info = self.session.info();
+        info.peers_zid().wait().next().is_some() || info.routers_zid().wait().next().is_some()
     }
 
     /// The agents' map, from the bridge.
