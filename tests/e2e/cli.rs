@@ -181,10 +181,10 @@ fn the_demo_as_readme_runs_it_in_real_time_passes() {
 }
 
 #[test]
-fn bench_lockstep_runs_the_real_load_beside_ipc_only_and_states_the_hub_memory() {
+fn bench_lockstep_runs_every_transport_under_the_real_load_beside_ipc_only_and_states_the_hub_memory() {
     let bench = Command::new(env!("CARGO_BIN_EXE_iwsim"))
         .args(["bench", "lockstep", "--agents", "2", "--robots-per-agent", "3", "--ticks", "30"])
-        .args(["--transport", "both", "--runs", "1", "--json"])
+        .args(["--transport", "shm,udp,zenoh", "--runs", "1", "--json"])
         .stdout(std::process::Stdio::piped())
         .stderr(std::process::Stdio::piped())
         .spawn()
@@ -194,7 +194,7 @@ fn bench_lockstep_runs_the_real_load_beside_ipc_only_and_states_the_hub_memory()
     let text = String::from_utf8_lossy(&out.stdout);
     assert!(out.status.success(), "{text}\n{}", String::from_utf8_lossy(&out.stderr));
     let j: serde_json::Value = serde_json::from_str(&text).expect("one JSON object");
-    for variant in ["shm", "udp", "shm_real", "udp_real"] {
+    for variant in ["shm", "udp", "zenoh", "shm_real", "udp_real", "zenoh_real"] {
         let rate = j[format!("{variant}_ticks_per_s")].as_f64().unwrap_or(0.0);
         assert!(rate > 0.0, "{variant}: no rate in {text}");
         let rss = j[format!("{variant}_hub_peak_rss_mib")].as_f64().unwrap_or(0.0);
@@ -204,7 +204,11 @@ fn bench_lockstep_runs_the_real_load_beside_ipc_only_and_states_the_hub_memory()
     // The real load's robots stand within each other's sensor range, and the agents (over
     // UDP: the clients parsing Measures) read every robot's every sensor each tick.
     assert!(j["real_neighbours_in_range"].as_f64().unwrap_or(0.0) > 2.0, "{text}");
-    for variant in ["shm_real", "udp_real"] {
+    // Transports side by side, as ratios of one invocation.
+    for key in ["ratio_shm_over_udp", "ratio_zenoh_over_udp", "ratio_shm_over_zenoh"] {
+        assert!(j[key].as_f64().is_some_and(|r| r > 0.0), "{key} in {text}");
+    }
+    for variant in ["shm_real", "udp_real", "zenoh_real"] {
         let readings = j[format!("{variant}_readings")].as_u64().unwrap_or(0);
         let near = j[format!("{variant}_readings_near")].as_u64().unwrap_or(0);
         assert!(readings >= 30 * 6 * 8, "{variant}: {readings} readings for 6 robots x 8 sensors x 30 ticks");

@@ -118,10 +118,11 @@ pub struct BenchLockstepArgs {
     /// Ticks to run.
     #[arg(long, default_value_t = 5000)]
     pub ticks: u64,
-    /// Agents attach over shared memory (shm), over the UDP/XML bridge (udp), or both in
-    /// one run with the ratio (both).
-    #[arg(long, default_value = "shm")]
-    pub transport: Transport,
+    /// How agents attach: over shared memory (shm), the UDP/XML bridge (udp), the Zenoh bridge
+    /// on loopback (zenoh); several, comma-separated, run in one invocation with their ratios
+    /// (`both` is shm,udp; `all` is shm,udp,zenoh).
+    #[arg(long, default_value = "shm", value_delimiter = ',')]
+    pub transport: Vec<Transport>,
     /// Also run over UDP with this many junk datagrams sent at the bridge during the run (half
     /// to its registration port, half to a client's port from a stranger), and report ticks/s
     /// with and without the flood and the bridge's stderr bytes (0: no flood run).
@@ -182,8 +183,12 @@ pub enum Transport {
     Shm,
     /// Ciber-Rato UDP/XML clients through `iwsim udp`.
     Udp,
-    /// Both, one after the other, with the ratio.
+    /// Agent SDK over Zenoh (TCP on loopback) through `iwsim zenoh`.
+    Zenoh,
+    /// shm and udp.
     Both,
+    /// shm, udp and zenoh.
+    All,
 }
 
 /// Options of the hidden UDP bench client.
@@ -225,6 +230,9 @@ pub struct LoadAgentArgs {
     /// Robots on the whole lattice (all agents).
     #[arg(long, default_value_t = 1)]
     pub total: usize,
+    /// Join through a Zenoh bridge at this endpoint instead of shared memory.
+    #[arg(long, value_name = "ENDPOINT")]
+    pub zenoh: Option<String>,
 }
 
 /// Options of the hidden raw ping-pong peer.

@@ -452,12 +452,12 @@ pub fn measure_lockstep(
     ticks: u64,
     plan: VariantPlan,
 ) -> anyhow::Result<LockstepBench> {
-    let VariantPlan { udp, flood, record, real, .. } = plan;
+    let VariantPlan { udp, zenoh, flood, record, real, .. } = plan;
     // Repeated runs in one invocation each get a session and folder of their own, so nothing a
     // run leaves behind can be mistaken for the next run's.
     static RUN: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
     let run = RUN.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-    let tag = format!("{}-{}-{}-{}-{run}", udp as u8, (flood > 0) as u8, record as u8, real as u8);
+    let tag = format!("{}{}-{}-{}-{}-{run}", udp as u8, zenoh as u8, (flood > 0) as u8, record as u8, real as u8);
     let dir = std::env::temp_dir().join(format!("iwsim-bench-{}-{tag}", std::process::id()));
     std::fs::create_dir_all(&dir)?;
     let lab = dir.join("lab.xml");
@@ -528,9 +528,10 @@ fn run_lockstep(
     plan: VariantPlan,
     record: Option<&std::path::Path>,
 ) -> anyhow::Result<(crew::CrewOutput, u64, u64)> {
-    let VariantPlan { udp, flood, real, .. } = plan;
-    // Over UDP the bridge is the hub's one agent, whatever the number of UDP clients.
-    let hub_agents = if udp { 1 } else { agents };
+    let VariantPlan { udp, zenoh, flood, real, .. } = plan;
+    // Over a bridge (UDP or Zenoh) the bridge is the hub's one agent, whatever the number of
+    // clients.
+    let hub_agents = if udp || zenoh { 1 } else { agents };
     let mut hub_args = vec![
         "hub".into(),
         "--session".into(),
@@ -611,6 +612,26 @@ fn run_lockstep(
             flooder = Some(start_flood(server, flood)?);
         }
     } else {
+        // Through Zenoh: the bridge on a free loopback port, and every agent told to use it.
+        let mut via = Vec::new();
+        if zenoh {
+            let port = std::net::TcpListener::bind("127.0.0.1:0")?.local_addr()?.port();
+            let endpoint = format!("tcp/127.0.0.1:{port}");
+            let mut bridge = spawn_self(&[
+                "zenoh".into(),
+                "--session".into(),
+                session.to_owned(),
+                "--listen".into(),
+                endpoint.clone(),
+                "--connect-timeout".into(),
+                "30".into(),
+            ])?;
+            // Keep draining its stderr, so the bridge never blocks on a full pipe.
+            let mut err = bridge.stderr.take().context("the Zenoh bridge's stderr")?;
+            stderr_bytes = Some(std::thread::spawn(move || std::io::copy(&mut err, &mut std::io::sink()).unwrap_or(0)));
+            crew.push(bridge, "Zenoh bridge");
+            via = vec!["--zenoh".to_owned(), endpoint];
+        }
         // Agents join in waves, each wave once the last has registered: a hub that met a
         // hundred hellos at once would make them in one pass of its loop, and the first agents
         // would wait longer than their 5 s for the map it hands out between passes. Only the
@@ -655,6 +676,8 @@ fn run_lockstep(
                     .map(str::to_owned)
                     .into()
                 };
+                let mut args = args;
+                args.extend(via.iter().cloned());
                 let mut agent = spawn_self(&args)?;
                 announced.push(std::io::BufReader::new(agent.stderr.take().context("an agent's stderr")?));
                 crew.push(agent, "agent");
@@ -931,6 +954,8 @@ pub struct VariantPlan {
     pub name: &'static str,
     /// Agents attach through the UDP/XML bridge.
     pub udp: bool,
+    /// Agents attach through the Zenoh bridge (loopback).
+    pub zenoh: bool,
     /// Junk datagrams sent at the bridge during the run.
     pub flood: u64,
     /// The hub records the run.
@@ -941,7 +966,7 @@ pub struct VariantPlan {
 
 impl VariantPlan {
     const fn new(name: &'static str, udp: bool) -> Self {
-        Self { name, udp, flood: 0, record: false, real: false }
+        Self { name, udp, zenoh: false, flood: 0, record: false, real: false }
     }
 }
 
@@ -949,14 +974,15 @@ const SHM: VariantPlan = VariantPlan::new("shm", false);
 const UDP: VariantPlan = VariantPlan::new("udp", true);
 const SHM_REAL: VariantPlan = VariantPlan { real: true, ..VariantPlan::new("shm+real", false) };
 const UDP_REAL: VariantPlan = VariantPlan { real: true, ..VariantPlan::new("udp+real", true) };
+const ZENOH: VariantPlan = VariantPlan { zenoh: true, ..VariantPlan::new("zenoh", false) };
+const ZENOH_REAL: VariantPlan = VariantPlan { zenoh: true, real: true, ..VariantPlan::new("zenoh+real", false) };
 
 /// The variants one invocation runs, in the order each round runs them.
 fn lockstep_variants(args: &BenchLockstepArgs) -> Vec<VariantPlan> {
-    let (shm, udp) = match args.transport {
-        Transport::Shm => (true, false),
-        Transport::Udp => (false, true),
-        Transport::Both => (true, true),
-    };
+    let has = |t: Transport| args.transport.iter().any(|&x| x == t || x == Transport::All);
+    let shm = has(Transport::Shm) || has(Transport::Both);
+    let udp = has(Transport::Udp) || has(Transport::Both);
+    let zenoh = has(Transport::Zenoh);
     let mut v = Vec::new();
     if args.load.ipc() {
         // A shared-memory flood run is a UDP run: `--transport shm --flood N` compares UDP with
@@ -966,6 +992,9 @@ fn lockstep_variants(args: &BenchLockstepArgs) -> Vec<VariantPlan> {
         }
         if udp {
             v.push(UDP);
+        }
+        if zenoh {
+            v.push(ZENOH);
         }
     }
     if args.flood > 0 {
@@ -988,6 +1017,9 @@ fn lockstep_variants(args: &BenchLockstepArgs) -> Vec<VariantPlan> {
         }
         if udp {
             v.push(UDP_REAL);
+        }
+        if zenoh {
+            v.push(ZENOH_REAL);
         }
     }
     v
@@ -1013,6 +1045,9 @@ pub fn lockstep_report(args: &BenchLockstepArgs, variants: &[LockstepVariant]) -
     };
     let shm_udp = pair("shm", "udp");
     let shm_udp_real = pair("shm+real", "udp+real");
+    let zenoh_udp = pair("zenoh", "udp");
+    let shm_zenoh = pair("shm", "zenoh");
+    let zenoh_udp_real = pair("zenoh+real", "udp+real");
     let real_shm = pair("shm+real", "shm");
     let real_udp = pair("udp+real", "udp");
     let (flood, quiet) = (find("udp+flood"), find("udp"));
@@ -1074,6 +1109,9 @@ pub fn lockstep_report(args: &BenchLockstepArgs, variants: &[LockstepVariant]) -
             ("ratio_shm_real_over_udp_real", &shm_udp_real),
             ("ratio_shm_real_over_shm", &real_shm),
             ("ratio_udp_real_over_udp", &real_udp),
+            ("ratio_zenoh_over_udp", &zenoh_udp),
+            ("ratio_shm_over_zenoh", &shm_zenoh),
+            ("ratio_zenoh_real_over_udp_real", &zenoh_udp_real),
         ] {
             if let Some(r) = r {
                 ratio(&mut s, key, r);
@@ -1144,6 +1182,15 @@ pub fn lockstep_report(args: &BenchLockstepArgs, variants: &[LockstepVariant]) -
     }
     if let Some(r) = &shm_udp_real {
         s += &format!("  shared memory / UDP, real load: {}\n", ratio(r));
+    }
+    if let Some(r) = &zenoh_udp {
+        s += &format!("  Zenoh / UDP: {}\n", ratio(r));
+    }
+    if let Some(r) = &shm_zenoh {
+        s += &format!("  shared memory / Zenoh: {}\n", ratio(r));
+    }
+    if let Some(r) = &zenoh_udp_real {
+        s += &format!("  Zenoh / UDP, real load: {}\n", ratio(r));
     }
     if let Some(r) = &real_shm {
         s += &format!("  real load / IPC only, shared memory: {}\n", ratio(r));
@@ -1240,6 +1287,8 @@ mod tests {
         let flooded = VariantPlan { flood: 10, ..VariantPlan::new("udp+flood", true) };
         assert_eq!(lockstep_variants(&a), vec![UDP, flooded]);
         assert_eq!(names(&["--transport", "both", "--load", "ipc"]), ["shm", "udp"]);
+        assert_eq!(names(&["--transport", "all", "--load", "ipc"]), ["shm", "udp", "zenoh"]);
+        assert_eq!(names(&["--transport", "zenoh,udp", "--load", "real"]), ["udp+real", "zenoh+real"]);
         // The flood is an IPC-only comparison; the real load adds its own variant.
         assert_eq!(names(&["--transport", "udp", "--flood", "10"]), ["udp", "udp+flood", "udp+real"]);
     }

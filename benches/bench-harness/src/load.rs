@@ -190,7 +190,12 @@ impl Readings {
 /// reads every one of its sensor blocks and answers with the reactive rule's powers.
 pub fn load_agent(args: &LoadAgentArgs) -> anyhow::Result<ExitCode> {
     let name = format!("load-agent-{}", std::process::id());
-    let mut agent = Agent::connect_within(&args.session, &name, Duration::from_secs(30))?;
+    let mut agent = match &args.zenoh {
+        Some(endpoint) => {
+            Agent::connect_zenoh(&agent_sdk::remote::Remote::new(endpoint), &args.session, Duration::from_secs(30))?
+        }
+        None => Agent::connect_within(&args.session, &name, Duration::from_secs(30))?,
+    };
     // Close on every path, so the last process of a session removes its files.
     let result = drive(&mut agent, args);
     agent.close();
