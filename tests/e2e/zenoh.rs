@@ -301,3 +301,80 @@ fn a_killed_bridge_is_a_dead_agent_to_the_hub_and_its_remote_agents_say_so() {
     assert!(text(&h.stdout).contains("agents: 1 connected, 1 died"), "{}", text(&h.stdout));
     assert_no_shared_memory_left(&s);
 }
+
+#[test]
+fn a_link_pulled_for_two_seconds_mid_run_stalls_nothing_and_loses_no_agent() {
+    let s = session("zenoh-link-pulled");
+    let host = Host::new();
+    let hub = Proc::spawn(&[
+        "hub",
+        "--session",
+        &s,
+        "--lockstep",
+        "--ticks",
+        "10000000",
+        "--wait-agents",
+        "1",
+        "--deadline-ms",
+        "300",
+    ]);
+    let listen = host.endpoint_here();
+    let mut bridge = Proc::spawn(&["zenoh", "--session", &s, "--listen", &listen, "--connect-timeout", "20"]);
+    let bridge_said = bridge.stderr_lines();
+    bridge_said.said("served under", Duration::from_secs(20));
+    let bin = env!("CARGO_BIN_EXE_iwsim");
+    let mut agent = std::process::Command::new("ip")
+        .args(["netns", "exec", &host.ns, bin, "agent", "wheelchair", "--session", &s, "--zenoh", &listen])
+        .args(["--connect-timeout", "20"])
+        .stdin(std::process::Stdio::null())
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .expect("the agent starts in the other namespace");
+    let agent_said = super::common::Lines::read(agent.stderr.take().expect("piped"));
+    agent_said.said("drives robots ", Duration::from_secs(30));
+    let mut observer = super::common::wait_for_tick(&s, 20, Duration::from_secs(30));
+    ip(&["link", "set", &host.link, "down"]);
+    let (cut_at, _) = tick_and_x(&mut observer, 1);
+    // The hub keeps its deadline policy while the agent cannot answer: the run goes on (the
+    // bridge answers without the agent at 90 % of the deadline, then no longer waits for it
+    // until it speaks again), and the chair, its agent silent, comes to rest.
+    x_at(&mut observer, 1, cut_at + 3);
+    std::thread::sleep(Duration::from_secs(2));
+    let (_, resting) = tick_and_x(&mut observer, 1);
+    ip(&["link", "set", &host.link, "up"]);
+    // Back on the link (TCP retransmits within seconds), the same agent drives it again.
+    let start = std::time::Instant::now();
+    loop {
+        let (_, x) = tick_and_x(&mut observer, 1);
+        if x > resting + 0.5 {
+            break;
+        }
+        assert!(
+            start.elapsed() < Duration::from_secs(30),
+            "the agent never drove again: still at {x} (rested at {resting})"
+        );
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    drop(observer);
+    assert_eq!(agent_sdk::control(&s, ipc_types::Command::Stop, 0).expect("the hub answers").status, 0);
+    assert!(hub.wait(Duration::from_secs(30)).status.success());
+    let status = agent.wait().expect("the agent exits");
+    let b = bridge.wait(Duration::from_secs(20));
+    assert!(
+        status.success(),
+        "{}\nthe bridge: {}",
+        agent_said.to_end(Duration::from_secs(5)).join("\n"),
+        bridge_said.so_far().join("\n")
+    );
+    assert!(b.status.success());
+    // Whether or not Zenoh closed the link meanwhile, the agent was not lost for good: any
+    // agent the bridge lost came back.
+    let end = bridge_said.to_end(Duration::from_secs(5)).join("\n");
+    let count = |what: &str| -> u64 {
+        let before = end.split(what).next().and_then(|b| b.rsplit([' ', '(']).next()).unwrap_or("");
+        before.parse().unwrap_or_else(|_| panic!("{what} in {end}"))
+    };
+    assert_eq!(count(" agents lost"), count(" came back"), "{end}");
+    assert_no_shared_memory_left(&s);
+}

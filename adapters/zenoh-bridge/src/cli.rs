@@ -58,11 +58,12 @@ pub fn run(args: &ZenohArgs) -> anyhow::Result<ExitCode> {
     );
     let counters = bridge.run()?;
     agent_sdk::report!(
-        "iwsim zenoh: run over ({} malformed, {} foreign, {} hellos refused, {} agents lost)",
+        "iwsim zenoh: run over ({} malformed, {} foreign, {} hellos refused, {} agents lost, {} came back)",
         counters.malformed,
         counters.foreign,
         counters.refused,
-        counters.lost
+        counters.lost,
+        counters.came_back
     );
     Ok(ExitCode::SUCCESS)
 }

@@ -74,6 +74,9 @@ pub struct Counters {
     pub refused: u64,
     /// Remote agents that went without saying goodbye.
     pub lost: u64,
+    /// Of those, the ones that came back (their link closed and reopened) and took their
+    /// robots again.
+    pub came_back: u64,
 }
 
 /// What Zenoh's threads hand the bridge's loop.
@@ -105,6 +108,8 @@ impl Events {
     }
 }
 
+/// How long the bridge stays after the run for its remote agents to leave.
+const LINGER: Duration = Duration::from_secs(3);
 /// Events kept for the loop at most.
 const MAX_EVENTS: usize = 4096;
 /// Remote agents one bridge serves.
@@ -125,6 +130,8 @@ struct RemoteAgent {
     actions: BTreeMap<u32, ActionBlock>,
     /// Answered at the deadline without it: not waited for until it speaks again.
     waited_out: bool,
+    /// Its liveliness token went (and has not come back): its robots are orphans meanwhile.
+    gone: bool,
 }
 
 /// A robot whose remote agent went: it stands until an agent takes it back.
@@ -132,6 +139,8 @@ struct Orphan {
     robot_id: u32,
     name: String,
     answer: RegisterResponse,
+    /// The remote agent it was left by (0: none; its registration was answered after it went).
+    from: u32,
 }
 
 /// A registration the hub has not answered yet.
@@ -289,10 +298,43 @@ impl Bridge {
             }
             if self.agent.finished() {
                 tracing::info!("the hub ended the run");
+                self.linger();
                 return Ok(self.counters);
             }
             self.agent.check_alive()?;
             self.answer_hub()?;
+        }
+    }
+
+    /// After the run: stays until every remote agent has left (they leave on the last tick's
+    /// blocks), at most [`LINGER`], so that closing the session cannot cut the last tick off
+    /// before it reached them.
+    fn linger(&mut self) {
+        let until = Instant::now() + LINGER;
+        while self.remotes.values().any(|r| !r.gone) && Instant::now() < until {
+            let mut fd = libc::pollfd { fd: self.wake.as_raw_fd(), events: libc::POLLIN, revents: 0 };
+            #[allow(unsafe_code)]
+            // SAFETY: one live pollfd for the duration of the call.
+            unsafe {
+                libc::poll(&mut fd, 1, 50);
+            }
+            let mut drained = [0u8; 256];
+            while matches!((&self.wake).read(&mut drained), Ok(n) if n > 0) {}
+            while let Some(e) = self.events.take() {
+                match e {
+                    // Leaving after the run, as agents do: not lost.
+                    Event::Alive { agent_id: Some(id), up: false } => {
+                        if let Some(r) = self.remotes.get_mut(&id) {
+                            r.gone = true;
+                        }
+                    }
+                    // A goodbye after the run, answered so its agent does not wait.
+                    Event::Query(q) => {
+                        let _ = q.reply_err("the run is over").wait();
+                    }
+                    _ => {}
+                }
+            }
         }
     }
 
@@ -319,7 +361,8 @@ impl Bridge {
             }
             Event::Actions { agent_id, bytes } => self.on_actions(agent_id, &bytes),
             Event::Alive { agent_id: Some(id), up: false } => self.lost(id),
-            Event::Alive { .. } => {}
+            Event::Alive { agent_id: Some(id), up: true } => self.came_back(id),
+            Event::Alive { agent_id: None, .. } => {}
         }
     }
 
@@ -348,7 +391,7 @@ impl Bridge {
                         .wait();
                     return;
                 }
-                if self.remotes.len() >= MAX_REMOTE_AGENTS {
+                if self.remotes.values().filter(|r| !r.gone).count() >= MAX_REMOTE_AGENTS {
                     self.counters.refused += 1;
                     return refuse(&q, Refusal::Capacity, "the bridge serves no more agents");
                 }
@@ -371,6 +414,7 @@ impl Bridge {
                         answered: None,
                         actions: BTreeMap::new(),
                         waited_out: false,
+                        gone: false,
                     },
                 );
                 tracing::info!("remote agent {id} said hello");
@@ -465,12 +509,19 @@ impl Bridge {
             let answer = RegisterResponse { agent_id: j.agent_id, hub_pid: 0, ..answer };
             if answer.status == Refusal::Accepted as u32 {
                 match self.remotes.get_mut(&j.agent_id) {
-                    Some(r) => {
+                    Some(r) if !r.gone => {
                         r.robots.push(answer.robot_id);
                         self.names.insert(answer.robot_id, (j.name.clone(), answer));
                     }
+                    Some(_) => {
+                        self.names.insert(answer.robot_id, (j.name.clone(), answer));
+                        let from = j.agent_id;
+                        self.orphans.push(Orphan { robot_id: answer.robot_id, name: j.name.clone(), answer, from });
+                    }
                     // Its agent went while the hub thought: the robot stands as an orphan.
-                    None => self.orphans.push(Orphan { robot_id: answer.robot_id, name: j.name.clone(), answer }),
+                    None => {
+                        self.orphans.push(Orphan { robot_id: answer.robot_id, name: j.name.clone(), answer, from: 0 })
+                    }
                 }
             }
             let _ = j.query.reply(j.query.key_expr().clone(), bytemuck::bytes_of(&answer).to_vec()).wait();
@@ -511,17 +562,44 @@ impl Bridge {
         self.changed = true;
     }
 
-    /// A remote agent's liveliness token went: its robots stand until an agent takes them back.
+    /// A remote agent's liveliness token went (its process, its host or its link): its robots
+    /// stand until it comes back or another agent takes them back.
     fn lost(&mut self, id: u32) {
-        let Some(r) = self.remotes.remove(&id) else { return };
+        let Some(r) = self.remotes.get_mut(&id) else { return };
+        if r.gone {
+            return;
+        }
+        r.gone = true;
+        r.actions.clear();
         self.counters.lost += 1;
         tracing::warn!("remote agent {id} is gone: its robots {:?} stand until it comes back", r.robots);
-        for robot_id in r.robots {
-            if let Some((name, answer)) = self.names.remove(&robot_id) {
-                self.orphans.push(Orphan { robot_id, name, answer });
+        for robot_id in std::mem::take(&mut r.robots) {
+            if let Some((name, answer)) = self.names.get(&robot_id).cloned() {
+                self.orphans.push(Orphan { robot_id, name, answer, from: id });
             }
         }
         self.changed = true;
+    }
+
+    /// A remote agent's liveliness token came back (Zenoh reconnected its link): it takes its
+    /// robots again, those no other agent took meanwhile.
+    fn came_back(&mut self, id: u32) {
+        let Some(r) = self.remotes.get_mut(&id) else { return };
+        if !r.gone {
+            return;
+        }
+        r.gone = false;
+        r.waited_out = false;
+        self.counters.came_back += 1;
+        let mut k = 0;
+        while k < self.orphans.len() {
+            if self.orphans[k].from == id {
+                r.robots.push(self.orphans.remove(k).robot_id);
+            } else {
+                k += 1;
+            }
+        }
+        tracing::info!("remote agent {id} is back: its robots {:?}", r.robots);
     }
 
     fn on_tick(&mut self, tick: u64) {
@@ -564,7 +642,10 @@ impl Bridge {
             let all = self.queued.is_empty()
                 && self.joining.is_empty()
                 && self.ready.is_none()
-                && self.remotes.values().all(|r| r.waited_out || r.sent != Some(tick) || r.answered >= Some(tick));
+                && self
+                    .remotes
+                    .values()
+                    .all(|r| r.gone || r.waited_out || r.sent != Some(tick) || r.answered >= Some(tick));
             let near_deadline = since.elapsed() >= Duration::from_millis(u64::from(p.deadline_ms) * 9 / 10);
             late = !all;
             !self.answered && (all || near_deadline)
@@ -574,7 +655,18 @@ impl Bridge {
         if !due {
             return Ok(());
         }
-        let mut actions: Vec<ActionBlock> = self.remotes.values().flat_map(|r| r.actions.values().copied()).collect();
+        // In lock-step, a remote agent that has not answered this tick (it is slow, or its link
+        // stalls) gets its robots' motors at rest rather than its last powers: over a network
+        // silence can last a lease (10 s), too long to drive blind.
+        let lockstep = p.lockstep != 0;
+        let mut actions: Vec<ActionBlock> = Vec::new();
+        for r in self.remotes.values() {
+            if lockstep && r.sent == Some(tick) && r.answered < Some(tick) {
+                actions.extend(r.robots.iter().map(|&id| ActionBlock::motors(id, 0.0, 0.0)));
+            } else {
+                actions.extend(r.actions.values().copied());
+            }
+        }
         // A robot whose agent went stands: its motors at rest, until it is taken back.
         actions.extend(self.orphans.iter().map(|o| ActionBlock::motors(o.robot_id, 0.0, 0.0)));
         self.agent.send(tick, &actions)?;

@@ -17,7 +17,6 @@ use std::io::{Read as _, Write as _};
 use std::os::fd::AsRawFd as _;
 use std::os::unix::net::UnixStream;
 use std::path::PathBuf;
-use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
@@ -28,6 +27,11 @@ use ipc_types::{
 use zenoh::Wait as _;
 
 use crate::{ANSWER_TIMEOUT, AgentError};
+
+/// How long the bridge may be out of reach before the agent gives up on it: a cable pulled
+/// for a moment, or a router restarted, costs ticks but not the agent (Zenoh reconnects and
+/// declares the agent's subscriptions and token again by itself).
+pub const BRIDGE_GRACE: Duration = Duration::from_secs(5);
 
 /// Sensor frames kept between two reads of the agent. More means it fell behind: the oldest
 /// go, since only the newest tick matters (as in shared memory, where the hub keeps one).
@@ -86,6 +90,8 @@ pub fn config(
 struct Inbox {
     frames: Mutex<VecDeque<Vec<u8>>>,
     ring: UnixStream,
+    /// When the last frame came: proof the bridge is there, whatever its token said.
+    last: Mutex<Option<Instant>>,
 }
 
 impl Inbox {
@@ -96,6 +102,7 @@ impl Inbox {
         }
         q.push_back(bytes);
         drop(q);
+        *self.last.lock().unwrap_or_else(|p| p.into_inner()) = Some(Instant::now());
         // A full socket already rings; nothing is lost by a byte not written.
         let _ = (&self.ring).write(&[1]);
     }
@@ -123,7 +130,10 @@ pub(crate) struct ZenohLink {
     actions: Option<zenoh::pubsub::Publisher<'static>>,
     /// Held while the agent lives: the bridge sees it go when the agent's process or link does.
     _token: Option<zenoh::liveliness::LivelinessToken>,
-    bridge_up: Arc<AtomicBool>,
+    /// Since when the bridge's liveliness token has been gone (`None`: it is there).
+    bridge_down: Arc<Mutex<Option<Instant>>>,
+    /// Since when this session has had no transport at all.
+    unlinked: std::cell::Cell<Option<Instant>>,
     _bridge_watch: zenoh::pubsub::Subscriber<()>,
     /// The blocks of the tick in hand.
     pub(crate) held: Vec<SensorBlock>,
@@ -150,25 +160,30 @@ impl ZenohLink {
         for s in [&wake, &ring] {
             s.set_nonblocking(true).map_err(|e| AgentError::Zenoh(format!("make a wake-up socket: {e}")))?;
         }
-        let bridge_up = Arc::new(AtomicBool::new(true));
-        let up = bridge_up.clone();
+        let bridge_down = Arc::new(Mutex::new(None));
+        let down = bridge_down.clone();
         let bridge_watch = z
             .liveliness()
             .declare_subscriber(wire::bridge_key(&prefix))
             .callback(move |s: zenoh::sample::Sample| {
-                up.store(s.kind() == zenoh::sample::SampleKind::Put, Ordering::SeqCst);
+                let mut d = down.lock().unwrap_or_else(|p| p.into_inner());
+                match s.kind() {
+                    zenoh::sample::SampleKind::Put => *d = None,
+                    zenoh::sample::SampleKind::Delete => *d = d.or(Some(Instant::now())),
+                }
             })
             .wait()
             .map_err(zerr("watch the bridge"))?;
         Ok(Self {
             session: z,
             prefix,
-            inbox: Arc::new(Inbox { frames: Mutex::new(VecDeque::new()), ring }),
+            inbox: Arc::new(Inbox { frames: Mutex::new(VecDeque::new()), ring, last: Mutex::new(None) }),
             wake,
             sensors: None,
             actions: None,
             _token: None,
-            bridge_up,
+            bridge_down,
+            unlinked: std::cell::Cell::new(None),
             _bridge_watch: bridge_watch,
             held: Vec::new(),
         })
@@ -269,15 +284,24 @@ impl ZenohLink {
         self.wake.as_raw_fd()
     }
 
-    /// Whether the bridge is still there: its liveliness token has not gone, and this session
-    /// is still connected to something (a client whose one peer or router went has no
-    /// transport left; Zenoh then tries to reconnect, but no token news can reach it).
+    /// Whether the bridge is still there, or has been out of reach for less than
+    /// [`BRIDGE_GRACE`]: its liveliness token is there, and this session is connected to
+    /// something (a client whose one peer or router went has no transport left, and no news of
+    /// the token can reach it; Zenoh meanwhile tries to reconnect).
     pub(crate) fn bridge_alive(&self) -> bool {
-        if !self.bridge_up.load(Ordering::SeqCst) {
-            return false;
-        }
+        let now = Instant::now();
         let info = self.session.info();
-        info.peers_zid().wait().next().is_some() || info.routers_zid().wait().next().is_some()
+        let linked = info.peers_zid().wait().next().is_some() || info.routers_zid().wait().next().is_some();
+        let unlinked = if linked { None } else { Some(self.unlinked.get().unwrap_or(now)) };
+        self.unlinked.set(unlinked);
+        let mut down = self.bridge_down.lock().unwrap_or_else(|p| p.into_inner());
+        // A link Zenoh reopened may not bring the token's news again; the bridge's frames
+        // after it went are news enough.
+        let last = *self.inbox.last.lock().unwrap_or_else(|p| p.into_inner());
+        if down.is_some_and(|since| last.is_some_and(|l| l > since)) {
+            *down = None;
+        }
+        [unlinked, *down].into_iter().flatten().all(|since| now.duration_since(since) < BRIDGE_GRACE)
     }
 
     /// The agents' map, from the bridge.
