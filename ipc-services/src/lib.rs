@@ -98,20 +98,26 @@ macro_rules! report {
 /// zombie main thread for the end of a killed three-thread hub cleaned up too early, found the
 /// hub's node "alive", and left the dead hub's shared memory in /dev/shm.
 pub fn process_alive(pid: u32) -> bool {
-    let Ok(tasks) = std::fs::read_dir(format!("/proc/{pid}/task")) else {
-        return false;
-    };
-    tasks.flatten().any(|task| {
-        match std::fs::read_to_string(task.path().join("stat")) {
-            // The state follows the command name, which is in parentheses and may hold anything.
-            Ok(stat) => stat
-                .rsplit_once(')')
-                .and_then(|(_, rest)| rest.split_whitespace().next())
-                .is_none_or(|state| state != "Z" && state != "X"),
-            // The thread left between the listing and the read.
-            Err(_) => false,
-        }
-    })
+    // One read while the main thread runs (the bridges ask on every turn of their loops); the
+    // other threads are looked at only once it has exited.
+    match thread_alive(&format!("/proc/{pid}/stat")) {
+        Some(true) => true,
+        None => false,
+        Some(false) => std::fs::read_dir(format!("/proc/{pid}/task")).is_ok_and(|tasks| {
+            tasks.flatten().any(|t| thread_alive(&t.path().join("stat").to_string_lossy()) == Some(true))
+        }),
+    }
+}
+
+/// Whether the thread whose `stat` file is at `path` has not exited; `None` when it is gone.
+fn thread_alive(path: &str) -> Option<bool> {
+    let stat = std::fs::read_to_string(path).ok()?;
+    // The state follows the command name, which is in parentheses and may hold anything.
+    Some(
+        stat.rsplit_once(')')
+            .and_then(|(_, rest)| rest.split_whitespace().next())
+            .is_none_or(|state| state != "Z" && state != "X"),
+    )
 }
 
 /// Nodes one service admits: every agent, every observer, the hub.

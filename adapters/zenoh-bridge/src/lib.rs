@@ -108,6 +108,8 @@ impl Events {
     }
 }
 
+/// How often the loop checks that the hub is alive and no signal came.
+const CHECK_EVERY: Duration = Duration::from_millis(10);
 /// How long the bridge stays after the run for its remote agents to leave.
 const LINGER: Duration = Duration::from_secs(3);
 /// Events kept for the loop at most.
@@ -181,6 +183,8 @@ pub struct Bridge {
     answered: bool,
     /// Actions arrived since the last answer (what real time answers on).
     changed: bool,
+    /// When the hub's liveness was last checked.
+    checked: Instant,
     /// Refused input.
     pub counters: Counters,
 }
@@ -264,6 +268,7 @@ impl Bridge {
             tick: None,
             answered: true,
             changed: false,
+            checked: Instant::now(),
             counters: Counters::default(),
         })
     }
@@ -301,7 +306,12 @@ impl Bridge {
                 self.linger();
                 return Ok(self.counters);
             }
-            self.agent.check_alive()?;
+            // A look at /proc and at the signals: every few milliseconds, not on every one of
+            // the tens of wake-ups a tick brings (one per remote agent's answer).
+            if self.checked.elapsed() >= CHECK_EVERY {
+                self.agent.check_alive()?;
+                self.checked = Instant::now();
+            }
             self.answer_hub()?;
         }
     }
