@@ -33,6 +33,9 @@ pub enum Command {
     /// Serves a session to agents on other machines over Zenoh (`iwsim agent … --zenoh
     /// tcp/HOST:7447` on theirs), in lock-step, with the shared-memory payloads.
     Zenoh(zenoh_bridge::cli::ZenohArgs),
+    /// A Zenoh router (Zenoh's own, as `zenohd` runs it) for a bridge and agents that meet
+    /// through one: `iwsim zenoh --connect` and the agents' `--zenoh` name it.
+    ZenohRouter(zenoh_bridge::cli::RouterArgs),
     /// Joins a physical wheelchair to a hub over its board's serial port (RS232): the chair
     /// becomes a Real robot that the agent registering the same name drives.
     Serial(serial_bridge::SerialArgs),

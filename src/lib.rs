@@ -61,6 +61,7 @@ pub fn run(cli: Cli) -> anyhow::Result<ExitCode> {
         Command::Replay(args) => hub::replay::run(&args),
         Command::Udp(args) => udp_bridge::cli::run(&args),
         Command::Zenoh(args) => zenoh_bridge::cli::run(&args),
+        Command::ZenohRouter(args) => zenoh_bridge::cli::router(&args),
         Command::View(args) => viewer::cli::run(&args),
         Command::Agent { agent: AgentCommand::Wheelchair(args) } => wheelchair::run(&args),
         Command::Agent { agent: AgentCommand::Navigator(args) } => navigator::run(&args),

@@ -378,3 +378,149 @@ fn a_link_pulled_for_two_seconds_mid_run_stalls_nothing_and_loses_no_agent() {
     assert_eq!(count(" agents lost"), count(" came back"), "{end}");
     assert_no_shared_memory_left(&s);
 }
+
+/// The hub's `tick N state hash H` line.
+fn hash_line(hub_output: &str) -> String {
+    hub_output
+        .lines()
+        .find(|l| l.contains(" state hash "))
+        .unwrap_or_else(|| panic!("no state hash in {hub_output}"))
+        .to_owned()
+}
+
+/// A wheelchair agent with two chairs for 300 lock-step ticks in session `s`, its extra
+/// options `via`, with a Zenoh bridge connected to `router` if given; the hub's state-hash line.
+fn two_chairs(s: &str, netns: Option<&str>, via: &[&str], router: Option<&str>) -> String {
+    let hub = Proc::spawn(&["hub", "--session", s, "--lockstep", "--ticks", "300", "--wait-agents", "1"]);
+    let bridge = router.map(|r| {
+        let mut b = Proc::spawn(&["zenoh", "--session", s, "--connect", r, "--connect-timeout", "20"]);
+        b.announced("served under", Duration::from_secs(20));
+        b
+    });
+    let bin = env!("CARGO_BIN_EXE_iwsim");
+    let mut cmd = match netns {
+        Some(ns) => {
+            let mut c = Command::new("ip");
+            c.args(["netns", "exec", ns, bin]);
+            c
+        }
+        None => Command::new(bin),
+    };
+    let agent = cmd
+        .args([
+            "agent",
+            "wheelchair",
+            "--session",
+            s,
+            "--robots",
+            "2",
+            "--powers",
+            "0.6,0.5",
+            "--connect-timeout",
+            "20",
+        ])
+        .args(via)
+        .output()
+        .expect("the agent runs");
+    assert!(agent.status.success(), "{}", text(&agent.stderr));
+    let h = hub.wait(Duration::from_secs(60));
+    assert!(h.status.success(), "{}", text(&h.stderr));
+    if let Some(b) = bridge {
+        assert!(b.wait(Duration::from_secs(20)).status.success());
+    }
+    hash_line(&text(&h.stdout))
+}
+
+#[test]
+fn through_a_router_between_the_hosts_the_run_is_the_local_run() {
+    let host = Host::new();
+    let here = two_chairs(&session("zenoh-routed-here"), None, &[], None);
+    // The router on this host's side of the link; the bridge reaches it on loopback, the
+    // agent from the other host: neither listens for the other.
+    let port = free_port();
+    let mut router = Proc::spawn(&["zenoh-router", "--listen", &format!("tcp/0.0.0.0:{port}")]);
+    router.announced("routing on", Duration::from_secs(20));
+    let s = session("zenoh-routed");
+    let via = format!("tcp/{}:{port}", host.here);
+    let routed = two_chairs(&s, Some(&host.ns), &["--zenoh", &via], Some(&format!("tcp/127.0.0.1:{port}")));
+    assert_eq!(routed, here);
+    router.signal("TERM");
+    assert!(router.wait(Duration::from_secs(20)).status.success());
+    assert_no_shared_memory_left(&s);
+}
+
+#[test]
+fn a_router_restarted_mid_run_costs_ticks_not_agents() {
+    let host = Host::new();
+    let s = session("zenoh-router-restart");
+    let hub = Proc::spawn(&[
+        "hub",
+        "--session",
+        &s,
+        "--lockstep",
+        "--ticks",
+        "10000000",
+        "--wait-agents",
+        "1",
+        "--deadline-ms",
+        "300",
+    ]);
+    let port = free_port();
+    let listen = format!("tcp/0.0.0.0:{port}");
+    let mut router = Proc::spawn(&["zenoh-router", "--listen", &listen]);
+    router.announced("routing on", Duration::from_secs(20));
+    let mut bridge = Proc::spawn(&[
+        "zenoh",
+        "--session",
+        &s,
+        "--connect",
+        &format!("tcp/127.0.0.1:{port}"),
+        "--connect-timeout",
+        "20",
+    ]);
+    let bridge_said = bridge.stderr_lines();
+    bridge_said.said("served under", Duration::from_secs(20));
+    let via = format!("tcp/{}:{port}", host.here);
+    let mut agent = Command::new("ip")
+        .args(["netns", "exec", &host.ns, env!("CARGO_BIN_EXE_iwsim"), "agent", "wheelchair", "--session", &s])
+        .args(["--zenoh", &via, "--connect-timeout", "20"])
+        .stdin(std::process::Stdio::null())
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .expect("the agent starts in the other namespace");
+    let agent_said = super::common::Lines::read(agent.stderr.take().expect("piped"));
+    agent_said.said("drives robots ", Duration::from_secs(30));
+    let mut observer = super::common::wait_for_tick(&s, 20, Duration::from_secs(30));
+    router.kill9();
+    let (cut_at, _) = tick_and_x(&mut observer, 1);
+    // Without the router the run goes on at the deadline's pace, the chair at rest.
+    x_at(&mut observer, 1, cut_at + 2);
+    let (_, resting) = tick_and_x(&mut observer, 1);
+    let mut router = Proc::spawn(&["zenoh-router", "--listen", &listen]);
+    router.announced("routing on", Duration::from_secs(20));
+    // Zenoh reconnects the bridge and the agent to the new router by itself, and the agent
+    // drives its chair again.
+    let start = std::time::Instant::now();
+    loop {
+        let (_, x) = tick_and_x(&mut observer, 1);
+        if x > resting + 0.5 {
+            break;
+        }
+        assert!(
+            start.elapsed() < Duration::from_secs(30),
+            "the agent never drove again: still at {x} (rested at {resting})"
+        );
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    drop(observer);
+    assert_eq!(agent_sdk::control(&s, ipc_types::Command::Stop, 0).expect("the hub answers").status, 0);
+    assert!(hub.wait(Duration::from_secs(30)).status.success());
+    let status = agent.wait().expect("the agent exits");
+    let b = bridge.wait(Duration::from_secs(20));
+    assert!(status.success(), "{}", agent_said.to_end(Duration::from_secs(5)).join("\n"));
+    assert!(b.status.success());
+    router.signal("TERM");
+    assert!(router.wait(Duration::from_secs(20)).status.success());
+    assert_no_shared_memory_left(&s);
+}

@@ -67,3 +67,30 @@ pub fn run(args: &ZenohArgs) -> anyhow::Result<ExitCode> {
     );
     Ok(ExitCode::SUCCESS)
 }
+
+/// Options of `iwsim zenoh-router`.
+#[derive(Debug, clap::Args, Clone)]
+pub struct RouterArgs {
+    /// Zenoh endpoint to listen on (repeatable).
+    #[arg(long, value_name = "ENDPOINT", default_value = DEFAULT_LISTEN)]
+    pub listen: Vec<String>,
+    /// A Zenoh configuration file (JSON5) to start from.
+    #[arg(long, value_name = "FILE")]
+    pub zenoh_config: Option<PathBuf>,
+}
+
+/// Runs Zenoh's own router (the engine `zenohd` runs, in router mode) until SIGINT or SIGTERM:
+/// for a lab whose bridge and agents meet through a router and that has no `zenohd`.
+pub fn router(args: &RouterArgs) -> anyhow::Result<ExitCode> {
+    use zenoh::Wait as _;
+    agent_sdk::remote::install_stop_handlers();
+    let cfg = agent_sdk::remote::config(args.zenoh_config.as_deref(), "router", &args.listen, &[])?;
+    let session = zenoh::open(cfg).wait().map_err(|e| anyhow::anyhow!("open a Zenoh router: {e}"))?;
+    agent_sdk::report!("iwsim zenoh-router: routing on {}", args.listen.join(", "));
+    while !agent_sdk::stop_signalled() {
+        // Zenoh's threads do the routing; this one only waits for the word to stop.
+        std::thread::sleep(std::time::Duration::from_millis(50));
+    }
+    drop(session);
+    Ok(ExitCode::SUCCESS)
+}

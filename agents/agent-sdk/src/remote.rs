@@ -37,6 +37,8 @@ pub const BRIDGE_GRACE: Duration = Duration::from_secs(5);
 /// go, since only the newest tick matters (as in shared memory, where the hub keeps one).
 const INBOX_FRAMES: usize = 8;
 
+pub use ipc_services::install_stop_handlers;
+
 /// Where a hub's Zenoh bridge is and how to reach it.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct Remote {
