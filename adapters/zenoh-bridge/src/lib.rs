@@ -114,6 +114,8 @@ const CHECK_EVERY: Duration = Duration::from_millis(10);
 const LINGER: Duration = Duration::from_secs(3);
 /// Events kept for the loop at most.
 const MAX_EVENTS: usize = 4096;
+/// Robot registrations waiting for a free slot towards the hub, at most.
+const MAX_QUEUED: usize = 1024;
 /// Remote agents one bridge serves.
 const MAX_REMOTE_AGENTS: usize = 256;
 /// Robot registrations sent to the hub and not answered yet, counting the ready request: the
@@ -433,6 +435,10 @@ impl Bridge {
             }
             _ if !self.remotes.contains_key(&req.agent_id) => {
                 refuse(&q, Refusal::UnknownAgent, &format!("agent {} has not said hello", req.agent_id));
+            }
+            // Bounded: a flood of registrations is refused, not kept.
+            Some(RegisterKind::Robot) if self.queued.len() >= MAX_QUEUED => {
+                refuse(&q, Refusal::Capacity, "too many registrations waiting at the bridge");
             }
             Some(RegisterKind::Robot) => self.queued.push_back((q, req)),
             Some(RegisterKind::Ready) => {
