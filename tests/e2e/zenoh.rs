@@ -153,11 +153,12 @@ fn an_agent_written_with_the_official_zenoh_binding_registers_reads_its_blocks_a
     let hub = Proc::spawn(&["hub", "--session", &s, "--lockstep", "--ticks", "60", "--wait-agents", "1"]);
     let endpoint = format!("tcp/127.0.0.1:{}", free_port());
     let mut bridge = Proc::spawn(&["zenoh", "--session", &s, "--listen", &endpoint, "--connect-timeout", "20"]);
-    bridge.announced("served under", Duration::from_secs(20));
+    let bridge_said = bridge.stderr_lines();
+    bridge_said.said("served under", Duration::from_secs(20));
     let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/zenoh/third_party_agent.py");
     let agent = Command::new(python)
         .arg(&script)
-        .args([&endpoint, &s, "py-chair", "10.0", "6.1", "0.8"])
+        .args([&endpoint, &s, "py-chair", "10.0", "6.1", "0.8", "--junk"])
         .output()
         .expect("python runs");
     assert!(agent.status.success(), "{}\n{}", text(&agent.stdout), text(&agent.stderr));
@@ -180,7 +181,11 @@ fn an_agent_written_with_the_official_zenoh_binding_registers_reads_its_blocks_a
         .and_then(|x| x.parse().ok())
         .unwrap_or_else(|| panic!("the hub's final pose of robot {robot}: {out}"));
     assert!(x > 11.0, "robot {robot} ended at x = {x}: {out}");
-    bridge.wait(Duration::from_secs(20));
+    // Its junk was refused or counted and dropped, and changed nothing else.
+    assert!(said.contains("refused this bridge speaks"), "{said}");
+    assert!(bridge.wait(Duration::from_secs(20)).status.success());
+    let end = bridge_said.to_end(Duration::from_secs(5)).join("\n");
+    assert!(end.contains("(1 malformed, 1 foreign, 1 hellos refused, 0 agents lost"), "{end}");
     assert_no_shared_memory_left(&s);
 }
 

@@ -4,7 +4,11 @@ documented wire layouts alone (`ipc_types::remote` and the structs it names): no
 It says hello, registers one robot at a pose, says it is ready, then answers every tick with
 its motors at POWER until the run ends. It prints what it saw, one `key value` per line.
 
-    python third_party_agent.py ENDPOINT SESSION NAME X Y POWER
+    python third_party_agent.py ENDPOINT SESSION NAME X Y POWER [--junk]
+
+With --junk it first says hello with a layout list of its own (which the bridge must refuse),
+and on the first tick also sends a payload too short to be actions and actions for a robot
+that is not its own (which the bridge must count and drop).
 """
 
 import os
@@ -58,12 +62,18 @@ def ask(session, key, payload):
 
 def main():
     endpoint, session_name, name, x, y, power = sys.argv[1:7]
+    junk = "--junk" in sys.argv[7:]
     prefix = f"iwsim/{session_name}"
     conf = zenoh.Config()
     conf.insert_json5("mode", '"client"')
     conf.insert_json5("connect/endpoints", f'["{endpoint}"]')
     conf.insert_json5("scouting/multicast/enabled", "false")
     with zenoh.open(conf) as session:
+        if junk:
+            replies = list(session.get(f"{prefix}/register", payload=request(HELLO, 0),
+                                       attachment="iwsim::RegisterRequest.v3", timeout=20.0))
+            assert replies and replies[0].ok is None, "a hello with other layouts is refused"
+            print("refused", replies[0].err.payload.to_bytes().decode(), flush=True)
         agent_id, _ = ask(session, f"{prefix}/register", request(HELLO, 0))
         print("agent", agent_id, flush=True)
         token = session.liveliness().declare_token(f"{prefix}/agent/{agent_id}/alive")
@@ -86,6 +96,10 @@ def main():
                 break
             block = struct.pack("<II2d3dII", robot_id, ACT_MOTORS, float(power), float(power), 0, 0, 0, 0, 0)
             block = block.ljust(ACTION_BLOCK, b"\0")
+            if junk and answered == 0:
+                actions.put(b"\x01\x02\x03")
+                stranger = struct.pack("<II2d3dII", robot_id + 1000, ACT_MOTORS, 1.0, 1.0, 0, 0, 0, 0, 0)
+                actions.put(ACTION_HEADER.pack(tick, agent_id, 1) + stranger.ljust(ACTION_BLOCK, b"\0"))
             actions.put(ACTION_HEADER.pack(tick, agent_id, 1) + block)
             answered += 1
         print("answered", answered, flush=True)
