@@ -1551,3 +1551,32 @@ pub fn run(args: &RunArgs) -> anyhow::Result<ExitCode> {
     let _ = std::io::stdout().flush();
     Ok(if passed == all.len() { ExitCode::SUCCESS } else { ExitCode::FAILURE })
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn zenoh_agents_are_all_or_numbers_from_one() {
+        assert_eq!(ZenohAgents::parse("all"), Ok(ZenohAgents::All));
+        assert_eq!(ZenohAgents::parse("1, 3"), Ok(ZenohAgents::Some(vec![1, 3])));
+        let some = ZenohAgents::parse("2").expect("one agent");
+        assert!(!some.includes(0) && some.includes(1) && !some.includes(2));
+        for bad in ["0", "x", "1,,2", ""] {
+            let e = ZenohAgents::parse(bad).expect_err(bad);
+            assert!(e.contains("is not an agent number"), "{bad}: {e}");
+        }
+    }
+
+    #[test]
+    fn agents_connect_where_the_bridge_listens_on_every_interface() {
+        let run = |listen: &str| ZenohRun { agents: ZenohAgents::All, listen: Some(listen.into()), netns: None };
+        let (listen, connect) = run("tcp/0.0.0.0:7447").endpoints().expect("endpoints");
+        assert_eq!((listen.as_str(), connect.as_str()), ("tcp/0.0.0.0:7447", "tcp/127.0.0.1:7447"));
+        let (_, connect) = run("tcp/10.0.0.5:7000").endpoints().expect("endpoints");
+        assert_eq!(connect, "tcp/10.0.0.5:7000");
+        let free = ZenohRun { agents: ZenohAgents::All, listen: None, netns: None };
+        let (listen, connect) = free.endpoints().expect("a free port");
+        assert!(listen.starts_with("tcp/127.0.0.1:") && listen == connect, "{listen}");
+    }
+}
