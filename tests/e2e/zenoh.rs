@@ -187,6 +187,14 @@ fn an_agent_written_with_the_official_zenoh_binding_registers_reads_its_blocks_a
     let end = bridge_said.to_end(Duration::from_secs(5)).join("\n");
     assert!(end.contains("(1 malformed, 1 foreign, 1 hellos refused, 0 agents lost"), "{end}");
     assert_no_shared_memory_left(&s);
+    // Nor a Zenoh shared-memory segment (the Python binding's, which the client turns off; no
+    // other test runs that binding).
+    let zenoh_files: Vec<String> = std::fs::read_dir("/dev/shm")
+        .expect("/dev/shm")
+        .filter_map(|e| e.ok()?.file_name().into_string().ok())
+        .filter(|n| n.ends_with(".zenoh"))
+        .collect();
+    assert!(zenoh_files.is_empty(), "left in /dev/shm: {zenoh_files:?}");
 }
 
 /// The newest world snapshot's tick and robot `id`'s x, metres.

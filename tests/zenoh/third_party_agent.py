@@ -68,6 +68,9 @@ def main():
     conf.insert_json5("mode", '"client"')
     conf.insert_json5("connect/endpoints", f'["{endpoint}"]')
     conf.insert_json5("scouting/multicast/enabled", "false")
+    # The binding is built with Zenoh's shared-memory transport, which leaves a segment in
+    # /dev/shm behind; nothing here needs it.
+    conf.insert_json5("transport/shared_memory/enabled", "false")
     with zenoh.open(conf) as session:
         if junk:
             replies = list(session.get(f"{prefix}/register", payload=request(HELLO, 0),
