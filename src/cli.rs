@@ -36,6 +36,10 @@ pub enum Command {
     /// A Zenoh router (Zenoh's own, as `zenohd` runs it) for a bridge and agents that meet
     /// through one: `iwsim zenoh --connect` and the agents' `--zenoh` name it.
     ZenohRouter(zenoh_bridge::cli::RouterArgs),
+    /// Hosts episodes for learning environments on other machines (the Python
+    /// `ChairsParallelEnv(..., zenoh="tcp/HOST:7447")`): each reset starts a lock-step hub of
+    /// its scenario here, served to it over Zenoh with the truth for its referee.
+    EnvHost(zenoh_bridge::cli::EnvHostArgs),
     /// Joins a physical wheelchair to a hub over its board's serial port (RS232): the chair
     /// becomes a Real robot that the agent registering the same name drives.
     Serial(serial_bridge::SerialArgs),

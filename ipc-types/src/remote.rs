@@ -13,6 +13,15 @@
 //! | `P/agent/<id>/actions` | the agent puts | [`ActionHeader`] + [`ActionBlock`]s |
 //! | `P/agent/<id>/alive` | the agent's liveliness token | — |
 //! | `P/bridge` | the bridge's liveliness token | — |
+//! | `P/observe/world` | the bridge puts, each tick (`--observers world`) | [`WorldHeader`] + [`RobotState`]s |
+//! | `P/observe/robots` | the bridge puts when they change; queryable | `u64` count + [`RobotInfo`]s |
+//! | `P/observe/map` | queryable: the observers' map | → [`MapHeader`] + [`MapItem`]s |
+//!
+//! The `observe` keys carry the truth (every robot's true pose, the scenario's obstacles): for
+//! a remote viewer, recorder or referee, never for an agent. A bridge serves them only when
+//! told to (`iwsim zenoh --observers world`); whoever may reach its Zenoh endpoint may then
+//! read them, so a bridge whose agents are under test keeps them off, or keeps its endpoint
+//! to trusted hosts (see Zenoh's access control).
 //!
 //! The layouts' versions are checked once, at hello: the request carries [`schema`] as its
 //! attachment and a bridge built with other layouts refuses it. Every payload after that is
@@ -26,8 +35,8 @@ use core::mem::size_of;
 use bytemuck::Pod;
 
 use crate::{
-    ActionBlock, ActionHeader, MapHeader, MapItem, RegisterRequest, RegisterResponse, SensorBlock, TickHeader,
-    type_name_of,
+    ActionBlock, ActionHeader, MapHeader, MapItem, RegisterRequest, RegisterResponse, RobotInfo, RobotState,
+    SensorBlock, TickHeader, WorldHeader, type_name_of,
 };
 
 /// The default key prefix of a session.
@@ -73,6 +82,51 @@ pub fn all_alive_key(prefix: &str) -> String {
 /// `P/bridge`: the bridge's liveliness token; an agent that loses it has lost its hub.
 pub fn bridge_key(prefix: &str) -> String {
     format!("{prefix}/bridge")
+}
+
+/// `P/observe/world`: every robot's true state, each tick (observers only).
+pub fn observe_world_key(prefix: &str) -> String {
+    format!("{prefix}/observe/world")
+}
+
+/// `P/observe/robots`: every robot's info (name, sensor geometry), put when it changes and
+/// answered to queries (observers only).
+pub fn observe_robots_key(prefix: &str) -> String {
+    format!("{prefix}/observe/robots")
+}
+
+/// `P/observe/map`: the observers' map, as a query (observers only).
+pub fn observe_map_key(prefix: &str) -> String {
+    format!("{prefix}/observe/map")
+}
+
+/// The layouts an observer and the bridge must share: sent with an observer's first query
+/// (for the observers' map).
+pub fn observer_schema() -> String {
+    [
+        type_name_of::<WorldHeader>(),
+        type_name_of::<RobotState>(),
+        type_name_of::<RobotInfo>(),
+        type_name_of::<MapHeader>(),
+        type_name_of::<MapItem>(),
+    ]
+    .join(" ")
+}
+
+/// The default key prefix of an episode host (`iwsim env-host`).
+pub const EPISODES_PREFIX: &str = "iwsim/episodes";
+
+/// `E/start`: a query that starts an episode on the host (a lock-step hub of the scenario the
+/// payload gives, one hub argument per line, and a bridge serving it with observers); the
+/// answer is the new session's name.
+pub fn episode_start_key(prefix: &str) -> String {
+    format!("{prefix}/start")
+}
+
+/// `E/end`: a query that ends the episode whose session the payload names; the answer is the
+/// hub's end-of-run summary (its `--json` line).
+pub fn episode_end_key(prefix: &str) -> String {
+    format!("{prefix}/end")
 }
 
 /// The agent id in a key `P/agent/<id>/…`, if the key is one.
@@ -225,5 +279,9 @@ mod tests {
         assert_eq!(agent_of_key(&p, "iwsim/other/agent/4/alive"), None);
         assert_eq!(agent_of_key(&p, "iwsim/lab/agent/x/alive"), None);
         assert!(schema().contains("iwsim::SensorBlock.v5"), "{}", schema());
+        assert_eq!(observe_world_key(&p), "iwsim/lab/observe/world");
+        // An observer's key is no agent's: the bridge's action subscription never matches it.
+        assert_eq!(agent_of_key(&p, &observe_world_key(&p)), None);
+        assert!(observer_schema().contains("RobotState"), "{}", observer_schema());
     }
 }

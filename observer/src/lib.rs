@@ -6,15 +6,22 @@
 //! agent learns only what its robots' sensors measure ([`agent_sdk::Agent`]), and the
 //! architecture test forbids this crate to every agent and to every adapter that drives
 //! robots.
+//!
+//! On another machine, [`Observer::connect_zenoh`] reads the same truth through the hub's Zenoh
+//! bridge, when the bridge serves it (`iwsim zenoh --observers world`).
 #![warn(missing_docs)]
 
+use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
+use agent_sdk::remote::{BridgeWatch, Remote};
 use agent_sdk::{AgentError, map, ports};
 use ipc_services::iceoryx2::node::Node;
 use ipc_services::iceoryx2::port::subscriber::Subscriber;
 use ipc_services::{Role, ServicesError, Session, Svc};
-use ipc_types::{RobotInfo, RobotState, WorldHeader};
+use ipc_types::remote as wire;
+use ipc_types::{MapHeader, MapItem, RobotInfo, RobotState, WorldHeader};
+use zenoh::Wait as _;
 
 use ports::{ANSWER_TIMEOUT, ipc, receive_map, receive_newest};
 
@@ -27,28 +34,60 @@ type ChairSubscriber = Subscriber<Svc, [ipc_types::ChairState], u64>;
 /// A read-only view of a session: world snapshots and the map, with no hello and no robots,
 /// so the hub does not count it as an agent (viewers, loggers).
 pub struct Observer {
+    /// Every robot's info (name, sensor geometry) as last received.
+    infos: Vec<RobotInfo>,
+    link: Link,
+}
+
+/// How an observer reaches its hub.
+enum Link {
+    /// Shared memory, on the hub's machine.
+    Shm(Box<ShmLink>),
+    /// Zenoh, through the hub's bridge, from any machine.
+    Zenoh(Box<ZenohLink>),
+}
+
+/// An observer's shared-memory ports.
+struct ShmLink {
     session: Session,
     hub_pid: Option<u32>,
-    _node: Node<Svc>,
+    node: Node<Svc>,
     world: Subscriber<Svc, [RobotState], WorldHeader>,
     sensors: Subscriber<Svc, [RobotInfo], ()>,
     map_svc: ipc_services::MapService,
     /// The newest snapshot received, held in shared memory (not copied): what
     /// [`Observer::with_world`] lends and [`Observer::world`] copies.
     last_world: Option<WorldSample>,
-    /// Every robot's info (name, sensor geometry) as last received.
-    infos: Vec<RobotInfo>,
     /// The physical chairs' port, opened at the first look (a served replay has none).
     chairs: Option<(ChairSubscriber, ipc_services::ChairService)>,
     /// Last, so it runs after every port and the node are gone.
     _release: ipc_services::SessionRelease,
 }
 
+/// The newest payload a subscriber received, not read yet.
+type Newest = Arc<Mutex<Option<Vec<u8>>>>;
+
+/// An observer's Zenoh session with the hub's bridge.
+struct ZenohLink {
+    session: String,
+    z: zenoh::Session,
+    watch: BridgeWatch,
+    world_in: Newest,
+    infos_in: Newest,
+    _subscribers: [zenoh::pubsub::Subscriber<()>; 2],
+    /// The newest snapshot received, copied out of the network buffer.
+    last_world: Option<(WorldHeader, Vec<RobotState>)>,
+    map: (MapHeader, Vec<MapItem>),
+}
+
 impl std::fmt::Debug for Observer {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("Observer").field("session", &self.session.name()).finish()
+        f.debug_struct("Observer").field("session", &self.session()).finish()
     }
 }
+
+/// How long an observer waits for a kept world or robot info (the hub republishes both).
+const KEPT_TIMEOUT: Duration = ANSWER_TIMEOUT;
 
 impl Observer {
     /// Attaches to the hub serving `session`, waiting up to `timeout` for it to come up.
@@ -80,32 +119,121 @@ impl Observer {
         // listed; one that died in between is found dead at the first check.
         let hub_pid = session.hub_pid();
         Ok(Self {
-            session,
-            hub_pid,
-            _node: node,
-            world,
-            sensors,
-            map_svc,
-            last_world: None,
             infos: Vec::new(),
-            chairs: None,
-            _release: release,
+            link: Link::Shm(Box::new(ShmLink {
+                session,
+                hub_pid,
+                node,
+                world,
+                sensors,
+                map_svc,
+                last_world: None,
+                chairs: None,
+                _release: release,
+            })),
         })
+    }
+
+    /// Attaches to the hub serving `session` on another machine, through its Zenoh bridge at
+    /// `remote` (which must serve observers: `iwsim zenoh --observers world`), waiting up to
+    /// `timeout` for the bridge to answer. What it reads is what a local observer reads, but
+    /// for the physical chairs ([`Observer::try_chairs`] has none).
+    pub fn connect_zenoh(remote: &Remote, session: &str, timeout: Duration) -> Result<Self, AgentError> {
+        // No node here to install them: SIGINT and SIGTERM must still end the observer's loop.
+        agent_sdk::remote::install_stop_handlers();
+        let z = agent_sdk::remote::open_session(remote, timeout)?;
+        let prefix = remote.prefix.clone().unwrap_or_else(|| wire::prefix(session));
+        let watch = BridgeWatch::new(&z, &prefix)?;
+        let (world_in, infos_in): (Newest, Newest) = Default::default();
+        let subscribe = |key: String, into: &Newest, what: &str| {
+            let (into, news) = (into.clone(), watch.news.clone());
+            z.declare_subscriber(key)
+                .callback(move |s: zenoh::sample::Sample| {
+                    *into.lock().unwrap_or_else(|p| p.into_inner()) = Some(s.payload().to_bytes().into_owned());
+                    *news.lock().unwrap_or_else(|p| p.into_inner()) = Some(Instant::now());
+                })
+                .wait()
+                .map_err(|e| AgentError::Zenoh(format!("subscribe to {what}: {e}")))
+        };
+        let subscribers = [
+            subscribe(wire::observe_world_key(&prefix), &world_in, "the world")?,
+            subscribe(wire::observe_robots_key(&prefix), &infos_in, "the robots' info")?,
+        ];
+        // The observers' map, asked with the layouts' names (a bridge built with others
+        // refuses, as one that serves no observers does), tried until `timeout`: the bridge
+        // may be coming up.
+        let start = Instant::now();
+        let map = loop {
+            match agent_sdk::remote::ask(
+                &z,
+                &wire::observe_map_key(&prefix),
+                Some(wire::observer_schema()),
+                "get the observers' map",
+                session,
+            ) {
+                Ok(bytes) => break bytes,
+                Err(AgentError::NoBridge(_)) if start.elapsed() < timeout && !ipc_services::stop_signalled() => {
+                    std::thread::sleep(Duration::from_millis(50));
+                }
+                Err(AgentError::NoBridge(s)) => {
+                    return Err(AgentError::Zenoh(format!(
+                        "no bridge at {} serves observers of session {s:?} (is it started with --observers world?)",
+                        remote.endpoint
+                    )));
+                }
+                Err(e) => return Err(e),
+            }
+        };
+        let frame = |error| AgentError::Frame { what: "observers' map", error };
+        let (h, items): (MapHeader, Vec<MapItem>) = wire::unframe(&map).map_err(frame)?;
+        wire::check_count(h.item_count, items.len()).map_err(frame)?;
+        let infos =
+            agent_sdk::remote::ask(&z, &wire::observe_robots_key(&prefix), None, "get the robots' info", session)?;
+        let mut o = Self {
+            infos: Vec::new(),
+            link: Link::Zenoh(Box::new(ZenohLink {
+                session: session.to_owned(),
+                z,
+                watch,
+                world_in,
+                infos_in,
+                _subscribers: subscribers,
+                last_world: None,
+                map: (h, items),
+            })),
+        };
+        // What the bridge answered stands until it puts newer news.
+        if let Link::Zenoh(l) = &o.link {
+            l.infos_in.lock().unwrap_or_else(|p| p.into_inner()).get_or_insert(infos);
+        }
+        o.refresh_robot_info()?;
+        Ok(o)
     }
 
     /// Fails with [`AgentError::HubGone`] once the hub's process has exited (however it ended:
     /// a SIGKILLed hub publishes no last tick), and with [`AgentError::Interrupted`] on SIGINT
     /// or SIGTERM.
+    /// Through Zenoh: [`AgentError::BridgeGone`] once the bridge has been out of reach for
+    /// [`agent_sdk::remote::BRIDGE_GRACE`].
     pub fn check_alive(&self) -> Result<(), AgentError> {
-        if ipc_services::stop_requested(&self._node) {
+        let l = match &self.link {
+            Link::Shm(l) => l,
+            Link::Zenoh(l) => {
+                if ipc_services::stop_signalled() {
+                    return Err(AgentError::Interrupted);
+                }
+                return if l.watch.alive(&l.z) { Ok(()) } else { Err(AgentError::BridgeGone(l.session.clone())) };
+            }
+        };
+        if ipc_services::stop_requested(&l.node) {
             return Err(AgentError::Interrupted);
         }
-        match self.hub_pid {
+        match l.hub_pid {
             Some(pid) if !ipc_services::process_alive(pid) => {
-                Err(AgentError::HubGone { pid, session: self.session.name().to_owned() })
+                Err(AgentError::HubGone { pid, session: l.session.name().to_owned() })
             }
             // No hub node was listed at attach: the hub died before the observer looked.
-            None => Err(AgentError::HubGone { pid: 0, session: self.session.name().to_owned() }),
+            None => Err(AgentError::HubGone { pid: 0, session: l.session.name().to_owned() }),
             Some(_) => Ok(()),
         }
     }
@@ -122,16 +250,34 @@ impl Observer {
         &mut self,
         f: impl FnOnce(&WorldHeader, &[RobotState]) -> R,
     ) -> Result<Option<R>, AgentError> {
-        if !receive_newest(&self.world, &mut self.last_world, "receive the world")? {
+        if !self.receive_world()? {
             return Ok(None);
         }
         Ok(self.with_last_world(f))
     }
 
+    /// Takes the newest world snapshot if one came since the last look; true if one did.
+    fn receive_world(&mut self) -> Result<bool, AgentError> {
+        match &mut self.link {
+            Link::Shm(l) => receive_newest(&l.world, &mut l.last_world, "receive the world"),
+            Link::Zenoh(l) => {
+                let Some(bytes) = l.world_in.lock().unwrap_or_else(|p| p.into_inner()).take() else { return Ok(false) };
+                let frame = |error| AgentError::Frame { what: "world snapshot", error };
+                let (h, robots): (WorldHeader, Vec<RobotState>) = wire::unframe(&bytes).map_err(frame)?;
+                wire::check_count(h.robot_count, robots.len()).map_err(frame)?;
+                l.last_world = Some((h, robots));
+                Ok(true)
+            }
+        }
+    }
+
     /// Runs `f` on the world snapshot the last call received (held in shared memory, nothing
     /// copied), without looking for a newer one; `None` before the first.
     pub fn with_last_world<R>(&self, f: impl FnOnce(&WorldHeader, &[RobotState]) -> R) -> Option<R> {
-        self.last_world.as_ref().map(|s| f(s.user_header(), s.payload()))
+        match &self.link {
+            Link::Shm(l) => l.last_world.as_ref().map(|s| f(s.user_header(), s.payload())),
+            Link::Zenoh(l) => l.last_world.as_ref().map(|(h, robots)| f(h, robots)),
+        }
     }
 
     /// The latest world snapshot: every robot's true state, copied out (see
@@ -152,14 +298,15 @@ impl Observer {
     /// ```
     pub fn with_world<R>(&mut self, f: impl FnOnce(&WorldHeader, &[RobotState]) -> R) -> Result<R, AgentError> {
         let start = Instant::now();
+        let mut f = Some(f);
         loop {
-            receive_newest(&self.world, &mut self.last_world, "receive the world")?;
-            if let Some(s) = &self.last_world {
-                return Ok(f(s.user_header(), s.payload()));
+            self.receive_world()?;
+            if let Some(r) = self.with_last_world(|h, robots| f.take().map(|f| f(h, robots))).flatten() {
+                return Ok(r);
             }
             self.check_alive()?;
-            if start.elapsed() > ANSWER_TIMEOUT {
-                return Err(AgentError::NoAnswer(self.session.name().to_owned(), ANSWER_TIMEOUT));
+            if start.elapsed() > KEPT_TIMEOUT {
+                return Err(AgentError::NoAnswer(self.session().to_owned(), KEPT_TIMEOUT));
             }
             std::thread::sleep(Duration::from_millis(1));
         }
@@ -169,17 +316,22 @@ impl Observer {
     /// since the last look (it does when the set of robots changes); true if it did.
     pub fn refresh_robot_info(&mut self) -> Result<bool, AgentError> {
         let mut changed = false;
-        while let Some(s) = self.sensors.receive().map_err(ipc("receive robot info"))? {
-            // The newest, in the hub's robot order; then those of robots that have left, so a
-            // snapshot read before they left still finds their names.
-            let mut ids: Vec<u32> = s.payload().iter().map(|i| i.robot_id).collect();
-            ids.sort_unstable();
-            let left: Vec<RobotInfo> =
-                self.infos.iter().filter(|i| ids.binary_search(&i.robot_id).is_err()).copied().collect();
-            self.infos.clear();
-            self.infos.extend_from_slice(s.payload());
-            self.infos.extend(left);
-            changed = true;
+        match &mut self.link {
+            Link::Shm(l) => {
+                while let Some(s) = l.sensors.receive().map_err(ipc("receive robot info"))? {
+                    merge_infos(&mut self.infos, s.payload());
+                    changed = true;
+                }
+            }
+            Link::Zenoh(l) => {
+                if let Some(bytes) = l.infos_in.lock().unwrap_or_else(|p| p.into_inner()).take() {
+                    let frame = |error| AgentError::Frame { what: "robots' info", error };
+                    let (count, infos): (u64, Vec<RobotInfo>) = wire::unframe(&bytes).map_err(frame)?;
+                    wire::check_count(u32::try_from(count).unwrap_or(u32::MAX), infos.len()).map_err(frame)?;
+                    merge_infos(&mut self.infos, &infos);
+                    changed = true;
+                }
+            }
         }
         Ok(changed)
     }
@@ -205,8 +357,8 @@ impl Observer {
                 return Ok(&self.infos);
             }
             self.check_alive()?;
-            if start.elapsed() > ANSWER_TIMEOUT {
-                return Err(AgentError::NoAnswer(self.session.name().to_owned(), ANSWER_TIMEOUT));
+            if start.elapsed() > KEPT_TIMEOUT {
+                return Err(AgentError::NoAnswer(self.session().to_owned(), KEPT_TIMEOUT));
             }
             std::thread::sleep(Duration::from_millis(1));
         }
@@ -214,19 +366,21 @@ impl Observer {
 
     /// The physical chairs' states (sensor mode, real and virtual readings, the test bench's
     /// true pose) with their tick, if the hub published them since the last call. `None` too
-    /// when the session has no chair service (a served replay).
+    /// when the session has no chair service (a served replay), and through Zenoh (the bridge
+    /// does not carry them).
     pub fn try_chairs(&mut self) -> Result<Option<(u64, Vec<ipc_types::ChairState>)>, AgentError> {
-        if self.chairs.is_none() {
-            match self.session.observer_chairs(&self._node, Role::Client) {
+        let Link::Shm(l) = &mut self.link else { return Ok(None) };
+        if l.chairs.is_none() {
+            match l.session.observer_chairs(&l.node, Role::Client) {
                 Ok(svc) => {
                     let sub = svc.subscriber_builder().create().map_err(ipc("create a chairs subscriber"))?;
-                    self.chairs = Some((sub, svc));
+                    l.chairs = Some((sub, svc));
                 }
                 Err(ServicesError::NotRunning { .. }) => return Ok(None),
                 Err(e) => return Err(e.into()),
             }
         }
-        let Some((sub, _)) = &self.chairs else { return Ok(None) };
+        let Some((sub, _)) = &l.chairs else { return Ok(None) };
         let mut newest = None;
         while let Some(s) = sub.receive().map_err(ipc("receive chair states"))? {
             newest = Some((*s.user_header(), s.payload().to_vec()));
@@ -237,12 +391,31 @@ impl Observer {
     /// The observers' map, decoded: the lab with the scenario's obstacles flagged (waits up to
     /// 5 s for the hub's kept sample).
     pub fn map(&self) -> Result<map::Map, AgentError> {
-        receive_map(&self.map_svc, &self.session, || Ok(()))
+        match &self.link {
+            Link::Shm(l) => receive_map(&l.map_svc, &l.session, || Ok(())),
+            Link::Zenoh(l) => Ok(map::Map::decode(&l.map.0, &l.map.1)?),
+        }
+    }
+
+    /// [`Observer::map`] without the decoding: the map's header and items, copied out.
+    pub fn map_items(&self) -> Result<(MapHeader, Vec<MapItem>), AgentError> {
+        match &self.link {
+            Link::Shm(l) => agent_sdk::receive_map_items(&l.map_svc, &l.session, || Ok(())),
+            Link::Zenoh(l) => Ok(l.map.clone()),
+        }
     }
 
     /// The session.
     pub fn session(&self) -> &str {
-        self.session.name()
+        match &self.link {
+            Link::Shm(l) => l.session.name(),
+            Link::Zenoh(l) => &l.session,
+        }
+    }
+
+    /// Whether this observer reads the session through Zenoh (from another machine).
+    pub fn is_remote(&self) -> bool {
+        matches!(self.link, Link::Zenoh(_))
     }
 
     /// Detaches, and removes the session's last file if this was the last process in it
@@ -250,4 +423,15 @@ impl Observer {
     pub fn close(self) {
         drop(self);
     }
+}
+
+/// Takes a new set of robot infos: the newest, in the hub's robot order; then those of robots
+/// that have left, so a snapshot read before they left still finds their names.
+fn merge_infos(infos: &mut Vec<RobotInfo>, newest: &[RobotInfo]) {
+    let mut ids: Vec<u32> = newest.iter().map(|i| i.robot_id).collect();
+    ids.sort_unstable();
+    let left: Vec<RobotInfo> = infos.iter().filter(|i| ids.binary_search(&i.robot_id).is_err()).copied().collect();
+    infos.clear();
+    infos.extend_from_slice(newest);
+    infos.extend(left);
 }

@@ -143,7 +143,11 @@ def _iwsim_bin() -> str:
 
 class ChairsParallelEnv(ParallelEnv):
     """``n`` chairs of ``scenario`` (default: the LIACC corridor, checkpoints 10 m apart), one
-    PettingZoo agent each, stepped in lock-step with one hub process per episode."""
+    PettingZoo agent each, stepped in lock-step with one hub process per episode.
+
+    With ``zenoh`` (an endpoint, ``"tcp/HOST:7447"``), the hubs run on another machine: each
+    episode is started there by its episode host (``iwsim env-host``), and the chairs and the
+    referee reach it through Zenoh. Nothing else changes."""
 
     metadata = {"name": "iwsim_chairs_v0", "render_modes": []}
 
@@ -153,6 +157,7 @@ class ChairsParallelEnv(ParallelEnv):
         scenario: Scenario | str | None = None,
         reward: Callable[[ChairState, ChairState, list], np.ndarray] = progress_reward,
         spacing_m: float = 1.5,
+        zenoh: Optional[str] = None,
     ) -> None:
         self.scenario = Scenario.load(scenario) if isinstance(scenario, str) else (scenario or Scenario())
         if n < 1:
@@ -174,6 +179,8 @@ class ChairsParallelEnv(ParallelEnv):
         self._obs_space = spaces.Box(low, high, dtype=np.float32)
         self._act_space = spaces.Box(-1.0, 1.0, (2,), np.float32)
         self._hub: Optional[subprocess.Popen] = None
+        self._zenoh = zenoh
+        self._host = None
         self._agent = None
         self._observer = None
         self._session: Optional[str] = None
@@ -193,28 +200,41 @@ class ChairsParallelEnv(ParallelEnv):
     def reset(self, seed: Optional[int] = None, options: Optional[dict] = None):
         self.close()
         s = self.scenario
-        self._session = f"env-{os.getpid()}-{uuid.uuid4().hex[:8]}"
-        args = [_iwsim_bin(), "hub", "--session", self._session, "--lockstep", "--wait-agents", "1",
-                "--lab", s.lab, "--cycle-ms", str(s.cycle_ms), "--ticks", str(s.ticks()),
-                "--seed", str(int.from_bytes(os.urandom(4), "little") if seed is None else int(seed)),
-                "--deadline-ms", "60000", "--json"]
+        scenario = ["--cycle-ms", str(s.cycle_ms), "--ticks", str(s.ticks()),
+                    "--seed", str(int.from_bytes(os.urandom(4), "little") if seed is None else int(seed)),
+                    "--deadline-ms", "60000"]
         if not s.noise:
-            args.append("--no-noise")
+            scenario.append("--no-noise")
         for o in s.obstacles:
-            args += ["--obstacle", ",".join(map(str, o))]
+            scenario += ["--obstacle", ",".join(map(str, o))]
         for c in s.checkpoints:
-            args += ["--checkpoint", ",".join(map(str, c))]
-        self._hub = subprocess.Popen(
-            args, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True, preexec_fn=_die_with_parent
-        )
-        self._agent = connect(self._session, "iwsim-env", timeout=20)
+            scenario += ["--checkpoint", ",".join(map(str, c))]
+        if self._zenoh is None:
+            self._session = f"env-{os.getpid()}-{uuid.uuid4().hex[:8]}"
+            args = [_iwsim_bin(), "hub", "--session", self._session, "--lockstep", "--wait-agents", "1",
+                    "--lab", s.lab, "--json", *scenario]
+            self._hub = subprocess.Popen(
+                args, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True, preexec_fn=_die_with_parent
+            )
+        else:
+            if self._host is None:
+                self._host = referee.EpisodeHost(self._zenoh, 20)
+            # A lab of this machine travels with the request; a built-in one is named.
+            lab_xml = None
+            if s.lab.startswith("builtin:"):
+                scenario += ["--lab", s.lab]
+            else:
+                with open(s.lab, "rb") as f:
+                    lab_xml = f.read()
+            self._session = self._host.start(scenario, lab_xml)
+        self._agent = connect(self._session, "iwsim-env", timeout=20, zenoh=self._zenoh)
         self._ids = {}
         for name, pose in zip(self.possible_agents, self._starts):
             self._ids[name] = self._agent.register(
                 name, body=CHAIR_BODY, pose=pose, motors=CHAIR_MOTORS, sensors=CHAIR_SENSORS
             )
         self._id_list = [self._ids[n] for n in self.possible_agents]
-        self._observer = referee.observe(self._session, 20)
+        self._observer = referee.observe(self._session, 20, zenoh=self._zenoh)
         self._agent.ready()
         self._tick = self._agent.wait_tick(timeout=60)
         if self._tick is None:
@@ -304,6 +324,10 @@ class ChairsParallelEnv(ParallelEnv):
             if part is not None:
                 part.close()
         self._observer = self._agent = None
+        if self._host is not None and self._session is not None:
+            session, self._session = self._session, None
+            out = self._host.end(session)
+            self.last_run = json.loads(out) if out.startswith("{") else None
         if self._hub is not None:
             if self._hub.poll() is None:
                 self._hub.terminate()
@@ -341,12 +365,14 @@ class ChairsParallelEnv(ParallelEnv):
 
 
 class ChairEnv(Env):
-    """One chair of ``ChairsParallelEnv`` as a Gymnasium ``Env``."""
+    """One chair of ``ChairsParallelEnv`` as a Gymnasium ``Env`` (``zenoh`` as there)."""
 
     metadata = {"render_modes": []}
 
-    def __init__(self, scenario: Scenario | str | None = None, reward=progress_reward) -> None:
-        self._env = ChairsParallelEnv(1, scenario, reward)
+    def __init__(
+        self, scenario: Scenario | str | None = None, reward=progress_reward, zenoh: Optional[str] = None
+    ) -> None:
+        self._env = ChairsParallelEnv(1, scenario, reward, zenoh=zenoh)
         self._name = self._env.possible_agents[0]
         self.observation_space = self._env.observation_space(self._name)
         self.action_space = self._env.action_space(self._name)

@@ -13,17 +13,22 @@ from __future__ import annotations
 
 from ._iwsim import referee as _native
 
+from typing import Optional
+
 Observer = _native.Observer
+EpisodeHost = _native.EpisodeHost
 env_step = _native.env_step
 
 
-def observe(session: str, timeout: float = 5.0) -> Observer:
-    """Attaches to the hub of ``session`` as an observer (the hub does not count it as an agent).
+def observe(session: str, timeout: float = 5.0, zenoh: Optional[str] = None) -> Observer:
+    """Attaches to the hub of ``session`` as an observer (the hub does not count it as an agent);
+    with ``zenoh`` (an endpoint, ``"tcp/HOST:7447"``), to a hub on another machine through its
+    Zenoh bridge, which must serve observers (``iwsim zenoh --observers world`` there).
 
     ``robots(tick, timeout)`` gives ``(tick, [(id, x m, y m, heading °, collisions)])`` at that
     tick or later; ``poses(tick, ids, timeout)`` the same for ``ids`` as packed float64 rows.
     """
-    return _native.observe(session, timeout)
+    return _native.observe(session, timeout, zenoh)
 
 
-__all__ = ["Observer", "env_step", "observe"]
+__all__ = ["EpisodeHost", "Observer", "env_step", "observe"]

@@ -12,13 +12,55 @@ use pyo3::types::{PyByteArray, PyBytes};
 use crate::{Agent, IwsimError, observation_table, seconds, to_py, write_f64s};
 
 /// Connects to the hub of `session` as an observer: it sees every robot's true state (for a
-/// referee or a reward, never for the agent under test), and the hub does not count it.
+/// referee or a reward, never for the agent under test), and the hub does not count it. With
+/// `zenoh` (an endpoint), to a hub on another machine through its bridge, which must serve
+/// observers (`iwsim zenoh --observers world`, or an episode host's).
 #[pyfunction]
-#[pyo3(signature = (session, timeout = 5.0))]
-fn observe(session: &str, timeout: f64) -> PyResult<Observer> {
+#[pyo3(signature = (session, timeout = 5.0, zenoh = None))]
+fn observe(session: &str, timeout: f64, zenoh: Option<&str>) -> PyResult<Observer> {
     let timeout = seconds("timeout", timeout)?;
     let name = format!("python-observer-{}", std::process::id());
-    observer::Observer::connect_within(session, &name, timeout).map(|o| Observer { sdk: Some(o) }).map_err(to_py)
+    let o = match zenoh {
+        Some(endpoint) => {
+            observer::Observer::connect_zenoh(&agent_sdk::remote::Remote::new(endpoint), session, timeout)
+        }
+        None => observer::Observer::connect_within(session, &name, timeout),
+    };
+    o.map(|o| Observer { sdk: Some(o) }).map_err(to_py)
+}
+
+/// An episode host on another machine (`iwsim env-host` there), for environments whose hub
+/// runs there: each episode is started and ended with a query.
+#[pyclass(unsendable, module = "iwsim._iwsim.referee")]
+#[derive(Debug)]
+pub struct EpisodeHost {
+    host: agent_sdk::remote::EpisodeHost,
+}
+
+#[pymethods]
+impl EpisodeHost {
+    /// Opens a Zenoh session to the host at `endpoint` (`tcp/HOST:7447`), waiting up to
+    /// `timeout` seconds for it.
+    #[new]
+    #[pyo3(signature = (endpoint, timeout = 20.0))]
+    fn new(py: Python<'_>, endpoint: &str, timeout: f64) -> PyResult<Self> {
+        let timeout = seconds("timeout", timeout)?;
+        let remote = agent_sdk::remote::Remote::new(endpoint);
+        py.detach(|| agent_sdk::remote::EpisodeHost::connect(&remote, timeout)).map(|host| Self { host }).map_err(to_py)
+    }
+
+    /// Starts an episode whose hub takes `args` (scenario options: `--ticks`, `--seed`,
+    /// `--obstacle`, …), its lab the XML `lab_xml` unless `args` name a built-in one; returns
+    /// the episode's session.
+    #[pyo3(signature = (args, lab_xml = None))]
+    fn start(&self, py: Python<'_>, args: Vec<String>, lab_xml: Option<Vec<u8>>) -> PyResult<String> {
+        py.detach(|| self.host.start(&args, lab_xml)).map_err(to_py)
+    }
+
+    /// Ends the episode of `session`; its hub's end-of-run summary (a JSON line).
+    fn end(&self, py: Python<'_>, session: &str) -> PyResult<String> {
+        py.detach(|| self.host.end(session)).map_err(to_py)
+    }
 }
 
 /// A read-only view of a session's truth: world snapshots.
@@ -155,5 +197,6 @@ pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(observe, m)?)?;
     m.add_function(wrap_pyfunction!(env_step, m)?)?;
     m.add_class::<Observer>()?;
+    m.add_class::<EpisodeHost>()?;
     Ok(())
 }

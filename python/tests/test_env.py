@@ -163,3 +163,107 @@ def test_a_trainer_killed_outright_takes_its_hub_with_it(tmp_path):
             trainer.kill()
         if hub_pid is not None and _running(hub_pid):
             os.kill(hub_pid, signal.SIGKILL)
+
+
+@pytest.fixture
+def other_host():
+    """An episode host (``iwsim env-host``) on another host as far as the network goes: a
+    network namespace joined to this one by a veth pair (root makes them; CI runs as root). It
+    yields the endpoint the environments connect to, and is stopped (SIGTERM) at the end,
+    which must leave nothing running and nothing in /dev/shm."""
+    import os
+    import pathlib
+    import subprocess
+
+    from conftest import iwsim_bin
+
+    if os.geteuid() != 0:
+        pytest.fail("the remote environment test makes a network namespace (`ip netns add`): run it as root")
+    tag = f"iwpy{os.getpid() % 100000}"
+    ns, link, peer = f"{tag}n", f"{tag}h", f"{tag}p"
+    subnet = f"10.251.{os.getpid() % 250}"
+
+    def ip(*args):
+        subprocess.run(["ip", *args], check=True, capture_output=True)
+
+    ip("netns", "add", ns)
+    try:
+        ip("link", "add", link, "type", "veth", "peer", "name", peer)
+        ip("link", "set", peer, "netns", ns)
+        ip("addr", "add", f"{subnet}.1/30", "dev", link)
+        ip("link", "set", link, "up")
+        ip("-n", ns, "addr", "add", f"{subnet}.2/30", "dev", peer)
+        ip("-n", ns, "link", "set", peer, "up")
+        ip("-n", ns, "link", "set", "lo", "up")
+        endpoint = f"tcp/{subnet}.2:7447"
+        host = subprocess.Popen(
+            ["ip", "netns", "exec", ns, iwsim_bin(), "env-host", "--listen", endpoint],
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+        )
+        try:
+            # Its first line says it serves.
+            line = host.stderr.readline()
+            assert "episodes served under" in line, line
+            yield endpoint, host.pid
+        finally:
+            host.terminate()
+            _, err = host.communicate(timeout=60)
+            assert host.returncode == 0, err
+            left = [p.name for p in pathlib.Path("/dev/shm").glob("iwsim_*") if f"env-{host.pid}-" in p.name]
+            assert not left, f"left in /dev/shm: {left}"
+    finally:
+        subprocess.run(["ip", "link", "del", link], capture_output=True)
+        subprocess.run(["ip", "netns", "del", ns], capture_output=True)
+
+
+def test_an_env_whose_hubs_run_on_another_host_passes_parallel_api_test_and_runs_as_here(other_host):
+    from pettingzoo.test import parallel_api_test
+
+    endpoint, _ = other_host
+    env = ChairsParallelEnv(3, short(), zenoh=endpoint)
+    try:
+        parallel_api_test(env, num_cycles=40)
+    finally:
+        env.close()
+
+    rng = np.random.default_rng(11)
+    actions = [{f"chair{i}": rng.uniform(-1, 1, 2).astype(np.float32) for i in range(2)} for _ in range(25)]
+
+    def episode(zenoh):
+        env = ChairsParallelEnv(2, short(), zenoh=zenoh)
+        try:
+            obs, _ = env.reset(seed=5)
+            seen = [np.stack([obs[a] for a in sorted(obs)])]
+            rewards = []
+            for act in actions:
+                obs, rew, _, _, _ = env.step({a: act[a] for a in env.agents})
+                seen.append(np.stack([obs[a] for a in sorted(obs)]))
+                rewards.append(sorted(rew.items()))
+        finally:
+            env.close()
+        return np.concatenate(seen), rewards, env.last_run
+
+    here, rewards_here, run_here = episode(None)
+    there, rewards_there, run_there = episode(endpoint)
+    # The same seed and actions: the same sensor readings and rewards (judged from the truth the
+    # referee read over the link), bit for bit.
+    assert here.tobytes() == there.tobytes()
+    assert rewards_here == rewards_there
+    # The host answered the episode's end with its hub's summary.
+    assert run_there is not None and run_there["ticks"] >= len(actions), run_there
+
+
+def test_an_env_host_refuses_what_an_episode_may_not_set(other_host):
+    from iwsim import IwsimError
+    from iwsim import referee
+
+    endpoint, _ = other_host
+    host = referee.EpisodeHost(endpoint, 20)
+    with pytest.raises(IwsimError, match="not an option an episode may set"):
+        host.start(["--record", "/etc/x.mcap"])
+    with pytest.raises(IwsimError, match="the hub did not start"):
+        host.start(["--obstacle", "nonsense"])
+    with pytest.raises(IwsimError, match="no episode"):
+        host.end("env-0-0")

@@ -41,6 +41,21 @@ impl Proc {
         Self(Some(child))
     }
 
+    /// Spawns as [`Proc::spawn`] does, in network namespace `ns` (`ip netns exec`, which
+    /// execs iwsim in place: the process is iwsim's own, to signal and wait for).
+    pub fn spawn_in(ns: &str, args: &[&str]) -> Self {
+        let child = Command::new("ip")
+            .args(["netns", "exec", ns, env!("CARGO_BIN_EXE_iwsim")])
+            .args(args)
+            .env("RUST_LOG", "warn")
+            .stdin(Stdio::null())
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .expect("ip netns exec iwsim starts");
+        Self(Some(child))
+    }
+
     /// Spawns as [`Proc::spawn`] does, with SIGHUP's default disposition in the child even when
     /// the tests run under `nohup` (which makes every child ignore it): as a process started
     /// from a terminal is, for the tests of what a hang-up does.

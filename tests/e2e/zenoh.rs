@@ -19,6 +19,8 @@ struct Host {
     link: String,
     /// This side's address, which the other host reaches us at.
     here: String,
+    /// The other host's address.
+    there: String,
 }
 
 impl Host {
@@ -36,7 +38,7 @@ impl Host {
         let (ns, link, peer) = (format!("iwz{pid}n{n}"), format!("iwz{pid}h{n}"), format!("iwz{pid}p{n}"));
         let subnet = format!("10.{}.{}", 200 + n % 50, pid % 250);
         let here = format!("{subnet}.1");
-        let host = Self { ns: ns.clone(), link: link.clone(), here: here.clone() };
+        let host = Self { ns: ns.clone(), link: link.clone(), here: here.clone(), there: format!("{subnet}.2") };
         for args in [
             vec!["netns", "add", &ns],
             vec!["link", "add", &link, "type", "veth", "peer", "name", &peer],
@@ -335,16 +337,11 @@ fn a_link_pulled_for_two_seconds_mid_run_stalls_nothing_and_loses_no_agent() {
     let mut bridge = Proc::spawn(&["zenoh", "--session", &s, "--listen", &listen, "--connect-timeout", "20"]);
     let bridge_said = bridge.stderr_lines();
     bridge_said.said("served under", Duration::from_secs(20));
-    let bin = env!("CARGO_BIN_EXE_iwsim");
-    let mut agent = std::process::Command::new("ip")
-        .args(["netns", "exec", &host.ns, bin, "agent", "wheelchair", "--session", &s, "--zenoh", &listen])
-        .args(["--connect-timeout", "20"])
-        .stdin(std::process::Stdio::null())
-        .stdout(std::process::Stdio::null())
-        .stderr(std::process::Stdio::piped())
-        .spawn()
-        .expect("the agent starts in the other namespace");
-    let agent_said = super::common::Lines::read(agent.stderr.take().expect("piped"));
+    let mut agent = Proc::spawn_in(
+        &host.ns,
+        &["agent", "wheelchair", "--session", &s, "--zenoh", &listen, "--connect-timeout", "20"],
+    );
+    let agent_said = agent.stderr_lines();
     agent_said.said("drives robots ", Duration::from_secs(30));
     let mut observer = super::common::wait_for_tick(&s, 20, Duration::from_secs(30));
     ip(&["link", "set", &host.link, "down"]);
@@ -372,7 +369,7 @@ fn a_link_pulled_for_two_seconds_mid_run_stalls_nothing_and_loses_no_agent() {
     drop(observer);
     assert_eq!(agent_sdk::control(&s, ipc_types::Command::Stop, 0).expect("the hub answers").status, 0);
     assert!(hub.wait(Duration::from_secs(30)).status.success());
-    let status = agent.wait().expect("the agent exits");
+    let status = agent.wait(Duration::from_secs(30)).status;
     let b = bridge.wait(Duration::from_secs(20));
     assert!(
         status.success(),
@@ -494,15 +491,9 @@ fn a_router_restarted_mid_run_costs_ticks_not_agents() {
     let bridge_said = bridge.stderr_lines();
     bridge_said.said("served under", Duration::from_secs(20));
     let via = format!("tcp/{}:{port}", host.here);
-    let mut agent = Command::new("ip")
-        .args(["netns", "exec", &host.ns, env!("CARGO_BIN_EXE_iwsim"), "agent", "wheelchair", "--session", &s])
-        .args(["--zenoh", &via, "--connect-timeout", "20"])
-        .stdin(std::process::Stdio::null())
-        .stdout(std::process::Stdio::null())
-        .stderr(std::process::Stdio::piped())
-        .spawn()
-        .expect("the agent starts in the other namespace");
-    let agent_said = super::common::Lines::read(agent.stderr.take().expect("piped"));
+    let mut agent =
+        Proc::spawn_in(&host.ns, &["agent", "wheelchair", "--session", &s, "--zenoh", &via, "--connect-timeout", "20"]);
+    let agent_said = agent.stderr_lines();
     agent_said.said("drives robots ", Duration::from_secs(30));
     let mut observer = super::common::wait_for_tick(&s, 20, Duration::from_secs(30));
     router.kill9();
@@ -529,11 +520,77 @@ fn a_router_restarted_mid_run_costs_ticks_not_agents() {
     drop(observer);
     assert_eq!(agent_sdk::control(&s, ipc_types::Command::Stop, 0).expect("the hub answers").status, 0);
     assert!(hub.wait(Duration::from_secs(30)).status.success());
-    let status = agent.wait().expect("the agent exits");
+    let status = agent.wait(Duration::from_secs(30)).status;
     let b = bridge.wait(Duration::from_secs(20));
     assert!(status.success(), "{}", agent_said.to_end(Duration::from_secs(5)).join("\n"));
     assert!(b.status.success());
     router.signal("TERM");
     assert!(router.wait(Duration::from_secs(20)).status.success());
+    assert_no_shared_memory_left(&s);
+}
+
+#[test]
+fn a_viewer_on_another_host_shows_the_run_only_when_the_bridge_serves_observers() {
+    let host = Host::new();
+    let s = session("zenoh-viewer");
+    let hub = Proc::spawn(&["hub", "--session", &s, "--cycle-ms", "10", "--no-noise"]);
+    let agent = Proc::spawn(&[
+        "agent",
+        "wheelchair",
+        "--session",
+        &s,
+        "--robots",
+        "2",
+        "--pose",
+        "10,6.1,0",
+        "--powers",
+        "0.6,0.5",
+    ]);
+    // A bridge that serves agents only: a viewer over there is told why it sees nothing.
+    let closed = host.endpoint_here();
+    let mut agents_only = Proc::spawn(&["zenoh", "--session", &s, "--listen", &closed, "--connect-timeout", "20"]);
+    agents_only.announced("served under", Duration::from_secs(20));
+    let http = format!("{}:0", host.there);
+    let refused = Proc::spawn_in(
+        &host.ns,
+        &["view", "--session", &s, "--zenoh", &closed, "--connect-timeout", "2", "--http", &http],
+    )
+    .wait(Duration::from_secs(30));
+    assert!(!refused.status.success());
+    assert!(text(&refused.stderr).contains("--observers world"), "{}", text(&refused.stderr));
+    // One that serves the world to observers: the viewer over there shows the run as the
+    // hub's own observer here sees it.
+    let open = host.endpoint_here();
+    let mut serving =
+        Proc::spawn(&["zenoh", "--session", &s, "--listen", &open, "--observers", "world", "--connect-timeout", "20"]);
+    assert!(serving.announced("served under", Duration::from_secs(20)).contains("the world to observers"));
+    let mut view = Proc::spawn_in(&host.ns, &["view", "--session", &s, "--zenoh", &open, "--http", &http]);
+    let url = view.announced("open http://", Duration::from_secs(30));
+    let addr: std::net::SocketAddr = url.trim_end_matches('/').parse().expect("the viewer's address");
+    let (mut ws, _) = tungstenite::connect(format!("ws://{addr}/ws")).expect("the remote viewer's stream");
+    let mut local = super::common::wait_for_tick(&s, 1, Duration::from_secs(30));
+    let start = std::time::Instant::now();
+    let mut seen: Vec<(u64, f32)> = Vec::new();
+    while seen.len() < 20 {
+        assert!(start.elapsed() < Duration::from_secs(30), "frames with two chairs: {seen:?}");
+        let tungstenite::Message::Binary(b) = ws.read().expect("a message") else { continue };
+        let f = viewer::frame::decode(&b).expect("a valid frame");
+        if f.robots.len() == 2 {
+            seen.push((f.tick, f.robots[0].pose[0]));
+        }
+    }
+    // The chairs drive, tick by tick, where the hub's truth has them.
+    assert!(seen.windows(2).all(|w| w[1].0 > w[0].0), "{seen:?}");
+    assert!(seen[19].1 > seen[0].1, "chair 1 drives: {seen:?}");
+    let (h, robots) = local.world().expect("the truth here");
+    assert!(h.tick >= seen[19].0, "the remote frames are of ticks the hub has run");
+    assert!((f64::from(seen[19].1) - robots[0].x_m).abs() < 1.0, "{seen:?} vs {}", robots[0].x_m);
+    drop(local);
+    drop(ws);
+    assert_eq!(agent_sdk::control(&s, ipc_types::Command::Stop, 0).expect("the hub answers").status, 0);
+    for p in [hub, agent, agents_only, serving, view] {
+        let out = p.wait(Duration::from_secs(30));
+        assert!(out.status.success(), "{}", text(&out.stderr));
+    }
     assert_no_shared_memory_left(&s);
 }

@@ -30,6 +30,10 @@ pub struct ViewArgs {
     /// cannot reach it by making its own name resolve here (DNS rebinding).
     #[arg(long = "allow-host", value_name = "HOST", value_parser = crate::server::allowed_host)]
     pub allow_host: Vec<String>,
+    /// `--zenoh`, `--zenoh-config`: show a hub on another machine, through its Zenoh bridge
+    /// (started there with `--observers world`).
+    #[command(flatten)]
+    pub remote: agent_sdk::cli::RemoteArgs,
 }
 
 /// Serves the viewer until the hub ends the run.
@@ -41,6 +45,7 @@ pub fn run(args: &ViewArgs) -> anyhow::Result<ExitCode> {
         allowed_origins: args.allow_origin.clone(),
         allowed_hosts: args.allow_host.clone(),
         connect_timeout: args.hub.timeout(),
+        remote: args.remote.remote(),
     })?;
     let addr = v.local_addr().unwrap_or(args.http);
     agent_sdk::report!("iwsim view: session {:?}, open http://{addr}/", args.hub.session);

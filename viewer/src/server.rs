@@ -96,6 +96,9 @@ pub struct ViewerConfig {
     pub allowed_hosts: Vec<String>,
     /// How long to wait for the hub.
     pub connect_timeout: Duration,
+    /// The hub's Zenoh bridge, when the hub is on another machine (the bridge must serve
+    /// observers: `iwsim zenoh --observers world`).
+    pub remote: Option<agent_sdk::remote::Remote>,
 }
 
 /// Why the viewer stopped.
@@ -104,6 +107,9 @@ pub enum ViewerError {
     /// The hub could not be reached.
     #[error(transparent)]
     Hub(#[from] AgentError),
+    /// Run control asked of a viewer on another machine.
+    #[error("--allow-control needs the hub's machine: a viewer through --zenoh only shows the run")]
+    RemoteControl,
     /// The HTTP port could not be bound.
     #[error("cannot serve HTTP on {addr}: {source}")]
     Bind {
@@ -387,8 +393,14 @@ pub struct Viewer {
 impl Viewer {
     /// Attaches to the hub and binds the HTTP port.
     pub fn start(cfg: ViewerConfig) -> Result<Self, ViewerError> {
-        let observer =
-            Observer::connect_within(&cfg.session, &format!("viewer-{}", std::process::id()), cfg.connect_timeout)?;
+        let observer = match &cfg.remote {
+            // Run control goes to the hub's own services, which only its machine reaches.
+            Some(_) if cfg.allow_control => return Err(ViewerError::RemoteControl),
+            Some(remote) => Observer::connect_zenoh(remote, &cfg.session, cfg.connect_timeout)?,
+            None => {
+                Observer::connect_within(&cfg.session, &format!("viewer-{}", std::process::id()), cfg.connect_timeout)?
+            }
+        };
         let map_json = Arc::new(frame::map_json(&observer.map()?));
         let listener = TcpListener::bind(cfg.http).map_err(|source| ViewerError::Bind { addr: cfg.http, source })?;
         Ok(Self { cfg, observer, listener, map_json })

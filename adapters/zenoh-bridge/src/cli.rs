@@ -28,6 +28,12 @@ pub struct ZenohArgs {
     /// Key prefix the session is served under [default: iwsim/<SESSION>].
     #[arg(long, value_name = "PREFIX")]
     pub prefix: Option<String>,
+    /// What observers on other machines (a remote viewer, recorder or referee) may read:
+    /// `off`, or `world` (every robot's true state each tick, the robots' info and the
+    /// observers' map, under <PREFIX>/observe/). Off by default: it is the truth, which
+    /// agents under test must not read, and anyone who reaches the endpoint could.
+    #[arg(long, value_enum, default_value = "off")]
+    pub observers: crate::Observers,
 }
 
 /// The endpoint listened on when neither `--listen` nor `--connect` is given.
@@ -47,14 +53,16 @@ pub fn run(args: &ZenohArgs) -> anyhow::Result<ExitCode> {
         connect: args.connect.clone(),
         config: args.zenoh_config.clone(),
         prefix: args.prefix.clone(),
+        observers: args.observers,
     };
     let bridge = Bridge::start(&cfg)?;
     agent_sdk::report!(
-        "iwsim zenoh: session {:?} served under {}/ (listening on {}{})",
+        "iwsim zenoh: session {:?} served under {}/ (listening on {}{}){}",
         args.hub.session,
         bridge.prefix(),
         if listen.is_empty() { "nothing".to_owned() } else { listen.join(", ") },
-        if args.connect.is_empty() { String::new() } else { format!("; connected to {}", args.connect.join(", ")) }
+        if args.connect.is_empty() { String::new() } else { format!("; connected to {}", args.connect.join(", ")) },
+        if args.observers == crate::Observers::World { ", the world to observers" } else { "" }
     );
     let counters = bridge.run()?;
     agent_sdk::report!(
@@ -65,6 +73,42 @@ pub fn run(args: &ZenohArgs) -> anyhow::Result<ExitCode> {
         counters.lost,
         counters.came_back
     );
+    Ok(ExitCode::SUCCESS)
+}
+
+/// Options of `iwsim env-host`.
+#[derive(Debug, clap::Args, Clone)]
+pub struct EnvHostArgs {
+    /// Zenoh endpoint to listen on for environments (repeatable). Without --listen and
+    /// --connect: tcp/0.0.0.0:7447, every interface.
+    #[arg(long, value_name = "ENDPOINT")]
+    pub listen: Vec<String>,
+    /// Zenoh endpoint to connect to, e.g. a router's tcp/HOST:7447 (repeatable).
+    #[arg(long, value_name = "ENDPOINT")]
+    pub connect: Vec<String>,
+    /// A Zenoh configuration file (JSON5) to start from: TLS, authentication, and the like.
+    #[arg(long, value_name = "FILE")]
+    pub zenoh_config: Option<PathBuf>,
+    /// Episodes running at once, at most.
+    #[arg(long, value_name = "N", default_value_t = 8, value_parser = clap::value_parser!(u32).range(1..=256))]
+    pub max_episodes: u32,
+}
+
+/// Serves episodes until SIGINT or SIGTERM.
+pub fn env_host(args: &EnvHostArgs) -> anyhow::Result<ExitCode> {
+    let listen = if args.listen.is_empty() && args.connect.is_empty() {
+        vec![DEFAULT_LISTEN.to_owned()]
+    } else {
+        args.listen.clone()
+    };
+    crate::episodes::serve(&crate::episodes::HostConfig {
+        listen,
+        connect: args.connect.clone(),
+        config: args.zenoh_config.clone(),
+        prefix: None,
+        max_episodes: args.max_episodes as usize,
+        iwsim: std::env::current_exe()?,
+    })?;
     Ok(ExitCode::SUCCESS)
 }
 

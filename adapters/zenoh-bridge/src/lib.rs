@@ -13,6 +13,7 @@
 //! does for a local agent that died.
 
 pub mod cli;
+pub mod episodes;
 
 use std::collections::{BTreeMap, VecDeque};
 use std::io::{Read as _, Write as _};
@@ -42,7 +43,7 @@ pub enum BridgeError {
     Zenoh(String),
 }
 
-fn zerr<E: std::fmt::Display>(what: &str) -> impl FnOnce(E) -> BridgeError + '_ {
+pub(crate) fn zerr<E: std::fmt::Display>(what: &str) -> impl FnOnce(E) -> BridgeError + '_ {
     move |e| BridgeError::Zenoh(format!("{what}: {e}"))
 }
 
@@ -61,6 +62,88 @@ pub struct BridgeConfig {
     pub config: Option<PathBuf>,
     /// The key prefix; `iwsim/<session>` when `None`.
     pub prefix: Option<String>,
+    /// What remote observers may read.
+    pub observers: Observers,
+}
+
+/// What a bridge serves to observers on other machines.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, clap::ValueEnum)]
+pub enum Observers {
+    /// Nothing: the truth stays on the hub's machine.
+    #[default]
+    Off,
+    /// Every robot's true state each tick, the robots' info and the observers' map.
+    World,
+}
+
+/// The truth, served to remote observers (`--observers world`).
+struct Observing {
+    observer: observer::Observer,
+    /// The observers' map, framed, for every query.
+    map: Vec<u8>,
+    world: zenoh::pubsub::Publisher<'static>,
+    robots: zenoh::pubsub::Publisher<'static>,
+    /// The robots' info, framed, as last put.
+    infos: Vec<u8>,
+}
+
+impl Observing {
+    fn start(cfg: &BridgeConfig, z: &zenoh::Session, prefix: &str) -> Result<Self, BridgeError> {
+        let observer = observer::Observer::connect_within(
+            &cfg.session,
+            &format!("zenoh-bridge-observer-{}", std::process::id()),
+            cfg.connect_timeout,
+        )?;
+        let (h, items) = observer.map_items()?;
+        let declare = |key: String| z.declare_publisher(key).express(true).wait().map_err(zerr("declare a publisher"));
+        let mut o = Self {
+            map: wire::frame(&h, &items),
+            world: declare(wire::observe_world_key(prefix))?,
+            robots: declare(wire::observe_robots_key(prefix))?,
+            infos: wire::frame(&0u64, &[] as &[ipc_types::RobotInfo]),
+            observer,
+        };
+        o.poll()?;
+        Ok(o)
+    }
+
+    /// Puts what changed since the last look: the robots' info first (as the hub does, so a
+    /// snapshot's robots are named by the time it arrives), then the newest world.
+    fn poll(&mut self) -> Result<(), BridgeError> {
+        if self.observer.refresh_robot_info()? {
+            let infos = self.observer.robot_infos();
+            self.infos = wire::frame(&(infos.len() as u64), infos);
+            if let Err(e) = self.robots.put(self.infos.clone()).wait() {
+                tracing::warn!("robots' info for observers: {e}");
+            }
+        }
+        if let Some(bytes) = self.observer.try_with_world(wire::frame)?
+            && let Err(e) = self.world.put(bytes).wait()
+        {
+            tracing::warn!("a world snapshot for observers: {e}");
+        }
+        Ok(())
+    }
+
+    fn answer(&self, q: &zenoh::query::Query, prefix: &str) {
+        let key = q.key_expr().as_str();
+        if key == wire::observe_robots_key(prefix) {
+            let _ = q.reply(q.key_expr().clone(), self.infos.clone()).wait();
+            return;
+        }
+        let schema = q.attachment().map(|a| a.to_bytes().into_owned()).unwrap_or_default();
+        if schema != wire::observer_schema().as_bytes() {
+            let _ = q
+                .reply_err(format!(
+                    "this bridge speaks {:?}, the observer {:?}: build both from the same iwsim",
+                    wire::observer_schema(),
+                    String::from_utf8_lossy(&schema)
+                ))
+                .wait();
+            return;
+        }
+        let _ = q.reply(q.key_expr().clone(), self.map.clone()).wait();
+    }
 }
 
 /// Input the bridge refused, by kind.
@@ -158,6 +241,8 @@ struct Joining {
 /// A running bridge.
 pub struct Bridge {
     agent: Agent,
+    /// The truth for remote observers, when served.
+    observing: Option<Observing>,
     control: Option<agent_sdk::ControlClient>,
     session: String,
     map: (MapHeader, Vec<MapItem>),
@@ -187,6 +272,9 @@ pub struct Bridge {
     changed: bool,
     /// When the hub's liveness was last checked.
     checked: Instant,
+    /// Set by whoever runs the bridge to end it (an episode host ending an episode): it then
+    /// says goodbye to the hub at once, before the hub is stopped.
+    stop: Arc<std::sync::atomic::AtomicBool>,
     /// Refused input.
     pub counters: Counters,
 }
@@ -202,18 +290,38 @@ impl Bridge {
     pub fn start(cfg: &BridgeConfig) -> Result<Self, BridgeError> {
         let agent =
             Agent::connect_within(&cfg.session, &format!("zenoh-bridge-{}", std::process::id()), cfg.connect_timeout)?;
-        let map = agent.map_items()?;
         let zcfg = agent_sdk::remote::config(cfg.config.as_deref(), "peer", &cfg.listen, &cfg.connect)
             .map_err(|e| BridgeError::Zenoh(e.to_string()))?;
         let z = zenoh::open(zcfg).wait().map_err(zerr("open a session"))?;
+        Self::serve_on(cfg, agent, z)
+    }
+
+    /// Connects to the hub and serves it on an open Zenoh session `z` (an episode host's, which
+    /// serves one bridge per episode); `cfg`'s endpoints and Zenoh file are not used.
+    pub fn start_on(cfg: &BridgeConfig, z: zenoh::Session) -> Result<Self, BridgeError> {
+        let name = format!("zenoh-bridge-{}-{}", std::process::id(), cfg.session);
+        let agent = Agent::connect_within(&cfg.session, &name, cfg.connect_timeout)?;
+        Self::serve_on(cfg, agent, z)
+    }
+
+    fn serve_on(cfg: &BridgeConfig, agent: Agent, z: zenoh::Session) -> Result<Self, BridgeError> {
+        let map = agent.map_items()?;
         let prefix = cfg.prefix.clone().unwrap_or_else(|| wire::prefix(&cfg.session));
         let (wake, ring) = UnixStream::pair().map_err(zerr("make a wake-up socket"))?;
         for s in [&wake, &ring] {
             s.set_nonblocking(true).map_err(zerr("make a wake-up socket"))?;
         }
         let events = Arc::new(Events { queue: Mutex::new(VecDeque::new()), ring });
+        let observing = match cfg.observers {
+            Observers::Off => None,
+            Observers::World => Some(Observing::start(cfg, &z, &prefix)?),
+        };
+        let mut keys = vec![wire::register_key(&prefix), wire::map_key(&prefix)];
+        if observing.is_some() {
+            keys.extend([wire::observe_map_key(&prefix), wire::observe_robots_key(&prefix)]);
+        }
         let mut queryables = Vec::new();
-        for key in [wire::register_key(&prefix), wire::map_key(&prefix)] {
+        for key in keys {
             let ev = events.clone();
             queryables.push(
                 z.declare_queryable(key)
@@ -248,6 +356,7 @@ impl Bridge {
             z.liveliness().declare_token(wire::bridge_key(&prefix)).wait().map_err(zerr("declare the bridge"))?;
         Ok(Self {
             agent,
+            observing,
             control: None,
             session: cfg.session.clone(),
             map,
@@ -271,8 +380,15 @@ impl Bridge {
             answered: true,
             changed: false,
             checked: Instant::now(),
+            stop: Arc::default(),
             counters: Counters::default(),
         })
+    }
+
+    /// A flag that ends [`Bridge::run`] when set (it returns its counters and, dropped, says
+    /// goodbye to the hub).
+    pub fn stopper(&self) -> Arc<std::sync::atomic::AtomicBool> {
+        self.stop.clone()
     }
 
     /// The key prefix served.
@@ -300,12 +416,24 @@ impl Bridge {
             }
             self.serve_joining()?;
             // Read the hub before judging its liveness: its last tick may be waiting.
+            // The world before the agents' blocks: a remote referee judging a tick finds it
+            // there when the agent's answer to it arrives.
+            if let Some(o) = &mut self.observing {
+                o.poll()?;
+            }
             if let Some(tick) = self.agent.try_tick()? {
                 self.on_tick(tick.tick);
             }
             if self.agent.finished() {
                 tracing::info!("the hub ended the run");
+                // The last world (its run state says the run is over) for remote observers.
+                if let Some(o) = &mut self.observing {
+                    o.poll()?;
+                }
                 self.linger();
+                return Ok(self.counters);
+            }
+            if self.stop.load(std::sync::atomic::Ordering::Relaxed) {
                 return Ok(self.counters);
             }
             // A look at /proc and at the signals: every few milliseconds, not on every one of
@@ -365,10 +493,13 @@ impl Bridge {
     fn on_event(&mut self, e: Event) {
         match e {
             Event::Query(q) => {
-                if q.key_expr().as_str() == wire::map_key(&self.prefix) {
+                let key = q.key_expr().as_str();
+                if key == wire::map_key(&self.prefix) {
                     let _ = q.reply(q.key_expr().clone(), wire::frame(&self.map.0, &self.map.1)).wait();
-                } else {
+                } else if key == wire::register_key(&self.prefix) {
                     self.on_register(q);
+                } else if let Some(o) = &self.observing {
+                    o.answer(&q, &self.prefix);
                 }
             }
             Event::Actions { agent_id, bytes } => self.on_actions(agent_id, &bytes),

@@ -60,6 +60,15 @@ pub struct CommonArgs {
     /// directory.
     #[arg(long, value_name = "DIR")]
     pub log: Option<PathBuf>,
+    /// `--zenoh`, `--zenoh-config`.
+    #[command(flatten)]
+    pub remote: RemoteArgs,
+}
+
+/// How to reach a hub on another machine (`--zenoh`, `--zenoh-config`): agents and observers
+/// (the viewer) take them.
+#[derive(Debug, Clone, Default, PartialEq, Eq, clap::Args)]
+pub struct RemoteArgs {
     /// Join a hub on another machine through its Zenoh bridge (`iwsim zenoh` there) at this
     /// endpoint, e.g. tcp/10.0.0.5:7447 (the bridge's, or a Zenoh router's).
     #[arg(long, value_name = "ENDPOINT")]
@@ -69,14 +78,20 @@ pub struct CommonArgs {
     pub zenoh_config: Option<PathBuf>,
 }
 
+impl RemoteArgs {
+    /// The bridge to reach, if `--zenoh` was given.
+    pub fn remote(&self) -> Option<crate::remote::Remote> {
+        let endpoint = self.zenoh.clone()?;
+        Some(crate::remote::Remote { endpoint, config: self.zenoh_config.clone(), prefix: None })
+    }
+}
+
 impl CommonArgs {
     /// Joins the session, waiting up to `--connect-timeout` for its hub. The agent's name is
     /// `role` and the process id (`navigator-4711`), unique on the machine.
     /// With `--zenoh`, it joins through the hub's Zenoh bridge instead.
     pub fn connect(&self, role: &str) -> Result<Agent, AgentError> {
-        if let Some(endpoint) = &self.zenoh {
-            let remote =
-                crate::remote::Remote { endpoint: endpoint.clone(), config: self.zenoh_config.clone(), prefix: None };
+        if let Some(remote) = self.remote.remote() {
             return Agent::connect_zenoh(&remote, &self.hub.session, self.hub.timeout());
         }
         Agent::connect_within(&self.hub.session, &format!("{role}-{}", std::process::id()), self.hub.timeout())
@@ -130,7 +145,7 @@ mod tests {
     fn defaults_and_values_parse() {
         let c = Cli::parse_from(["agent"]).common;
         let hub = SessionArgs { session: "default".into(), connect_timeout: 5.0 };
-        assert_eq!(c, CommonArgs { hub, log: None, zenoh: None, zenoh_config: None });
+        assert_eq!(c, CommonArgs { hub, log: None, remote: RemoteArgs::default() });
         assert_eq!(c.hub.timeout(), Duration::from_secs(5));
         let c = Cli::parse_from(["agent", "--session", "s", "--connect-timeout", "0.25", "--log", "d"]).common;
         assert_eq!(

@@ -88,12 +88,200 @@ pub fn config(
     Ok(c)
 }
 
+/// Opens a Zenoh client session to `remote`, trying until `timeout` passes (the bridge or the
+/// router may be coming up) or a stop signal comes.
+pub fn open_session(remote: &Remote, timeout: Duration) -> Result<zenoh::Session, AgentError> {
+    let cfg = config(remote.config.as_deref(), "client", &[], std::slice::from_ref(&remote.endpoint))?;
+    let start = Instant::now();
+    loop {
+        match zenoh::open(cfg.clone()).wait() {
+            Ok(z) => return Ok(z),
+            Err(_) if start.elapsed() < timeout && !ipc_services::stop_signalled() => {
+                std::thread::sleep(Duration::from_millis(50));
+            }
+            Err(e) => return Err(AgentError::Zenoh(format!("connect to {}: {e}", remote.endpoint))),
+        }
+    }
+}
+
+/// Asks the bridge serving `session` at `key` (with `attachment`, if any) and returns the
+/// payload of its answer: [`AgentError::NoBridge`] when none answers within
+/// [`ANSWER_TIMEOUT`], the bridge's own words when it refuses.
+pub fn ask(
+    z: &zenoh::Session,
+    key: &str,
+    attachment: Option<String>,
+    what: &str,
+    session: &str,
+) -> Result<Vec<u8>, AgentError> {
+    query(z, key, None, attachment.map(String::into_bytes), ANSWER_TIMEOUT, what, session)
+}
+
+/// A query's one answer, as [`ask`], with a payload and a timeout of its own.
+fn query(
+    z: &zenoh::Session,
+    key: &str,
+    payload: Option<Vec<u8>>,
+    attachment: Option<Vec<u8>>,
+    timeout: Duration,
+    what: &str,
+    server: &str,
+) -> Result<Vec<u8>, AgentError> {
+    let mut get = z.get(key).timeout(timeout);
+    if let Some(p) = payload {
+        get = get.payload(p);
+    }
+    if let Some(a) = attachment {
+        get = get.attachment(a);
+    }
+    let replies = get.wait().map_err(zerr(what))?;
+    let reply = replies.recv().map_err(|_| AgentError::NoBridge(server.to_owned()))?;
+    let sample = reply.result().map_err(|e| {
+        AgentError::Zenoh(format!("{what}: the bridge said: {}", String::from_utf8_lossy(&e.payload().to_bytes())))
+    })?;
+    Ok(sample.payload().to_bytes().into_owned())
+}
+
+/// An episode host on another machine (`iwsim env-host` there): a learning environment
+/// starts each episode there (a lock-step hub of its scenario, served by a bridge with
+/// observers) and ends it.
+pub struct EpisodeHost {
+    z: zenoh::Session,
+    prefix: String,
+    endpoint: String,
+}
+
+impl std::fmt::Debug for EpisodeHost {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("EpisodeHost").field("endpoint", &self.endpoint).finish()
+    }
+}
+
+/// How long an episode host may take to start or end an episode (it waits up to 20 s for a
+/// hub to come up or to end).
+const EPISODE_TIMEOUT: Duration = Duration::from_secs(30);
+
+impl EpisodeHost {
+    /// Opens a Zenoh session to the host at `remote`, waiting up to `timeout` for it.
+    pub fn connect(remote: &Remote, timeout: Duration) -> Result<Self, AgentError> {
+        let z = open_session(remote, timeout)?;
+        let prefix = remote.prefix.clone().unwrap_or_else(|| wire::EPISODES_PREFIX.to_owned());
+        Ok(Self { z, prefix, endpoint: remote.endpoint.clone() })
+    }
+
+    /// Starts an episode: a hub with `args` (scenario options only: `--ticks`, `--seed`,
+    /// `--obstacle`, …; the host refuses others), its lab `lab_xml` when it is not a built-in
+    /// one. Returns the session to join (with [`crate::Agent::connect_zenoh`] and an
+    /// observer) at the same endpoint.
+    pub fn start(&self, args: &[String], lab_xml: Option<Vec<u8>>) -> Result<String, AgentError> {
+        let mut payload = String::new();
+        for a in args {
+            if a.contains('\n') {
+                return Err(AgentError::Zenoh(format!("an episode option on two lines: {a:?}")));
+            }
+            payload.push_str(a);
+            payload.push('\n');
+        }
+        let what = "start an episode";
+        let key = wire::episode_start_key(&self.prefix);
+        let answer = query(&self.z, &key, Some(payload.into_bytes()), lab_xml, EPISODE_TIMEOUT, what, &self.endpoint)
+            .map_err(|e| self.no_host(e))?;
+        String::from_utf8(answer).map_err(|_| AgentError::Zenoh("the episode host answered no session name".into()))
+    }
+
+    /// Ends the episode of `session` and returns its hub's end-of-run summary (its `--json`
+    /// line; empty if it printed none).
+    pub fn end(&self, session: &str) -> Result<String, AgentError> {
+        let key = wire::episode_end_key(&self.prefix);
+        let payload = Some(session.as_bytes().to_vec());
+        let answer = query(&self.z, &key, payload, None, EPISODE_TIMEOUT, "end an episode", &self.endpoint)
+            .map_err(|e| self.no_host(e))?;
+        Ok(String::from_utf8_lossy(&answer).into_owned())
+    }
+
+    fn no_host(&self, e: AgentError) -> AgentError {
+        match e {
+            AgentError::NoBridge(_) => AgentError::Zenoh(format!(
+                "no episode host answered at {} (is `iwsim env-host` running there?)",
+                self.endpoint
+            )),
+            AgentError::Zenoh(m) => AgentError::Zenoh(m.replace("the bridge said", "the episode host said")),
+            e => e,
+        }
+    }
+}
+
+/// Watches a bridge from a remote session: its liveliness token, whether the session is linked
+/// at all, and the news its payloads bring. Agents and observers both use it.
+pub struct BridgeWatch {
+    /// Since when the bridge's liveliness token has been gone (`None`: it is there).
+    down: Arc<Mutex<Option<Instant>>>,
+    /// Since when the session has had no transport at all.
+    unlinked: std::cell::Cell<Option<Instant>>,
+    /// When the last payload from the bridge came: set by the owner's subscriber.
+    pub news: Arc<Mutex<Option<Instant>>>,
+    _subscriber: zenoh::pubsub::Subscriber<()>,
+}
+
+impl std::fmt::Debug for BridgeWatch {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("BridgeWatch").field("down", &self.down).finish()
+    }
+}
+
+impl BridgeWatch {
+    /// Starts watching the bridge serving `prefix`.
+    pub fn new(z: &zenoh::Session, prefix: &str) -> Result<Self, AgentError> {
+        let down = Arc::new(Mutex::new(None));
+        let d = down.clone();
+        let subscriber = z
+            .liveliness()
+            .declare_subscriber(wire::bridge_key(prefix))
+            .callback(move |s: zenoh::sample::Sample| {
+                let mut d = d.lock().unwrap_or_else(|p| p.into_inner());
+                match s.kind() {
+                    zenoh::sample::SampleKind::Put => *d = None,
+                    zenoh::sample::SampleKind::Delete => *d = d.or(Some(Instant::now())),
+                }
+            })
+            .wait()
+            .map_err(zerr("watch the bridge"))?;
+        Ok(Self {
+            down,
+            unlinked: std::cell::Cell::new(None),
+            news: Arc::new(Mutex::new(None)),
+            _subscriber: subscriber,
+        })
+    }
+
+    /// Whether the bridge is still there, or has been out of reach for less than
+    /// [`BRIDGE_GRACE`]: its liveliness token is there, and `z` is connected to something (a
+    /// client whose one peer or router went has no transport left, and no news of the token
+    /// can reach it; Zenoh meanwhile tries to reconnect).
+    pub fn alive(&self, z: &zenoh::Session) -> bool {
+        let now = Instant::now();
+        let info = z.info();
+        let linked = info.peers_zid().wait().next().is_some() || info.routers_zid().wait().next().is_some();
+        let unlinked = if linked { None } else { Some(self.unlinked.get().unwrap_or(now)) };
+        self.unlinked.set(unlinked);
+        let mut down = self.down.lock().unwrap_or_else(|p| p.into_inner());
+        // A link Zenoh reopened may not bring the token's news again; the bridge's payloads
+        // after it went are news enough.
+        let last = *self.news.lock().unwrap_or_else(|p| p.into_inner());
+        if down.is_some_and(|since| last.is_some_and(|l| l > since)) {
+            *down = None;
+        }
+        [unlinked, *down].into_iter().flatten().all(|since| now.duration_since(since) < BRIDGE_GRACE)
+    }
+}
+
 /// The sensor frames the link's subscriber received, and a socket it rings for each.
 struct Inbox {
     frames: Mutex<VecDeque<Vec<u8>>>,
     ring: UnixStream,
-    /// When the last frame came: proof the bridge is there, whatever its token said.
-    last: Mutex<Option<Instant>>,
+    /// When the last frame came: proof the bridge is there, whatever its token said (shared
+    /// with the link's [`BridgeWatch`]).
+    last: Arc<Mutex<Option<Instant>>>,
 }
 
 impl Inbox {
@@ -132,11 +320,8 @@ pub(crate) struct ZenohLink {
     actions: Option<zenoh::pubsub::Publisher<'static>>,
     /// Held while the agent lives: the bridge sees it go when the agent's process or link does.
     _token: Option<zenoh::liveliness::LivelinessToken>,
-    /// Since when the bridge's liveliness token has been gone (`None`: it is there).
-    bridge_down: Arc<Mutex<Option<Instant>>>,
-    /// Since when this session has had no transport at all.
-    unlinked: std::cell::Cell<Option<Instant>>,
-    _bridge_watch: zenoh::pubsub::Subscriber<()>,
+    /// Whether the bridge is there.
+    watch: BridgeWatch,
     /// The blocks of the tick in hand.
     pub(crate) held: Vec<SensorBlock>,
 }
@@ -144,49 +329,22 @@ pub(crate) struct ZenohLink {
 impl ZenohLink {
     /// Opens a Zenoh session to `remote`, trying until `timeout` passes.
     pub(crate) fn open(remote: &Remote, session: &str, timeout: Duration) -> Result<Self, AgentError> {
-        let cfg = config(remote.config.as_deref(), "client", &[], std::slice::from_ref(&remote.endpoint))?;
-        let start = Instant::now();
-        let z = loop {
-            match zenoh::open(cfg.clone()).wait() {
-                Ok(z) => break z,
-                Err(_) if start.elapsed() < timeout && !ipc_services::stop_signalled() => {
-                    std::thread::sleep(Duration::from_millis(50));
-                }
-                Err(e) => {
-                    return Err(AgentError::Zenoh(format!("connect to {}: {e}", remote.endpoint)));
-                }
-            }
-        };
+        let z = open_session(remote, timeout)?;
         let prefix = remote.prefix.clone().unwrap_or_else(|| wire::prefix(session));
         let (wake, ring) = UnixStream::pair().map_err(|e| AgentError::Zenoh(format!("make a wake-up socket: {e}")))?;
         for s in [&wake, &ring] {
             s.set_nonblocking(true).map_err(|e| AgentError::Zenoh(format!("make a wake-up socket: {e}")))?;
         }
-        let bridge_down = Arc::new(Mutex::new(None));
-        let down = bridge_down.clone();
-        let bridge_watch = z
-            .liveliness()
-            .declare_subscriber(wire::bridge_key(&prefix))
-            .callback(move |s: zenoh::sample::Sample| {
-                let mut d = down.lock().unwrap_or_else(|p| p.into_inner());
-                match s.kind() {
-                    zenoh::sample::SampleKind::Put => *d = None,
-                    zenoh::sample::SampleKind::Delete => *d = d.or(Some(Instant::now())),
-                }
-            })
-            .wait()
-            .map_err(zerr("watch the bridge"))?;
+        let watch = BridgeWatch::new(&z, &prefix)?;
         Ok(Self {
             session: z,
             prefix,
-            inbox: Arc::new(Inbox { frames: Mutex::new(VecDeque::new()), ring, last: Mutex::new(None) }),
+            inbox: Arc::new(Inbox { frames: Mutex::new(VecDeque::new()), ring, last: watch.news.clone() }),
             wake,
             sensors: None,
             actions: None,
             _token: None,
-            bridge_down,
-            unlinked: std::cell::Cell::new(None),
-            _bridge_watch: bridge_watch,
+            watch,
             held: Vec::new(),
         })
     }
@@ -286,43 +444,16 @@ impl ZenohLink {
         self.wake.as_raw_fd()
     }
 
-    /// Whether the bridge is still there, or has been out of reach for less than
-    /// [`BRIDGE_GRACE`]: its liveliness token is there, and this session is connected to
-    /// something (a client whose one peer or router went has no transport left, and no news of
-    /// the token can reach it; Zenoh meanwhile tries to reconnect).
+    /// Whether the bridge is still there (see [`BridgeWatch::alive`]).
     pub(crate) fn bridge_alive(&self) -> bool {
-        let now = Instant::now();
-        let info = self.session.info();
-        let linked = info.peers_zid().wait().next().is_some() || info.routers_zid().wait().next().is_some();
-        let unlinked = if linked { None } else { Some(self.unlinked.get().unwrap_or(now)) };
-        self.unlinked.set(unlinked);
-        let mut down = self.bridge_down.lock().unwrap_or_else(|p| p.into_inner());
-        // A link Zenoh reopened may not bring the token's news again; the bridge's frames
-        // after it went are news enough.
-        let last = *self.inbox.last.lock().unwrap_or_else(|p| p.into_inner());
-        if down.is_some_and(|since| last.is_some_and(|l| l > since)) {
-            *down = None;
-        }
-        [unlinked, *down].into_iter().flatten().all(|since| now.duration_since(since) < BRIDGE_GRACE)
+        self.watch.alive(&self.session)
     }
 
     /// The agents' map, from the bridge.
     pub(crate) fn map(&self, session: &str) -> Result<(MapHeader, Vec<MapItem>), AgentError> {
-        let replies = self
-            .session
-            .get(wire::map_key(&self.prefix))
-            .timeout(ANSWER_TIMEOUT)
-            .wait()
-            .map_err(zerr("ask for the map"))?;
-        let reply = replies.recv().map_err(|_| AgentError::NoBridge(session.to_owned()))?;
-        let sample = reply.result().map_err(|e| {
-            AgentError::Zenoh(format!(
-                "get the map: the bridge said: {}",
-                String::from_utf8_lossy(&e.payload().to_bytes())
-            ))
-        })?;
+        let bytes = ask(&self.session, &wire::map_key(&self.prefix), None, "get the map", session)?;
         let frame = |error: FrameError| AgentError::Frame { what: "map", error };
-        let (h, items): (MapHeader, Vec<MapItem>) = wire::unframe(&sample.payload().to_bytes()).map_err(frame)?;
+        let (h, items): (MapHeader, Vec<MapItem>) = wire::unframe(&bytes).map_err(frame)?;
         wire::check_count(h.item_count, items.len()).map_err(frame)?;
         Ok((h, items))
     }

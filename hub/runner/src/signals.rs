@@ -185,31 +185,7 @@ pub fn unblock_in_child(command: &mut std::process::Command) {
     }
 }
 
-/// Makes `command`'s child get SIGTERM when the runner dies, however it dies (SIGKILL, a
-/// crash): the hub, the agents and the viewer then stop and clean up as on Ctrl-C, rather than
-/// run on as orphans. The signal comes when the thread that spawned the child ends, so children
-/// are spawned from the runner's main thread, which lives as long as the run. A runner that
-/// died between the fork and the child's `prctl` is caught by comparing the parent's pid: the
-/// child then fails to start.
-pub fn die_with_parent(command: &mut std::process::Command) {
-    use std::os::unix::process::CommandExt as _;
-    let parent = std::process::id();
-    #[allow(unsafe_code)]
-    // SAFETY: the closure runs in the forked child before exec and only calls prctl and
-    // getppid, both plain system calls (async-signal-safe); it allocates nothing and takes no
-    // lock.
-    unsafe {
-        command.pre_exec(move || {
-            if libc::prctl(libc::PR_SET_PDEATHSIG, libc::SIGTERM as libc::c_ulong) != 0 {
-                return Err(io::Error::last_os_error());
-            }
-            if libc::getppid() as u32 != parent {
-                return Err(io::Error::other("the runner died as the process started"));
-            }
-            Ok(())
-        });
-    }
-}
+pub use ipc_services::die_with_parent;
 
 #[cfg(test)]
 mod tests {
