@@ -23,6 +23,12 @@
 //! read them, so a bridge whose agents are under test keeps them off, or keeps its endpoint
 //! to trusted hosts (see Zenoh's access control).
 //!
+//! An agent's id is tied to the Zenoh session that said hello for it, as the hub ties it to
+//! the iceoryx2 port that did: the bridge answers a hello with a random secret of
+//! [`SECRET_LEN`] bytes as the reply's attachment (a reply goes to the querier only), and every
+//! later request and actions payload of that agent carries it as its attachment. One without
+//! it, or with another agent's, is counted as foreign and dropped.
+//!
 //! The layouts' versions are checked once, at hello: the request carries [`schema`] as its
 //! attachment and a bridge built with other layouts refuses it. Every payload after that is
 //! checked for its size (see [`unframe`]).
@@ -38,6 +44,9 @@ use crate::{
     ActionBlock, ActionHeader, MapHeader, MapItem, RegisterRequest, RegisterResponse, RobotInfo, RobotState,
     SensorBlock, TickHeader, WorldHeader, type_name_of,
 };
+
+/// Bytes of an agent's secret (see the module's documentation).
+pub const SECRET_LEN: usize = 16;
 
 /// The default key prefix of a session.
 pub fn prefix(session: &str) -> String {

@@ -41,6 +41,20 @@ impl Proc {
         Self(Some(child))
     }
 
+    /// Spawns as [`Proc::spawn`] does, in directory `dir`.
+    pub fn spawn_at(dir: &std::path::Path, args: &[&str]) -> Self {
+        let child = Command::new(env!("CARGO_BIN_EXE_iwsim"))
+            .args(args)
+            .current_dir(dir)
+            .env("RUST_LOG", "warn")
+            .stdin(Stdio::null())
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .expect("iwsim starts");
+        Self(Some(child))
+    }
+
     /// Spawns as [`Proc::spawn`] does, in network namespace `ns` (`ip netns exec`, which
     /// execs iwsim in place: the process is iwsim's own, to signal and wait for).
     pub fn spawn_in(ns: &str, args: &[&str]) -> Self {

@@ -187,7 +187,7 @@ fn an_agent_written_with_the_official_zenoh_binding_registers_reads_its_blocks_a
     assert!(said.contains("refused this bridge speaks"), "{said}");
     assert!(bridge.wait(Duration::from_secs(20)).status.success());
     let end = bridge_said.to_end(Duration::from_secs(5)).join("\n");
-    assert!(end.contains("(1 malformed, 1 foreign, 1 hellos refused, 0 agents lost"), "{end}");
+    assert!(end.contains("(1 malformed, 2 foreign, 1 hellos refused, 0 agents lost"), "{end}");
     assert_no_shared_memory_left(&s);
     // Nor a Zenoh shared-memory segment (the Python binding's, which the client turns off; no
     // other test runs that binding).
@@ -592,5 +592,49 @@ fn a_viewer_on_another_host_shows_the_run_only_when_the_bridge_serves_observers(
         let out = p.wait(Duration::from_secs(30));
         assert!(out.status.success(), "{}", text(&out.stderr));
     }
+    assert_no_shared_memory_left(&s);
+}
+
+#[test]
+fn with_the_documented_user_password_files_only_a_listed_agent_gets_in() {
+    // README's example files, as they are: run from the repository's root, as README says.
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let s = session("zenoh-auth");
+    let hub = Proc::spawn(&["hub", "--session", &s, "--lockstep", "--ticks", "100", "--wait-agents", "1"]);
+    let endpoint = format!("tcp/127.0.0.1:{}", free_port());
+    let auth = ["--zenoh-config", "docs/zenoh/bridge-auth.json5"];
+    let mut bridge = Proc::spawn_at(
+        root,
+        &[&["zenoh", "--session", &s, "--listen", &endpoint, "--connect-timeout", "20"][..], &auth].concat(),
+    );
+    bridge.announced("served under", Duration::from_secs(20));
+    // Without credentials no link opens: the agent gives up at its timeout and says why.
+    let stranger =
+        Proc::spawn(&["agent", "wheelchair", "--session", &s, "--zenoh", &endpoint, "--connect-timeout", "2"])
+            .wait(Duration::from_secs(30));
+    assert!(!stranger.status.success());
+    assert!(text(&stranger.stderr).contains(&format!("connect to {endpoint}")), "{}", text(&stranger.stderr));
+    // With the documented agent file it joins, drives, and the run ends as usual.
+    let listed = Proc::spawn_at(
+        root,
+        &[
+            "agent",
+            "wheelchair",
+            "--session",
+            &s,
+            "--zenoh",
+            &endpoint,
+            "--connect-timeout",
+            "20",
+            "--zenoh-config",
+            "docs/zenoh/agent-auth.json5",
+        ],
+    )
+    .wait(Duration::from_secs(60));
+    assert!(listed.status.success(), "{}", text(&listed.stderr));
+    let h = hub.wait(Duration::from_secs(60));
+    assert!(h.status.success(), "{}", text(&h.stderr));
+    assert!(text(&h.stdout).contains("tick 100 "), "{}", text(&h.stdout));
+    assert!(bridge.wait(Duration::from_secs(20)).status.success());
     assert_no_shared_memory_left(&s);
 }

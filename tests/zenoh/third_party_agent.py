@@ -6,9 +6,12 @@ its motors at POWER until the run ends. It prints what it saw, one `key value` p
 
     python third_party_agent.py ENDPOINT SESSION NAME X Y POWER [--junk]
 
+The bridge answers the hello with a secret (the reply's attachment); every later request and
+every actions payload carries it as its attachment, which ties them to this agent.
+
 With --junk it first says hello with a layout list of its own (which the bridge must refuse),
-and on the first tick also sends a payload too short to be actions and actions for a robot
-that is not its own (which the bridge must count and drop).
+and on the first tick also sends a payload too short to be actions, actions for a robot that
+is not its own, and actions without the secret (which the bridge must count and drop).
 """
 
 import os
@@ -48,15 +51,17 @@ def request(kind, agent_id, robot=None):
     return struct.pack("<IIII2Q", kind, os.getpid(), agent_id, 0, 0, 0) + (robot or bytes(656))
 
 
-def ask(session, key, payload):
-    replies = session.get(key, payload=payload, attachment=SCHEMA, timeout=20.0)
+def ask(session, key, payload, attachment):
+    """One request; its answer's agent id, robot id and attachment (the secret, after a hello)."""
+    replies = session.get(key, payload=payload, attachment=attachment, timeout=20.0)
     for reply in replies:
         if reply.ok is None:
             sys.exit(f"the bridge said: {reply.err.payload.to_bytes()!r}")
         status, agent_id, robot_id, sensors, _pid, _tick, detail = RESPONSE.unpack(reply.ok.payload.to_bytes())
         if status != 0:
             sys.exit(f"refused ({status}): {detail.rstrip(bytes(1)).decode()}")
-        return agent_id, robot_id
+        secret = reply.ok.attachment.to_bytes() if reply.ok.attachment is not None else None
+        return agent_id, robot_id, secret
     sys.exit("no bridge answered")
 
 
@@ -77,15 +82,17 @@ def main():
                                        attachment="iwsim::RegisterRequest.v3", timeout=20.0))
             assert replies and replies[0].ok is None, "a hello with other layouts is refused"
             print("refused", replies[0].err.payload.to_bytes().decode(), flush=True)
-        agent_id, _ = ask(session, f"{prefix}/register", request(HELLO, 0))
+        agent_id, _, secret = ask(session, f"{prefix}/register", request(HELLO, 0), SCHEMA)
+        assert secret is not None and len(secret) == 16, "the welcome carries the agent's secret"
         print("agent", agent_id, flush=True)
         token = session.liveliness().declare_token(f"{prefix}/agent/{agent_id}/alive")
         frames = queue.Queue()
         sub = session.declare_subscriber(
             f"{prefix}/agent/{agent_id}/sensors", lambda s: frames.put(s.payload.to_bytes()))
-        _, robot_id = ask(session, f"{prefix}/register", request(ROBOT, agent_id, registration(name, float(x), float(y))))
+        robot = registration(name, float(x), float(y))
+        _, robot_id, _ = ask(session, f"{prefix}/register", request(ROBOT, agent_id, robot), secret)
         print("robot", robot_id, flush=True)
-        ask(session, f"{prefix}/register", request(READY, agent_id))
+        ask(session, f"{prefix}/register", request(READY, agent_id), secret)
         actions = session.declare_publisher(f"{prefix}/agent/{agent_id}/actions")
         answered, mine = 0, 0
         while True:
@@ -100,10 +107,13 @@ def main():
             block = struct.pack("<II2d3dII", robot_id, ACT_MOTORS, float(power), float(power), 0, 0, 0, 0, 0)
             block = block.ljust(ACTION_BLOCK, b"\0")
             if junk and answered == 0:
-                actions.put(b"\x01\x02\x03")
+                actions.put(b"\x01\x02\x03", attachment=secret)
                 stranger = struct.pack("<II2d3dII", robot_id + 1000, ACT_MOTORS, 1.0, 1.0, 0, 0, 0, 0, 0)
-                actions.put(ACTION_HEADER.pack(tick, agent_id, 1) + stranger.ljust(ACTION_BLOCK, b"\0"))
-            actions.put(ACTION_HEADER.pack(tick, agent_id, 1) + block)
+                actions.put(ACTION_HEADER.pack(tick, agent_id, 1) + stranger.ljust(ACTION_BLOCK, b"\0"),
+                            attachment=secret)
+                # In its own name, but as another session would: without the secret.
+                actions.put(ACTION_HEADER.pack(tick, agent_id, 1) + block)
+            actions.put(ACTION_HEADER.pack(tick, agent_id, 1) + block, attachment=secret)
             answered += 1
         print("answered", answered, flush=True)
         print("own_blocks", mine, flush=True)

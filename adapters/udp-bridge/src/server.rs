@@ -959,18 +959,7 @@ impl Bridge {
 
     /// Sends a run-control command without waiting for the hub's answer.
     fn command(&mut self, command: Command, robot_id: u32) {
-        if self.control.is_none() {
-            match agent_sdk::ControlClient::connect(&self.cfg.session) {
-                Ok(c) => self.control = Some(c),
-                Err(e) => {
-                    tracing::warn!("{command:?} for the hub failed: {e}");
-                    return;
-                }
-            }
-        }
-        if let Some(c) = self.control.as_mut()
-            && let Err(e) = c.send(command, robot_id)
-        {
+        if let Err(e) = agent_sdk::ControlClient::send_lazily(&mut self.control, &self.cfg.session, command, robot_id) {
             tracing::warn!("{command:?} for the hub failed: {e}");
         }
     }

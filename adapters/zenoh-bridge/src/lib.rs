@@ -47,6 +47,13 @@ pub(crate) fn zerr<E: std::fmt::Display>(what: &str) -> impl FnOnce(E) -> Bridge
     move |e| BridgeError::Zenoh(format!("{what}: {e}"))
 }
 
+/// A fresh agent secret, from the kernel's random source.
+fn new_secret() -> std::io::Result<[u8; wire::SECRET_LEN]> {
+    let mut s = [0u8; wire::SECRET_LEN];
+    std::fs::File::open("/dev/urandom")?.read_exact(&mut s)?;
+    Ok(s)
+}
+
 /// How the bridge is set up.
 #[derive(Debug, Clone)]
 pub struct BridgeConfig {
@@ -165,7 +172,7 @@ pub struct Counters {
 /// What Zenoh's threads hand the bridge's loop.
 enum Event {
     Query(zenoh::query::Query),
-    Actions { agent_id: Option<u32>, bytes: Vec<u8> },
+    Actions { agent_id: Option<u32>, bytes: Vec<u8>, secret: Option<[u8; wire::SECRET_LEN]> },
     Alive { agent_id: Option<u32>, up: bool },
 }
 
@@ -207,6 +214,8 @@ const MAX_REQUESTS_IN_FLIGHT: usize = 2;
 
 /// A remote agent.
 struct RemoteAgent {
+    /// What proves a request or actions payload is this agent's (see `ipc_types::remote`).
+    secret: [u8; wire::SECRET_LEN],
     robots: Vec<u32>,
     sensors: zenoh::pubsub::Publisher<'static>,
     /// The last tick this agent was sent sensor blocks for.
@@ -275,6 +284,11 @@ pub struct Bridge {
     /// Set by whoever runs the bridge to end it (an episode host ending an episode): it then
     /// says goodbye to the hub at once, before the hub is stopped.
     stop: Arc<std::sync::atomic::AtomicBool>,
+    /// Per-tick scratch, kept so a tick allocates nothing: the hub's blocks by robot id,
+    /// one remote agent's blocks, and the actions answered.
+    index: Vec<(u32, usize)>,
+    mine: Vec<SensorBlock>,
+    answer: Vec<ActionBlock>,
     /// Refused input.
     pub counters: Counters,
 }
@@ -336,7 +350,8 @@ impl Bridge {
             z.declare_subscriber(wire::all_actions_key(&prefix))
                 .callback(move |s: zenoh::sample::Sample| {
                     let agent_id = wire::agent_of_key(&p, s.key_expr().as_str());
-                    ev.push(Event::Actions { agent_id, bytes: s.payload().to_bytes().into_owned() });
+                    let secret = s.attachment().and_then(|a| a.to_bytes().as_ref().try_into().ok());
+                    ev.push(Event::Actions { agent_id, bytes: s.payload().to_bytes().into_owned(), secret });
                 })
                 .wait()
                 .map_err(zerr("subscribe to actions"))?,
@@ -381,6 +396,9 @@ impl Bridge {
             changed: false,
             checked: Instant::now(),
             stop: Arc::default(),
+            index: Vec::new(),
+            mine: Vec::new(),
+            answer: Vec::new(),
             counters: Counters::default(),
         })
     }
@@ -502,7 +520,7 @@ impl Bridge {
                     o.answer(&q, &self.prefix);
                 }
             }
-            Event::Actions { agent_id, bytes } => self.on_actions(agent_id, &bytes),
+            Event::Actions { agent_id, bytes, secret } => self.on_actions(agent_id, &bytes, secret),
             Event::Alive { agent_id: Some(id), up: false } => self.lost(id),
             Event::Alive { agent_id: Some(id), up: true } => self.came_back(id),
             Event::Alive { agent_id: None, .. } => {}
@@ -547,10 +565,18 @@ impl Bridge {
                         return;
                     }
                 };
+                let secret = match new_secret() {
+                    Ok(s) => s,
+                    Err(e) => {
+                        let _ = q.reply_err(format!("the bridge could not draw the agent's secret: {e}")).wait();
+                        return;
+                    }
+                };
                 self.next_id += 1;
                 self.remotes.insert(
                     id,
                     RemoteAgent {
+                        secret,
                         robots: Vec::new(),
                         sensors: publisher,
                         sent: None,
@@ -562,10 +588,24 @@ impl Bridge {
                 );
                 tracing::info!("remote agent {id} said hello");
                 let r = RegisterResponse { agent_id: id, ..bytemuck::Zeroable::zeroed() };
-                let _ = q.reply(q.key_expr().clone(), bytemuck::bytes_of(&r).to_vec()).wait();
+                // The reply reaches the querier only: the secret stays between the two.
+                let _ =
+                    q.reply(q.key_expr().clone(), bytemuck::bytes_of(&r).to_vec()).attachment(secret.to_vec()).wait();
             }
             _ if !self.remotes.contains_key(&req.agent_id) => {
                 refuse(&q, Refusal::UnknownAgent, &format!("agent {} has not said hello", req.agent_id));
+            }
+            _ if !self
+                .remotes
+                .get(&req.agent_id)
+                .is_some_and(|r| q.attachment().is_some_and(|a| a.to_bytes().as_ref() == r.secret.as_slice())) =>
+            {
+                self.counters.foreign += 1;
+                refuse(
+                    &q,
+                    Refusal::NotYours,
+                    &format!("a request in agent {}'s name without its secret", req.agent_id),
+                );
             }
             // Bounded: a flood of registrations is refused, not kept.
             Some(RegisterKind::Robot) if self.queued.len() >= MAX_QUEUED => {
@@ -676,7 +716,7 @@ impl Bridge {
         Ok(())
     }
 
-    fn on_actions(&mut self, agent_id: Option<u32>, bytes: &[u8]) {
+    fn on_actions(&mut self, agent_id: Option<u32>, bytes: &[u8], secret: Option<[u8; wire::SECRET_LEN]>) {
         let Some(id) = agent_id else {
             self.counters.malformed += 1;
             return;
@@ -693,7 +733,8 @@ impl Bridge {
             self.counters.foreign += 1;
             return;
         };
-        if h.agent_id != id {
+        // Another session acting in this agent's name: it does not hold the agent's secret.
+        if h.agent_id != id || secret != Some(r.secret) {
             self.counters.foreign += 1;
             return;
         }
@@ -756,9 +797,10 @@ impl Bridge {
         }
         let header = *self.agent.tick_header();
         let blocks = self.agent.sensors();
-        let mut index: Vec<(u32, usize)> = blocks.iter().enumerate().map(|(i, b)| (b.robot_id, i)).collect();
+        let (index, mine) = (&mut self.index, &mut self.mine);
+        index.clear();
+        index.extend(blocks.iter().enumerate().map(|(i, b)| (b.robot_id, i)));
         index.sort_unstable();
-        let mut mine: Vec<SensorBlock> = Vec::new();
         for r in self.remotes.values_mut() {
             mine.clear();
             mine.extend(
@@ -771,7 +813,7 @@ impl Bridge {
             }
             // The remote agent spins for nothing: its ticks come over a network.
             let h = TickHeader { count: mine.len() as u32, spin_us: 0, ..header };
-            if let Err(e) = r.sensors.put(wire::frame(&h, &mine)).wait() {
+            if let Err(e) = r.sensors.put(wire::frame(&h, mine)).wait() {
                 tracing::warn!("sensor blocks for a remote agent: {e}");
             }
             r.sent = Some(tick);
@@ -806,7 +848,8 @@ impl Bridge {
         // stalls) gets its robots' motors at rest rather than its last powers: over a network
         // silence can last a lease (10 s), too long to drive blind.
         let lockstep = p.lockstep != 0;
-        let mut actions: Vec<ActionBlock> = Vec::new();
+        let actions = &mut self.answer;
+        actions.clear();
         for r in self.remotes.values() {
             if lockstep && r.sent == Some(tick) && r.answered < Some(tick) {
                 actions.extend(r.robots.iter().map(|&id| ActionBlock::motors(id, 0.0, 0.0)));
@@ -816,7 +859,7 @@ impl Bridge {
         }
         // A robot whose agent went stands: its motors at rest, until it is taken back.
         actions.extend(self.orphans.iter().map(|o| ActionBlock::motors(o.robot_id, 0.0, 0.0)));
-        self.agent.send(tick, &actions)?;
+        self.agent.send(tick, actions)?;
         self.answered = true;
         if late {
             for r in self.remotes.values_mut() {
@@ -830,18 +873,7 @@ impl Bridge {
 
     /// Sends a run-control command without waiting for the hub's answer.
     fn command(&mut self, command: Command, robot_id: u32) {
-        if self.control.is_none() {
-            match agent_sdk::ControlClient::connect(&self.session) {
-                Ok(c) => self.control = Some(c),
-                Err(e) => {
-                    tracing::warn!("{command:?} for the hub failed: {e}");
-                    return;
-                }
-            }
-        }
-        if let Some(c) = self.control.as_mut()
-            && let Err(e) = c.send(command, robot_id)
-        {
+        if let Err(e) = agent_sdk::ControlClient::send_lazily(&mut self.control, &self.session, command, robot_id) {
             tracing::warn!("{command:?} for the hub failed: {e}");
         }
     }

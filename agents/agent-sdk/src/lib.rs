@@ -362,6 +362,22 @@ impl ControlClient {
         Ok(())
     }
 
+    /// Sends a command as [`ControlClient::send`] does on the client in `slot`, opening it
+    /// first if the slot is empty: for a process (a bridge) that sends commands rarely and
+    /// keeps no control node until it does.
+    pub fn send_lazily(
+        slot: &mut Option<Self>,
+        session: &str,
+        command: ipc_types::Command,
+        robot_id: u32,
+    ) -> Result<(), AgentError> {
+        let client = match slot {
+            Some(c) => c,
+            None => slot.insert(Self::connect(session)?),
+        };
+        client.send(command, robot_id)
+    }
+
     /// Sends a command and waits up to 15 s for the hub's answer, on this one client: a
     /// process that sends many commands (the web viewer) keeps one node instead of one per
     /// command.

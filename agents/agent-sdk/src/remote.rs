@@ -324,6 +324,9 @@ pub(crate) struct ZenohLink {
     watch: BridgeWatch,
     /// The blocks of the tick in hand.
     pub(crate) held: Vec<SensorBlock>,
+    /// The secret the bridge answered this agent's hello with: the attachment of every later
+    /// request and actions payload, which proves they are this agent's.
+    secret: std::cell::Cell<Option<[u8; wire::SECRET_LEN]>>,
 }
 
 impl ZenohLink {
@@ -346,6 +349,7 @@ impl ZenohLink {
             _token: None,
             watch,
             held: Vec::new(),
+            secret: std::cell::Cell::new(None),
         })
     }
 
@@ -378,13 +382,23 @@ impl ZenohLink {
         Ok(())
     }
 
+    /// What a register request carries as its attachment: the layouts' names with a hello,
+    /// the agent's secret with every later one.
+    fn credentials(&self, req: &RegisterRequest) -> Vec<u8> {
+        if req.kind == ipc_types::RegisterKind::Hello as u32 {
+            wire::schema().into_bytes()
+        } else {
+            self.secret.get().map(|s| s.to_vec()).unwrap_or_default()
+        }
+    }
+
     /// Sends a register request; read the answer with [`ZenohLink::poll`].
     pub(crate) fn request(&self, req: &RegisterRequest) -> Result<PendingReply, AgentError> {
         let replies = self
             .session
             .get(wire::register_key(&self.prefix))
             .payload(bytemuck::bytes_of(req).to_vec())
-            .attachment(wire::schema())
+            .attachment(self.credentials(req))
             // The bridge answers once the hub has (which may take up to ANSWER_TIMEOUT).
             .timeout(ANSWER_TIMEOUT + Duration::from_secs(1))
             .wait()
@@ -396,9 +410,18 @@ impl ZenohLink {
     pub(crate) fn poll(&self, pending: &PendingReply, session: &str) -> Result<Option<RegisterResponse>, AgentError> {
         match pending.replies.try_recv() {
             Ok(Some(reply)) => match reply.result() {
-                Ok(sample) => wire::one::<RegisterResponse>(&sample.payload().to_bytes())
-                    .map(Some)
-                    .map_err(|error| AgentError::Frame { what: "registration answer", error }),
+                Ok(sample) => {
+                    // The welcome's secret, kept from the first answer that brings one.
+                    if self.secret.get().is_none()
+                        && let Some(a) = sample.attachment()
+                        && let Ok(secret) = <[u8; wire::SECRET_LEN]>::try_from(a.to_bytes().as_ref())
+                    {
+                        self.secret.set(Some(secret));
+                    }
+                    wire::one::<RegisterResponse>(&sample.payload().to_bytes())
+                        .map(Some)
+                        .map_err(|error| AgentError::Frame { what: "registration answer", error })
+                }
                 Err(e) => Err(AgentError::Zenoh(format!(
                     "register: the bridge said: {}",
                     String::from_utf8_lossy(&e.payload().to_bytes())
@@ -416,7 +439,7 @@ impl ZenohLink {
             .session
             .get(wire::register_key(&self.prefix))
             .payload(bytemuck::bytes_of(req).to_vec())
-            .attachment(wire::schema())
+            .attachment(self.credentials(req))
             .callback(|_| {})
             .wait();
     }
@@ -424,7 +447,8 @@ impl ZenohLink {
     /// Sends actions.
     pub(crate) fn send(&self, header: &ActionHeader, actions: &[ActionBlock]) -> Result<(), AgentError> {
         let Some(p) = &self.actions else { return Err(AgentError::Zenoh("send actions before hello".into())) };
-        p.put(wire::frame(header, actions)).wait().map_err(zerr("send actions"))
+        let secret = self.secret.get().unwrap_or_default();
+        p.put(wire::frame(header, actions)).attachment(secret.to_vec()).wait().map_err(zerr("send actions"))
     }
 
     /// The oldest sensor frame not read yet, checked; `None` when there is none.
