@@ -595,10 +595,10 @@ impl Bridge {
             _ if !self.remotes.contains_key(&req.agent_id) => {
                 refuse(&q, Refusal::UnknownAgent, &format!("agent {} has not said hello", req.agent_id));
             }
-            _ if !self
+            _ if self
                 .remotes
                 .get(&req.agent_id)
-                .is_some_and(|r| q.attachment().is_some_and(|a| a.to_bytes().as_ref() == r.secret.as_slice())) =>
+                .is_none_or(|r| q.attachment().is_none_or(|a| a.to_bytes().as_ref() != r.secret.as_slice())) =>
             {
                 self.counters.foreign += 1;
                 refuse(
