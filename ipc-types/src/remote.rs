@@ -12,7 +12,7 @@
 //! | `P/agent/<id>/sensors` | the bridge puts, each tick | [`TickHeader`] + [`SensorBlock`]s |
 //! | `P/agent/<id>/actions` | the agent puts | [`ActionHeader`] + [`ActionBlock`]s |
 //! | `P/agent/<id>/alive` | the agent's liveliness token | — |
-//! | `P/bridge` | the bridge's liveliness token | — |
+//! | `P/bridge/<instance>` | the bridge's liveliness token, one instance per run | — |
 //! | `P/observe/world` | the bridge puts, each tick (`--observers world`) | [`WorldHeader`] + [`RobotState`]s |
 //! | `P/observe/robots` | the bridge puts when they change; queryable | `u64` count + [`RobotInfo`]s |
 //! | `P/observe/map` | queryable: the observers' map | → [`MapHeader`] + [`MapItem`]s |
@@ -88,9 +88,16 @@ pub fn all_alive_key(prefix: &str) -> String {
     format!("{prefix}/agent/*/alive")
 }
 
-/// `P/bridge`: the bridge's liveliness token; an agent that loses it has lost its hub.
-pub fn bridge_key(prefix: &str) -> String {
-    format!("{prefix}/bridge")
+/// `P/bridge/<instance>`: the liveliness token of one run of the bridge (`instance` drawn at
+/// random when it starts); an agent that loses it has lost its hub, and one that sees another
+/// instance's come knows the bridge was restarted and has forgotten it.
+pub fn bridge_key(prefix: &str, instance: u64) -> String {
+    format!("{prefix}/bridge/{instance:016x}")
+}
+
+/// `P/bridge/*`: every bridge instance's token (what agents watch).
+pub fn all_bridges_key(prefix: &str) -> String {
+    format!("{prefix}/bridge/*")
 }
 
 /// `P/observe/world`: every robot's true state, each tick (observers only).

@@ -638,3 +638,65 @@ fn with_the_documented_user_password_files_only_a_listed_agent_gets_in() {
     assert!(bridge.wait(Duration::from_secs(20)).status.success());
     assert_no_shared_memory_left(&s);
 }
+
+#[test]
+fn a_restarted_bridge_takes_its_remote_agents_back_and_they_drive_on() {
+    let host = Host::new();
+    let s = session("zenoh-bridge-restart");
+    let hub = Proc::spawn(&[
+        "hub",
+        "--session",
+        &s,
+        "--lockstep",
+        "--ticks",
+        "10000000",
+        "--wait-agents",
+        "1",
+        "--deadline-ms",
+        "300",
+    ]);
+    let listen = host.endpoint_here();
+    let bridge_args = ["zenoh", "--session", &s, "--listen", &listen, "--connect-timeout", "20"];
+    let mut first = Proc::spawn(&bridge_args);
+    first.announced("served under", Duration::from_secs(20));
+    let mut agent = Proc::spawn_in(
+        &host.ns,
+        &["agent", "wheelchair", "--session", &s, "--zenoh", &listen, "--connect-timeout", "20", "--name", "chair1"],
+    );
+    let agent_said = agent.stderr_lines();
+    agent_said.said("drives robots ", Duration::from_secs(30));
+    let mut observer = super::common::wait_for_tick(&s, 20, Duration::from_secs(30));
+    first.kill9();
+    let (killed_at, _) = tick_and_x(&mut observer, 1);
+    // The hub holds the chair as a dead agent's (frozen) while no bridge serves it.
+    let (_, before) = tick_and_x(&mut observer, 1);
+    // The same bridge started again: a new run of it, which knows no agent. The agent sees it
+    // come, says hello again and takes its chair back by name, and drives on.
+    let mut second = Proc::spawn(&bridge_args);
+    let second_said = second.stderr_lines();
+    second_said.said("served under", Duration::from_secs(20));
+    let start = std::time::Instant::now();
+    loop {
+        let (t, x) = tick_and_x(&mut observer, 1);
+        if t > killed_at && x > before + 0.5 {
+            break;
+        }
+        assert!(
+            start.elapsed() < Duration::from_secs(30),
+            "the agent never drove again: at {x} (stood at {before}); it said: {}",
+            agent_said.so_far().join("\n")
+        );
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    drop(observer);
+    assert_eq!(agent_sdk::control(&s, ipc_types::Command::Stop, 0).expect("the hub answers").status, 0);
+    let h = hub.wait(Duration::from_secs(30));
+    assert!(h.status.success(), "{}", text(&h.stderr));
+    // Two bridges were the hub's agents, the first of them died; one robot throughout.
+    assert!(text(&h.stdout).contains("agents: 2 connected, 1 died"), "{}", text(&h.stdout));
+    assert_eq!(text(&h.stdout).matches("robot ").count(), 1, "{}", text(&h.stdout));
+    let a = agent.wait(Duration::from_secs(30));
+    assert!(a.status.success(), "{}", agent_said.to_end(Duration::from_secs(5)).join("\n"));
+    assert!(second.wait(Duration::from_secs(20)).status.success());
+    assert_no_shared_memory_left(&s);
+}

@@ -47,6 +47,16 @@ pub(crate) fn zerr<E: std::fmt::Display>(what: &str) -> impl FnOnce(E) -> Bridge
     move |e| BridgeError::Zenoh(format!("{what}: {e}"))
 }
 
+/// A random number naming this run of the bridge (its token's key): agents that see another
+/// one come know the bridge was restarted.
+fn instance() -> Result<u64, BridgeError> {
+    let mut b = [0u8; 8];
+    std::fs::File::open("/dev/urandom")
+        .and_then(|mut f| f.read_exact(&mut b))
+        .map_err(|e| BridgeError::Zenoh(format!("draw the bridge's instance: {e}")))?;
+    Ok(u64::from_le_bytes(b))
+}
+
 /// A fresh agent secret, from the kernel's random source.
 fn new_secret() -> std::io::Result<[u8; wire::SECRET_LEN]> {
     let mut s = [0u8; wire::SECRET_LEN];
@@ -367,8 +377,11 @@ impl Bridge {
                 .wait()
                 .map_err(zerr("watch the agents"))?,
         );
-        let token =
-            z.liveliness().declare_token(wire::bridge_key(&prefix)).wait().map_err(zerr("declare the bridge"))?;
+        let token = z
+            .liveliness()
+            .declare_token(wire::bridge_key(&prefix, instance()?))
+            .wait()
+            .map_err(zerr("declare the bridge"))?;
         Ok(Self {
             agent,
             observing,

@@ -729,8 +729,17 @@ impl Agent {
     /// Registers a robot; its id, or the hub's typed refusal.
     pub fn register(&mut self, robot: &RobotRegistration) -> Result<u32, AgentError> {
         let resp = self.request(RegisterKind::Robot, Some(robot))?;
-        self.robots.push(resp.robot_id);
+        self.accepted(resp.robot_id, Some(robot));
         Ok(resp.robot_id)
+    }
+
+    /// A robot the hub accepted joins this agent's; through Zenoh its registration is kept,
+    /// for a restarted bridge.
+    fn accepted(&mut self, robot_id: u32, registration: Option<&RobotRegistration>) {
+        self.robots.push(robot_id);
+        if let (Link::Zenoh(z), Some(reg)) = (&mut self.link, registration) {
+            z.registrations.push((robot_id, *reg));
+        }
     }
 
     /// Tells the hub every robot is registered: the agent joins the lock-step barrier.
@@ -801,6 +810,9 @@ impl Agent {
                     }
                 }
             };
+            if !arrived {
+                self.rejoin_if_replaced()?;
+            }
             if !arrived && let Err(e) = self.check() {
                 // The hub may have published its last tick just before going: read it first.
                 if self.take_sensors()? {
@@ -837,6 +849,40 @@ impl Agent {
             return self.tick_from_last();
         }
         Ok(None)
+    }
+
+    /// Through Zenoh, when the bridge was restarted (another run of it came up, which has
+    /// forgotten this agent): says hello to the new one and registers this agent's robots
+    /// again, each by its name and id, which takes them back from the hub as a local agent
+    /// restarted takes its robots back. The agent's id changes; its robots' ids do not (a
+    /// robot the hub gives another id fails the rejoin). Nothing to do on shared memory, or
+    /// when the bridge is the one this agent knows. [`Agent::wait_tick`] calls it when a
+    /// wait brings nothing.
+    pub fn rejoin_if_replaced(&mut self) -> Result<(), AgentError> {
+        let Link::Zenoh(z) = &mut self.link else { return Ok(()) };
+        if !z.replaced() || self.finished {
+            return Ok(());
+        }
+        z.leave();
+        let registrations = std::mem::take(&mut z.registrations);
+        let hello = self.request(RegisterKind::Hello, None)?;
+        self.agent_id = hello.agent_id;
+        let Link::Zenoh(z) = &mut self.link else { unreachable!("matched above") };
+        z.joined(hello.agent_id)?;
+        let before = std::mem::take(&mut self.robots);
+        for (id, reg) in registrations {
+            let again = RobotRegistration { requested_id: id, ..reg };
+            let got = self.register(&again)?;
+            if got != id {
+                return Err(AgentError::Zenoh(format!(
+                    "the restarted bridge gave robot {id} ({:?}) id {got}: this agent's robots are not its own any more",
+                    reg.name.as_str().unwrap_or("")
+                )));
+            }
+        }
+        debug_assert_eq!(before, self.robots, "the same robots, in the same order");
+        self.request(RegisterKind::Ready, None)?;
+        Ok(())
     }
 
     /// The header of the last tick returned (for a bridge that passes the tick on).

@@ -32,6 +32,8 @@ pub struct PendingRequest {
     pending: Pending,
     kind: RegisterKind,
     sent: Instant,
+    /// A robot registration's request: through Zenoh a restarted bridge gets it again.
+    robot: Option<RobotRegistration>,
 }
 
 impl std::fmt::Debug for PendingRequest {
@@ -79,7 +81,7 @@ impl Agent {
             }
             Link::Zenoh(z) => Pending::Zenoh(z.request(&req)?),
         };
-        Ok(PendingRequest { pending, kind, sent: Instant::now() })
+        Ok(PendingRequest { pending, kind, sent: Instant::now(), robot: robot.copied() })
     }
 
     /// The hub's answer to `request` if it has come: `Ok(None)` while it has not, the
@@ -96,7 +98,7 @@ impl Agent {
     pub fn poll_answer(&mut self, request: &PendingRequest) -> Result<Option<RegisterResponse>, AgentError> {
         let Some(r) = self.poll_response(request)? else { return Ok(None) };
         if request.kind == RegisterKind::Robot {
-            self.robots.push(r.robot_id);
+            self.accepted(r.robot_id, request.robot.as_ref());
         }
         Ok(Some(r))
     }

@@ -214,8 +214,7 @@ impl EpisodeHost {
 /// Watches a bridge from a remote session: its liveliness token, whether the session is linked
 /// at all, and the news its payloads bring. Agents and observers both use it.
 pub struct BridgeWatch {
-    /// Since when the bridge's liveliness token has been gone (`None`: it is there).
-    down: Arc<Mutex<Option<Instant>>>,
+    tokens: Arc<Mutex<Tokens>>,
     /// Since when the session has had no transport at all.
     unlinked: std::cell::Cell<Option<Instant>>,
     /// When the last payload from the bridge came: set by the owner's subscriber.
@@ -223,55 +222,91 @@ pub struct BridgeWatch {
     _subscriber: zenoh::pubsub::Subscriber<()>,
 }
 
+/// What the bridge instances' liveliness tokens said.
+#[derive(Debug, Default)]
+struct Tokens {
+    /// The instance this side knows (the first whose token it saw).
+    known: Option<String>,
+    /// Since when the known instance's token has been gone (`None`: it is there).
+    down: Option<Instant>,
+    /// Another instance's token, come since: the bridge was restarted.
+    newer: Option<String>,
+}
+
 impl std::fmt::Debug for BridgeWatch {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("BridgeWatch").field("down", &self.down).finish()
+        f.debug_struct("BridgeWatch").field("tokens", &self.tokens).finish()
     }
 }
 
 impl BridgeWatch {
-    /// Starts watching the bridge serving `prefix`.
+    /// Starts watching the bridge serving `prefix` (its instance's token, there now, is the
+    /// one known).
     pub fn new(z: &zenoh::Session, prefix: &str) -> Result<Self, AgentError> {
-        let down = Arc::new(Mutex::new(None));
-        let d = down.clone();
+        let tokens = Arc::new(Mutex::new(Tokens::default()));
+        let t = tokens.clone();
         let subscriber = z
             .liveliness()
-            .declare_subscriber(wire::bridge_key(prefix))
+            .declare_subscriber(wire::all_bridges_key(prefix))
+            .history(true)
             .callback(move |s: zenoh::sample::Sample| {
-                let mut d = d.lock().unwrap_or_else(|p| p.into_inner());
+                let mut t = t.lock().unwrap_or_else(|p| p.into_inner());
+                let key = s.key_expr().as_str();
                 match s.kind() {
-                    zenoh::sample::SampleKind::Put => *d = None,
-                    zenoh::sample::SampleKind::Delete => *d = d.or(Some(Instant::now())),
+                    zenoh::sample::SampleKind::Put if t.known.is_none() => t.known = Some(key.to_owned()),
+                    zenoh::sample::SampleKind::Put if t.known.as_deref() == Some(key) => t.down = None,
+                    zenoh::sample::SampleKind::Put => t.newer = Some(key.to_owned()),
+                    zenoh::sample::SampleKind::Delete if t.known.as_deref() == Some(key) => {
+                        t.down = t.down.or(Some(Instant::now()));
+                    }
+                    zenoh::sample::SampleKind::Delete if t.newer.as_deref() == Some(key) => t.newer = None,
+                    zenoh::sample::SampleKind::Delete => {}
                 }
             })
             .wait()
             .map_err(zerr("watch the bridge"))?;
         Ok(Self {
-            down,
+            tokens,
             unlinked: std::cell::Cell::new(None),
             news: Arc::new(Mutex::new(None)),
             _subscriber: subscriber,
         })
     }
 
+    /// Whether another run of the bridge has come up since the one this side knows (which
+    /// has forgotten it): an agent says hello again ([`BridgeWatch::rejoined`] then).
+    pub fn replaced(&self) -> bool {
+        self.tokens.lock().unwrap_or_else(|p| p.into_inner()).newer.is_some()
+    }
+
+    /// The newer run of the bridge is now the one known.
+    pub fn rejoined(&self) {
+        let mut t = self.tokens.lock().unwrap_or_else(|p| p.into_inner());
+        if let Some(newer) = t.newer.take() {
+            t.known = Some(newer);
+            t.down = None;
+        }
+    }
+
     /// Whether the bridge is still there, or has been out of reach for less than
-    /// [`BRIDGE_GRACE`]: its liveliness token is there, and `z` is connected to something (a
-    /// client whose one peer or router went has no transport left, and no news of the token
-    /// can reach it; Zenoh meanwhile tries to reconnect).
+    /// [`BRIDGE_GRACE`]: its liveliness token (or a newer run's) is there, and `z` is connected
+    /// to something (a client whose one peer or router went has no transport left, and no news
+    /// of the token can reach it; Zenoh meanwhile tries to reconnect).
     pub fn alive(&self, z: &zenoh::Session) -> bool {
         let now = Instant::now();
         let info = z.info();
         let linked = info.peers_zid().wait().next().is_some() || info.routers_zid().wait().next().is_some();
         let unlinked = if linked { None } else { Some(self.unlinked.get().unwrap_or(now)) };
         self.unlinked.set(unlinked);
-        let mut down = self.down.lock().unwrap_or_else(|p| p.into_inner());
+        let mut t = self.tokens.lock().unwrap_or_else(|p| p.into_inner());
         // A link Zenoh reopened may not bring the token's news again; the bridge's payloads
         // after it went are news enough.
         let last = *self.news.lock().unwrap_or_else(|p| p.into_inner());
-        if down.is_some_and(|since| last.is_some_and(|l| l > since)) {
-            *down = None;
+        if t.down.is_some_and(|since| last.is_some_and(|l| l > since)) {
+            t.down = None;
         }
-        [unlinked, *down].into_iter().flatten().all(|since| now.duration_since(since) < BRIDGE_GRACE)
+        let down = if t.newer.is_some() { None } else { t.down };
+        [unlinked, down].into_iter().flatten().all(|since| now.duration_since(since) < BRIDGE_GRACE)
     }
 }
 
@@ -327,6 +362,8 @@ pub(crate) struct ZenohLink {
     /// The secret the bridge answered this agent's hello with: the attachment of every later
     /// request and actions payload, which proves they are this agent's.
     secret: std::cell::Cell<Option<[u8; wire::SECRET_LEN]>>,
+    /// Each accepted robot's id and registration, in order: what a rejoin registers again.
+    pub(crate) registrations: Vec<(u32, ipc_types::RobotRegistration)>,
 }
 
 impl ZenohLink {
@@ -350,6 +387,7 @@ impl ZenohLink {
             watch,
             held: Vec::new(),
             secret: std::cell::Cell::new(None),
+            registrations: Vec::new(),
         })
     }
 
@@ -466,6 +504,22 @@ impl ZenohLink {
     /// Readable when a sensor frame arrived.
     pub(crate) fn wake_fd(&self) -> i32 {
         self.wake.as_raw_fd()
+    }
+
+    /// Whether the bridge was restarted and has forgotten this agent.
+    pub(crate) fn replaced(&self) -> bool {
+        self.watch.replaced()
+    }
+
+    /// Leaves the bridge run that forgot this agent: its keys, its secret and its frames go,
+    /// and the new run is the one watched. A hello to it follows.
+    pub(crate) fn leave(&mut self) {
+        self.sensors = None;
+        self.actions = None;
+        self._token = None;
+        self.secret.set(None);
+        self.inbox.frames.lock().unwrap_or_else(|p| p.into_inner()).clear();
+        self.watch.rejoined();
     }
 
     /// Whether the bridge is still there (see [`BridgeWatch::alive`]).
