@@ -197,6 +197,9 @@ pub fn threads_for(requested: usize) -> usize {
     }
 }
 
+/// Lock-step ticks whose answer wait the outcome's percentiles count, at most (8 MB).
+const MAX_ANSWER_WAITS: usize = 1 << 20;
+
 /// Runs a hub until its tick limit, a Stop command, or SIGINT/SIGTERM.
 pub fn run(cfg: HubConfig) -> Result<HubOutcome, HubError> {
     raise_fd_limit();
@@ -264,6 +267,13 @@ pub fn run(cfg: HubConfig) -> Result<HubOutcome, HubError> {
     // to come in after their tick was published.
     let mut spun_on: Option<u64> = None;
     let mut last_answer_wait: Option<Duration> = None;
+    // Every lock-step tick's wait, for the outcome's percentiles (reserved up front for a run
+    // of known length, so the loop does not reallocate; a run without end grows it).
+    let mut answer_waits: Vec<u64> = Vec::new();
+    if cfg.mode == Mode::LockStep {
+        let known = if cfg.tick_limit == 0 { 4096 } else { cfg.tick_limit };
+        answer_waits.reserve_exact(known.min(MAX_ANSWER_WAITS as u64) as usize);
+    }
     let mut published_at = Instant::now();
 
     tracing::info!(
@@ -568,7 +578,11 @@ pub fn run(cfg: HubConfig) -> Result<HubOutcome, HubError> {
             if step {
                 first_step.get_or_insert_with(Instant::now);
                 if core.mode() == Mode::LockStep {
-                    last_answer_wait = Some(now.saturating_duration_since(published_at));
+                    let wait = now.saturating_duration_since(published_at);
+                    last_answer_wait = Some(wait);
+                    if answer_waits.len() < MAX_ANSWER_WAITS {
+                        answer_waits.push(wait.as_nanos() as u64);
+                    }
                 }
                 core.step();
                 publish = true;
@@ -622,6 +636,8 @@ pub fn run(cfg: HubConfig) -> Result<HubOutcome, HubError> {
     outcome.refused_poses = core.refused_poses();
     outcome.ticks = core.world().tick();
     outcome.run_s = first_step.map_or(0.0, |t| t.elapsed().as_secs_f64());
+    outcome.answer_wait = (cfg.mode == Mode::LockStep && !answer_waits.is_empty())
+        .then(|| records::latency::Percentiles::of_ns(&answer_waits));
     outcome.state_hash = StateHash(core.world().state_hash());
     outcome.robots = core
         .robot_states()

@@ -700,3 +700,62 @@ fn a_restarted_bridge_takes_its_remote_agents_back_and_they_drive_on() {
     assert!(second.wait(Duration::from_secs(20)).status.success());
     assert_no_shared_memory_left(&s);
 }
+
+#[test]
+fn in_real_time_a_link_pulled_for_two_seconds_rests_the_chair_and_the_clock_goes_on() {
+    let s = session("zenoh-link-pulled-rt");
+    let host = Host::new();
+    // Real time at 20 ms a tick: the hub never waits for anyone.
+    let hub = Proc::spawn(&["hub", "--session", &s, "--cycle-ms", "20", "--no-noise"]);
+    let listen = host.endpoint_here();
+    let mut bridge = Proc::spawn(&["zenoh", "--session", &s, "--listen", &listen, "--connect-timeout", "20"]);
+    let bridge_said = bridge.stderr_lines();
+    bridge_said.said("served under", Duration::from_secs(20));
+    let mut agent = Proc::spawn_in(
+        &host.ns,
+        &["agent", "wheelchair", "--session", &s, "--zenoh", &listen, "--connect-timeout", "20", "--powers", "0.4,0.4"],
+    );
+    let agent_said = agent.stderr_lines();
+    agent_said.said("drives robots ", Duration::from_secs(30));
+    let mut observer = super::common::wait_for_tick(&s, 10, Duration::from_secs(30));
+    // Driving before the cut.
+    let (t0, x0) = tick_and_x(&mut observer, 1);
+    let x_driving = x_at(&mut observer, 1, t0 + 25);
+    assert!(x_driving > x0, "the chair drives: {x0} → {x_driving}");
+    ip(&["link", "set", &host.link, "down"]);
+    let cut = std::time::Instant::now();
+    let (cut_at, _) = tick_and_x(&mut observer, 1);
+    // The bridge rests the silent agent's chair after half a second; by 1.5 s it stands.
+    while cut.elapsed() < Duration::from_millis(1500) {
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    let (_, resting) = tick_and_x(&mut observer, 1);
+    while cut.elapsed() < Duration::from_millis(2000) {
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    let (up_at, still) = tick_and_x(&mut observer, 1);
+    ip(&["link", "set", &host.link, "up"]);
+    assert!((still - resting).abs() < 1e-3, "a chair whose agent is silent stands: {resting} → {still}");
+    // The clock went on meanwhile (2 s at 20 ms a tick is 100 ticks; a loaded machine runs
+    // fewer, but never stops).
+    assert!(up_at >= cut_at + 25, "the hub's clock went on without the agent: tick {cut_at} → {up_at}");
+    // Back on the link, the same agent drives it again.
+    let start = std::time::Instant::now();
+    loop {
+        let (_, x) = tick_and_x(&mut observer, 1);
+        if x > still + 0.2 {
+            break;
+        }
+        assert!(start.elapsed() < Duration::from_secs(30), "the agent never drove again: still at {x}");
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    drop(observer);
+    assert_eq!(agent_sdk::control(&s, ipc_types::Command::Stop, 0).expect("the hub answers").status, 0);
+    assert!(hub.wait(Duration::from_secs(30)).status.success());
+    let a = agent.wait(Duration::from_secs(30));
+    assert!(a.status.success(), "{}", agent_said.to_end(Duration::from_secs(5)).join("\n"));
+    assert!(bridge.wait(Duration::from_secs(20)).status.success());
+    let said = bridge_said.to_end(Duration::from_secs(5)).join("\n");
+    assert!(said.contains("rest until it speaks"), "{said}");
+    assert_no_shared_memory_left(&s);
+}

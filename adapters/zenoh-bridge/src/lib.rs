@@ -238,6 +238,11 @@ struct RemoteAgent {
     waited_out: bool,
     /// Its liveliness token went (and has not come back): its robots are orphans meanwhile.
     gone: bool,
+    /// When its last actions came (or its hello): in real time, a silence longer than
+    /// [`Bridge::silence`] rests its robots.
+    heard: Instant,
+    /// Its robots were rested for its silence; it is not rested again until it speaks.
+    rested: bool,
 }
 
 /// A robot whose remote agent went: it stands until an agent takes it back.
@@ -597,6 +602,8 @@ impl Bridge {
                         actions: BTreeMap::new(),
                         waited_out: false,
                         gone: false,
+                        heard: Instant::now(),
+                        rested: false,
                     },
                 );
                 tracing::info!("remote agent {id} said hello");
@@ -760,6 +767,8 @@ impl Bridge {
         }
         r.answered = Some(r.answered.map_or(h.tick, |t| t.max(h.tick)));
         r.waited_out = false;
+        r.heard = Instant::now();
+        r.rested = false;
         self.changed = true;
     }
 
@@ -852,7 +861,23 @@ impl Bridge {
             late = !all;
             !self.answered && (all || near_deadline)
         } else {
-            std::mem::take(&mut self.changed)
+            // In real time the hub keeps a robot's last powers: a remote agent silent for
+            // longer than a few ticks (its link stalls) gets its robots rested once, rather
+            // than driven blind until Zenoh's lease (10 s) declares it gone.
+            let silence = self.silence();
+            let mut rest = false;
+            for r in self.remotes.values_mut() {
+                if !r.gone && !r.rested && !r.robots.is_empty() && r.heard.elapsed() > silence {
+                    r.rested = true;
+                    r.actions.clear();
+                    rest = true;
+                    tracing::warn!(
+                        "remote agent silent for {silence:?}: its robots {:?} rest until it speaks",
+                        r.robots
+                    );
+                }
+            }
+            std::mem::take(&mut self.changed) || rest
         };
         if !due {
             return Ok(());
@@ -864,7 +889,7 @@ impl Bridge {
         let actions = &mut self.answer;
         actions.clear();
         for r in self.remotes.values() {
-            if lockstep && r.sent == Some(tick) && r.answered < Some(tick) {
+            if r.rested || lockstep && r.sent == Some(tick) && r.answered < Some(tick) {
                 actions.extend(r.robots.iter().map(|&id| ActionBlock::motors(id, 0.0, 0.0)));
             } else {
                 actions.extend(r.actions.values().copied());
@@ -882,6 +907,12 @@ impl Bridge {
             }
         }
         Ok(())
+    }
+
+    /// How long a remote agent may be silent in real time before its robots rest: five ticks,
+    /// and at least half a second.
+    fn silence(&self) -> Duration {
+        Duration::from_millis(u64::from(self.map.0.cycle_ms) * 5).max(Duration::from_millis(500))
     }
 
     /// Sends a run-control command without waiting for the hub's answer.

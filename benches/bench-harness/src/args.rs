@@ -123,6 +123,14 @@ pub struct BenchLockstepArgs {
     /// (`both` is shm,udp; `all` is shm,udp,zenoh).
     #[arg(long, default_value = "shm", value_delimiter = ',')]
     pub transport: Vec<Transport>,
+    /// Run the UDP clients and the Zenoh agents in this network namespace, as on another host
+    /// (made beforehand, joined to this one by a veth pair; needs root): the bridges listen on
+    /// --netns-address. Shared-memory agents stay here.
+    #[arg(long, value_name = "NS", requires = "netns_address")]
+    pub netns: Option<String>,
+    /// This host's address on the link to --netns, which the bridges listen on.
+    #[arg(long, value_name = "ADDRESS", requires = "netns")]
+    pub netns_address: Option<std::net::IpAddr>,
     /// Also run over UDP with this many junk datagrams sent at the bridge during the run (half
     /// to its registration port, half to a client's port from a stranger), and report ticks/s
     /// with and without the flood and the bridge's stderr bytes (0: no flood run).

@@ -232,8 +232,20 @@ fn iwsim_exe() -> anyhow::Result<std::path::PathBuf> {
 }
 
 pub(crate) fn spawn_self(args: &[String]) -> anyhow::Result<std::process::Child> {
-    std::process::Command::new(iwsim_exe()?)
-        .args(args)
+    spawn_self_in(None, args)
+}
+
+/// [`spawn_self`] in network namespace `netns` (`ip netns exec`, which execs iwsim in place).
+pub(crate) fn spawn_self_in(netns: Option<&str>, args: &[String]) -> anyhow::Result<std::process::Child> {
+    let mut cmd = match netns {
+        Some(ns) => {
+            let mut c = std::process::Command::new("ip");
+            c.args(["netns", "exec", ns]).arg(iwsim_exe()?);
+            c
+        }
+        None => std::process::Command::new(iwsim_exe()?),
+    };
+    cmd.args(args)
         .stdin(std::process::Stdio::null())
         .stdout(std::process::Stdio::piped())
         .stderr(std::process::Stdio::piped())
@@ -431,6 +443,9 @@ pub struct LockstepBench {
     pub hub_peak_rss_kib: u64,
     /// What the agents read (real load only; zero otherwise).
     pub readings: load::Readings,
+    /// One tick's round trip as the hub timed it: from its publication to the last answer
+    /// (through the bridge from remote agents), percentiles over the run's ticks.
+    pub round_trip: Option<records::latency::Percentiles>,
 }
 
 /// A hub in lock-step with `agents` agent processes of `robots_per_agent` robots each, physics
@@ -451,6 +466,7 @@ pub fn measure_lockstep(
     robots_per_agent: usize,
     ticks: u64,
     plan: VariantPlan,
+    away: Option<&Away>,
 ) -> anyhow::Result<LockstepBench> {
     let VariantPlan { udp, zenoh, flood, record, real, .. } = plan;
     // Repeated runs in one invocation each get a session and folder of their own, so nothing a
@@ -475,7 +491,7 @@ pub fn measure_lockstep(
     std::fs::write(&lab, lab_xml)?;
     let session = format!("bench-ls-{}-{tag}", std::process::id());
     let recording = record.then(|| dir.join("run.mcap"));
-    let run = run_lockstep(&session, &lab, (agents, robots_per_agent, ticks), plan, recording.as_deref());
+    let run = run_lockstep(&session, &lab, (agents, robots_per_agent, ticks), plan, recording.as_deref(), away);
     let _ = std::fs::remove_dir_all(&dir);
     // A run that failed stopped its hub, perhaps before the hub could clean up (a helper that
     // fails at once stops it while it starts): remove what a dead hub left of the session.
@@ -500,7 +516,18 @@ pub fn measure_lockstep(
         recorded_bytes: hub_out.recorded_bytes,
         hub_peak_rss_kib: out.hub_peak_rss_kib,
         readings,
+        round_trip: hub_out.answer_wait,
     })
+}
+
+/// Another host for the bridges' clients: a network namespace, and this host's address on the
+/// link to it (`bench lockstep --netns NS --netns-address ADDRESS`).
+#[derive(Debug, Clone)]
+pub struct Away {
+    /// The namespace the UDP clients and the Zenoh agents run in.
+    pub netns: String,
+    /// Where they reach the bridges.
+    pub address: std::net::IpAddr,
 }
 
 /// Robots of the IPC-only lattices stand this far apart, ten to a row.
@@ -527,8 +554,12 @@ fn run_lockstep(
     (agents, robots_per_agent, ticks): (usize, usize, u64),
     plan: VariantPlan,
     record: Option<&std::path::Path>,
+    away: Option<&Away>,
 ) -> anyhow::Result<(crew::CrewOutput, u64, u64)> {
     let VariantPlan { udp, zenoh, flood, real, .. } = plan;
+    // Where the bridges' clients run, and the address the bridges serve them on.
+    let there = away.map(|a| a.netns.as_str());
+    let bridge_ip = away.map_or(std::net::IpAddr::from([127, 0, 0, 1]), |a| a.address);
     // Over a bridge (UDP or Zenoh) the bridge is the hub's one agent, whatever the number of
     // clients.
     let hub_agents = if udp || zenoh { 1 } else { agents };
@@ -562,6 +593,8 @@ fn run_lockstep(
             session.to_owned(),
             "--port".into(),
             "0".into(),
+            "--bind".into(),
+            bridge_ip.to_string(),
             "--connect-timeout".into(),
             "30".into(),
         ])?;
@@ -593,7 +626,7 @@ fn run_lockstep(
                     total.clone(),
                 ]);
             }
-            let mut client = spawn_self(&client_args)?;
+            let mut client = spawn_self_in(there, &client_args)?;
             registered.push(std::io::BufReader::new(client.stdout.take().context("a UDP client's stdout")?));
             crew.push(client, "UDP client");
         }
@@ -612,11 +645,12 @@ fn run_lockstep(
             flooder = Some(start_flood(server, flood)?);
         }
     } else {
-        // Through Zenoh: the bridge on a free loopback port, and every agent told to use it.
+        // Through Zenoh: the bridge on a free port (loopback, or the link to the other host),
+        // and every agent told to use it.
         let mut via = Vec::new();
         if zenoh {
-            let port = std::net::TcpListener::bind("127.0.0.1:0")?.local_addr()?.port();
-            let endpoint = format!("tcp/127.0.0.1:{port}");
+            let port = std::net::TcpListener::bind((bridge_ip, 0))?.local_addr()?.port();
+            let endpoint = format!("tcp/{bridge_ip}:{port}");
             let mut bridge = spawn_self(&[
                 "zenoh".into(),
                 "--session".into(),
@@ -678,7 +712,7 @@ fn run_lockstep(
                 };
                 let mut args = args;
                 args.extend(via.iter().cloned());
-                let mut agent = spawn_self(&args)?;
+                let mut agent = spawn_self_in(if zenoh { there } else { None }, &args)?;
                 announced.push(std::io::BufReader::new(agent.stderr.take().context("an agent's stderr")?));
                 crew.push(agent, "agent");
             }
@@ -810,7 +844,10 @@ pub fn udp_client(args: &UdpClientArgs) -> anyhow::Result<ExitCode> {
     let lattice = load::Lattice::new(args.total);
     let mut socks = Vec::new();
     for k in 0..args.robots {
-        let s = UdpSocket::bind("127.0.0.1:0").context("bind a client socket")?;
+        // Loopback to a bridge on loopback; any address to one on another host's link.
+        let local: std::net::IpAddr =
+            if args.server.ip().is_loopback() { [127, 0, 0, 1].into() } else { [0, 0, 0, 0].into() };
+        let s = UdpSocket::bind((local, 0)).context("bind a client socket")?;
         s.set_read_timeout(Some(Duration::from_secs(10)))?;
         let reg = if args.real {
             let g = args.first + k;
@@ -923,6 +960,15 @@ impl LockstepVariant {
     pub fn real(&self) -> bool {
         self.name.ends_with("+real")
     }
+
+    /// One tick's round trip, µs: the spread over the runs of each run's median, and of each
+    /// run's 99th percentile; `None` when the hub reported none.
+    pub fn round_trip_us(&self) -> Option<(Spread, Spread)> {
+        let p: Vec<_> = self.runs.iter().filter_map(|b| b.round_trip).collect();
+        let p50: Vec<f64> = p.iter().map(|p| p.p50_us).collect();
+        let p99: Vec<f64> = p.iter().map(|p| p.p99_us).collect();
+        Some((Spread::of(&p50)?, Spread::of(&p99)?))
+    }
 }
 
 /// A ratio of two variants: of their medians, and its spread over the rounds, each round's two
@@ -1028,9 +1074,10 @@ fn lockstep_variants(args: &BenchLockstepArgs) -> Vec<VariantPlan> {
 /// Runs every variant `args.runs` times, interleaved round by round.
 pub fn measure_lockstep_runs(args: &BenchLockstepArgs) -> anyhow::Result<Vec<LockstepVariant>> {
     let variants = lockstep_variants(args);
+    let away = args.netns.clone().zip(args.netns_address).map(|(netns, address)| Away { netns, address });
     let runs = repeat::interleaved(args.runs, variants.len(), |round, i| {
         let plan = variants[i];
-        measure_lockstep(args.agents, args.robots_per_agent, args.ticks, plan)
+        measure_lockstep(args.agents, args.robots_per_agent, args.ticks, plan, away.as_ref())
             .with_context(|| format!("run {} of {}", round + 1, plan.name))
     })?;
     Ok(variants.iter().zip(runs).map(|(plan, runs)| LockstepVariant { name: plan.name, runs }).collect())
@@ -1071,6 +1118,9 @@ pub fn lockstep_report(args: &BenchLockstepArgs, variants: &[LockstepVariant]) -
             "{{\"agents\":{},\"robots_per_agent\":{},\"ticks\":{ticks},\"runs\":{}",
             args.agents, args.robots_per_agent, args.runs
         );
+        if let (Some(ns), Some(a)) = (&args.netns, args.netns_address) {
+            s += &format!(",\"netns\":{ns:?},\"netns_address\":\"{a}\"");
+        }
         for v in variants {
             let t = v.ticks_per_s();
             // One variant keeps the old `transport` and `ticks_per_s` keys; several are named.
@@ -1084,6 +1134,12 @@ pub fn lockstep_report(args: &BenchLockstepArgs, variants: &[LockstepVariant]) -
             s += &format!(",\"{key}\":{:.1},\"{key}_min\":{:.1},\"{key}_max\":{:.1}", t.median, t.min, t.max);
             if v.hub_peak_rss_mib() > 0.0 {
                 s += &format!(",\"{prefix}hub_peak_rss_mib\":{:.1}", v.hub_peak_rss_mib());
+            }
+            if let Some((p50, p99)) = v.round_trip_us() {
+                s += &format!(
+                    ",\"{prefix}round_trip_p50_us\":{:.1},\"{prefix}round_trip_p99_us\":{:.1}",
+                    p50.median, p99.median
+                );
             }
             if v.real() {
                 let r = v.readings();
@@ -1133,6 +1189,9 @@ pub fn lockstep_report(args: &BenchLockstepArgs, variants: &[LockstepVariant]) -
         s += "}\n";
         return s;
     }
+    if let (Some(ns), Some(a)) = (&args.netns, args.netns_address) {
+        s += &format!("the bridges' clients in network namespace {ns}, reaching them at {a}\n");
+    }
     for v in variants {
         let t = v.ticks_per_s();
         let rate = if t.runs > 1 {
@@ -1162,8 +1221,16 @@ pub fn lockstep_report(args: &BenchLockstepArgs, variants: &[LockstepVariant]) -
         } else {
             String::new()
         };
+        let trip = match v.round_trip_us() {
+            Some((p50, p99)) if t.runs > 1 => format!(
+                "; a tick's round trip p50 {:.0} us ({:.0}-{:.0}), p99 {:.0} us ({:.0}-{:.0})",
+                p50.median, p50.min, p50.max, p99.median, p99.min, p99.max
+            ),
+            Some((p50, p99)) => format!("; a tick's round trip p50 {:.0} us, p99 {:.0} us", p50.median, p99.median),
+            None => String::new(),
+        };
         s += &format!(
-            "lockstep over {transport}: {} agents x {} robots, {what}: {rate} over {ticks} ticks{flooded}{stderr}{near}{rss}\n",
+            "lockstep over {transport}: {} agents x {} robots, {what}: {rate} over {ticks} ticks{trip}{flooded}{stderr}{near}{rss}\n",
             args.agents, args.robots_per_agent
         );
     }
@@ -1251,6 +1318,7 @@ mod tests {
             recorded_bytes: 0,
             hub_peak_rss_kib: 0,
             readings: load::Readings::default(),
+            round_trip: None,
         }
     }
 
@@ -1341,6 +1409,24 @@ mod tests {
         assert_eq!(j["shm_real_readings_near_fraction"], 0.75);
         assert_eq!(j["ratio_shm_real_over_shm"], 0.75);
         assert_eq!(j["real_neighbours_in_range"], 6.84);
+    }
+
+    #[test]
+    fn the_report_gives_a_ticks_round_trip_and_where_the_clients_ran() {
+        let trip = |p50: f64, p99: f64| LockstepBench {
+            round_trip: Some(records::latency::Percentiles { samples: 1000, p50_us: p50, p99_us: p99, p999_us: p99 }),
+            ..run(2000.0, 0, 0)
+        };
+        let v = [LockstepVariant { name: "zenoh", runs: vec![trip(300.0, 900.0), trip(250.0, 700.0), trip(400.0, 800.0)] }];
+        let a = lockstep_args(&["--transport", "zenoh", "--netns", "far", "--netns-address", "10.0.0.1"]).expect("parses");
+        let out = lockstep_report(&a, &v);
+        assert!(out.starts_with("the bridges' clients in network namespace far, reaching them at 10.0.0.1\n"), "{out}");
+        assert!(out.contains("a tick's round trip p50 300 us (250-400), p99 800 us (700-900)"), "{out}");
+        let a = lockstep_args(&["--transport", "zenoh", "--json"]).expect("parses");
+        let j: serde_json::Value = serde_json::from_str(&lockstep_report(&a, &v)).expect("one JSON object");
+        assert_eq!((j["round_trip_p50_us"].as_f64(), j["round_trip_p99_us"].as_f64()), (Some(300.0), Some(800.0)));
+        // A namespace needs the address the bridges serve it on.
+        assert!(lockstep_args(&["--netns", "far"]).is_err());
     }
 
     #[test]

@@ -128,6 +128,11 @@ pub struct HubOutcome {
     /// Every robot's final standing in the challenge, in id order.
     #[serde(default)]
     pub scores: Vec<ScoreAtEnd>,
+    /// In lock-step, how long each tick waited from its publication to its last answer (the
+    /// round trip of one tick through every agent, and through a bridge to remote agents):
+    /// percentiles over the run's ticks (the first million), or `None` in real time.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub answer_wait: Option<crate::latency::Percentiles>,
 }
 
 /// Why a hub's stdout gave no outcome.
@@ -185,10 +190,16 @@ mod tests {
                 collisions: 1,
                 visited: "00".into(),
             }],
+            answer_wait: Some(crate::latency::Percentiles {
+                samples: 60,
+                p50_us: 812.5,
+                p99_us: 2000.0,
+                p999_us: 2100.0,
+            }),
         };
         assert_eq!(
             out.json_line(),
-            r#"{"ticks":60,"run_s":0.123457,"state_hash":"0123456789abcdef","agents_seen":2,"agents_died":1,"foreign_dropped":4,"recorded_bytes":0,"recording_dropped_frames":0,"snapshots":61,"refused_poses":0,"interrupted":false,"robots":[{"id":3,"x_m":10.5,"y_m":6.1,"heading_deg":-90.0,"flags":4}],"scoring":1,"scores":[{"id":3,"name":"RS1","state":"Finished","score":-5,"arrival_tick":0,"returning_ticks":0,"collisions":1,"visited":"00"}]}"#
+            r#"{"ticks":60,"run_s":0.123457,"state_hash":"0123456789abcdef","agents_seen":2,"agents_died":1,"foreign_dropped":4,"recorded_bytes":0,"recording_dropped_frames":0,"snapshots":61,"refused_poses":0,"interrupted":false,"robots":[{"id":3,"x_m":10.5,"y_m":6.1,"heading_deg":-90.0,"flags":4}],"scoring":1,"scores":[{"id":3,"name":"RS1","state":"Finished","score":-5,"arrival_tick":0,"returning_ticks":0,"collisions":1,"visited":"00"}],"answer_wait":{"samples":60,"p50_us":812.5,"p99_us":2000.0,"p999_us":2100.0}}"#
         );
     }
 
