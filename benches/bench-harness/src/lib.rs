@@ -1417,8 +1417,10 @@ mod tests {
             round_trip: Some(records::latency::Percentiles { samples: 1000, p50_us: p50, p99_us: p99, p999_us: p99 }),
             ..run(2000.0, 0, 0)
         };
-        let v = [LockstepVariant { name: "zenoh", runs: vec![trip(300.0, 900.0), trip(250.0, 700.0), trip(400.0, 800.0)] }];
-        let a = lockstep_args(&["--transport", "zenoh", "--netns", "far", "--netns-address", "10.0.0.1"]).expect("parses");
+        let v =
+            [LockstepVariant { name: "zenoh", runs: vec![trip(300.0, 900.0), trip(250.0, 700.0), trip(400.0, 800.0)] }];
+        let a =
+            lockstep_args(&["--transport", "zenoh", "--netns", "far", "--netns-address", "10.0.0.1"]).expect("parses");
         let out = lockstep_report(&a, &v);
         assert!(out.starts_with("the bridges' clients in network namespace far, reaching them at 10.0.0.1\n"), "{out}");
         assert!(out.contains("a tick's round trip p50 300 us (250-400), p99 800 us (700-900)"), "{out}");
