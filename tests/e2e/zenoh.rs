@@ -759,3 +759,64 @@ fn in_real_time_a_link_pulled_for_two_seconds_rests_the_chair_and_the_clock_goes
     assert!(said.contains("rest until it speaks"), "{said}");
     assert_no_shared_memory_left(&s);
 }
+
+#[test]
+fn with_the_documented_tls_files_only_an_agent_holding_the_labs_certificate_gets_in() {
+    // README's example: certificates made by docs/zenoh/make-certs.sh, the two documented
+    // configuration files as they are, each process started where `certs/` is.
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let dir = work_dir("tls");
+    let made = Command::new("bash")
+        .arg(root.join("docs/zenoh/make-certs.sh"))
+        .arg(dir.join("certs"))
+        .output()
+        .expect("bash runs");
+    assert!(made.status.success(), "make-certs.sh: {}", text(&made.stderr));
+    let s = session("zenoh-tls");
+    let hub = Proc::spawn(&["hub", "--session", &s, "--lockstep", "--ticks", "100", "--wait-agents", "1"]);
+    let endpoint = format!("tls/localhost:{}", free_port());
+    let config = |name: &str| root.join("docs/zenoh").join(name).to_str().expect("utf-8").to_owned();
+    let bridge_cfg = config("bridge-tls.json5");
+    let mut bridge = Proc::spawn_at(
+        &dir,
+        &["zenoh", "--session", &s, "--listen", &endpoint, "--connect-timeout", "20", "--zenoh-config", &bridge_cfg],
+    );
+    bridge.announced("served under", Duration::from_secs(20));
+    // An agent that trusts the lab's authority but holds no certificate of it is kept out
+    // (mutual TLS): it gives up at its timeout and says why.
+    std::fs::write(
+        dir.join("no-client-cert.json5"),
+        r#"{ transport: { link: { tls: { root_ca_certificate: "certs/ca.pem" } } } }"#,
+    )
+    .expect("written");
+    let agent = |cfg: &str, timeout: &str| {
+        Proc::spawn_at(
+            &dir,
+            &[
+                "agent",
+                "wheelchair",
+                "--session",
+                &s,
+                "--zenoh",
+                &endpoint,
+                "--connect-timeout",
+                timeout,
+                "--zenoh-config",
+                cfg,
+            ],
+        )
+        .wait(Duration::from_secs(60))
+    };
+    let stranger = agent("no-client-cert.json5", "2");
+    assert!(!stranger.status.success());
+    assert!(text(&stranger.stderr).contains(&format!("connect to {endpoint}")), "{}", text(&stranger.stderr));
+    // The documented agent file: it checks the bridge, shows its own certificate, drives.
+    let listed = agent(&config("agent-tls.json5"), "20");
+    assert!(listed.status.success(), "{}", text(&listed.stderr));
+    let h = hub.wait(Duration::from_secs(60));
+    assert!(h.status.success(), "{}", text(&h.stderr));
+    assert!(text(&h.stdout).contains("tick 100 "), "{}", text(&h.stdout));
+    assert!(bridge.wait(Duration::from_secs(20)).status.success());
+    let _ = std::fs::remove_dir_all(&dir);
+    assert_no_shared_memory_left(&s);
+}
