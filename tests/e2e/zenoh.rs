@@ -820,3 +820,49 @@ fn with_the_documented_tls_files_only_an_agent_holding_the_labs_certificate_gets
     let _ = std::fs::remove_dir_all(&dir);
     assert_no_shared_memory_left(&s);
 }
+
+#[test]
+fn an_episode_that_reached_its_time_limit_still_answers_its_end_with_its_summary() {
+    // An episode host here, an environment's queries from this test, a lab sent along.
+    let endpoint = format!("tcp/127.0.0.1:{}", free_port());
+    let mut host = Proc::spawn(&["env-host", "--listen", &endpoint]);
+    host.announced("episodes served under", Duration::from_secs(20));
+    let episodes =
+        agent_sdk::remote::EpisodeHost::connect(&agent_sdk::remote::Remote::new(&endpoint), Duration::from_secs(20))
+            .expect("the host answers");
+    let lab = std::fs::read(Path::new(env!("CARGO_MANIFEST_DIR")).join("hub/world/maps/liacc-lab.xml")).expect("lab");
+    let s = episodes.start(&["--ticks".into(), "40".into()], Some(lab)).expect("an episode starts");
+    // The host keeps the sent lab while the episode runs, and removes it when it has reaped it.
+    let lab_file = std::env::temp_dir().join(format!("iwsim-episodes-{}", host.pid())).join(format!("{s}.xml"));
+    assert!(lab_file.exists(), "{} while the episode runs", lab_file.display());
+    // An agent drives the episode to its time limit and leaves.
+    let agent = Proc::spawn(&[
+        "agent",
+        "wheelchair",
+        "--session",
+        &s,
+        "--zenoh",
+        &endpoint,
+        "--connect-timeout",
+        "20",
+        "--pose",
+        "10,6.1,0",
+    ])
+    .wait(Duration::from_secs(60));
+    assert!(agent.status.success(), "{}", text(&agent.stderr));
+    let start = std::time::Instant::now();
+    while lab_file.exists() {
+        assert!(start.elapsed() < Duration::from_secs(30), "the ended episode was never reaped");
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    // Ended long before the environment asks: its summary is still there, once.
+    let summary = records::outcome::HubOutcome::from_stdout(&episodes.end(&s).expect("the host answers"))
+        .expect("the hub's summary");
+    assert_eq!(summary.ticks, 40);
+    let again = episodes.end(&s).expect_err("an episode ends once");
+    assert!(again.to_string().contains("no episode"), "{again}");
+    drop(episodes);
+    host.signal("TERM");
+    assert!(host.wait(Duration::from_secs(30)).status.success());
+    assert_no_shared_memory_left(&s);
+}

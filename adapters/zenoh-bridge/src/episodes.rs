@@ -63,6 +63,8 @@ const MAX_REQUEST_BYTES: usize = 4 << 20;
 const START_TIMEOUT: Duration = Duration::from_secs(20);
 /// How long a hub has to end its run after SIGTERM before it is killed.
 const END_TIMEOUT: Duration = Duration::from_secs(20);
+/// Ended episodes whose summaries are kept for their environments, at most.
+const MAX_ENDED: usize = 256;
 /// Queries waiting for the host's loop, at most (more are dropped: their askers time out).
 const MAX_WAITING: usize = 64;
 
@@ -142,7 +144,16 @@ pub fn serve(cfg: &HostConfig) -> Result<(), BridgeError> {
         );
     }
     let work = std::env::temp_dir().join(format!("iwsim-episodes-{}", std::process::id()));
-    let mut host = Host { cfg: cfg.clone(), z, prefix, work, episodes: Vec::new(), next: 1, dying: Vec::new() };
+    let mut host = Host {
+        cfg: cfg.clone(),
+        z,
+        prefix,
+        work,
+        episodes: Vec::new(),
+        next: 1,
+        dying: Vec::new(),
+        ended: Default::default(),
+    };
     agent_sdk::report!(
         "iwsim env-host: episodes served under {}/ (listening on {}{})",
         host.prefix,
@@ -165,6 +176,9 @@ struct Host {
     next: u64,
     /// Bridges whose hub never came up, joined once they give up.
     dying: Vec<JoinHandle<Result<Counters, BridgeError>>>,
+    /// Episodes that ended by themselves (their time limit), with their summaries, until
+    /// their environments end them.
+    ended: std::collections::VecDeque<(String, String)>,
 }
 
 impl Host {
@@ -306,6 +320,9 @@ impl Host {
     }
 
     fn end(&mut self, session: &str) -> Result<String, String> {
+        if let Some(k) = self.ended.iter().position(|(s, _)| s == session) {
+            return Ok(self.ended.remove(k).map(|(_, summary)| summary).unwrap_or_default());
+        }
         let k = self
             .episodes
             .iter()
@@ -361,7 +378,13 @@ impl Host {
         while k < self.episodes.len() {
             if matches!(self.episodes[k].hub.try_wait(), Ok(Some(_))) && self.episodes[k].bridge.is_finished() {
                 let e = self.episodes.swap_remove(k);
-                self.finish(e, false);
+                let session = e.session.clone();
+                let summary = self.finish(e, false);
+                // Kept for the environment's end, which may come long after the time limit.
+                if self.ended.len() >= MAX_ENDED {
+                    self.ended.pop_front();
+                }
+                self.ended.push_back((session, summary));
             } else {
                 k += 1;
             }
