@@ -758,6 +758,13 @@ impl Bridge {
             self.counters.foreign += 1;
             return;
         }
+        // Its own actions from an agent taken for gone: it is back, whatever its token said
+        // (a token's news can arrive out of order across a restarted router, its going after
+        // its coming back).
+        if r.gone {
+            self.came_back(id);
+        }
+        let Some(r) = self.remotes.get_mut(&id) else { return };
         for b in blocks {
             if r.robots.contains(&b.robot_id) {
                 r.actions.insert(b.robot_id, b);
