@@ -459,6 +459,56 @@ fn through_a_router_between_the_hosts_the_run_is_the_local_run() {
     assert_no_shared_memory_left(&s);
 }
 
+/// Agents `a` and `b` (two chairs each, `b` started once `a` drives) in a 200-tick lock-step
+/// run of session `s`: locally when `bridge` is `None`, else on the other host through a
+/// bridge listening at `bridge` and waiting for both. The hub's state-hash line.
+fn two_agents_one_after_the_other(s: &str, bridge: Option<(&Host, &str)>) -> String {
+    let waited = if bridge.is_some() { "1" } else { "2" };
+    let hub = Proc::spawn(&["hub", "--session", s, "--lockstep", "--ticks", "200", "--wait-agents", waited]);
+    let mut zb = bridge.map(|(_, ep)| {
+        let mut b = Proc::spawn(&["zenoh", "--session", s, "--listen", ep, "--wait-agents", "2"]);
+        b.announced("served under", Duration::from_secs(20));
+        b
+    });
+    let agent = |name: &str, powers: &str| {
+        let mut args = vec!["agent", "wheelchair", "--session", s, "--name", name, "--robots", "2"];
+        args.extend(["--powers", powers, "--connect-timeout", "20"]);
+        match bridge {
+            Some((host, ep)) => {
+                args.extend(["--zenoh", ep]);
+                Proc::spawn_in(&host.ns, &args)
+            }
+            None => Proc::spawn(&args),
+        }
+    };
+    let mut a = agent("a", "0.6,0.5");
+    a.announced("drives robots", Duration::from_secs(30));
+    // The hub has not ticked: it waits for b, here or behind the bridge.
+    let b = agent("b", "0.5,0.6");
+    for p in [a, b] {
+        let o = p.wait(Duration::from_secs(120));
+        assert!(o.status.success(), "{}", text(&o.stderr));
+    }
+    let h = hub.wait(Duration::from_secs(60));
+    assert!(h.status.success(), "{}", text(&h.stderr));
+    if let Some(b) = zb.take() {
+        assert!(b.wait(Duration::from_secs(20)).status.success());
+    }
+    hash_line(&text(&h.stdout))
+}
+
+#[test]
+fn a_bridge_waiting_for_two_remote_agents_starts_the_run_with_both_as_a_hub_does() {
+    let host = Host::new();
+    let here = two_agents_one_after_the_other(&session("zenoh-wait-here"), None);
+    let s = session("zenoh-wait");
+    let ep = host.endpoint_here();
+    let there = two_agents_one_after_the_other(&s, Some((&host, &ep)));
+    // Had the run started at a's word, b's chairs would have missed its first ticks.
+    assert_eq!(there, here);
+    assert_no_shared_memory_left(&s);
+}
+
 #[test]
 fn a_router_restarted_mid_run_costs_ticks_not_agents() {
     let host = Host::new();

@@ -34,6 +34,11 @@ pub struct ZenohArgs {
     /// agents under test must not read, and anyone who reaches the endpoint could.
     #[arg(long, value_enum, default_value = "off")]
     pub observers: crate::Observers,
+    /// Remote agents to wait for: the bridge tells the hub it is ready (so a lock-step hub's
+    /// --wait-agents counts it) once this many remote agents have registered their robots and
+    /// said they are ready.
+    #[arg(long, value_name = "N", default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..))]
+    pub wait_agents: u32,
 }
 
 /// The endpoint listened on when neither `--listen` nor `--connect` is given.
@@ -54,6 +59,7 @@ pub fn run(args: &ZenohArgs) -> anyhow::Result<ExitCode> {
         config: args.zenoh_config.clone(),
         prefix: args.prefix.clone(),
         observers: args.observers,
+        wait_agents: args.wait_agents as usize,
     };
     let bridge = Bridge::start(&cfg)?;
     agent_sdk::report!(

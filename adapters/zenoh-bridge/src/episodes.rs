@@ -260,6 +260,7 @@ impl Host {
             config: None,
             prefix: None,
             observers: Observers::World,
+            wait_agents: 1,
         };
         let z = self.z.clone();
         let bridge = std::thread::spawn(move || match Bridge::start_on(&bcfg, z) {

@@ -81,6 +81,10 @@ pub struct BridgeConfig {
     pub prefix: Option<String>,
     /// What remote observers may read.
     pub observers: Observers,
+    /// Remote agents that must say they are ready before the bridge tells the hub it is: a
+    /// lock-step run then starts with every one of them in, as `iwsim hub --wait-agents` does
+    /// for local agents. At least 1.
+    pub wait_agents: usize,
 }
 
 /// What a bridge serves to observers on other machines.
@@ -285,6 +289,9 @@ pub struct Bridge {
     /// The bridge's own ready request, and the remote ready requests waiting on it.
     ready: Option<PendingRequest>,
     ready_waiting: Vec<zenoh::query::Query>,
+    /// The remote agents that said they are ready, while the bridge waits for enough of them.
+    ready_agents: std::collections::BTreeSet<u32>,
+    wait_agents: usize,
     is_ready: bool,
     orphans: Vec<Orphan>,
     /// The robots' names, for taking a robot back.
@@ -406,6 +413,8 @@ impl Bridge {
             queued: VecDeque::new(),
             ready: None,
             ready_waiting: Vec::new(),
+            ready_agents: std::collections::BTreeSet::new(),
+            wait_agents: cfg.wait_agents.max(1),
             is_ready: false,
             orphans: Vec::new(),
             names: BTreeMap::new(),
@@ -633,7 +642,14 @@ impl Bridge {
             }
             Some(RegisterKind::Robot) => self.queued.push_back((q, req)),
             Some(RegisterKind::Ready) => {
-                if self.is_ready {
+                if !self.is_ready {
+                    self.ready_agents.insert(req.agent_id);
+                }
+                // An agent counted while the bridge waits for more is answered at once, as the
+                // hub answers a local one (it then waits for the first tick, not for a reply
+                // that could time out); the one that completes the count, once the hub has
+                // answered the bridge.
+                if self.is_ready || self.ready_agents.len() < self.wait_agents {
                     let r = RegisterResponse { agent_id: req.agent_id, ..bytemuck::Zeroable::zeroed() };
                     let _ = q.reply(q.key_expr().clone(), bytemuck::bytes_of(&r).to_vec()).wait();
                 } else {
@@ -642,6 +658,7 @@ impl Bridge {
             }
             Some(RegisterKind::Bye) => {
                 // As a local agent's goodbye: its robots leave the run.
+                self.ready_agents.remove(&req.agent_id);
                 if let Some(r) = self.remotes.remove(&req.agent_id) {
                     tracing::info!("remote agent {} said goodbye", req.agent_id);
                     for id in r.robots {
@@ -658,8 +675,15 @@ impl Bridge {
     /// Forwards queued registrations to the hub, and the answers back.
     fn serve_joining(&mut self) -> Result<(), BridgeError> {
         // Ready once a remote robot exists (a bridge with no robots must not count towards a
-        // hub's --wait-agents), and once some remote agent says it is.
-        if !self.is_ready && self.ready.is_none() && !self.ready_waiting.is_empty() && self.joining.is_empty() {
+        // hub's --wait-agents), and once --wait-agents remote agents say they are, with every
+        // registration sent before answered: none of them then misses the first tick.
+        if !self.is_ready
+            && self.ready.is_none()
+            && !self.ready_waiting.is_empty()
+            && self.ready_agents.len() >= self.wait_agents
+            && self.joining.is_empty()
+            && self.queued.is_empty()
+        {
             self.ready = Some(self.agent.start_ready()?);
         }
         if let Some(p) = &self.ready {
@@ -854,6 +878,12 @@ impl Bridge {
     /// silent agent then lags like any agent). In real time: whenever some actions came.
     fn answer_hub(&mut self) -> Result<(), BridgeError> {
         let Some((tick, since)) = self.tick else { return Ok(()) };
+        // Not before the hub counts the bridge ready: while it waits for more remote agents,
+        // an early one's answer to the tick in hand would be the bridge's, and a lock-step
+        // hub takes one answer per agent and tick; the later agents' would be lost.
+        if !self.is_ready {
+            return Ok(());
+        }
         let p = &self.map.0.params;
         let mut late = false;
         let due = if p.lockstep != 0 {

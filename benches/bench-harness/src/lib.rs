@@ -659,6 +659,9 @@ fn run_lockstep(
                 endpoint.clone(),
                 "--connect-timeout".into(),
                 "30".into(),
+                // Every agent in before the first tick: the ticks counted are the same for all.
+                "--wait-agents".into(),
+                agents.to_string(),
             ])?;
             // Keep draining its stderr, so the bridge never blocks on a full pipe.
             let mut err = bridge.stderr.take().context("the Zenoh bridge's stderr")?;
