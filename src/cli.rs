@@ -28,6 +28,11 @@ pub enum Command {
     /// Replays a recorded run (an MCAP file) from its replay journal; --check compares every
     /// tick's state hash with the recording's.
     Replay(hub::replay::ReplayArgs),
+    /// Records a running session as an observer, on this machine or on another through the
+    /// session's Zenoh bridge (`--zenoh`, the bridge with `--observers world`): the world each
+    /// tick and the map, on the hub recorder's Foxglove channels, for `iwsim plot` and Foxglove.
+    /// It has no replay journal (an observer sees no actions): `iwsim hub --record` has.
+    Record(crate::record::RecordArgs),
     /// Serves the Ciber-Rato / Intellwheels UDP/XML protocol to remote agents and viewers.
     Udp(udp_bridge::cli::UdpArgs),
     /// Serves a session to agents on other machines over Zenoh (`iwsim agent … --zenoh

@@ -4,6 +4,7 @@
 
 pub mod cli;
 pub mod mapcheck;
+pub mod record;
 pub mod resume;
 mod stop_on_signals;
 
@@ -59,6 +60,7 @@ pub fn run(cli: Cli) -> anyhow::Result<ExitCode> {
         Command::Demo(args) => runner::demo::run(&args),
         Command::Hub(args) => hub::cli::run(&args),
         Command::Replay(args) => hub::replay::run(&args),
+        Command::Record(args) => record::record(&args),
         Command::Udp(args) => udp_bridge::cli::run(&args),
         Command::Zenoh(args) => zenoh_bridge::cli::run(&args),
         Command::ZenohRouter(args) => zenoh_bridge::cli::router(&args),

@@ -1204,10 +1204,87 @@ pub fn pack_map(
     (header, items)
 }
 
+/// What [`pack_map`] packed, read back from an observers' map: the lab (the scenario's
+/// obstacles last), the grid, where the obstacles start and the checkpoints. For a recorder
+/// that has only the map a bridge serves (`iwsim record --zenoh`). The error says which item
+/// does not fit.
+pub fn unpack_map(header: &MapHeader, items: &[MapItem]) -> Result<(Lab, Grid, usize, Vec<Checkpoint>), String> {
+    use nalgebra::Point2;
+    use world::map::{Beacon, StartPose, Target, Wall};
+    if header.item_count as usize != items.len() {
+        return Err(format!("the header counts {} items, the map holds {}", header.item_count, items.len()));
+    }
+    let mut lab = Lab {
+        name: header.name.as_str().unwrap_or("").to_owned(),
+        width_m: header.width_m,
+        height_m: header.height_m,
+        walls: Vec::new(),
+        beacons: Vec::new(),
+        targets: Vec::new(),
+    };
+    let (mut grid, mut checkpoints, mut obstacle_from) = (Grid::default(), Vec::new(), None);
+    let mut corners_due = 0usize;
+    for (k, it) in items.iter().enumerate() {
+        let bad = |what: &str| format!("map item {k} (kind {}, index {}): {what}", it.kind, it.index);
+        if corners_due > 0 && it.kind != MAP_CORNER {
+            return Err(bad(&format!("the wall before it lacks {corners_due} corners")));
+        }
+        match it.kind {
+            MAP_WALL => {
+                if !(it.b >= 3.0 && it.b <= items.len() as f64) {
+                    return Err(bad(&format!("a wall of {} corners", it.b)));
+                }
+                corners_due = it.b as usize;
+                if it.c != 0.0 {
+                    obstacle_from.get_or_insert(lab.walls.len());
+                } else if obstacle_from.is_some() {
+                    return Err(bad("a map wall after the scenario's obstacles"));
+                }
+                lab.walls.push(Wall { height_m: it.a, corners: Vec::with_capacity(corners_due) });
+            }
+            MAP_CORNER => {
+                let Some(w) = lab.walls.last_mut().filter(|_| corners_due > 0) else {
+                    return Err(bad("a corner of no wall"));
+                };
+                w.corners.push(Point2::new(it.a, it.b));
+                corners_due -= 1;
+            }
+            MAP_BEACON => lab.beacons.push(Beacon { pos: Point2::new(it.a, it.b), height_m: it.c }),
+            MAP_TARGET => lab.targets.push(Target { pos: Point2::new(it.a, it.b), radius_m: it.c }),
+            MAP_GRID => grid.poses.push(StartPose { pos: Point2::new(it.a, it.b), heading_deg: it.c }),
+            MAP_CHECKPOINT => checkpoints.push(Checkpoint { x: it.a, y: it.b, radius: it.c }),
+            _ => return Err(bad("an unknown kind")),
+        }
+    }
+    if corners_due > 0 {
+        return Err(format!("the last wall lacks {corners_due} corners"));
+    }
+    let obstacle_from = obstacle_from.unwrap_or(lab.walls.len());
+    Ok((lab, grid, obstacle_from, checkpoints))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
     use world::map::builtin;
+
+    #[test]
+    fn an_observers_map_unpacks_to_the_lab_grid_obstacles_and_checkpoints_it_packs() {
+        let map = builtin::map("liacc").expect("built in");
+        let mut lab = map.lab.clone();
+        let obstacle_from = lab.walls.len();
+        lab.walls.push(world::map::Wall::rectangle(1.0, 1.0, 2.0, 2.5, 0.8));
+        let checkpoints = vec![Checkpoint { x: 3.0, y: 4.0, radius: 0.5 }];
+        let params = hub_params(&Params::default(), Mode::LockStep, 100, 250);
+        let (h, items) = pack_map(&lab, &map.grid, obstacle_from, &checkpoints, 100, params);
+        let (lab2, grid2, from2, checkpoints2) = unpack_map(&h, &items).expect("unpacks");
+        assert_eq!((lab2, grid2, from2, checkpoints2), (lab, map.grid.clone(), obstacle_from, checkpoints));
+        // A wall cut short is named.
+        let cut: Vec<MapItem> = items.iter().copied().filter(|i| !(i.kind == MAP_CORNER && i.index == 0)).collect();
+        let h2 = MapHeader { item_count: cut.len() as u32, ..h };
+        let e = unpack_map(&h2, &cut).expect_err("wall 0 lost its corners");
+        assert!(e.contains("lacks"), "{e}");
+    }
 
     fn core(mode: Mode) -> HubCore {
         let map = builtin::map("liacc").expect("built in");

@@ -144,6 +144,15 @@ pub fn outcome_of(stage: &Stage) -> HubOutcome {
 /// `iwsim replay`.
 pub fn run(args: &ReplayArgs) -> anyhow::Result<ExitCode> {
     let recording = Recording::open(&args.file).with_context(|| format!("reading {}", args.file.display()))?;
+    if let Some(from) = recording.metadata.get(recorder::OBSERVED_METADATA_NAME) {
+        anyhow::bail!(
+            "{} was recorded by an observer ({}), not by the hub: it holds the world as seen, but no replay journal \
+             (actions, seed, noise) to replay. Plot it (`iwsim plot`) or open it in Foxglove; for a replayable \
+             file, record on the hub's machine (`iwsim hub --record`).",
+            args.file.display(),
+            from.get("source").map_or("iwsim record", String::as_str)
+        );
+    }
     if let Some(lost) = &recording.truncated {
         ipc_services::report!("iwsim replay: {}: {lost}", args.file.display());
     }

@@ -67,12 +67,20 @@ struct ShmLink {
 /// The newest payload a subscriber received, not read yet.
 type Newest = Arc<Mutex<Option<Vec<u8>>>>;
 
+/// World snapshots received and not read yet, oldest first: a viewer takes the newest, a
+/// recorder every one in order ([`Observer::next_world`]).
+type Backlog = Arc<Mutex<std::collections::VecDeque<Vec<u8>>>>;
+
+/// World snapshots kept for a reader that falls behind; older ones are dropped (a recorder
+/// sees the gap in the ticks).
+const WORLD_BACKLOG: usize = 1024;
+
 /// An observer's Zenoh session with the hub's bridge.
 struct ZenohLink {
     session: String,
     z: zenoh::Session,
     watch: BridgeWatch,
-    world_in: Newest,
+    world_in: Backlog,
     infos_in: Newest,
     _subscribers: [zenoh::pubsub::Subscriber<()>; 2],
     /// The newest snapshot received, copied out of the network buffer.
@@ -144,20 +152,35 @@ impl Observer {
         let z = agent_sdk::remote::open_session(remote, timeout)?;
         let prefix = remote.prefix.clone().unwrap_or_else(|| wire::prefix(session));
         let watch = BridgeWatch::new(&z, &prefix)?;
-        let (world_in, infos_in): (Newest, Newest) = Default::default();
-        let subscribe = |key: String, into: &Newest, what: &str| {
-            let (into, news) = (into.clone(), watch.news.clone());
+        let (world_in, infos_in): (Backlog, Newest) = Default::default();
+        let subscribe = |key: String, what: &str, keep: Box<dyn Fn(Vec<u8>) + Send + Sync>| {
+            let news = watch.news.clone();
             z.declare_subscriber(key)
                 .callback(move |s: zenoh::sample::Sample| {
-                    *into.lock().unwrap_or_else(|p| p.into_inner()) = Some(s.payload().to_bytes().into_owned());
+                    keep(s.payload().to_bytes().into_owned());
                     *news.lock().unwrap_or_else(|p| p.into_inner()) = Some(Instant::now());
                 })
                 .wait()
                 .map_err(|e| AgentError::Zenoh(format!("subscribe to {what}: {e}")))
         };
+        let (worlds, infos) = (world_in.clone(), infos_in.clone());
         let subscribers = [
-            subscribe(wire::observe_world_key(&prefix), &world_in, "the world")?,
-            subscribe(wire::observe_robots_key(&prefix), &infos_in, "the robots' info")?,
+            subscribe(
+                wire::observe_world_key(&prefix),
+                "the world",
+                Box::new(move |bytes| {
+                    let mut q = worlds.lock().unwrap_or_else(|p| p.into_inner());
+                    if q.len() >= WORLD_BACKLOG {
+                        q.pop_front();
+                    }
+                    q.push_back(bytes);
+                }),
+            )?,
+            subscribe(
+                wire::observe_robots_key(&prefix),
+                "the robots' info",
+                Box::new(move |bytes| *infos.lock().unwrap_or_else(|p| p.into_inner()) = Some(bytes)),
+            )?,
         ];
         // The observers' map, asked with the layouts' names (a bridge built with others
         // refuses, as one that serves no observers does), tried until `timeout`: the bridge
@@ -256,12 +279,39 @@ impl Observer {
         Ok(self.with_last_world(f))
     }
 
+    /// The world snapshot after the last one read, copied out, if one came: through Zenoh
+    /// every snapshot in the order the bridge put it (up to 1024 wait; a reader further behind
+    /// loses the oldest), so a recorder misses none the network delivered; over shared memory
+    /// the newest, as [`Observer::try_world`].
+    pub fn next_world(&mut self) -> Result<Option<(WorldHeader, Vec<RobotState>)>, AgentError> {
+        if !self.receive_world_from(true)? {
+            return Ok(None);
+        }
+        Ok(self.with_last_world(|h, robots| (*h, robots.to_vec())))
+    }
+
     /// Takes the newest world snapshot if one came since the last look; true if one did.
     fn receive_world(&mut self) -> Result<bool, AgentError> {
+        self.receive_world_from(false)
+    }
+
+    /// Takes a world snapshot that came since the last look (through Zenoh, the oldest one
+    /// waiting if `oldest`, else the newest, the rest dropped); true if one did.
+    fn receive_world_from(&mut self, oldest: bool) -> Result<bool, AgentError> {
         match &mut self.link {
             Link::Shm(l) => receive_newest(&l.world, &mut l.last_world, "receive the world"),
             Link::Zenoh(l) => {
-                let Some(bytes) = l.world_in.lock().unwrap_or_else(|p| p.into_inner()).take() else { return Ok(false) };
+                let taken = {
+                    let mut q = l.world_in.lock().unwrap_or_else(|p| p.into_inner());
+                    if oldest {
+                        q.pop_front()
+                    } else {
+                        let newest = q.pop_back();
+                        q.clear();
+                        newest
+                    }
+                };
+                let Some(bytes) = taken else { return Ok(false) };
                 let frame = |error| AgentError::Frame { what: "world snapshot", error };
                 let (h, robots): (WorldHeader, Vec<RobotState>) = wire::unframe(&bytes).map_err(frame)?;
                 wire::check_count(h.robot_count, robots.len()).map_err(frame)?;

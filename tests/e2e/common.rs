@@ -30,44 +30,22 @@ pub struct Proc(pub Option<Child>);
 
 impl Proc {
     pub fn spawn(args: &[&str]) -> Self {
-        let child = Command::new(env!("CARGO_BIN_EXE_iwsim"))
-            .args(args)
-            .env("RUST_LOG", "warn")
-            .stdin(Stdio::null())
-            .stdout(Stdio::piped())
-            .stderr(Stdio::piped())
-            .spawn()
-            .expect("iwsim starts");
-        Self(Some(child))
+        Self::start(Self::iwsim(args))
     }
 
     /// Spawns as [`Proc::spawn`] does, in directory `dir`.
     pub fn spawn_at(dir: &std::path::Path, args: &[&str]) -> Self {
-        let child = Command::new(env!("CARGO_BIN_EXE_iwsim"))
-            .args(args)
-            .current_dir(dir)
-            .env("RUST_LOG", "warn")
-            .stdin(Stdio::null())
-            .stdout(Stdio::piped())
-            .stderr(Stdio::piped())
-            .spawn()
-            .expect("iwsim starts");
-        Self(Some(child))
+        let mut cmd = Self::iwsim(args);
+        cmd.current_dir(dir);
+        Self::start(cmd)
     }
 
     /// Spawns as [`Proc::spawn`] does, in network namespace `ns` (`ip netns exec`, which
     /// execs iwsim in place: the process is iwsim's own, to signal and wait for).
     pub fn spawn_in(ns: &str, args: &[&str]) -> Self {
-        let child = Command::new("ip")
-            .args(["netns", "exec", ns, env!("CARGO_BIN_EXE_iwsim")])
-            .args(args)
-            .env("RUST_LOG", "warn")
-            .stdin(Stdio::null())
-            .stdout(Stdio::piped())
-            .stderr(Stdio::piped())
-            .spawn()
-            .expect("ip netns exec iwsim starts");
-        Self(Some(child))
+        let mut cmd = Command::new("ip");
+        cmd.args(["netns", "exec", ns, env!("CARGO_BIN_EXE_iwsim")]).args(args);
+        Self::start(cmd)
     }
 
     /// Spawns as [`Proc::spawn`] does, with SIGHUP's default disposition in the child even when
@@ -75,8 +53,7 @@ impl Proc {
     /// from a terminal is, for the tests of what a hang-up does.
     pub fn spawn_hangup_default(args: &[&str]) -> Self {
         use std::os::unix::process::CommandExt as _;
-        let mut cmd = Command::new(env!("CARGO_BIN_EXE_iwsim"));
-        cmd.args(args).env("RUST_LOG", "warn").stdin(Stdio::null()).stdout(Stdio::piped()).stderr(Stdio::piped());
+        let mut cmd = Self::iwsim(args);
         // SAFETY: between fork and exec the child only calls signal(2), which is
         // async-signal-safe; nothing is allocated or locked.
         #[allow(unsafe_code)]
@@ -86,7 +63,27 @@ impl Proc {
                 Ok(())
             });
         }
-        Self(Some(cmd.spawn().expect("iwsim starts")))
+        Self::start(cmd)
+    }
+
+    /// `iwsim ARGS`, not started yet.
+    fn iwsim(args: &[&str]) -> Command {
+        let mut cmd = Command::new(env!("CARGO_BIN_EXE_iwsim"));
+        cmd.args(args);
+        cmd
+    }
+
+    /// Starts `cmd` as every test process starts: quiet logs, no stdin, its output piped.
+    fn start(mut cmd: Command) -> Self {
+        let what = format!("{cmd:?}");
+        let child = cmd
+            .env("RUST_LOG", "warn")
+            .stdin(Stdio::null())
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .unwrap_or_else(|e| panic!("{what} starts: {e}"));
+        Self(Some(child))
     }
 
     pub fn pid(&self) -> u32 {
@@ -323,15 +320,18 @@ impl Lines {
     /// Waits for a line containing `marker`; returns what follows it on that line.
     pub fn said(&self, marker: &str, timeout: Duration) -> String {
         let deadline = Instant::now() + timeout;
+        // What came instead, for the failure's message.
+        let mut other = Vec::new();
         loop {
             match self.next_by(deadline) {
                 Next::Line(line) => {
                     if let Some(rest) = line.split(marker).nth(1) {
                         return rest.trim().to_owned();
                     }
+                    other.push(line);
                 }
-                Next::End => panic!("no line with {marker:?}: the output ended"),
-                Next::TimedOut => panic!("no line with {marker:?} within {timeout:?}"),
+                Next::End => panic!("no line with {marker:?}: the output ended after:\n{}", other.join("\n")),
+                Next::TimedOut => panic!("no line with {marker:?} within {timeout:?}, after:\n{}", other.join("\n")),
             }
         }
     }

@@ -646,6 +646,65 @@ fn a_viewer_on_another_host_shows_the_run_only_when_the_bridge_serves_observers(
 }
 
 #[test]
+fn a_recorder_on_another_host_writes_the_hubs_own_world_frames_and_says_they_cannot_be_replayed() {
+    let host = Host::new();
+    let s = session("zenoh-record");
+    let dir = work_dir("record");
+    let (here, there) = (dir.join("hub.mcap"), dir.join("remote.mcap"));
+    let path = |p: &Path| p.to_str().expect("utf-8").to_owned();
+    let hub = Proc::spawn(
+        &["hub", "--session", &s, "--lockstep", "--ticks", "300", "--wait-agents", "1"]
+            .into_iter()
+            .chain(["--record", &path(&here)])
+            .collect::<Vec<_>>(),
+    );
+    let ep = host.endpoint_here();
+    let mut bridge =
+        Proc::spawn(&["zenoh", "--session", &s, "--listen", &ep, "--observers", "world", "--connect-timeout", "20"]);
+    bridge.announced("served under", Duration::from_secs(20));
+    let mut recorder = Proc::spawn_in(
+        &host.ns,
+        &["record", "--session", &s, "--zenoh", &ep, "--out", &path(&there), "--connect-timeout", "20"],
+    );
+    recorder.announced("recording session", Duration::from_secs(30));
+    // The hub waits for this agent, so the recorder is in before the first step.
+    let agent = Proc::spawn_in(
+        &host.ns,
+        &["agent", "wheelchair", "--session", &s, "--robots", "2", "--powers", "0.6,0.5", "--zenoh", &ep],
+    );
+    for p in [agent, hub, bridge] {
+        let o = p.wait(Duration::from_secs(120));
+        assert!(o.status.success(), "{}", text(&o.stderr));
+    }
+    let o = recorder.wait(Duration::from_secs(30));
+    let said = text(&o.stdout);
+    assert!(o.status.success(), "{said}{}", text(&o.stderr));
+    assert!(
+        said.contains("301 world frames") && said.contains("0 missed") && said.contains("the run finished"),
+        "{said}"
+    );
+    let (a, b) = (
+        recorder::WorldTrack::open(&here).expect("the hub's recording"),
+        recorder::WorldTrack::open(&there).expect("the remote recording"),
+    );
+    // Every tick's robots, bit for bit. Tick 0 alone may differ: the hub writes a tick's
+    // world at its first publication (before the chairs came), the recorder the first it saw.
+    assert_eq!(a.frames.len(), b.frames.len());
+    assert_eq!(a.frames[1..], b.frames[1..]);
+    let lab = |p: &Path| recorder::Recording::open(p).expect("a run start").start.lab;
+    assert_eq!(lab(&there), lab(&here));
+    // It plots as a hub's recording does; a replay is refused, and says why.
+    let svg = dir.join("remote.svg");
+    let o = Proc::spawn(&["plot", &path(&there), "--out", &path(&svg)]).wait(Duration::from_secs(60));
+    assert!(o.status.success() && svg.exists(), "{}", text(&o.stderr));
+    let o = Proc::spawn(&["replay", &path(&there)]).wait(Duration::from_secs(60));
+    assert!(!o.status.success());
+    assert!(text(&o.stderr).contains("recorded by an observer"), "{}", text(&o.stderr));
+    assert_no_shared_memory_left(&s);
+    let _ = std::fs::remove_dir_all(dir);
+}
+
+#[test]
 fn with_the_documented_user_password_files_only_a_listed_agent_gets_in() {
     // README's example files, as they are: run from the repository's root, as README says.
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));

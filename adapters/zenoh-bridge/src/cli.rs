@@ -15,16 +15,9 @@ pub struct ZenohArgs {
     /// `--session`, `--connect-timeout`.
     #[command(flatten)]
     pub hub: SessionArgs,
-    /// Zenoh endpoint to listen on for agents (repeatable). Without --listen and --connect:
-    /// tcp/0.0.0.0:7447, every interface.
-    #[arg(long, value_name = "ENDPOINT")]
-    pub listen: Vec<String>,
-    /// Zenoh endpoint to connect to, e.g. a router's tcp/HOST:7447 (repeatable).
-    #[arg(long, value_name = "ENDPOINT")]
-    pub connect: Vec<String>,
-    /// A Zenoh configuration file (JSON5) to start from: TLS, authentication, and the like.
-    #[arg(long, value_name = "FILE")]
-    pub zenoh_config: Option<PathBuf>,
+    /// `--listen`, `--connect`, `--zenoh-config`.
+    #[command(flatten)]
+    pub endpoints: Endpoints,
     /// Key prefix the session is served under [default: iwsim/<SESSION>].
     #[arg(long, value_name = "PREFIX")]
     pub prefix: Option<String>,
@@ -41,22 +34,47 @@ pub struct ZenohArgs {
     pub wait_agents: u32,
 }
 
+/// Where a bridge or an episode host meets its peers (`--listen`, `--connect`,
+/// `--zenoh-config`).
+#[derive(Debug, clap::Args, Clone)]
+pub struct Endpoints {
+    /// Zenoh endpoint to listen on for peers (repeatable). Without --listen and --connect:
+    /// tcp/0.0.0.0:7447, every interface.
+    #[arg(long, value_name = "ENDPOINT")]
+    pub listen: Vec<String>,
+    /// Zenoh endpoint to connect to, e.g. a router's tcp/HOST:7447 (repeatable).
+    #[arg(long, value_name = "ENDPOINT")]
+    pub connect: Vec<String>,
+    /// A Zenoh configuration file (JSON5) to start from: TLS, authentication, and the like.
+    #[arg(long, value_name = "FILE")]
+    pub zenoh_config: Option<PathBuf>,
+}
+
+impl Endpoints {
+    /// The endpoints to listen on: `--listen`'s, or [`DEFAULT_LISTEN`] when neither
+    /// `--listen` nor `--connect` was given (a peer must be reachable one way or the other).
+    pub fn listen(&self) -> Vec<String> {
+        if self.listen.is_empty() && self.connect.is_empty() {
+            vec![DEFAULT_LISTEN.to_owned()]
+        } else {
+            self.listen.clone()
+        }
+    }
+}
+
 /// The endpoint listened on when neither `--listen` nor `--connect` is given.
 pub const DEFAULT_LISTEN: &str = "tcp/0.0.0.0:7447";
 
 /// Serves Zenoh until the hub ends the run or goes away.
 pub fn run(args: &ZenohArgs) -> anyhow::Result<ExitCode> {
-    let listen = if args.listen.is_empty() && args.connect.is_empty() {
-        vec![DEFAULT_LISTEN.to_owned()]
-    } else {
-        args.listen.clone()
-    };
+    let listen = args.endpoints.listen();
+    let connect = &args.endpoints.connect;
     let cfg = BridgeConfig {
         session: args.hub.session.clone(),
         connect_timeout: args.hub.timeout(),
         listen: listen.clone(),
-        connect: args.connect.clone(),
-        config: args.zenoh_config.clone(),
+        connect: connect.clone(),
+        config: args.endpoints.zenoh_config.clone(),
         prefix: args.prefix.clone(),
         observers: args.observers,
         wait_agents: args.wait_agents as usize,
@@ -67,7 +85,7 @@ pub fn run(args: &ZenohArgs) -> anyhow::Result<ExitCode> {
         args.hub.session,
         bridge.prefix(),
         if listen.is_empty() { "nothing".to_owned() } else { listen.join(", ") },
-        if args.connect.is_empty() { String::new() } else { format!("; connected to {}", args.connect.join(", ")) },
+        if connect.is_empty() { String::new() } else { format!("; connected to {}", connect.join(", ")) },
         if args.observers == crate::Observers::World { ", the world to observers" } else { "" }
     );
     let counters = bridge.run()?;
@@ -85,16 +103,9 @@ pub fn run(args: &ZenohArgs) -> anyhow::Result<ExitCode> {
 /// Options of `iwsim env-host`.
 #[derive(Debug, clap::Args, Clone)]
 pub struct EnvHostArgs {
-    /// Zenoh endpoint to listen on for environments (repeatable). Without --listen and
-    /// --connect: tcp/0.0.0.0:7447, every interface.
-    #[arg(long, value_name = "ENDPOINT")]
-    pub listen: Vec<String>,
-    /// Zenoh endpoint to connect to, e.g. a router's tcp/HOST:7447 (repeatable).
-    #[arg(long, value_name = "ENDPOINT")]
-    pub connect: Vec<String>,
-    /// A Zenoh configuration file (JSON5) to start from: TLS, authentication, and the like.
-    #[arg(long, value_name = "FILE")]
-    pub zenoh_config: Option<PathBuf>,
+    /// `--listen`, `--connect`, `--zenoh-config`.
+    #[command(flatten)]
+    pub endpoints: Endpoints,
     /// Episodes running at once, at most.
     #[arg(long, value_name = "N", default_value_t = 8, value_parser = clap::value_parser!(u32).range(1..=256))]
     pub max_episodes: u32,
@@ -102,15 +113,10 @@ pub struct EnvHostArgs {
 
 /// Serves episodes until SIGINT or SIGTERM.
 pub fn env_host(args: &EnvHostArgs) -> anyhow::Result<ExitCode> {
-    let listen = if args.listen.is_empty() && args.connect.is_empty() {
-        vec![DEFAULT_LISTEN.to_owned()]
-    } else {
-        args.listen.clone()
-    };
     crate::episodes::serve(&crate::episodes::HostConfig {
-        listen,
-        connect: args.connect.clone(),
-        config: args.zenoh_config.clone(),
+        listen: args.endpoints.listen(),
+        connect: args.endpoints.connect.clone(),
+        config: args.endpoints.zenoh_config.clone(),
         prefix: None,
         max_episodes: args.max_episodes as usize,
         iwsim: std::env::current_exe()?,

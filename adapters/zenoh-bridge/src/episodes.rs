@@ -275,15 +275,12 @@ impl Host {
         });
         // The bridge is up, or the hub failed (its options), or the time is up.
         let started = Instant::now();
-        let stop = Arc::new(AtomicBool::new(false));
-        let failed = loop {
+        let ready = loop {
             match ready_rx.try_recv() {
-                Ok(Ok(flag)) => {
-                    // The bridge's own flag, so that setting it ends the bridge.
-                    return self.started(session, hub, out, err, bridge, flag, lab, &args);
-                }
-                Ok(Err(e)) => break Some(e),
-                Err(TryRecvError::Disconnected) => break Some("the bridge stopped".into()),
+                // The bridge's own flag, so that setting it ends the bridge.
+                Ok(Ok(flag)) => break Ok(flag),
+                Ok(Err(e)) => break Err(e),
+                Err(TryRecvError::Disconnected) => break Err("the bridge stopped".into()),
                 Err(TryRecvError::Empty) => {}
             }
             if let Ok(Some(status)) = hub.try_wait() {
@@ -293,31 +290,23 @@ impl Host {
                 return Err(format!("the hub did not start ({status}): {}", said.trim()));
             }
             if started.elapsed() > START_TIMEOUT {
-                break Some(format!("no hub within {START_TIMEOUT:?}"));
+                break Err(format!("no hub within {START_TIMEOUT:?}"));
             }
             std::thread::sleep(Duration::from_millis(5));
         };
-        let episode = Episode { session, hub, out, err, bridge, stop, lab };
-        let e = failed.unwrap_or_default();
-        self.finish(episode, true);
-        Err(e)
-    }
-
-    #[allow(clippy::too_many_arguments)] // an episode's parts, once its bridge serves it
-    fn started(
-        &mut self,
-        session: String,
-        hub: Child,
-        out: JoinHandle<String>,
-        err: JoinHandle<String>,
-        bridge: JoinHandle<Result<Counters, BridgeError>>,
-        stop: Arc<AtomicBool>,
-        lab: Option<PathBuf>,
-        args: &[String],
-    ) -> Result<String, String> {
-        tracing::info!("episode {session} started: hub {}", args.join(" "));
-        self.episodes.push(Episode { session: session.clone(), hub, out, err, bridge, stop, lab });
-        Ok(session)
+        let stop = ready.as_ref().map_or_else(|_| Arc::new(AtomicBool::new(false)), Arc::clone);
+        let episode = Episode { session: session.clone(), hub, out, err, bridge, stop, lab };
+        match ready {
+            Ok(_) => {
+                tracing::info!("episode {session} started: hub {}", args.join(" "));
+                self.episodes.push(episode);
+                Ok(session)
+            }
+            Err(e) => {
+                self.finish(episode, true);
+                Err(e)
+            }
+        }
     }
 
     fn end(&mut self, session: &str) -> Result<String, String> {

@@ -116,7 +116,14 @@ impl Observing {
             cfg.connect_timeout,
         )?;
         let (h, items) = observer.map_items()?;
-        let declare = |key: String| z.declare_publisher(key).express(true).wait().map_err(zerr("declare a publisher"));
+        let congestion = congestion_control(h.params.lockstep != 0);
+        let declare = |key: String| {
+            z.declare_publisher(key)
+                .express(true)
+                .congestion_control(congestion)
+                .wait()
+                .map_err(zerr("declare a publisher"))
+        };
         let mut o = Self {
             map: wire::frame(&h, &items),
             world: declare(wire::observe_world_key(prefix))?,
@@ -165,6 +172,14 @@ impl Observing {
         }
         let _ = q.reply(q.key_expr().clone(), self.map.clone()).wait();
     }
+}
+
+/// How the bridge's puts meet a full queue to a peer. In lock-step every tick's sensor blocks
+/// and world must arrive (a dropped frame would change the run, or leave a hole in a remote
+/// recording), and the run waits for its agents anyway: Block. In real time the newest frame
+/// is what matters and one slow peer must not hold the others back: Drop, Zenoh's default.
+fn congestion_control(lockstep: bool) -> zenoh::qos::CongestionControl {
+    if lockstep { zenoh::qos::CongestionControl::Block } else { zenoh::qos::CongestionControl::Drop }
 }
 
 /// Input the bridge refused, by kind.
@@ -584,7 +599,12 @@ impl Bridge {
                     return refuse(&q, Refusal::Capacity, "the bridge serves no more agents");
                 }
                 let id = self.next_id;
-                let publisher = match self.z.declare_publisher(wire::sensors_key(&self.prefix, id)).express(true).wait()
+                let publisher = match self
+                    .z
+                    .declare_publisher(wire::sensors_key(&self.prefix, id))
+                    .express(true)
+                    .congestion_control(congestion_control(self.map.0.params.lockstep != 0))
+                    .wait()
                 {
                     Ok(p) => p,
                     Err(e) => {

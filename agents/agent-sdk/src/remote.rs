@@ -407,6 +407,10 @@ impl ZenohLink {
                 .declare_publisher(wire::actions_key(&self.prefix, id))
                 // One tick's actions go at once, not batched with the next.
                 .express(true)
+                // Never dropped (a put's default): a lock-step hub would step without them, and
+                // the run would not be the run. A full queue holds this agent only, which
+                // has nothing to do until its actions are out.
+                .congestion_control(zenoh::qos::CongestionControl::Block)
                 .wait()
                 .map_err(zerr("declare the actions publisher"))?,
         );

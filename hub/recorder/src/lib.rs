@@ -107,3 +107,7 @@ pub const FRAME_TRANSFORMS_SCHEMA_NAME: &str = "foxglove.FrameTransforms";
 pub const METADATA_NAME: &str = "iwsim.run";
 /// Name of the metadata record holding the wall-clock start.
 pub const WALL_CLOCK_METADATA_NAME: &str = "iwsim.wall_clock";
+/// Name of the metadata record that marks a recording made by an observer (`iwsim record`):
+/// it holds the world frames the observer saw and the map, but no replay journal (an observer
+/// sees no actions, seed or noise), so it cannot be replayed. Its entries say where from.
+pub const OBSERVED_METADATA_NAME: &str = "iwsim.observed";
