@@ -10,7 +10,7 @@ use std::time::Duration;
 
 use records::summary::RunSummary;
 
-use super::common::{Proc, assert_no_shared_memory_left, session, text};
+use super::common::{Lines, Proc, assert_no_shared_memory_left, session, text};
 
 /// Another host as far as the network goes: a network namespace with one end of a veth pair,
 /// the other end here. Removed (namespace and link) when dropped.
@@ -97,6 +97,18 @@ fn run(dir: &Path, name: &str, args: &[&str]) -> RunSummary {
     RunSummary::read(&out.join("summary.json")).unwrap_or_else(|e| panic!("{e}"))
 }
 
+/// `iwsim zenoh --session S OPTIONS --connect-timeout 20` once it serves, with the rest of
+/// what it says on stderr; the line saying it serves is returned as well.
+fn serving_bridge(s: &str, options: &[&str]) -> (Proc, Lines, String) {
+    let mut args = vec!["zenoh", "--session", s];
+    args.extend_from_slice(options);
+    args.extend(["--connect-timeout", "20"]);
+    let mut b = Proc::spawn(&args);
+    let said = b.stderr_lines();
+    let serving = said.said("served under", Duration::from_secs(20));
+    (b, said, serving)
+}
+
 #[test]
 fn the_navigator_on_another_host_drives_the_slalom_bit_for_bit_as_it_does_here() {
     let dir = work_dir("slalom");
@@ -154,9 +166,7 @@ fn an_agent_written_with_the_official_zenoh_binding_registers_reads_its_blocks_a
     let python = recorder::python::checker_python().unwrap_or_else(|e| panic!("{e}"));
     let hub = Proc::spawn(&["hub", "--session", &s, "--lockstep", "--ticks", "60", "--wait-agents", "1"]);
     let endpoint = format!("tcp/127.0.0.1:{}", free_port());
-    let mut bridge = Proc::spawn(&["zenoh", "--session", &s, "--listen", &endpoint, "--connect-timeout", "20"]);
-    let bridge_said = bridge.stderr_lines();
-    bridge_said.said("served under", Duration::from_secs(20));
+    let (bridge, bridge_said, _) = serving_bridge(&s, &["--listen", &endpoint]);
     let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/zenoh/third_party_agent.py");
     let agent = Command::new(python)
         .arg(&script)
@@ -238,9 +248,7 @@ fn a_remote_agent_killed_mid_run_leaves_its_chair_standing_and_takes_it_back_whe
         "60000",
     ]);
     let endpoint = format!("tcp/127.0.0.1:{}", free_port());
-    let mut bridge = Proc::spawn(&["zenoh", "--session", &s, "--listen", &endpoint, "--connect-timeout", "20"]);
-    let bridge_said = bridge.stderr_lines();
-    bridge_said.said("served under", Duration::from_secs(20));
+    let (bridge, bridge_said, _) = serving_bridge(&s, &["--listen", &endpoint]);
     let agent =
         ["agent", "wheelchair", "--session", &s, "--zenoh", &endpoint, "--connect-timeout", "20", "--name", "chair1"];
     let mut first = Proc::spawn(&agent);
@@ -290,8 +298,7 @@ fn a_killed_bridge_is_a_dead_agent_to_the_hub_and_its_remote_agents_say_so() {
         "200",
     ]);
     let endpoint = format!("tcp/127.0.0.1:{}", free_port());
-    let mut bridge = Proc::spawn(&["zenoh", "--session", &s, "--listen", &endpoint, "--connect-timeout", "20"]);
-    bridge.announced("served under", Duration::from_secs(20));
+    let (mut bridge, _, _) = serving_bridge(&s, &["--listen", &endpoint]);
     let mut agent =
         Proc::spawn(&["agent", "wheelchair", "--session", &s, "--zenoh", &endpoint, "--connect-timeout", "20"]);
     let agent_said = agent.stderr_lines();
@@ -334,9 +341,7 @@ fn a_link_pulled_for_two_seconds_mid_run_stalls_nothing_and_loses_no_agent() {
         "300",
     ]);
     let listen = host.endpoint_here();
-    let mut bridge = Proc::spawn(&["zenoh", "--session", &s, "--listen", &listen, "--connect-timeout", "20"]);
-    let bridge_said = bridge.stderr_lines();
-    bridge_said.said("served under", Duration::from_secs(20));
+    let (bridge, bridge_said, _) = serving_bridge(&s, &["--listen", &listen]);
     let mut agent = Proc::spawn_in(
         &host.ns,
         &["agent", "wheelchair", "--session", &s, "--zenoh", &listen, "--connect-timeout", "20"],
@@ -402,11 +407,7 @@ fn hash_line(hub_output: &str) -> String {
 /// options `via`, with a Zenoh bridge connected to `router` if given; the hub's state-hash line.
 fn two_chairs(s: &str, netns: Option<&str>, via: &[&str], router: Option<&str>) -> String {
     let hub = Proc::spawn(&["hub", "--session", s, "--lockstep", "--ticks", "300", "--wait-agents", "1"]);
-    let bridge = router.map(|r| {
-        let mut b = Proc::spawn(&["zenoh", "--session", s, "--connect", r, "--connect-timeout", "20"]);
-        b.announced("served under", Duration::from_secs(20));
-        b
-    });
+    let bridge = router.map(|r| serving_bridge(s, &["--connect", r]).0);
     let bin = env!("CARGO_BIN_EXE_iwsim");
     let mut cmd = match netns {
         Some(ns) => {
@@ -465,11 +466,7 @@ fn through_a_router_between_the_hosts_the_run_is_the_local_run() {
 fn two_agents_one_after_the_other(s: &str, bridge: Option<(&Host, &str)>) -> String {
     let waited = if bridge.is_some() { "1" } else { "2" };
     let hub = Proc::spawn(&["hub", "--session", s, "--lockstep", "--ticks", "200", "--wait-agents", waited]);
-    let mut zb = bridge.map(|(_, ep)| {
-        let mut b = Proc::spawn(&["zenoh", "--session", s, "--listen", ep, "--wait-agents", "2"]);
-        b.announced("served under", Duration::from_secs(20));
-        b
-    });
+    let mut zb = bridge.map(|(_, ep)| serving_bridge(s, &["--listen", ep, "--wait-agents", "2"]).0);
     let agent = |name: &str, powers: &str| {
         let mut args = vec!["agent", "wheelchair", "--session", s, "--name", name, "--robots", "2"];
         args.extend(["--powers", powers, "--connect-timeout", "20"]);
@@ -529,17 +526,7 @@ fn a_router_restarted_mid_run_costs_ticks_not_agents() {
     let listen = format!("tcp/0.0.0.0:{port}");
     let mut router = Proc::spawn(&["zenoh-router", "--listen", &listen]);
     router.announced("routing on", Duration::from_secs(20));
-    let mut bridge = Proc::spawn(&[
-        "zenoh",
-        "--session",
-        &s,
-        "--connect",
-        &format!("tcp/127.0.0.1:{port}"),
-        "--connect-timeout",
-        "20",
-    ]);
-    let bridge_said = bridge.stderr_lines();
-    bridge_said.said("served under", Duration::from_secs(20));
+    let (bridge, _, _) = serving_bridge(&s, &["--connect", &format!("tcp/127.0.0.1:{port}")]);
     let via = format!("tcp/{}:{port}", host.here);
     let mut agent =
         Proc::spawn_in(&host.ns, &["agent", "wheelchair", "--session", &s, "--zenoh", &via, "--connect-timeout", "20"]);
@@ -598,8 +585,7 @@ fn a_viewer_on_another_host_shows_the_run_only_when_the_bridge_serves_observers(
     ]);
     // A bridge that serves agents only: a viewer over there is told why it sees nothing.
     let closed = host.endpoint_here();
-    let mut agents_only = Proc::spawn(&["zenoh", "--session", &s, "--listen", &closed, "--connect-timeout", "20"]);
-    agents_only.announced("served under", Duration::from_secs(20));
+    let (agents_only, _, _) = serving_bridge(&s, &["--listen", &closed]);
     let http = format!("{}:0", host.there);
     let refused = Proc::spawn_in(
         &host.ns,
@@ -611,9 +597,8 @@ fn a_viewer_on_another_host_shows_the_run_only_when_the_bridge_serves_observers(
     // One that serves the world to observers: the viewer over there shows the run as the
     // hub's own observer here sees it.
     let open = host.endpoint_here();
-    let mut serving =
-        Proc::spawn(&["zenoh", "--session", &s, "--listen", &open, "--observers", "world", "--connect-timeout", "20"]);
-    assert!(serving.announced("served under", Duration::from_secs(20)).contains("the world to observers"));
+    let (serving, _, said) = serving_bridge(&s, &["--listen", &open, "--observers", "world"]);
+    assert!(said.contains("the world to observers"), "{said}");
     let mut view = Proc::spawn_in(&host.ns, &["view", "--session", &s, "--zenoh", &open, "--http", &http]);
     let url = view.announced("open http://", Duration::from_secs(30));
     let addr: std::net::SocketAddr = url.trim_end_matches('/').parse().expect("the viewer's address");
@@ -659,9 +644,7 @@ fn a_recorder_on_another_host_writes_the_hubs_own_world_frames_and_says_they_can
             .collect::<Vec<_>>(),
     );
     let ep = host.endpoint_here();
-    let mut bridge =
-        Proc::spawn(&["zenoh", "--session", &s, "--listen", &ep, "--observers", "world", "--connect-timeout", "20"]);
-    bridge.announced("served under", Duration::from_secs(20));
+    let (bridge, _, _) = serving_bridge(&s, &["--listen", &ep, "--observers", "world"]);
     let mut recorder = Proc::spawn_in(
         &host.ns,
         &["record", "--session", &s, "--zenoh", &ep, "--out", &path(&there), "--connect-timeout", "20"],
@@ -765,9 +748,7 @@ fn a_restarted_bridge_takes_its_remote_agents_back_and_they_drive_on() {
         "300",
     ]);
     let listen = host.endpoint_here();
-    let bridge_args = ["zenoh", "--session", &s, "--listen", &listen, "--connect-timeout", "20"];
-    let mut first = Proc::spawn(&bridge_args);
-    first.announced("served under", Duration::from_secs(20));
+    let (mut first, _, _) = serving_bridge(&s, &["--listen", &listen]);
     let mut agent = Proc::spawn_in(
         &host.ns,
         &["agent", "wheelchair", "--session", &s, "--zenoh", &listen, "--connect-timeout", "20", "--name", "chair1"],
@@ -781,9 +762,7 @@ fn a_restarted_bridge_takes_its_remote_agents_back_and_they_drive_on() {
     let (_, before) = tick_and_x(&mut observer, 1);
     // The same bridge started again: a new run of it, which knows no agent. The agent sees it
     // come, says hello again and takes its chair back by name, and drives on.
-    let mut second = Proc::spawn(&bridge_args);
-    let second_said = second.stderr_lines();
-    second_said.said("served under", Duration::from_secs(20));
+    let (second, _, _) = serving_bridge(&s, &["--listen", &listen]);
     let start = std::time::Instant::now();
     loop {
         let (t, x) = tick_and_x(&mut observer, 1);
@@ -817,9 +796,7 @@ fn in_real_time_a_link_pulled_for_two_seconds_rests_the_chair_and_the_clock_goes
     // Real time at 20 ms a tick: the hub never waits for anyone.
     let hub = Proc::spawn(&["hub", "--session", &s, "--cycle-ms", "20", "--no-noise"]);
     let listen = host.endpoint_here();
-    let mut bridge = Proc::spawn(&["zenoh", "--session", &s, "--listen", &listen, "--connect-timeout", "20"]);
-    let bridge_said = bridge.stderr_lines();
-    bridge_said.said("served under", Duration::from_secs(20));
+    let (bridge, bridge_said, _) = serving_bridge(&s, &["--listen", &listen]);
     let mut agent = Proc::spawn_in(
         &host.ns,
         &["agent", "wheelchair", "--session", &s, "--zenoh", &listen, "--connect-timeout", "20", "--powers", "0.4,0.4"],
