@@ -669,7 +669,7 @@ impl Bridge {
                 // hub answers a local one (it then waits for the first tick, not for a reply
                 // that could time out); the one that completes the count, once the hub has
                 // answered the bridge.
-                if self.is_ready || self.ready_agents.len() < self.wait_agents {
+                if self.is_ready || self.ready_remote_agents() < self.wait_agents {
                     let r = RegisterResponse { agent_id: req.agent_id, ..bytemuck::Zeroable::zeroed() };
                     let _ = q.reply(q.key_expr().clone(), bytemuck::bytes_of(&r).to_vec()).wait();
                 } else {
@@ -692,6 +692,12 @@ impl Bridge {
         }
     }
 
+    /// The remote agents that said they are ready and are still there (one that went before
+    /// the run started no longer counts, and counts again if its link comes back).
+    fn ready_remote_agents(&self) -> usize {
+        self.ready_agents.iter().filter(|id| self.remotes.get(id).is_some_and(|r| !r.gone)).count()
+    }
+
     /// Forwards queued registrations to the hub, and the answers back.
     fn serve_joining(&mut self) -> Result<(), BridgeError> {
         // Ready once a remote robot exists (a bridge with no robots must not count towards a
@@ -700,7 +706,7 @@ impl Bridge {
         if !self.is_ready
             && self.ready.is_none()
             && !self.ready_waiting.is_empty()
-            && self.ready_agents.len() >= self.wait_agents
+            && self.ready_remote_agents() >= self.wait_agents
             && self.joining.is_empty()
             && self.queued.is_empty()
         {
