@@ -31,7 +31,9 @@ pub enum Command {
     /// Records a running session as an observer, on this machine or on another through the
     /// session's Zenoh bridge (`--zenoh`, the bridge with `--observers world`): the world each
     /// tick and the map, on the hub recorder's Foxglove channels, for `iwsim plot` and Foxglove.
-    /// It has no replay journal (an observer sees no actions): `iwsim hub --record` has.
+    /// It has no replay journal (an observer sees no actions): `iwsim hub --record` has. On the
+    /// hub's machine it sees each snapshot it is in time for: every tick in real time, not every
+    /// one in lock-step (it says how many it missed).
     Record(crate::record::RecordArgs),
     /// Serves the Ciber-Rato / Intellwheels UDP/XML protocol to remote agents and viewers.
     Udp(udp_bridge::cli::UdpArgs),

@@ -4,7 +4,11 @@
 //! It sees what a viewer sees: each tick's world (every robot's true pose, flags and
 //! standing), the robots' info and the map. It writes them on the hub recorder's Foxglove
 //! channels (`/lab`, `/robots`, `/tf`, `/proximity`), so `iwsim plot`, Foxglove and any MCAP
-//! reader take the file as they take a hub's. What it cannot see (the agents' actions, the
+//! reader take the file as they take a hub's. Through the bridge it gets every lock-step tick
+//! (the bridge is one of the hub's agents, and puts each tick's world before answering it); on
+//! the hub's machine it reads the newest snapshot, as a viewer does, so in real time it gets
+//! every tick but in lock-step only those it sees, and says how many it missed (the hub waits
+//! for no observer: `iwsim hub --record` records a whole lock-step run). What it cannot see (the agents' actions, the
 //! seed, the noise) is the replay journal: the file says so in an `iwsim.observed` metadata
 //! record, and `iwsim replay` refuses it rather than replay nothing.
 
