@@ -163,12 +163,36 @@ impl Rig {
     fn control(&mut self) {
         let since = now_ns();
         self.spawn_controller();
-        self.truth.wait_for(since, Duration::from_secs(30), "the controller's powers at the board", driving);
+        let deadline = Instant::now() + Duration::from_secs(30);
+        // Watched while waiting: a controller that gave up says why, rather than the board's
+        // silence 30 s later.
+        while self.truth.find(since, driving).is_none() {
+            if let Some(c) = self.controller.as_mut().and_then(|p| p.0.as_mut())
+                && let Ok(Some(status)) = c.try_wait()
+            {
+                let o = self.controller.take().expect("there").wait(Duration::from_secs(5));
+                panic!("the controller exited ({status}) before driving: {}", text(&o.stderr));
+            }
+            assert!(Instant::now() < deadline, "the controller's powers at the board: not within 30 s");
+            std::thread::sleep(Duration::from_millis(5));
+        }
     }
 
     fn spawn_controller(&mut self) {
-        self.controller =
-            Some(Proc::spawn(&["agent", "wheelchair", "--session", &self.s, "--name", "chair", "--powers", "0.4,0.4"]));
+        // A loaded machine can take seconds to open a session's services: the default 5 s
+        // is too short for a test that shares two cores with the whole suite.
+        self.controller = Some(Proc::spawn(&[
+            "agent",
+            "wheelchair",
+            "--session",
+            &self.s,
+            "--name",
+            "chair",
+            "--powers",
+            "0.4,0.4",
+            "--connect-timeout",
+            "30",
+        ]));
     }
 
     /// The operator's `iwsim resume chair1`, as a user types it on a loaded machine (where
