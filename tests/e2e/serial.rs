@@ -54,6 +54,19 @@ impl Truth {
     /// Waits (polling the file) until a line satisfies `f`, among those logged at or after
     /// `since_ns`; returns it.
     fn wait_for(&mut self, since_ns: u64, timeout: Duration, what: &str, f: impl Fn(&Value) -> bool) -> Value {
+        self.wait_unless(since_ns, timeout, what, f, || None)
+    }
+
+    /// As `wait_for`, but asks `abort` at every look: a reason it gives (a process that
+    /// died, say) fails the wait at once with that reason, rather than after the timeout.
+    fn wait_unless(
+        &mut self,
+        since_ns: u64,
+        timeout: Duration,
+        what: &str,
+        f: impl Fn(&Value) -> bool,
+        mut abort: impl FnMut() -> Option<String>,
+    ) -> Value {
         let deadline = Instant::now() + timeout;
         let mut seen = 0;
         loop {
@@ -64,6 +77,9 @@ impl Truth {
                 }
             }
             seen = self.lines.len();
+            if let Some(why) = abort() {
+                panic!("{what}: {why}");
+            }
             assert!(Instant::now() < deadline, "{what}: not in {} within {timeout:?}", self.path.display());
             std::thread::sleep(Duration::from_millis(5));
         }
@@ -163,19 +179,15 @@ impl Rig {
     fn control(&mut self) {
         let since = now_ns();
         self.spawn_controller();
-        let deadline = Instant::now() + Duration::from_secs(30);
         // Watched while waiting: a controller that gave up says why, rather than the board's
         // silence 30 s later.
-        while self.truth.find(since, driving).is_none() {
-            if let Some(c) = self.controller.as_mut().and_then(|p| p.0.as_mut())
-                && let Ok(Some(status)) = c.try_wait()
-            {
-                let o = self.controller.take().expect("there").wait(Duration::from_secs(5));
-                panic!("the controller exited ({status}) before driving: {}", text(&o.stderr));
-            }
-            assert!(Instant::now() < deadline, "the controller's powers at the board: not within 30 s");
-            std::thread::sleep(Duration::from_millis(5));
-        }
+        let controller = &mut self.controller;
+        self.truth.wait_unless(since, Duration::from_secs(30), "the controller's powers at the board", driving, || {
+            let c = controller.as_mut().and_then(|p| p.0.as_mut())?;
+            let status = c.try_wait().ok()??;
+            let o = controller.take().expect("there").wait(Duration::from_secs(5));
+            Some(format!("the controller exited ({status}) before driving: {}", text(&o.stderr)))
+        });
     }
 
     fn spawn_controller(&mut self) {

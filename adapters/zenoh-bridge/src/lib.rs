@@ -15,7 +15,7 @@
 pub mod cli;
 pub mod episodes;
 
-use std::collections::{BTreeMap, VecDeque};
+use std::collections::{BTreeMap, BTreeSet, VecDeque};
 use std::io::{Read as _, Write as _};
 use std::os::fd::AsRawFd as _;
 use std::os::unix::net::UnixStream;
@@ -109,14 +109,18 @@ struct Observing {
 }
 
 impl Observing {
-    fn start(cfg: &BridgeConfig, z: &zenoh::Session, prefix: &str) -> Result<Self, BridgeError> {
+    fn start(
+        cfg: &BridgeConfig,
+        z: &zenoh::Session,
+        prefix: &str,
+        congestion: zenoh::qos::CongestionControl,
+    ) -> Result<Self, BridgeError> {
         let observer = observer::Observer::connect_within(
             &cfg.session,
             &format!("zenoh-bridge-observer-{}", std::process::id()),
             cfg.connect_timeout,
         )?;
         let (h, items) = observer.map_items()?;
-        let congestion = congestion_control(h.params.lockstep != 0);
         let declare = |key: String| {
             z.declare_publisher(key)
                 .express(true)
@@ -180,6 +184,16 @@ impl Observing {
 /// is what matters and one slow peer must not hold the others back: Drop, Zenoh's default.
 fn congestion_control(lockstep: bool) -> zenoh::qos::CongestionControl {
     if lockstep { zenoh::qos::CongestionControl::Block } else { zenoh::qos::CongestionControl::Drop }
+}
+
+/// Where the bridge stands with the hub's ready (`--wait-agents`).
+enum Readiness {
+    /// The remote agents that said they are ready (`counted`), until there are enough; the
+    /// ready queries that came once there were (`waiting`) wait for the hub's answer to the
+    /// bridge's own request (`asked`, once sent).
+    Counting { counted: BTreeSet<u32>, waiting: Vec<zenoh::query::Query>, asked: Option<Box<PendingRequest>> },
+    /// The hub counts the bridge ready: a remote agent's ready is answered at once.
+    Ready,
 }
 
 /// Input the bridge refused, by kind.
@@ -301,13 +315,11 @@ pub struct Bridge {
     /// Registrations forwarded to the hub, and those waiting for a free slot.
     joining: Vec<Joining>,
     queued: VecDeque<(zenoh::query::Query, RegisterRequest)>,
-    /// The bridge's own ready request, and the remote ready requests waiting on it.
-    ready: Option<PendingRequest>,
-    ready_waiting: Vec<zenoh::query::Query>,
-    /// The remote agents that said they are ready, while the bridge waits for enough of them.
-    ready_agents: std::collections::BTreeSet<u32>,
+    /// Whether the hub counts the bridge ready, and the way there.
+    readiness: Readiness,
     wait_agents: usize,
-    is_ready: bool,
+    /// Every put's congestion control (`congestion_control`): fixed by the hub's mode.
+    congestion: zenoh::qos::CongestionControl,
     orphans: Vec<Orphan>,
     /// The robots' names, for taking a robot back.
     names: BTreeMap<u32, (String, RegisterResponse)>,
@@ -357,6 +369,7 @@ impl Bridge {
 
     fn serve_on(cfg: &BridgeConfig, agent: Agent, z: zenoh::Session) -> Result<Self, BridgeError> {
         let map = agent.map_items()?;
+        let congestion = congestion_control(map.0.params.lockstep != 0);
         let prefix = cfg.prefix.clone().unwrap_or_else(|| wire::prefix(&cfg.session));
         let (wake, ring) = UnixStream::pair().map_err(zerr("make a wake-up socket"))?;
         for s in [&wake, &ring] {
@@ -365,7 +378,7 @@ impl Bridge {
         let events = Arc::new(Events { queue: Mutex::new(VecDeque::new()), ring });
         let observing = match cfg.observers {
             Observers::Off => None,
-            Observers::World => Some(Observing::start(cfg, &z, &prefix)?),
+            Observers::World => Some(Observing::start(cfg, &z, &prefix, congestion)?),
         };
         let mut keys = vec![wire::register_key(&prefix), wire::map_key(&prefix)];
         if observing.is_some() {
@@ -426,11 +439,9 @@ impl Bridge {
             next_id: 1,
             joining: Vec::new(),
             queued: VecDeque::new(),
-            ready: None,
-            ready_waiting: Vec::new(),
-            ready_agents: std::collections::BTreeSet::new(),
+            readiness: Readiness::Counting { counted: BTreeSet::new(), waiting: Vec::new(), asked: None },
             wait_agents: cfg.wait_agents.max(1),
-            is_ready: false,
+            congestion,
             orphans: Vec::new(),
             names: BTreeMap::new(),
             tick: None,
@@ -603,7 +614,7 @@ impl Bridge {
                     .z
                     .declare_publisher(wire::sensors_key(&self.prefix, id))
                     .express(true)
-                    .congestion_control(congestion_control(self.map.0.params.lockstep != 0))
+                    .congestion_control(self.congestion)
                     .wait()
                 {
                     Ok(p) => p,
@@ -662,23 +673,29 @@ impl Bridge {
             }
             Some(RegisterKind::Robot) => self.queued.push_back((q, req)),
             Some(RegisterKind::Ready) => {
-                if !self.is_ready {
-                    self.ready_agents.insert(req.agent_id);
-                }
+                let enough = self.ready_remote_agents(Some(req.agent_id)) >= self.wait_agents;
                 // An agent counted while the bridge waits for more is answered at once, as the
                 // hub answers a local one (it then waits for the first tick, not for a reply
                 // that could time out); the one that completes the count, once the hub has
                 // answered the bridge.
-                if self.is_ready || self.ready_remote_agents() < self.wait_agents {
-                    let r = RegisterResponse { agent_id: req.agent_id, ..bytemuck::Zeroable::zeroed() };
-                    let _ = q.reply(q.key_expr().clone(), bytemuck::bytes_of(&r).to_vec()).wait();
-                } else {
-                    self.ready_waiting.push(q);
+                match &mut self.readiness {
+                    Readiness::Counting { counted, waiting, .. } => {
+                        counted.insert(req.agent_id);
+                        if enough {
+                            waiting.push(q);
+                            return;
+                        }
+                    }
+                    Readiness::Ready => {}
                 }
+                let r = RegisterResponse { agent_id: req.agent_id, ..bytemuck::Zeroable::zeroed() };
+                let _ = q.reply(q.key_expr().clone(), bytemuck::bytes_of(&r).to_vec()).wait();
             }
             Some(RegisterKind::Bye) => {
                 // As a local agent's goodbye: its robots leave the run.
-                self.ready_agents.remove(&req.agent_id);
+                if let Readiness::Counting { counted, .. } = &mut self.readiness {
+                    counted.remove(&req.agent_id);
+                }
                 if let Some(r) = self.remotes.remove(&req.agent_id) {
                     tracing::info!("remote agent {} said goodbye", req.agent_id);
                     for id in r.robots {
@@ -693,9 +710,18 @@ impl Bridge {
     }
 
     /// The remote agents that said they are ready and are still there (one that went before
-    /// the run started no longer counts, and counts again if its link comes back).
-    fn ready_remote_agents(&self) -> usize {
-        self.ready_agents.iter().filter(|id| self.remotes.get(id).is_some_and(|r| !r.gone)).count()
+    /// the run started no longer counts, and counts again if its link comes back), with
+    /// `also` among them.
+    fn ready_remote_agents(&self, also: Option<u32>) -> usize {
+        let Readiness::Counting { counted, .. } = &self.readiness else { return 0 };
+        let there = |id: &u32| self.remotes.get(id).is_some_and(|r| !r.gone);
+        let also = also.filter(there);
+        counted.iter().filter(|&id| Some(*id) != also && there(id)).count() + usize::from(also.is_some())
+    }
+
+    /// The bridge's own ready request to the hub, while it waits for the answer.
+    fn asking_hub(&self) -> bool {
+        matches!(self.readiness, Readiness::Counting { asked: Some(_), .. })
     }
 
     /// Forwards queued registrations to the hub, and the answers back.
@@ -703,29 +729,26 @@ impl Bridge {
         // Ready once a remote robot exists (a bridge with no robots must not count towards a
         // hub's --wait-agents), and once --wait-agents remote agents say they are, with every
         // registration sent before answered: none of them then misses the first tick.
-        if !self.is_ready
-            && self.ready.is_none()
-            && !self.ready_waiting.is_empty()
-            && self.ready_remote_agents() >= self.wait_agents
-            && self.joining.is_empty()
-            && self.queued.is_empty()
-        {
-            self.ready = Some(self.agent.start_ready()?);
-        }
-        if let Some(p) = &self.ready {
-            match self.agent.poll_answer(p) {
-                Ok(Some(_)) | Err(AgentError::Refused { .. }) => {
-                    self.ready = None;
-                    self.is_ready = true;
-                    for q in self.ready_waiting.drain(..) {
-                        let _ = q.reply(q.key_expr().clone(), vec![0u8; size_of::<RegisterResponse>()]).wait();
+        let enough = self.ready_remote_agents(None) >= self.wait_agents;
+        let settled = self.joining.is_empty() && self.queued.is_empty();
+        if let Readiness::Counting { waiting, asked, .. } = &mut self.readiness {
+            if asked.is_none() && !waiting.is_empty() && enough && settled {
+                *asked = Some(Box::new(self.agent.start_ready()?));
+            }
+            if let Some(p) = asked {
+                match self.agent.poll_answer(p) {
+                    Ok(Some(_)) | Err(AgentError::Refused { .. }) => {
+                        for q in waiting.drain(..) {
+                            let _ = q.reply(q.key_expr().clone(), vec![0u8; size_of::<RegisterResponse>()]).wait();
+                        }
+                        self.readiness = Readiness::Ready;
                     }
+                    Ok(None) => {}
+                    Err(e) => return Err(e.into()),
                 }
-                Ok(None) => {}
-                Err(e) => return Err(e.into()),
             }
         }
-        while self.joining.len() + usize::from(self.ready.is_some()) < MAX_REQUESTS_IN_FLIGHT {
+        while self.joining.len() + usize::from(self.asking_hub()) < MAX_REQUESTS_IN_FLIGHT {
             let Some((q, req)) = self.queued.pop_front() else { break };
             let name = req.robot.name.as_str().unwrap_or("").to_owned();
             // A robot whose remote agent went is taken back by a registration that names it.
@@ -907,7 +930,7 @@ impl Bridge {
         // Not before the hub counts the bridge ready: while it waits for more remote agents,
         // an early one's answer to the tick in hand would be the bridge's, and a lock-step
         // hub takes one answer per agent and tick; the later agents' would be lost.
-        if !self.is_ready {
+        if !matches!(self.readiness, Readiness::Ready) {
             return Ok(());
         }
         let p = &self.map.0.params;
@@ -915,7 +938,6 @@ impl Bridge {
         let due = if p.lockstep != 0 {
             let all = self.queued.is_empty()
                 && self.joining.is_empty()
-                && self.ready.is_none()
                 && self
                     .remotes
                     .values()
