@@ -43,6 +43,10 @@ pub enum Command {
     /// A Zenoh router (Zenoh's own, as `zenohd` runs it) for a bridge and agents that meet
     /// through one: `iwsim zenoh --connect` and the agents' `--zenoh` name it.
     ZenohRouter(zenoh_bridge::cli::RouterArgs),
+    /// Serves chairs to ROS 2 over Zenoh in rmw_zenoh's wire format: per chair NAME, cmd_vel in;
+    /// odom, tf, scan, ranges, imu and bumper out; /clock and /map (nodes started with
+    /// RMW_IMPLEMENTATION=rmw_zenoh_cpp see them, with no ROS 2 install here).
+    Ros2(ros2_bridge::cli::Ros2Args),
     /// Hosts episodes for learning environments on other machines (the Python
     /// `ChairsParallelEnv(..., zenoh="tcp/HOST:7447")`): each reset starts a lock-step hub of
     /// its scenario here, served to it over Zenoh with the truth for its referee.

@@ -64,6 +64,7 @@ pub fn run(cli: Cli) -> anyhow::Result<ExitCode> {
         Command::Udp(args) => udp_bridge::cli::run(&args),
         Command::Zenoh(args) => zenoh_bridge::cli::run(&args),
         Command::ZenohRouter(args) => zenoh_bridge::cli::router(&args),
+        Command::Ros2(args) => ros2_bridge::cli::run(&args),
         Command::EnvHost(args) => zenoh_bridge::cli::env_host(&args),
         Command::View(args) => viewer::cli::run(&args),
         Command::Agent { agent: AgentCommand::Wheelchair(args) } => wheelchair::run(&args),

@@ -20,6 +20,12 @@ pub fn wait_until(what: &str, timeout: Duration, every: Duration, mut ready: imp
     }
 }
 
+/// A TCP port free at the time of asking (for a Zenoh endpoint).
+pub fn free_port() -> u16 {
+    let l = std::net::TcpListener::bind("0.0.0.0:0").expect("a free port");
+    l.local_addr().expect("its address").port()
+}
+
 pub fn session(tag: &str) -> String {
     static N: AtomicU32 = AtomicU32::new(0);
     format!("e2e-{tag}-{}-{}", std::process::id(), N.fetch_add(1, Ordering::Relaxed))

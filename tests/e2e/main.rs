@@ -14,6 +14,7 @@ mod mixed_view;
 mod python;
 mod replay;
 mod robots;
+mod ros2;
 mod runner;
 mod scenarios;
 mod serial;

@@ -10,7 +10,7 @@ use std::time::Duration;
 
 use records::summary::RunSummary;
 
-use super::common::{Lines, Proc, assert_no_shared_memory_left, session, text};
+use super::common::{Lines, Proc, assert_no_shared_memory_left, free_port, session, text};
 
 /// Another host as far as the network goes: a network namespace with one end of a veth pair,
 /// the other end here. Removed (namespace and link) when dropped.
@@ -74,11 +74,6 @@ fn ip(args: &[&str]) {
 }
 
 /// A TCP port free at the moment (the kernel's pick).
-fn free_port() -> u16 {
-    let l = std::net::TcpListener::bind("0.0.0.0:0").expect("a free port");
-    l.local_addr().expect("its address").port()
-}
-
 fn work_dir(tag: &str) -> PathBuf {
     let dir = std::env::temp_dir().join(format!("iwsim-e2e-zenoh-{tag}-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);

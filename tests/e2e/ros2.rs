@@ -1,0 +1,129 @@
+//! ROS 2 through `iwsim ros2`, checked from the ROS side by a node made of third-party parts
+//! only (tests/ros2/rmw_node.py: the official Zenoh binding and PyPI `rosbags`, from
+//! rmw_zenoh's documented wire format), judged from the hub's own recording.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+use std::time::Duration;
+
+use super::common::{Lines, Proc, assert_no_shared_memory_left, free_port, session, text};
+
+fn work_dir(tag: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("iwsim-e2e-ros2-{tag}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).expect("work dir");
+    dir
+}
+
+/// A Zenoh router on a free local port, as rmw_zenoh's nodes meet through one; its endpoint.
+fn router() -> (Proc, String) {
+    let endpoint = format!("tcp/127.0.0.1:{}", free_port());
+    let mut r = Proc::spawn(&["zenoh-router", "--listen", &endpoint]);
+    let said = Lines::read(r.0.as_mut().and_then(|c| c.stderr.take()).expect("stderr"));
+    said.said("routing on", Duration::from_secs(30));
+    (r, endpoint)
+}
+
+fn python_script(name: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/ros2").join(name)
+}
+
+/// `key value…` lines of a script's output: the values after `key`.
+fn values<'a>(said: &'a str, key: &str) -> Vec<&'a str> {
+    said.lines()
+        .find_map(|l| l.strip_prefix(key).and_then(|r| r.strip_prefix(' ')))
+        .unwrap_or_else(|| panic!("{key} in\n{said}"))
+        .split_whitespace()
+        .collect()
+}
+
+#[test]
+fn a_ros_2_node_made_of_zenoh_and_rosbags_reads_every_topic_and_drives_the_chair_on_the_commanded_arc() {
+    let s = session("ros2-round-trip");
+    let dir = work_dir("round-trip");
+    let recording = dir.join("run.mcap");
+    let python = recorder::python::checker_python().unwrap_or_else(|e| panic!("{e}"));
+    let (mut router, endpoint) = router();
+    let ticks = 100;
+    let hub = Proc::spawn(&[
+        "hub",
+        "--session",
+        &s,
+        "--lab",
+        "builtin:thesis",
+        "--lockstep",
+        "--ticks",
+        &ticks.to_string(),
+        "--wait-agents",
+        "1",
+        "--no-noise",
+        "--record",
+        recording.to_str().expect("utf-8"),
+    ]);
+    let bridge = Proc::spawn(&[
+        "ros2",
+        "--session",
+        &s,
+        "--chair",
+        "chair1=4,4,0",
+        "--connect",
+        &endpoint,
+        "--connect-timeout",
+        "30",
+    ]);
+    let node = Command::new(&python)
+        .arg(python_script("round_trip.py"))
+        .args([&endpoint, "chair1", "0.3", "0.3"])
+        .output()
+        .expect("python runs");
+    let said = text(&node.stdout);
+    assert!(node.status.success(), "{said}\n{}", text(&node.stderr));
+    let h = hub.wait(Duration::from_secs(60));
+    assert!(h.status.success(), "{}", text(&h.stderr));
+    let b = bridge.wait(Duration::from_secs(30));
+    assert!(b.status.success(), "{}\n{}", text(&b.stdout), text(&b.stderr));
+    router.signal("INT");
+    router.wait(Duration::from_secs(20));
+
+    // Transient-local /map: the lab's walls on 5 cm cells (builtin:thesis is 28 m x 14 m),
+    // and the chair's static frames with the start pose as map -> odom.
+    assert_eq!(values(&said, "map"), ["560", "280", "0.050", "map"], "{said}");
+    let occupied: usize = values(&said, "map_occupied")[0].parse().expect("a count");
+    // Two walls: 2 m x 9 m and an L of 8 m2, 26 m2 in all: 10,400 cells of 5 cm.
+    assert!((8_000..11_000).contains(&occupied), "{said}");
+    let frames = values(&said, "tf_static");
+    for f in ["base_link>prox0", "base_link>prox7", "map>odom"] {
+        assert!(frames.contains(&f), "{f} in {frames:?}");
+    }
+    // Lock-step: /clock, odom and scan once per tick, every one decoded by rosbags, every
+    // sample with rmw_zenoh's attachment; the command answered every tick.
+    let clock: u64 = values(&said, "clock")[0].parse().expect("a count");
+    assert_eq!(clock, ticks + 1, "{said}");
+    assert_eq!(values(&said, "odom")[..3], [clock.to_string().as_str(), "odom", "base_link"], "{said}");
+    assert_eq!(values(&said, "scan")[..3], [clock.to_string().as_str(), "base_link", "360"], "{said}");
+    assert_eq!(values(&said, "bad_attachments"), ["0"], "{said}");
+
+    // The hub's record: the true track of a chair told 0.3 m/s and 0.3 rad/s is an arc of
+    // radius 1 m about (4, 5), tangent to its start heading. The motor filter ramps both
+    // wheels alike, so the curvature holds from the first tick: every point is on the circle.
+    let run = plot::track::RecordedRun::read(&recording, &["chair1".to_owned()]).unwrap_or_else(|e| panic!("{e}"));
+    let (_, track) = &run.robots[0];
+    let samples = &track.samples;
+    assert!(samples.len() as u64 >= ticks, "{} samples", samples.len());
+    for (i, p) in samples.iter().enumerate() {
+        let r = (p.x_m - 4.0).hypot(p.y_m - 5.0);
+        assert!((r - 1.0).abs() < 0.02, "sample {i} at ({}, {}) is {r} m from (4, 5)", p.x_m, p.y_m);
+    }
+    let (first, last) = (&samples[0], &samples[samples.len() - 1]);
+    // 10 s at 0.3 rad/s, less the filter's ramp: well over a third of a turn.
+    let turned = (last.heading_deg - first.heading_deg).rem_euclid(360.0);
+    assert!(turned > 120.0, "the chair turned {turned} degrees");
+    // The odometry the node read ends where the truth does (no noise in this run), in the
+    // odom frame whose origin is the start pose.
+    let odom = values(&said, "odom_pose");
+    let (ox, oy): (f64, f64) = (odom[0].parse().expect("x"), odom[1].parse().expect("y"));
+    let (tx, ty) = (last.x_m - 4.0, last.y_m - 4.0);
+    assert!((ox - tx).abs() < 0.05 && (oy - ty).abs() < 0.05, "odom ({ox}, {oy}) against the truth ({tx}, {ty})");
+    assert_no_shared_memory_left(&s);
+    let _ = std::fs::remove_dir_all(&dir);
+}
