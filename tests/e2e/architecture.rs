@@ -127,6 +127,7 @@ fn agents_adapters_and_the_viewer_never_link_the_hub_or_the_world() {
         "wheelchair",
         "udp-bridge",
         "zenoh-bridge",
+        "ros2-bridge",
         "serial-bridge",
         "viewer",
         "iwsim-python",

@@ -43,7 +43,7 @@ fn a_ros_2_node_made_of_zenoh_and_rosbags_reads_every_topic_and_drives_the_chair
     let dir = work_dir("round-trip");
     let recording = dir.join("run.mcap");
     let python = recorder::python::checker_python().unwrap_or_else(|e| panic!("{e}"));
-    let (mut router, endpoint) = router();
+    let (router, endpoint) = router();
     let ticks = 100;
     let hub = Proc::spawn(&[
         "hub",

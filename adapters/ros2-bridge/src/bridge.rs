@@ -163,7 +163,7 @@ impl Graph {
     fn latched(&mut self, node: &Node, topic: &str, ty: &'static TypeDesc) -> Result<Latched, Ros2Error> {
         let topic = self.publisher(node, topic, ty, Qos::latched(1))?;
         let cache_key = names::cache_key(&topic.key, &self.zid, topic.entity);
-        let last: Arc<Mutex<Option<(Vec<u8>, [u8; 33])>>> = Arc::default();
+        let last: Cache = Arc::default();
         let (kept, reply_key) = (last.clone(), topic.key.clone());
         let queryable = self
             .z
@@ -214,9 +214,12 @@ impl Topic {
     }
 }
 
+/// A latched topic's last sample (CDR and attachment), which its cache's queries get.
+type Cache = Arc<Mutex<Option<(Vec<u8>, [u8; 33])>>>;
+
 struct Latched {
     topic: Topic,
-    last: Arc<Mutex<Option<(Vec<u8>, [u8; 33])>>>,
+    last: Cache,
     _queryable: zenoh::query::Queryable<()>,
 }
 
