@@ -53,6 +53,8 @@ node.subscribe(f"{ns}/scan", "sensor_msgs/msg/LaserScan", scan, rmw.QOS_SENSOR)
 # The publisher last: its token tells the bridge the chair has a controller, and a lock-step
 # run starts, so every subscription must be in place first.
 cmd = node.publisher(f"{ns}/cmd_vel", "geometry_msgs/msg/Twist")
+# Junk first, which the bridge must count and drop: three bytes that are no Twist.
+cmd.pub.put(b"\x00\x01\x00")
 cmd.put(rmw.twist(v, w))
 
 start = time.monotonic()

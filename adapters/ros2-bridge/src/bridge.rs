@@ -427,8 +427,11 @@ impl Bridge {
                     }
                 }
                 Err(e) => {
+                    // Said once; a flood of junk is counted, not logged.
+                    if self.malformed == 0 {
+                        tracing::warn!("{}'s cmd_vel is not a geometry_msgs/msg/Twist: {e}", self.chairs[k].name);
+                    }
                     self.malformed += 1;
-                    tracing::warn!("{}'s cmd_vel is not a geometry_msgs/msg/Twist: {e}", self.chairs[k].name);
                 }
             },
             Event::Token { key, up } => {
