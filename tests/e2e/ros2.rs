@@ -130,3 +130,21 @@ fn a_ros_2_node_made_of_zenoh_and_rosbags_reads_every_topic_and_drives_the_chair
     assert_no_shared_memory_left(&s);
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+#[test]
+fn bench_ros2_measures_chairs_driven_over_ros_2_beside_shared_memory() {
+    // Small, for the suite: the figures README quotes come from the default sizes.
+    let out = Proc::spawn(&["bench", "ros2", "--chairs", "2", "--ticks", "50", "--runs", "1", "--json"])
+        .wait(Duration::from_secs(120));
+    let said = text(&out.stdout);
+    assert!(out.status.success(), "{said}\n{}", text(&out.stderr));
+    let line = said.lines().last().unwrap_or_default();
+    let v: serde_json::Value = serde_json::from_str(line).unwrap_or_else(|e| panic!("{e}: {line}"));
+    let size = &v["sizes"][0];
+    assert_eq!(size["chairs"], 2, "{v}");
+    for key in ["ros2_ticks_per_s", "shm_ticks_per_s", "ros2_over_shm"] {
+        let median = size[key]["median"].as_f64().unwrap_or(0.0);
+        assert!(median > 0.0, "{key} in {v}");
+    }
+    assert!(v["cpu"].as_str().is_some_and(|c| !c.is_empty()), "{v}");
+}

@@ -22,6 +22,9 @@ pub enum BenchCommand {
     /// second (over the run and in its slowest second), the hub's and the navigators' CPU per
     /// tick, and how the traffic went (arrivals, contacts, deadlocks, judged from the record).
     Traffic(BenchTrafficArgs),
+    /// Lock-step ticks per second with chairs driven over ROS 2 topics (`iwsim ros2`, a Zenoh
+    /// router and a ROS-side controller), beside the same chairs driven over shared memory.
+    Ros2(BenchRos2Args),
     /// The peer process of the raw iceoryx2 ping-pong (started by `bench latency`).
     #[command(hide = true)]
     RawPeer(RawPeerArgs),
@@ -59,6 +62,23 @@ pub struct BenchSerialArgs {
     /// Seconds of each run at the fastest sample period.
     #[arg(long, default_value_t = 3.0, value_parser = positive_seconds)]
     pub seconds: f64,
+    /// Print one JSON object instead of text.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// Options of `iwsim bench ros2`.
+#[derive(Debug, Args, Clone)]
+pub struct BenchRos2Args {
+    /// Chair counts to measure, comma-separated.
+    #[arg(long, value_delimiter = ',', default_value = "1,10", value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..=100))]
+    pub chairs: Vec<usize>,
+    /// Ticks per run.
+    #[arg(long, default_value_t = 1000, value_parser = clap::value_parser!(u64).range(10..=1_000_000))]
+    pub ticks: u64,
+    /// Runs per size and transport (interleaved); each figure is the median with min and max.
+    #[arg(long, default_value_t = 5, value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..=MAX_RUNS))]
+    pub runs: usize,
     /// Print one JSON object instead of text.
     #[arg(long)]
     pub json: bool,

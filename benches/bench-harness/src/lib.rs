@@ -10,6 +10,7 @@ pub mod args;
 mod crew;
 pub mod load;
 pub mod repeat;
+pub mod ros2;
 pub mod serial;
 pub mod tiled;
 pub mod traffic;
@@ -26,6 +27,7 @@ pub fn run(command: &BenchCommand) -> anyhow::Result<std::process::ExitCode> {
         BenchCommand::Viewer(a) => viewer::run(a),
         BenchCommand::Serial(a) => serial::run(a),
         BenchCommand::Traffic(a) => traffic::run(a),
+        BenchCommand::Ros2(a) => ros2::run(a),
         BenchCommand::RawPeer(a) => raw_peer(a),
         BenchCommand::UdpClient(a) => udp_client(a),
         BenchCommand::LoadAgent(a) => load::load_agent(a),
