@@ -972,16 +972,22 @@ pub fn run_once(
                         None => None,
                     };
                     for (k, a) in scenario.agents.iter().enumerate() {
-                        let mut args = vec![
-                            s("agent"),
-                            a.kind.clone(),
-                            s("--session"),
-                            session.clone(),
-                            s("--connect-timeout"),
-                            s("30"),
-                            s("--log"),
-                            out.display().to_string(),
-                        ];
+                        let ros2 = a.kind == "ros2";
+                        let mut args = if ros2 {
+                            // The ROS 2 bridge: its chairs are driven from ROS 2 (no logs of its own).
+                            vec![s("ros2"), s("--session"), session.clone(), s("--connect-timeout"), s("30")]
+                        } else {
+                            vec![
+                                s("agent"),
+                                a.kind.clone(),
+                                s("--session"),
+                                session.clone(),
+                                s("--connect-timeout"),
+                                s("30"),
+                                s("--log"),
+                                out.display().to_string(),
+                            ]
+                        };
                         if let Some(cfg) = &a.config {
                             let path = out.join(format!("agent{}-{}.toml", k + 1, a.kind));
                             std::fs::write(&path, toml::to_string(cfg).context("writing an agent's config")?)?;
@@ -994,6 +1000,7 @@ pub fn run_once(
                         let mut netns = None;
                         if let Some((z, connect)) = &zenoh
                             && z.agents.includes(k)
+                            && !ros2
                         {
                             // Agents retry for their --connect-timeout while the bridge comes up.
                             args.extend([s("--zenoh"), connect.clone()]);

@@ -26,6 +26,8 @@
 //! kind = "navigator"
 //! options = { name = "chair1", pose = [10.0, 6.1, 0.0], checkpoint = [[10.0, 6.1], [20.0, 6.1]] }
 //! # `config` (a table) is written to a file and passed as `--config FILE`.
+//! # kind = "ros2" runs `iwsim ros2` with the options, e.g. { chair = ["chair1=10,6.1,0"] }:
+//! # the chairs it serves are driven by a ROS 2 stack the user starts.
 //!
 //! [routes]                       # checkpoints each robot must reach, in order
 //! chair1 = [1, 2]
@@ -390,8 +392,14 @@ impl Scenario {
             }
         }
         for a in &s.agents {
-            if !["navigator", "wheelchair", "door", "teleop"].contains(&a.kind.as_str()) {
-                return Err(bad(format!("agent kind {:?}: expected navigator, wheelchair, door or teleop", a.kind)));
+            if !["navigator", "wheelchair", "door", "teleop", "ros2"].contains(&a.kind.as_str()) {
+                return Err(bad(format!(
+                    "agent kind {:?}: expected navigator, wheelchair, door, teleop or ros2",
+                    a.kind
+                )));
+            }
+            if a.kind == "ros2" && a.config.is_some() {
+                return Err(bad("agent kind \"ros2\" takes options, not a config table".into()));
             }
         }
         if let Some(chair) = &s.chair {
