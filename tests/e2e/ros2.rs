@@ -152,8 +152,9 @@ fn bench_ros2_measures_chairs_driven_over_ros_2_beside_shared_memory() {
 /// The thesis slalom (`builtin:slalom`) with its chair served by `iwsim ros2`, for a ROS 2
 /// controller to drive: the scenario file a user writes.
 fn slalom_over_ros2(endpoint: &str) -> String {
-    let slalom = std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("hub/runner/scenarios/slalom.toml"))
-        .expect("the slalom scenario");
+    let slalom =
+        std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("hub/runner/scenarios/slalom.toml"))
+            .expect("the slalom scenario");
     let (head, tail) = slalom.split_once("[[agents]]").expect("an agent");
     let (_, rest) = tail.split_once("\n\n").expect("the agent's table ends");
     format!(
