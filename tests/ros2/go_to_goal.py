@@ -166,12 +166,14 @@ class World:
     def centre(self, r, c):
         return np.stack([self.ox + (c + 0.5) * self.res, self.oy + (r + 0.5) * self.res], axis=-1)
 
-    def clearance(self, xy):
-        """Clearance (metres) at points (..., 2): distance to the nearest occupied cell's edge."""
+    def clearance(self, xy, field=None):
+        """Clearance (metres) at points (..., 2): distance to the nearest occupied cell's edge
+        (of field: the walls and found obstacles unless told)."""
+        field = self.edt if field is None else field
         r, c = self.cells(xy)
         ok = self.inside(r, c)
         out = np.full(r.shape, -1.0, np.float32)
-        out[ok] = self.edt[r[ok], c[ok]] - self.res / 2
+        out[ok] = field[r[ok], c[ok]] - self.res / 2
         return out
 
     def integrate(self, pose, angles, ranges, range_max):
@@ -437,6 +439,7 @@ class Planner:
     MAX_GOAL_SHIFT = 0.45
     ESCAPE_M = 0.45  # how far from a too-near start the path may stay that near
     BACKUP_M = 0.3  # the recovery's straight reverse
+    SEARCH_REVERSE = False
     HEAD_ERR = 0.015  # radians of heading error the clearance allows for
 
     def __init__(self, body):
@@ -460,6 +463,9 @@ class Planner:
         for k in (2, -2):
             motions.append(("T", k, [(0.0, 0.0, k * dth * f) for f in (1 / 3, 2 / 3, 1.0)], 0.0))
         self.motions = motions
+        # The search drives forward and turns in place; reversing (one wide sonar looks back)
+        # is left to the recovery's short straight back-up.
+        self.searchable = np.array([mo[0] != "R" or self.SEARCH_REVERSE for mo in motions])
         # Per start heading bin: the outline of every sample pose, as offsets from the start.
         K = len(body.outline)
         S = 3
@@ -523,7 +529,12 @@ class Planner:
         for h in range(0, self.NB, 2):
             o = self.outline_at[h]
             pts = np.stack([px[:, None] + o[None, :, 0], py[:, None] + o[None, :, 1]], -1)
-            ok = (world.clearance(pts) - self.extra[None, :]).min(axis=1) >= self.C_MIN
+            cl = world.clearance(pts)
+            if world.risk_edt is not None:
+                # Where to stop, unseen cells next to a found obstacle count as that obstacle
+                # (a goal beside a half-seen box is not a place to drive into to find out).
+                cl = np.minimum(cl, world.clearance(pts, world.risk_edt))
+            ok = (cl - self.extra[None, :]).min(axis=1) >= self.C_MIN
             if ok.any():
                 r = float(d[ok].min())
                 best = r if best is None else min(best, r)
@@ -723,7 +734,7 @@ class Planner:
             # near as the start, never nearer; then the path keeps C_MIN.
             need = min(self.C_MIN, clear - 1e-3) if dist < escape_m else self.C_MIN
             ends = self.ends[h]
-            for m in np.nonzero(cl >= need)[0]:
+            for m in np.nonzero((cl >= need) & self.searchable)[0]:
                 mkind, k, _, length = self.motions[m]
                 c_m = float(cl[m])
                 nx, ny = x + ends[m, 0], y + ends[m, 1]
@@ -1161,6 +1172,11 @@ def main():
                     world.refresh()
                     if not path_clear(planner, world, follower):
                         reason = "blocked"
+            # Something new next to the goal: where to stop may have changed (the goal may
+            # now be taken), so plan again (at most once a second).
+            if reason is None and t - last_plan_t >= 1.0 and len(rest) \
+                    and (np.hypot(pts[:, 0] - goal[0], pts[:, 1] - goal[1]) < 1.0).any():
+                reason = "goal area"
             world.new_cells = []
         if follower is not None and reason is None:
             rest = follower.remaining_poses()
@@ -1182,7 +1198,7 @@ def main():
         elif t - progress_ref[0] > 10.0 and reason is None:
             reason = "no progress"
             progress_ref = (t, dgoal)
-        if reason is not None and t >= fail_until and (reason == "blocked" or t - last_plan_t >= 0.5 or follower is None):
+        if reason is not None and t >= fail_until and (reason != "no progress" or t - last_plan_t >= 0.5):
             world.refresh()
             w0 = time.monotonic()
             path, partial = planner.plan(world, pose, goal, args.tolerance)
