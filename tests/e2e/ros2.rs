@@ -148,3 +148,66 @@ fn bench_ros2_measures_chairs_driven_over_ros_2_beside_shared_memory() {
     }
     assert!(v["cpu"].as_str().is_some_and(|c| !c.is_empty()), "{v}");
 }
+
+/// The thesis slalom (`builtin:slalom`) with its chair served by `iwsim ros2`, for a ROS 2
+/// controller to drive: the scenario file a user writes.
+fn slalom_over_ros2(endpoint: &str) -> String {
+    let slalom =
+        std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("hub/runner/scenarios/slalom.toml"))
+            .expect("the slalom scenario");
+    let (head, tail) = slalom.split_once("[[agents]]").expect("an agent");
+    let (_, rest) = tail.split_once("\n\n").expect("the agent's table ends");
+    format!(
+        "{head}[[agents]]\nkind = \"ros2\"\noptions = {{ chair = [\"chair1=10,6.1,0\"], connect = \"{endpoint}\" }}\n\n{rest}"
+    )
+}
+
+#[test]
+fn a_ros_2_go_to_goal_controller_drives_the_slalom_to_checkpoint_2_without_a_contact() {
+    let python = recorder::python::checker_python().unwrap_or_else(|e| panic!("{e}"));
+    let dir = work_dir("go-to-goal");
+    for seed in 1..=5 {
+        let (router, endpoint) = router();
+        let scenario = dir.join(format!("slalom-ros2-{seed}.toml"));
+        std::fs::write(&scenario, slalom_over_ros2(&endpoint)).expect("scenario written");
+        let out = dir.join(format!("out{seed}"));
+        let run = Proc::spawn(&[
+            "run",
+            scenario.to_str().expect("utf-8"),
+            "--lockstep",
+            // A ROS 2 stack may think for seconds (this one's planner, on a loaded machine):
+            // the deadline leaves it room, so the run is the same run however busy the
+            // machine is (a met deadline changes nothing).
+            "--deadline-ms",
+            "60000",
+            "--headless",
+            "--seed",
+            &seed.to_string(),
+            "--out",
+            out.to_str().expect("utf-8"),
+        ]);
+        // The ROS side: odom, scan, /map and tf_static in, cmd_vel out, on the simulation's clock.
+        let node = Command::new(&python)
+            .arg(python_script("go_to_goal.py"))
+            .args([&endpoint, "chair1", "20.0", "6.1"])
+            .output()
+            .expect("python runs");
+        let said = text(&node.stdout);
+        let r = run.wait(Duration::from_secs(300));
+        router.signal("INT");
+        router.wait(Duration::from_secs(20));
+        assert!(node.status.success(), "seed {seed}: {said}\n{}", text(&node.stderr));
+        // The deadline asked for is the one the hub kept (its record says so).
+        let rec = recorder::Recording::open(out.join("run.mcap")).unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(rec.start.deadline_ms, 60_000, "seed {seed}");
+        // Judged from the hub's record: checkpoint 2 reached, no contact of any kind.
+        let summary = records::summary::RunSummary::read(&out.join("summary.json")).unwrap_or_else(|e| panic!("{e}"));
+        assert!(
+            r.status.success() && summary.passed,
+            "seed {seed}: {:?}\n{}\n{said}",
+            summary.failures,
+            text(&r.stdout)
+        );
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -92,6 +92,17 @@ class Node:
         self.keep.append(sub)
         return sub
 
+    def on_publisher_gone(self, topic, callback):
+        """Calls `callback()` when a publisher of `topic` leaves the graph (its liveliness
+        token goes), as `ros2 topic info` would see it go."""
+        key = f"@ros2_lv/{self.domain}/**/MP/**/{mangle(topic)}/**"
+
+        def on_token(sample):
+            if sample.kind == zenoh.SampleKind.DELETE:
+                callback()
+
+        self.keep.append(self.session.liveliness().declare_subscriber(key, on_token))
+
     def latched(self, topic, typename, depth=1, timeout=10.0):
         """What a late transient-local subscription gets: the publishers' cached samples."""
         key = data_key(self.domain, topic, typename)

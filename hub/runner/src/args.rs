@@ -14,6 +14,11 @@ pub struct RunArgs {
     /// Step as fast as the agents allow (deterministic) instead of in real time.
     #[arg(long)]
     pub lockstep: bool,
+    /// Lock-step: how long (ms) a tick waits for its agents before the hub steps without the
+    /// late ones (default: the scenario's `deadline_ms`, else 5000). A ROS 2 stack that plans
+    /// for seconds needs more; a deadline that is met never changes the run.
+    #[arg(long, value_name = "MS", value_parser = clap::value_parser!(u64).range(1..=hub::cli::MAX_DEADLINE_MS))]
+    pub deadline_ms: Option<u64>,
     /// No viewer.
     #[arg(long)]
     pub headless: bool,

@@ -889,7 +889,7 @@ pub fn run_once(
         hub_args.extend([s("--grid"), g]);
     }
     if opts.lockstep {
-        hub_args.extend([s("--lockstep"), s("--deadline-ms"), s("5000")]);
+        hub_args.extend([s("--lockstep"), s("--deadline-ms"), scenario.deadline_ms.to_string()]);
     }
     if !scenario.noise {
         hub_args.push(s("--no-noise"));
@@ -1402,6 +1402,9 @@ pub fn run(args: &RunArgs) -> anyhow::Result<ExitCode> {
     let mut scenario = Scenario::load(&args.scenario)?;
     if let Some(mode) = args.chair_mode {
         scenario.set_chair_mode(mode).map_err(|e| anyhow::anyhow!("--chair-mode {}: {e}", mode.as_str()))?;
+    }
+    if let Some(ms) = args.deadline_ms {
+        scenario.deadline_ms = ms;
     }
     if args.chair_odometry_only {
         let name = scenario.name.clone();

@@ -7,6 +7,7 @@
 //! lab = "builtin:liacc"          # or a lab file, relative to this file
 //! seconds = 90                   # simulated time limit
 //! cycle_ms = 100                 # tick (default 100)
+//! deadline_ms = 5000             # lock-step: how long a tick waits for its agents (default 5000)
 //! noise = true                   # Ciber-Rato's sensor and motor noise, 2 % wheel slip (default true)
 //!
 //! [[checkpoints]]                # numbered from 1 in file order
@@ -63,6 +64,10 @@ use std::path::{Path, PathBuf};
 pub use records::places::{Checkpoint, Obstacle};
 use serde::Deserialize;
 
+/// The lock-step deadline of a scenario that sets none: long enough for any agent of ours on a
+/// loaded machine, short enough that a hung one holds the run only seconds.
+pub const DEFAULT_DEADLINE_MS: u64 = 5000;
+
 /// The built-in scenarios, by name.
 pub const BUILTINS: &[(&str, &str)] = &[
     ("dynamics", include_str!("../scenarios/dynamics.toml")),
@@ -93,6 +98,11 @@ pub struct Scenario {
     /// Tick, milliseconds.
     #[serde(default = "default_cycle")]
     pub cycle_ms: u32,
+    /// Lock-step: how long (wall-clock ms) the hub waits for a tick's answers before it steps
+    /// without the late agents. A stack that thinks long (a ROS 2 planner) needs more than the
+    /// default; a deadline that is met changes nothing in the run.
+    #[serde(default = "default_deadline")]
+    pub deadline_ms: u64,
     /// Simulated time limit, seconds.
     pub seconds: f64,
     /// Noise on (true: `world::map::NoiseParams::WHEELCHAIR`, Ciber-Rato's sensor and motor
@@ -130,6 +140,9 @@ pub struct Scenario {
 
 fn default_lab() -> String {
     "builtin:liacc".into()
+}
+fn default_deadline() -> u64 {
+    DEFAULT_DEADLINE_MS
 }
 fn default_cycle() -> u32 {
     100
@@ -371,6 +384,13 @@ impl Scenario {
         }
         if s.cycle_ms == 0 {
             return Err(bad("cycle_ms must be at least 1".into()));
+        }
+        if !(1..=hub::cli::MAX_DEADLINE_MS).contains(&s.deadline_ms) {
+            return Err(bad(format!(
+                "deadline_ms = {}: must be 1..={} (a day)",
+                s.deadline_ms,
+                hub::cli::MAX_DEADLINE_MS
+            )));
         }
         if s.agents.is_empty() && s.crowd.is_none() {
             return Err(bad("no [[agents]] and no [crowd]: a run needs at least one agent".into()));
@@ -628,6 +648,20 @@ mod tests {
     }
 
     #[test]
+    fn the_scenario_file_readme_shows_parses_as_shown() {
+        let readme =
+            std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("../../README.md")).expect("README.md");
+        let (_, after) = readme.split_once("### The scenario file").expect("README's scenario section");
+        let (_, block) = after.split_once("```toml\n").expect("its TOML block");
+        let (text, _) = block.split_once("```").expect("the block ends");
+        let s = Scenario::parse(text, "README.md", Path::new(".")).unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!((s.name.as_str(), s.deadline_ms, s.checkpoints.len(), s.agents.len()), ("slalom", 5000, 2, 2));
+        let unset = Scenario::parse(&text.replace("deadline_ms = 5000", ""), "README.md", Path::new("."))
+            .unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(unset.deadline_ms, DEFAULT_DEADLINE_MS);
+    }
+
+    #[test]
     fn mistakes_are_named_with_their_place() {
         for forever in ["1e300", "inf", "nan", "0", "604801"] {
             let text = format!("name = \"x\"\nseconds = {forever}\n[[agents]]\nkind = \"navigator\"\n");
@@ -644,6 +678,11 @@ mod tests {
         )
         .expect_err("bad route");
         assert_eq!(err.to_string(), "x.toml: route of c: checkpoint 3 does not exist (there are 0)");
+        for never in ["0", "86400001"] {
+            let text = format!("name = \"x\"\nseconds = 1\ndeadline_ms = {never}\n[[agents]]\nkind = \"navigator\"\n");
+            let err = Scenario::parse(&text, "x.toml", Path::new(".")).expect_err(never).to_string();
+            assert_eq!(err, format!("x.toml: deadline_ms = {never}: must be 1..=86400000 (a day)"));
+        }
         let err =
             Scenario::parse("name = \"x\"\nseconds = 1\nspeed = 2\n", "x.toml", Path::new(".")).expect_err("unknown");
         assert!(err.to_string().contains("unknown field"), "{err}");
