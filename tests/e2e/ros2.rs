@@ -132,6 +132,82 @@ fn a_ros_2_node_made_of_zenoh_and_rosbags_reads_every_topic_and_drives_the_chair
 }
 
 #[test]
+fn a_controller_that_falls_silent_is_stopped_by_the_zero_velocity_timeout_in_real_time() {
+    let s = session("ros2-timeout");
+    let dir = work_dir("timeout");
+    let recording = dir.join("run.mcap");
+    let python = recorder::python::checker_python().unwrap_or_else(|e| panic!("{e}"));
+    let (router, endpoint) = router();
+    // Real time, 8 s: the node drives 0.3 m/s straight for 15 clocks, then hangs.
+    let ticks = 80;
+    let hub = Proc::spawn(&[
+        "hub",
+        "--session",
+        &s,
+        "--lab",
+        "builtin:thesis",
+        "--ticks",
+        &ticks.to_string(),
+        "--wait-agents",
+        "1",
+        "--no-noise",
+        "--record",
+        recording.to_str().expect("utf-8"),
+    ]);
+    let bridge = Proc::spawn(&[
+        "ros2",
+        "--session",
+        &s,
+        "--chair",
+        "chair1=4,4,0",
+        "--connect",
+        &endpoint,
+        "--connect-timeout",
+        "30",
+        "--cmd-vel-timeout",
+        "0.5",
+    ]);
+    let node = Command::new(&python)
+        .arg(python_script("round_trip.py"))
+        .args([&endpoint, "chair1", "0.3", "0", "15"])
+        .output()
+        .expect("python runs");
+    let said = text(&node.stdout);
+    assert!(node.status.success(), "{said}\n{}", text(&node.stderr));
+    let h = hub.wait(Duration::from_secs(60));
+    assert!(h.status.success(), "{}", text(&h.stderr));
+    let b = bridge.wait(Duration::from_secs(30));
+    assert!(b.status.success(), "{}{}", text(&b.stdout), text(&b.stderr));
+    router.signal("INT");
+    router.wait(Duration::from_secs(20));
+
+    // The node's last command answered the clock at `last` (simulated seconds).
+    let sent = values(&said, "cmd_vel");
+    assert_eq!(sent[0], "15", "{said}");
+    let last: f64 = sent[1].parse().expect("a stamp");
+    // The truth, from the hub's record, at simulated time t (the sample at or after it).
+    let run = plot::track::RecordedRun::read(&recording, &["chair1".to_owned()]).unwrap_or_else(|e| panic!("{e}"));
+    let samples = &run.robots[0].1.samples;
+    let at = |t: f64| {
+        let p = samples.iter().find(|p| p.time_s >= t - 1e-9).unwrap_or_else(|| panic!("no sample at {t} s"));
+        (p.x_m, p.y_m)
+    };
+    let dist = |a: (f64, f64), b: (f64, f64)| (b.0 - a.0).hypot(b.1 - a.1);
+    // Within the timeout of its last command the chair still drives (at about 0.28 m/s by
+    // then: 0.11 m in 0.4 s) ...
+    let going = dist(at(last), at(last + 0.4));
+    assert!(going > 0.06, "{going} m in the 0.4 s after the last command\n{said}");
+    // ... and then the driver stops it: over the run's last 1.5 s (at least 3 s after the
+    // last command; on the last command alone it would go 0.4 m) it moves less than 1 cm.
+    let end = samples.last().expect("samples").time_s;
+    assert!(end - last >= 4.5, "the run ended {end} s, the last command {last} s");
+    let resting = dist(at(end - 1.5), at(end));
+    assert!(resting < 0.01, "{resting} m in the last 1.5 s: the silent controller's chair did not stop");
+    assert_no_shared_memory_left(&s);
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
 fn bench_ros2_measures_chairs_driven_over_ros_2_beside_shared_memory() {
     // Small, for the suite: the figures README quotes come from the default sizes.
     let out = Proc::spawn(&["bench", "ros2", "--chairs", "2", "--ticks", "50", "--runs", "1", "--json"])

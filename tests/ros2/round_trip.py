@@ -3,7 +3,10 @@ binding and rosbags only (rmw_node.py) reads /map and /NAME/tf_static (transient
 /clock, /NAME/odom and /NAME/scan, decoding every message with rosbags, and answers every
 /clock with the same cmd_vel (V m/s, W rad/s), encoded by rosbags.
 
-    python round_trip.py ENDPOINT NAME V W
+    python round_trip.py ENDPOINT NAME V W [ANSWERS]
+
+With ANSWERS it answers only that many clocks and then falls silent, its publisher still there:
+a controller that hangs, which the base driver's zero-velocity timeout must stop.
 
 It prints what it saw, one `key value...` per line, and ends when /clock has been quiet for
 3 s after the run started (the hub ended it).
@@ -16,6 +19,7 @@ import time
 import rmw_node as rmw
 
 endpoint, name, v, w = sys.argv[1], sys.argv[2], float(sys.argv[3]), float(sys.argv[4])
+answers = int(sys.argv[5]) if len(sys.argv) > 5 else None
 session = rmw.open_session(endpoint)
 node = rmw.Node(session, 0, "/", "round_trip")
 ns = f"/{name}"
@@ -35,16 +39,18 @@ print("tf_static", " ".join(frames))
 
 clock, odom, scan = rmw.Latest(), rmw.Latest(), rmw.Latest()
 sent = [0]
+last_answered = [None]
 cmd = None
 
 
 def on_clock(msg, ok):
     clock(msg, ok)
-    if cmd is None:
+    if cmd is None or (answers is not None and sent[0] >= answers):
         return
     # A use_sim_time controller: one command per tick of the simulation's clock.
     cmd.put(rmw.twist(v, w))
     sent[0] += 1
+    last_answered[0] = f"{msg.clock.sec}.{msg.clock.nanosec:09d}"
 
 
 node.subscribe("/clock", "rosgraph_msgs/msg/Clock", on_clock, rmw.QOS_SENSOR)
@@ -55,7 +61,8 @@ node.subscribe(f"{ns}/scan", "sensor_msgs/msg/LaserScan", scan, rmw.QOS_SENSOR)
 cmd = node.publisher(f"{ns}/cmd_vel", "geometry_msgs/msg/Twist")
 # Junk first, which the bridge must count and drop: three bytes that are no Twist.
 cmd.pub.put(b"\x00\x01\x00")
-cmd.put(rmw.twist(v, w))
+if answers is None:
+    cmd.put(rmw.twist(v, w))
 
 start = time.monotonic()
 while time.monotonic() - start < 300:
@@ -75,5 +82,5 @@ print("odom_pose", f"{p.x:.4f}", f"{p.y:.4f}", f"{2 * math.atan2(q.z, q.w):.4f}"
 print("odom_twist", f"{o.twist.twist.linear.x:.4f}", f"{o.twist.twist.angular.z:.4f}")
 print("scan", scan.count, s.header.frame_id, len(s.ranges), f"{s.angle_increment:.5f}")
 print("bad_attachments", clock.bad_attachments + odom.bad_attachments + scan.bad_attachments)
-print("cmd_vel", sent[0])
+print("cmd_vel", sent[0], last_answered[0])
 session.close()
