@@ -648,17 +648,13 @@ mod tests {
     }
 
     #[test]
-    fn the_scenario_file_readme_shows_parses_as_shown() {
-        let readme =
-            std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("../../README.md")).expect("README.md");
-        let (_, after) = readme.split_once("### The scenario file").expect("README's scenario section");
-        let (_, block) = after.split_once("```toml\n").expect("its TOML block");
-        let (text, _) = block.split_once("```").expect("the block ends");
-        let s = Scenario::parse(text, "README.md", Path::new(".")).unwrap_or_else(|e| panic!("{e}"));
-        assert_eq!((s.name.as_str(), s.deadline_ms, s.checkpoints.len(), s.agents.len()), ("slalom", 5000, 2, 2));
-        let unset = Scenario::parse(&text.replace("deadline_ms = 5000", ""), "README.md", Path::new("."))
+    fn the_lock_step_deadline_is_the_files_or_five_seconds() {
+        let head = "name = \"x\"\nseconds = 1\n[[agents]]\nkind = \"navigator\"\n";
+        let unset = Scenario::parse(head, "x.toml", Path::new(".")).unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(unset.deadline_ms, 5000);
+        let set = Scenario::parse(&format!("deadline_ms = 60000\n{head}"), "x.toml", Path::new("."))
             .unwrap_or_else(|e| panic!("{e}"));
-        assert_eq!(unset.deadline_ms, DEFAULT_DEADLINE_MS);
+        assert_eq!(set.deadline_ms, 60_000);
     }
 
     #[test]
