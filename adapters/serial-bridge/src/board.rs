@@ -23,7 +23,10 @@ pub const REOPEN_EVERY: Duration = Duration::from_millis(500);
 /// In stepped mode, how long a tick waits for the sample its step produces before the board
 /// counts as silent.
 pub const STEP_WAIT: Duration = Duration::from_secs(1);
-/// In stepped mode, how long to wait after a step's sample for the SimTruth that follows it.
+/// In stepped mode, how long to wait after a step's sample for a SimTruth while the board has
+/// not proved to be the emulator (a real board sends none). The emulator sends one after every
+/// sample, so once it has sent one the wait is [`STEP_WAIT`]: its frames leave at the line's
+/// pace, and a loaded machine can hold its thread between the two for longer than this.
 pub const TRUTH_WAIT: Duration = Duration::from_millis(100);
 /// The longest the loops here sleep between looks at the port and the timers (the protocol
 /// asks for at least every 20 ms).
@@ -386,8 +389,9 @@ impl BoardLink {
             self.safety.poll(now);
             self.apply();
             let Some(fd) = self.fd() else { return };
+            let truth_wait = if self.safety.emulated() { STEP_WAIT } else { TRUTH_WAIT };
             match self.sample_at {
-                Some(at) if self.truth_seen || now >= at + TRUTH_WAIT => return,
+                Some(at) if self.truth_seen || now >= at + truth_wait => return,
                 _ if now >= deadline => {
                     agent_sdk::report!(
                         "iwsim serial: the board did not answer a step within {} ms",

@@ -468,6 +468,11 @@ impl Safety {
         }
     }
 
+    /// Whether the board proved to be the chair emulator (it sent a SimTruth).
+    pub fn emulated(&self) -> bool {
+        self.emulated
+    }
+
     /// Whether the chair cannot move while we do not step it: a stepped board that proved to
     /// be an emulator (only an emulator sends SimTruth). Its clock moves only on our steps,
     /// once per tick, so a hub or controller that is slow in lock-step (a long plan) moves
