@@ -211,12 +211,9 @@ fn bench_lockstep_runs_every_transport_under_the_real_load_beside_ipc_only_and_s
     for variant in ["shm_real", "udp_real", "zenoh_real"] {
         let readings = j[format!("{variant}_readings")].as_u64().unwrap_or(0);
         let near = j[format!("{variant}_readings_near")].as_u64().unwrap_or(0);
-        // Over UDP the bridge is ready at its first robot (a Ciber-Rato client registers when
-        // it likes, and the bridge cannot know how many will come), so on a loaded machine
-        // the second client's robots can join a tick or two late: 90 % of every tick's.
-        let all = 30 * 6 * 8;
-        let floor = if variant == "udp_real" { all * 9 / 10 } else { all };
-        assert!(readings >= floor, "{variant}: {readings} readings for 6 robots x 8 sensors x 30 ticks");
+        // Every robot is in from the first tick (over UDP the bridge waits for all six:
+        // `iwsim udp --wait-robots`).
+        assert!(readings >= 30 * 6 * 8, "{variant}: {readings} readings for 6 robots x 8 sensors x 30 ticks");
         assert!(near > 0 && near < readings, "{variant}: {near} of {readings} readings saw a neighbour");
     }
     // Every run's hub removed its session's shared memory.

@@ -24,6 +24,8 @@ fn values_that_cannot_be_honoured_are_refused_with_the_option_and_its_range() {
         (&["hub", "--cycle-ms", "0"][..], "--cycle-ms", "1..="),
         (&["agent", "wheelchair", "--robots", "0"][..], "--robots", "1..=10000"),
         (&["udp", "--client-timeout", "1e30"][..], "--client-timeout", "0.1..=86400"),
+        (&["udp", "--wait-robots", "0"][..], "--wait-robots", "1..=1000000"),
+        (&["run", "builtin:slalom", "--deadline-ms", "0"][..], "--deadline-ms", "1..=86400000"),
     ] {
         // A session of its own, so a value that is not refused starts nothing a user runs.
         let s = session("refused");

@@ -36,6 +36,10 @@ pub struct UdpArgs {
     /// An address that may register as a viewer whatever `--viewers` says. Repeatable.
     #[arg(long, value_name = "IP")]
     pub viewer_allow: Vec<std::net::IpAddr>,
+    /// Tell the hub the bridge is ready (its `--wait-agents` counts it) only once this many
+    /// robots registered: a lock-step run then starts with every client's robot in it.
+    #[arg(long, value_name = "N", default_value_t = 1, value_parser = clap::value_parser!(u64).range(1..=1_000_000))]
+    pub wait_robots: u64,
 }
 
 /// The shortest `--client-timeout`, seconds: the bridge looks at its clients every 20 ms, and a
@@ -68,6 +72,7 @@ pub fn run(args: &UdpArgs) -> anyhow::Result<ExitCode> {
         allow_control: args.allow_control,
         viewers: args.viewers,
         viewer_allow: args.viewer_allow.clone(),
+        wait_robots: usize::try_from(args.wait_robots).unwrap_or(usize::MAX),
     };
     let bridge = Bridge::start(cfg)?;
     agent_sdk::report!(

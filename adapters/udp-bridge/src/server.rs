@@ -66,6 +66,10 @@ pub struct BridgeConfig {
     pub viewers: Viewers,
     /// Addresses allowed to register as viewers besides those `viewers` lets in.
     pub viewer_allow: Vec<IpAddr>,
+    /// The bridge tells the hub it is ready once this many robots were accepted (at least 1):
+    /// a Ciber-Rato client registers when it likes, so only the user knows how many to wait
+    /// for before a lock-step run starts.
+    pub wait_robots: usize,
 }
 
 /// Who may register as a Ciber-Rato viewer or panel: a viewer sees the truth (every robot's
@@ -504,6 +508,8 @@ pub struct Bridge {
     is_ready: bool,
     /// The ready request in flight.
     ready: Option<PendingRequest>,
+    /// Robots the hub accepted so far (the ready waits for `cfg.wait_robots` of them).
+    accepted: usize,
     /// Robot registrations not yet answered, in arrival order.
     joining: Vec<Joining>,
     /// Bad datagrams, logged at a bounded rate.
@@ -556,6 +562,7 @@ impl Bridge {
             answered: true,
             is_ready: false,
             ready: None,
+            accepted: 0,
             joining: Vec::new(),
             noise: NoiseLog::new(),
             block_index: Vec::new(),
@@ -828,8 +835,8 @@ impl Bridge {
     }
 
     /// Moves robot registrations along without waiting for the hub: sends queued ones (a few
-    /// in flight at a time), reads the answers that came, and admits accepted robots once the
-    /// bridge is ready (so the hub counts the bridge before its first robot drives).
+    /// in flight at a time), reads the answers that came, and admits accepted robots (once the
+    /// bridge is ready, when their number reached `wait_robots`).
     fn serve_joining(&mut self) -> Result<(), BridgeError> {
         if self.joining.is_empty() && self.ready.is_none() {
             return Ok(());
@@ -851,7 +858,8 @@ impl Bridge {
                 Ok(Some(accepted)) => {
                     j.request = None;
                     j.robot_id = Some(accepted.robot_id);
-                    if !self.is_ready && self.ready.is_none() {
+                    self.accepted += 1;
+                    if !self.is_ready && self.ready.is_none() && self.accepted >= self.cfg.wait_robots {
                         self.ready = Some(self.agent.start_ready()?);
                     }
                     k += 1;
@@ -875,7 +883,11 @@ impl Bridge {
             self.ready = None;
             self.is_ready = true;
         }
-        if !self.is_ready {
+        // While the ready is asked, the accepted robots wait for it (the hub counts the
+        // bridge before their first tick). Before that, while `--wait-robots` are still to
+        // come, they are admitted at once: a client registering several robots waits for each
+        // reply before it sends the next registration.
+        if !self.is_ready && self.accepted >= self.cfg.wait_robots {
             return Ok(());
         }
         let (admitted, waiting): (Vec<Joining>, Vec<Joining>) =

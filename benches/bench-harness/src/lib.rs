@@ -599,13 +599,15 @@ fn run_lockstep(
             bridge_ip.to_string(),
             "--connect-timeout".into(),
             "30".into(),
+            // The hub starts when the bridge is ready: with every client's robots in, so
+            // that every tick measured carries all of them.
+            "--wait-robots".into(),
+            total.clone(),
         ])?;
         let announced = bridge_address(&mut bridge);
         crew.push(bridge, "bridge");
         let (server, bytes) = announced?;
         stderr_bytes = Some(bytes);
-        // The hub starts when the bridge is ready, i.e. at its first robot: register every
-        // client's robots before the first tick matters, which the clients do at once.
         let mut registered = Vec::new();
         for i in 0..agents {
             let (bx, by) = origin(i);
