@@ -578,7 +578,21 @@ fn hub_started(procs: &mut Procs, banner: &Receiver<String>, signals: &Signals) 
             return Some(Stop::HubExited);
         }
         match banner.try_recv() {
-            Ok(_) | Err(TryRecvError::Disconnected) => return None,
+            Ok(_) => return None,
+            // The hub closed its stderr without the banner: it is exiting, though its exit
+            // may not show yet (on a loaded machine the pipe's end comes first).
+            Err(TryRecvError::Disconnected) => {
+                let closed = Instant::now();
+                while closed.elapsed() < STOP_BOUND {
+                    if procs.hub.exited().is_some() {
+                        return Some(Stop::HubExited);
+                    }
+                    if let Some(signal) = signals.wait(POLL) {
+                        return Some(Stop::Signal(signal));
+                    }
+                }
+                return None;
+            }
             Err(TryRecvError::Empty) if since.elapsed() > HUB_START_BOUND => return None,
             Err(TryRecvError::Empty) => {}
         }
