@@ -312,6 +312,45 @@ fn every_iwsim_command_in_the_readme_takes_the_options_it_shows() {
     assert!(refused.is_empty(), "{}", refused.join("\n"));
 }
 
+#[test]
+fn every_option_in_the_readme_command_table_is_one_the_command_takes() {
+    let readme = std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("README.md")).expect("README");
+    let (_, table) = readme.split_once("## Command line").expect("README's command line section");
+    let mut rows = 0;
+    let mut stale = Vec::new();
+    for row in table.lines().take_while(|l| !l.starts_with("## ")).filter(|l| l.starts_with("| `iwsim ")) {
+        let shown = row.split('`').nth(1).unwrap_or_default();
+        // The subcommand's words, then its options as `--name`.
+        let words: Vec<&str> = shown
+            .split_whitespace()
+            .skip(1)
+            .take_while(|w| w.chars().next().is_some_and(|c| c.is_ascii_lowercase()))
+            .collect();
+        let flags: Vec<&str> = shown
+            .split(|c: char| !(c.is_ascii_alphanumeric() || c == '-'))
+            .filter(|t| t.starts_with("--") && t.len() > 2)
+            .collect();
+        let mut args = words.clone();
+        args.push("--help");
+        let help = text(&Proc::spawn(&args).wait(Duration::from_secs(30)).stdout);
+        for flag in flags {
+            if !help.contains(&format!("{flag} "))
+                && !help.contains(&format!("{flag}\n"))
+                && !help.contains(&format!("{flag},"))
+            {
+                stale.push(format!("iwsim {}: {flag}", words.join(" ")));
+            }
+        }
+        rows += 1;
+    }
+    assert!(rows >= 25, "README's command table has {rows} rows");
+    assert!(
+        stale.is_empty(),
+        "options README's command table shows that the command does not take:\n{}",
+        stale.join("\n")
+    );
+}
+
 /// The first ```toml block of README's section `heading` (up to the next heading of that level).
 fn readme_toml(readme: &str, heading: &str) -> String {
     let section = readme.split(heading).nth(1).unwrap_or_else(|| panic!("README has {heading:?}"));
