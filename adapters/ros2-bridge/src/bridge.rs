@@ -1,13 +1,11 @@
 //! The bridge: a hub client that registers chairs and serves each as a ROS 2 base driver on
 //! Zenoh, in rmw_zenoh's wire format.
 
-use std::collections::{BTreeMap, BTreeSet, VecDeque};
-use std::io::{Read as _, Write as _};
-use std::os::fd::AsRawFd as _;
-use std::os::unix::net::UnixStream;
+use std::collections::{BTreeMap, BTreeSet};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
+use agent_sdk::inbox::{Doorbell, Inbox, inbox};
 use agent_sdk::map::Map;
 use agent_sdk::odometry::Odometry;
 use agent_sdk::{Agent, AgentError};
@@ -90,28 +88,8 @@ enum Event {
     Token { key: String, up: bool },
 }
 
-struct Events {
-    queue: Mutex<VecDeque<Event>>,
-    ring: UnixStream,
-}
-
 /// Events kept for the loop at most (a flood waits, or is dropped, in Zenoh's queues).
 const MAX_EVENTS: usize = 4096;
-
-impl Events {
-    fn push(&self, e: Event) {
-        let mut q = self.queue.lock().unwrap_or_else(|p| p.into_inner());
-        if q.len() < MAX_EVENTS {
-            q.push_back(e);
-        }
-        drop(q);
-        let _ = (&self.ring).write(&[1]);
-    }
-
-    fn take(&self) -> Option<Event> {
-        self.queue.lock().unwrap_or_else(|p| p.into_inner()).pop_front()
-    }
-}
 
 fn now_ns() -> i64 {
     SystemTime::now().duration_since(UNIX_EPOCH).map_or(0, |d| d.as_nanos() as i64)
@@ -278,8 +256,8 @@ pub struct Bridge {
     clock: Topic,
     /// Kept: its cache answers late subscribers.
     _map: Latched,
-    events: Arc<Events>,
-    wake: UnixStream,
+    events: Arc<Inbox<Event>>,
+    wake: Doorbell,
     _tokens: zenoh::pubsub::Subscriber<()>,
     cones: Vec<Cone>,
     tick: Option<(u64, f64, Instant)>,
@@ -322,11 +300,7 @@ impl Bridge {
         let mut agent =
             Agent::connect_within(&cfg.session, &format!("ros2-bridge-{}", std::process::id()), cfg.connect_timeout)?;
         let map = agent.map()?;
-        let (wake, ring) = UnixStream::pair().map_err(zerr("make a wake-up socket"))?;
-        for s in [&wake, &ring] {
-            s.set_nonblocking(true).map_err(zerr("make a wake-up socket"))?;
-        }
-        let events = Arc::new(Events { queue: Mutex::new(VecDeque::new()), ring });
+        let (events, wake) = inbox::<Event>(MAX_EVENTS).map_err(zerr("make a wake-up socket"))?;
         let mut graph =
             Graph { zid: z.zid().to_string(), z: z.clone(), domain: cfg.domain, next_id: 0, tokens: Vec::new() };
         let root = graph.node("/", "iwsim")?;
@@ -394,17 +368,7 @@ impl Bridge {
 
     /// Waits for the hub's tick or a Zenoh event, at most `timeout`; handles the events.
     fn wait(&mut self, timeout: Duration) {
-        let mut fds = [
-            libc::pollfd { fd: self.agent.tick_fd(), events: libc::POLLIN, revents: 0 },
-            libc::pollfd { fd: self.wake.as_raw_fd(), events: libc::POLLIN, revents: 0 },
-        ];
-        #[allow(unsafe_code)]
-        // SAFETY: fds is a live array of pollfd for the duration of the call.
-        unsafe {
-            libc::poll(fds.as_mut_ptr(), fds.len() as libc::nfds_t, timeout.as_millis().min(1000) as i32);
-        }
-        let mut drained = [0u8; 256];
-        while matches!((&self.wake).read(&mut drained), Ok(n) if n > 0) {}
+        self.wake.wait(Some(self.agent.tick_fd()), timeout.min(Duration::from_secs(1)));
         while let Some(e) = self.events.take() {
             self.on_event(e);
         }
@@ -569,7 +533,7 @@ impl Bridge {
 #[allow(clippy::too_many_arguments)]
 fn serve_chair(
     graph: &mut Graph,
-    events: &Arc<Events>,
+    events: &Arc<Inbox<Event>>,
     z: &zenoh::Session,
     k: usize,
     spec: &ChairSpec,
@@ -596,7 +560,7 @@ fn serve_chair(
     let cmd_vel = z
         .declare_subscriber(cmd_vel_key)
         .callback(move |s: zenoh::sample::Sample| {
-            ev.push(Event::CmdVel { k, bytes: s.payload().to_bytes().into_owned() })
+            ev.push(Event::CmdVel { k, bytes: s.payload().to_bytes().into_owned() });
         })
         .wait()
         .map_err(zerr("subscribe to cmd_vel"))?;

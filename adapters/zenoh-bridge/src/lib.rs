@@ -16,13 +16,12 @@ pub mod cli;
 pub mod episodes;
 
 use std::collections::{BTreeMap, BTreeSet, VecDeque};
-use std::io::{Read as _, Write as _};
-use std::os::fd::AsRawFd as _;
-use std::os::unix::net::UnixStream;
+use std::io::Read as _;
 use std::path::PathBuf;
-use std::sync::{Arc, Mutex};
+use std::sync::Arc;
 use std::time::{Duration, Instant};
 
+use agent_sdk::inbox::{Doorbell, Inbox, inbox};
 use agent_sdk::pending::PendingRequest;
 use agent_sdk::{Agent, AgentError};
 use ipc_types::remote as wire;
@@ -219,28 +218,6 @@ enum Event {
     Alive { agent_id: Option<u32>, up: bool },
 }
 
-/// Events in arrival order, and the socket that rings the loop for each.
-struct Events {
-    queue: Mutex<VecDeque<Event>>,
-    ring: UnixStream,
-}
-
-impl Events {
-    fn push(&self, e: Event) {
-        let mut q = self.queue.lock().unwrap_or_else(|p| p.into_inner());
-        // Bounded: a flood waits in Zenoh's own queues (or is dropped there), not here.
-        if q.len() < MAX_EVENTS {
-            q.push_back(e);
-        }
-        drop(q);
-        let _ = (&self.ring).write(&[1]);
-    }
-
-    fn take(&self) -> Option<Event> {
-        self.queue.lock().unwrap_or_else(|p| p.into_inner()).pop_front()
-    }
-}
-
 /// How often the loop checks that the hub is alive and no signal came.
 const CHECK_EVERY: Duration = Duration::from_millis(10);
 /// How long the bridge stays after the run for its remote agents to leave.
@@ -305,8 +282,8 @@ pub struct Bridge {
     map: (MapHeader, Vec<MapItem>),
     z: zenoh::Session,
     prefix: String,
-    events: Arc<Events>,
-    wake: UnixStream,
+    events: Arc<Inbox<Event>>,
+    wake: Doorbell,
     _queryables: Vec<zenoh::query::Queryable<()>>,
     _subscribers: Vec<zenoh::pubsub::Subscriber<()>>,
     _token: zenoh::liveliness::LivelinessToken,
@@ -371,11 +348,7 @@ impl Bridge {
         let map = agent.map_items()?;
         let congestion = congestion_control(map.0.params.lockstep != 0);
         let prefix = cfg.prefix.clone().unwrap_or_else(|| wire::prefix(&cfg.session));
-        let (wake, ring) = UnixStream::pair().map_err(zerr("make a wake-up socket"))?;
-        for s in [&wake, &ring] {
-            s.set_nonblocking(true).map_err(zerr("make a wake-up socket"))?;
-        }
-        let events = Arc::new(Events { queue: Mutex::new(VecDeque::new()), ring });
+        let (events, wake) = inbox::<Event>(MAX_EVENTS).map_err(zerr("make a wake-up socket"))?;
         let observing = match cfg.observers {
             Observers::Off => None,
             Observers::World => Some(Observing::start(cfg, &z, &prefix, congestion)?),
@@ -389,7 +362,9 @@ impl Bridge {
             let ev = events.clone();
             queryables.push(
                 z.declare_queryable(key)
-                    .callback(move |q| ev.push(Event::Query(q)))
+                    .callback(move |q| {
+                        ev.push(Event::Query(q));
+                    })
                     .wait()
                     .map_err(zerr("declare a queryable"))?,
             );
@@ -471,17 +446,7 @@ impl Bridge {
     pub fn run(mut self) -> Result<Counters, BridgeError> {
         loop {
             let timeout = self.next_wake();
-            let mut fds = [
-                libc::pollfd { fd: self.agent.tick_fd(), events: libc::POLLIN, revents: 0 },
-                libc::pollfd { fd: self.wake.as_raw_fd(), events: libc::POLLIN, revents: 0 },
-            ];
-            #[allow(unsafe_code)]
-            // SAFETY: fds is a live array of pollfd for the duration of the call.
-            unsafe {
-                libc::poll(fds.as_mut_ptr(), fds.len() as libc::nfds_t, timeout.as_millis() as i32);
-            }
-            let mut drained = [0u8; 256];
-            while matches!((&self.wake).read(&mut drained), Ok(n) if n > 0) {}
+            self.wake.wait(Some(self.agent.tick_fd()), timeout);
             while let Some(e) = self.events.take() {
                 self.on_event(e);
             }
@@ -523,14 +488,7 @@ impl Bridge {
     fn linger(&mut self) {
         let until = Instant::now() + LINGER;
         while self.remotes.values().any(|r| !r.gone) && Instant::now() < until {
-            let mut fd = libc::pollfd { fd: self.wake.as_raw_fd(), events: libc::POLLIN, revents: 0 };
-            #[allow(unsafe_code)]
-            // SAFETY: one live pollfd for the duration of the call.
-            unsafe {
-                libc::poll(&mut fd, 1, 50);
-            }
-            let mut drained = [0u8; 256];
-            while matches!((&self.wake).read(&mut drained), Ok(n) if n > 0) {}
+            self.wake.wait(None, Duration::from_millis(50));
             while let Some(e) = self.events.take() {
                 match e {
                     // Leaving after the run, as agents do: not lost.

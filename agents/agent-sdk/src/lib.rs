@@ -46,6 +46,7 @@ pub use ipc_services::{report, stop_signalled};
 pub use records::{args, files, log};
 
 pub mod cli;
+pub mod inbox;
 pub mod logs;
 pub mod map;
 pub mod odometry;
@@ -531,12 +532,22 @@ impl Drop for Agent {
 /// Waits until `fd` is readable or `timeout` passes (a signal also ends the wait); whether it
 /// became readable.
 fn wait_readable(fd: i32, timeout: Duration) -> bool {
-    let mut pfd = libc::pollfd { fd, events: libc::POLLIN, revents: 0 };
+    poll_readable(&[fd], timeout)
+}
+
+/// Waits until one of `fds` (at most 4) is readable or `timeout` passes (a signal also ends
+/// the wait); whether one became readable.
+pub(crate) fn poll_readable(fds: &[i32], timeout: Duration) -> bool {
+    let mut pfds = [libc::pollfd { fd: -1, events: libc::POLLIN, revents: 0 }; 4];
+    let n = fds.len().min(pfds.len());
+    for (p, &fd) in pfds.iter_mut().zip(&fds[..n]) {
+        p.fd = fd;
+    }
     let ms = timeout.as_millis().min(i32::MAX as u128) as i32;
     #[allow(unsafe_code)]
-    // SAFETY: one live pollfd for the duration of the call.
-    let n = unsafe { libc::poll(&mut pfd, 1, ms) };
-    n > 0 && pfd.revents != 0
+    // SAFETY: `n` live pollfds for the duration of the call.
+    let ready = unsafe { libc::poll(pfds.as_mut_ptr(), n as libc::nfds_t, ms) };
+    ready > 0 && pfds[..n].iter().any(|p| p.revents != 0)
 }
 
 impl std::fmt::Debug for Agent {
