@@ -37,43 +37,34 @@ fn values<'a>(said: &'a str, key: &str) -> Vec<&'a str> {
         .collect()
 }
 
-#[test]
-fn a_ros_2_node_made_of_zenoh_and_rosbags_reads_every_topic_and_drives_the_chair_on_the_commanded_arc() {
-    let s = session("ros2-round-trip");
-    let dir = work_dir("round-trip");
-    let recording = dir.join("run.mcap");
+/// One run of `round_trip.py` (with `node_args` after the endpoint) against `iwsim ros2`
+/// serving chair1 at (4, 4, 0) on builtin:thesis, noise off, for `ticks` ticks (`lockstep`
+/// or real time), recorded to `recording`; what the node and the bridge said, once all ended.
+fn round_trip_run(
+    s: &str,
+    recording: &Path,
+    lockstep: bool,
+    ticks: u64,
+    bridge_args: &[&str],
+    node_args: &[&str],
+) -> (String, String) {
     let python = recorder::python::checker_python().unwrap_or_else(|e| panic!("{e}"));
     let (router, endpoint) = router();
-    let ticks = 100;
-    let hub = Proc::spawn(&[
-        "hub",
-        "--session",
-        &s,
-        "--lab",
-        "builtin:thesis",
-        "--lockstep",
-        "--ticks",
-        &ticks.to_string(),
-        "--wait-agents",
-        "1",
-        "--no-noise",
-        "--record",
-        recording.to_str().expect("utf-8"),
-    ]);
-    let bridge = Proc::spawn(&[
-        "ros2",
-        "--session",
-        &s,
-        "--chair",
-        "chair1=4,4,0",
-        "--connect",
-        &endpoint,
-        "--connect-timeout",
-        "30",
-    ]);
+    let ticks = ticks.to_string();
+    let mut hub_args = vec!["hub", "--session", s, "--lab", "builtin:thesis", "--ticks", &ticks];
+    if lockstep {
+        hub_args.push("--lockstep");
+    }
+    hub_args.extend(["--wait-agents", "1", "--no-noise", "--record", recording.to_str().expect("utf-8")]);
+    let hub = Proc::spawn(&hub_args);
+    let mut args =
+        vec!["ros2", "--session", s, "--chair", "chair1=4,4,0", "--connect", &endpoint, "--connect-timeout", "30"];
+    args.extend(bridge_args);
+    let bridge = Proc::spawn(&args);
     let node = Command::new(&python)
         .arg(python_script("round_trip.py"))
-        .args([&endpoint, "chair1", "0.3", "0.3"])
+        .arg(&endpoint)
+        .args(node_args)
         .output()
         .expect("python runs");
     let said = text(&node.stdout);
@@ -83,10 +74,20 @@ fn a_ros_2_node_made_of_zenoh_and_rosbags_reads_every_topic_and_drives_the_chair
     let b = bridge.wait(Duration::from_secs(30));
     let bridge_said = text(&b.stdout) + &text(&b.stderr);
     assert!(b.status.success(), "{bridge_said}");
-    // The node's junk on cmd_vel was counted and dropped; the run went on (below).
-    assert!(bridge_said.contains("1 cmd_vel samples were not a geometry_msgs/msg/Twist"), "{bridge_said}");
     router.signal("INT");
     router.wait(Duration::from_secs(20));
+    (said, bridge_said)
+}
+
+#[test]
+fn a_ros_2_node_made_of_zenoh_and_rosbags_reads_every_topic_and_drives_the_chair_on_the_commanded_arc() {
+    let s = session("ros2-round-trip");
+    let dir = work_dir("round-trip");
+    let recording = dir.join("run.mcap");
+    let ticks = 100;
+    let (said, bridge_said) = round_trip_run(&s, &recording, true, ticks, &[], &["chair1", "0.3", "0.3"]);
+    // The node's junk on cmd_vel was counted and dropped; the run went on (below).
+    assert!(bridge_said.contains("1 cmd_vel samples were not a geometry_msgs/msg/Twist"), "{bridge_said}");
 
     // Transient-local /map: the lab's walls on 5 cm cells (builtin:thesis is 28 m x 14 m),
     // and the chair's static frames with the start pose as map -> odom.
@@ -136,50 +137,9 @@ fn a_controller_that_falls_silent_is_stopped_by_the_zero_velocity_timeout_in_rea
     let s = session("ros2-timeout");
     let dir = work_dir("timeout");
     let recording = dir.join("run.mcap");
-    let python = recorder::python::checker_python().unwrap_or_else(|e| panic!("{e}"));
-    let (router, endpoint) = router();
     // Real time, 8 s: the node drives 0.3 m/s straight for 15 clocks, then hangs.
-    let ticks = 80;
-    let hub = Proc::spawn(&[
-        "hub",
-        "--session",
-        &s,
-        "--lab",
-        "builtin:thesis",
-        "--ticks",
-        &ticks.to_string(),
-        "--wait-agents",
-        "1",
-        "--no-noise",
-        "--record",
-        recording.to_str().expect("utf-8"),
-    ]);
-    let bridge = Proc::spawn(&[
-        "ros2",
-        "--session",
-        &s,
-        "--chair",
-        "chair1=4,4,0",
-        "--connect",
-        &endpoint,
-        "--connect-timeout",
-        "30",
-        "--cmd-vel-timeout",
-        "0.5",
-    ]);
-    let node = Command::new(&python)
-        .arg(python_script("round_trip.py"))
-        .args([&endpoint, "chair1", "0.3", "0", "15"])
-        .output()
-        .expect("python runs");
-    let said = text(&node.stdout);
-    assert!(node.status.success(), "{said}\n{}", text(&node.stderr));
-    let h = hub.wait(Duration::from_secs(60));
-    assert!(h.status.success(), "{}", text(&h.stderr));
-    let b = bridge.wait(Duration::from_secs(30));
-    assert!(b.status.success(), "{}{}", text(&b.stdout), text(&b.stderr));
-    router.signal("INT");
-    router.wait(Duration::from_secs(20));
+    let (said, _) =
+        round_trip_run(&s, &recording, false, 80, &["--cmd-vel-timeout", "0.5"], &["chair1", "0.3", "0", "15"]);
 
     // The node's last command answered the clock at `last` (simulated seconds).
     let sent = values(&said, "cmd_vel");

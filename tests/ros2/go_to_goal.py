@@ -267,26 +267,14 @@ class World:
                 lx = ax_[:, None] + d * dx_[:, None]
                 ly = ay_[:, None] + d * dy_[:, None]
                 c_, s_ = math.cos(th), math.sin(th)
-                px, py = x + c_ * lx - s_ * ly, y + s_ * lx + c_ * ly
-                r, c = self.cells(np.stack([px, py], -1))
-                ok = self.inside(r, c)
-                flat = np.unique(r[ok] * self.w + c[ok])
-                rr, cc = flat // self.w, flat % self.w
-                self.miss[rr, cc] += 1.0
-                self.seen[rr, cc] = True
+                self._seen_through(x + c_ * lx - s_ * ly, y + s_ * lx + c_ * ly)
         else:
             reach = np.where(finite, ranges - self.CLEAR_SHORT_M, np.where(valid, self.CLEAR_INF_M, 0.0))
             sel = np.nonzero(np.minimum(reach, range_max) > 0.1)[0]
             if len(sel):
                 n = int(math.ceil(float(reach[sel].max()) / (self.res * 0.8))) + 1
                 d = np.minimum(reach[sel], range_max)[:, None] * np.linspace(0.0, 1.0, max(n, 2))[None, :]
-                px, py = x + d * cos[sel, None], y + d * sin[sel, None]
-                r, c = self.cells(np.stack([px, py], -1))
-                ok = self.inside(r, c)
-                flat = np.unique(r[ok] * self.w + c[ok])
-                rr, cc = flat // self.w, flat % self.w
-                self.miss[rr, cc] += 1.0
-                self.seen[rr, cc] = True
+                self._seen_through(x + d * cos[sel, None], y + d * sin[sel, None])
         # Hits.
         idx = np.nonzero(trusted)[0]
         if len(idx):
@@ -313,6 +301,15 @@ class World:
             self.new_cells += list(zip(rr.tolist(), cc.tolist()))
             self.sensed = now
             self.dirty = True
+
+    def _seen_through(self, px, py):
+        """Counts once each cell the rays' points (px, py) pass through as seen empty."""
+        r, c = self.cells(np.stack([px, py], -1))
+        ok = self.inside(r, c)
+        flat = np.unique(r[ok] * self.w + c[ok])
+        rr, cc = flat // self.w, flat % self.w
+        self.miss[rr, cc] += 1.0
+        self.seen[rr, cc] = True
 
     def occupied(self):
         """Cells the scan found: hit often enough, and hit at least as often as seen through
