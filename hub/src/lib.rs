@@ -16,7 +16,7 @@ pub mod serve;
 pub mod stage;
 
 use std::collections::BTreeMap;
-use std::os::fd::{AsRawFd, FromRawFd, OwnedFd};
+use std::os::fd::{AsRawFd, OwnedFd};
 use std::time::{Duration, Instant};
 
 use ipc_services::iceoryx2::port::publisher::Publisher;
@@ -124,53 +124,17 @@ struct PidFd(OwnedFd);
 
 impl PidFd {
     fn open(pid: u32) -> Option<Self> {
-        #[allow(unsafe_code)]
-        // SAFETY: pidfd_open takes a pid and flags and returns a new fd or −1; no memory is
-        // passed.
-        let fd = unsafe { libc::syscall(libc::SYS_pidfd_open, pid as libc::pid_t, 0) };
-        if fd < 0 {
-            return None;
-        }
-        #[allow(unsafe_code)]
-        // SAFETY: the fd was just returned by pidfd_open and is owned by nothing else.
-        Some(Self(unsafe { OwnedFd::from_raw_fd(fd as i32) }))
+        os::process::pidfd_open(pid).map(Self)
     }
 }
 
-/// Raises the soft open-file limit to the hard one: the hub holds about 11 fds per agent.
-fn raise_fd_limit() {
-    let mut lim = libc::rlimit { rlim_cur: 0, rlim_max: 0 };
-    #[allow(unsafe_code)]
-    // SAFETY: getrlimit/setrlimit read and write the struct passed, which lives on our stack.
-    unsafe {
-        if libc::getrlimit(libc::RLIMIT_NOFILE, &mut lim) == 0 && lim.rlim_cur < lim.rlim_max {
-            lim.rlim_cur = lim.rlim_max;
-            libc::setrlimit(libc::RLIMIT_NOFILE, &lim);
-        }
-    }
-}
-
-/// `poll(2)` on a set of file descriptors, with its `pollfd` array kept between calls so the
-/// hub's loop allocates nothing once warm.
-#[derive(Debug, Default)]
-struct Poller {
-    pfds: Vec<libc::pollfd>,
-}
-
-impl Poller {
-    /// Waits until one of `fds` is readable or `timeout` passes; `ready` gets the indexes of
-    /// the readable ones.
-    fn readable(&mut self, fds: &[i32], timeout: Duration, ready: &mut Vec<usize>) {
-        ready.clear();
-        self.pfds.clear();
-        self.pfds.extend(fds.iter().map(|&fd| libc::pollfd { fd, events: libc::POLLIN, revents: 0 }));
-        let ms = timeout.as_millis().min(i32::MAX as u128) as i32;
-        #[allow(unsafe_code)]
-        // SAFETY: pfds is a live, correctly sized array of pollfd for the duration of the call.
-        let n = unsafe { libc::poll(self.pfds.as_mut_ptr(), self.pfds.len() as libc::nfds_t, ms) };
-        if n > 0 {
-            ready.extend(self.pfds.iter().enumerate().filter(|(_, p)| p.revents != 0).map(|(i, _)| i));
-        }
+/// Waits until one of `fds` is readable or `timeout` passes; `ready` gets the indexes of the
+/// readable ones. An error of the wait (none is expected of open descriptors) reads as a
+/// timeout: the loop looks at everything again on its next turn.
+fn readable(poller: &mut os::poll::Poller, fds: &[i32], timeout: Duration, ready: &mut Vec<usize>) {
+    ready.clear();
+    if poller.wait(fds, Some(timeout)).is_ok() {
+        poller.ready_into(ready);
     }
 }
 
@@ -202,7 +166,8 @@ const MAX_ANSWER_WAITS: usize = 1 << 20;
 
 /// Runs a hub until its tick limit, a Stop command, or SIGINT/SIGTERM.
 pub fn run(cfg: HubConfig) -> Result<HubOutcome, HubError> {
-    raise_fd_limit();
+    // The hub holds about 11 descriptors per agent.
+    os::process::raise_fd_limit();
     let session = Session::new(&cfg.session)?;
     // Dropped last, on every way out (a refused lab, a failed port, the end of the run): the
     // last process of a session leaves nothing in /dev/shm.
@@ -254,7 +219,7 @@ pub fn run(cfg: HubConfig) -> Result<HubOutcome, HubError> {
     let mut deadline_at = Instant::now() + cfg.deadline;
     let mut fds: Vec<i32> = Vec::new();
     let mut fd_agents: Vec<u32> = Vec::new();
-    let mut poller = Poller::default();
+    let mut poller = os::poll::Poller::default();
     let mut ready = Vec::new();
     let mut dead_agents: Vec<u32> = Vec::new();
     let mut publish = true;
@@ -374,7 +339,7 @@ pub fn run(cfg: HubConfig) -> Result<HubOutcome, HubError> {
         } else {
             timeout
         };
-        poller.readable(&fds, timeout, &mut ready);
+        readable(&mut poller, &fds, timeout, &mut ready);
         let _ = ports.doorbell.try_wait(|_| {});
         // A new subscriber gets the kept (history) sample only when the publisher next looks
         // at its connections: the map is sent once, and the world not while paused.
@@ -607,7 +572,7 @@ pub fn run(cfg: HubConfig) -> Result<HubOutcome, HubError> {
     let linger_until = Instant::now() + Duration::from_secs(2);
     let mut waiting: Vec<i32> = agents.values().filter_map(|a| a.pidfd.as_ref().map(|p| p.0.as_raw_fd())).collect();
     while !waiting.is_empty() && Instant::now() < linger_until {
-        poller.readable(&waiting, linger_until.saturating_duration_since(Instant::now()), &mut ready);
+        readable(&mut poller, &waiting, linger_until.saturating_duration_since(Instant::now()), &mut ready);
         if ready.is_empty() {
             break;
         }

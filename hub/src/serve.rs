@@ -36,7 +36,7 @@ use crate::core::{MapAudience, Mode, hub_params, pack_map_for, robot_info, robot
 use crate::ports::{HubPorts, agent_sensor_port};
 use crate::replay::outcome_of;
 use crate::stage::{Stage, StageApplyError};
-use crate::{HubError, HubOutcome, IDLE_POLL, PidFd, Poller, named_publisher};
+use crate::{HubError, HubOutcome, IDLE_POLL, PidFd, named_publisher, readable};
 
 /// How to serve a recording.
 #[derive(Debug, Clone, PartialEq)]
@@ -370,7 +370,7 @@ pub fn serve(recording: &Recording, options: &ServeOptions) -> Result<Served, Re
         Served { steps: 0, outcome: HubOutcome::default(), mismatch: None, agents_seen: 0, robots_refused: 0 };
     let mut fds: Vec<i32> = Vec::new();
     let mut fd_agents: Vec<u32> = Vec::new();
-    let mut poller = Poller::default();
+    let mut poller = os::poll::Poller::default();
     let mut ready = Vec::new();
     let mut next_tick_at = Instant::now() + period;
     let mut publish = true;
@@ -440,7 +440,7 @@ pub fn serve(recording: &Recording, options: &ServeOptions) -> Result<Served, Re
                 fd_agents.push(id);
             }
         }
-        poller.readable(&fds, timeout, &mut ready);
+        readable(&mut poller, &fds, timeout, &mut ready);
         let _ = io.doorbell.try_wait(|_| {});
         // A new subscriber gets the kept sample only when the publisher next looks at its
         // connections: the maps are sent once, and the world not while paused.
@@ -553,7 +553,7 @@ pub fn serve(recording: &Recording, options: &ServeOptions) -> Result<Served, Re
             break;
         }
         // Wakes when an agent exits; observers leave no fd to wait on, so look again soon.
-        poller.readable(&alive, Duration::from_millis(10), &mut ready);
+        readable(&mut poller, &alive, Duration::from_millis(10), &mut ready);
         for &i in &ready {
             let fd = alive[i];
             agents.retain(|_, a| a.pidfd.as_ref().is_none_or(|p| p.0.as_raw_fd() != fd));

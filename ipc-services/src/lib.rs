@@ -96,23 +96,7 @@ macro_rules! report {
 /// should (the main one). A parent that died between the fork and the child's `prctl` is
 /// caught by comparing the parent's pid: the child then fails to start.
 pub fn die_with_parent(command: &mut std::process::Command) {
-    use std::os::unix::process::CommandExt as _;
-    let parent = std::process::id();
-    #[allow(unsafe_code)]
-    // SAFETY: the closure runs in the forked child before exec and only calls prctl and
-    // getppid, both plain system calls (async-signal-safe); it allocates nothing and takes no
-    // lock.
-    unsafe {
-        command.pre_exec(move || {
-            if libc::prctl(libc::PR_SET_PDEATHSIG, libc::SIGTERM as libc::c_ulong) != 0 {
-                return Err(std::io::Error::last_os_error());
-            }
-            if libc::getppid() as u32 != parent {
-                return Err(std::io::Error::other("the parent died as the process started"));
-            }
-            Ok(())
-        });
-    }
+    os::process::die_with_parent(command);
 }
 
 /// Whether process `pid` still runs: one of its threads has not exited yet. A killed process
@@ -589,13 +573,7 @@ fn remove_node_counter(config: &Config) -> bool {
 #[cfg(target_os = "linux")]
 pub fn monotonic_ns() -> u64 {
     // std's Instant is this clock but opaque; only a raw reading crosses processes.
-    let mut ts = libc::timespec { tv_sec: 0, tv_nsec: 0 };
-    #[allow(unsafe_code)]
-    // SAFETY: clock_gettime writes the timespec we pass, which lives on our stack.
-    unsafe {
-        libc::clock_gettime(libc::CLOCK_MONOTONIC, &mut ts);
-    }
-    ts.tv_sec as u64 * 1_000_000_000 + ts.tv_nsec as u64
+    os::clock::monotonic_ns()
 }
 
 /// Allocation for slice publishers: start small and grow by powers of two, so a hub with ten
@@ -647,25 +625,12 @@ pub fn install_stop_handlers() {
         // Only an atomic store: the one thing this handler may safely do.
         STOP.store(true, std::sync::atomic::Ordering::SeqCst);
     }
-    for signo in [libc::SIGINT, libc::SIGTERM, libc::SIGHUP] {
-        // SAFETY: reads the current disposition, then installs a handler that only stores to
-        // an atomic; the structs are zeroed C structs filled as sigaction(2) documents.
-        #[allow(unsafe_code)]
-        unsafe {
-            let mut old: libc::sigaction = std::mem::zeroed();
-            if libc::sigaction(signo, std::ptr::null(), &mut old) != 0
-                || (signo == libc::SIGHUP && old.sa_sigaction == libc::SIG_IGN)
-            {
-                continue;
-            }
-            let mut sa: libc::sigaction = std::mem::zeroed();
-            sa.sa_sigaction = on_stop as *const () as usize;
-            sa.sa_flags = libc::SA_RESTART;
-            libc::sigemptyset(&mut sa.sa_mask);
-            if libc::sigaction(signo, &sa, std::ptr::null_mut()) != 0 {
-                tracing::debug!("signal {signo}: handler not installed: {}", std::io::Error::last_os_error());
-            }
-        }
+    // SIGHUP stays ignored where it was (as under `nohup`).
+    let hup = !os::signals::is_ignored(libc::SIGHUP);
+    let signals: &[i32] =
+        if hup { &[libc::SIGINT, libc::SIGTERM, libc::SIGHUP] } else { &[libc::SIGINT, libc::SIGTERM] };
+    if let Err(e) = os::signals::on_signals(signals, on_stop, true) {
+        tracing::debug!("termination handlers not installed: {e}");
     }
 }
 

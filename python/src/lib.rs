@@ -369,12 +369,7 @@ pub(crate) fn write_f64s(out: &mut [u8], values: &[f64]) {
 
 /// Waits up to `slice` for `fd` to become readable; whether it did.
 fn wait_readable(fd: i32, slice: Duration) -> bool {
-    let mut p = libc::pollfd { fd, events: libc::POLLIN, revents: 0 };
-    let ms = slice.as_millis().clamp(0, i32::MAX as u128) as i32;
-    #[allow(unsafe_code)]
-    // SAFETY: `p` is one live pollfd for the duration of the call; poll writes only its revents.
-    let n = unsafe { libc::poll(&mut p, 1, ms) };
-    n > 0
+    os::poll::any_readable(&[fd], Some(slice)).unwrap_or(false)
 }
 
 /// `SensorBlock`'s fields as (name, byte offset, NumPy type code, element count), from the

@@ -166,6 +166,7 @@ fn agents_adapters_and_the_viewer_never_link_the_hub_or_the_world() {
             "serial-protocol",
             "chair-emulator",
             "observer",
+            "os",
         ]
         .contains(&m.as_str());
         assert!(is_client || known_other, "new workspace package {m:?}: add it to ARCHITECTURE.md and to this test");
@@ -528,4 +529,29 @@ fn the_python_agent_api_never_imports_the_referee() {
         }
     }
     assert!(bad.is_empty(), "Python agent code reaching the referee:\n{}", bad.join("\n"));
+}
+
+#[test]
+fn only_the_os_layer_calls_the_c_library() {
+    // Architecture invariant: production code calls no libc function outside the OS layer
+    // (`os/`): poll, terminals, ptys, signals, clocks and process calls go through it, so
+    // there is one wrapper of each. libc's constants (signal numbers) may be named anywhere.
+    let mut bad = Vec::new();
+    for f in sources() {
+        let r = rel(&f);
+        if r.starts_with("os/") || is_test_file(&r) {
+            continue;
+        }
+        for (n, line) in production_lines(&f) {
+            let calls = line.match_indices("libc::").any(|(i, _)| {
+                let name: String =
+                    line[i + 6..].chars().take_while(|c| c.is_ascii_alphanumeric() || *c == '_').collect();
+                name.starts_with(|c: char| c.is_ascii_lowercase()) && line[i + 6 + name.len()..].starts_with('(')
+            });
+            if calls {
+                bad.push(format!("{r}:{n}: {}", line.trim()));
+            }
+        }
+    }
+    assert!(bad.is_empty(), "libc called outside the OS layer (os/):\n  {}", bad.join("\n  "));
 }

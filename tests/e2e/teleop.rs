@@ -8,11 +8,12 @@ use std::process::Command;
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
-use ::teleop::pty::Pty;
 use ::teleop::term::local_modes;
+use ::teleop::view::TERMINAL_SIZE;
 use agent_sdk::control;
 use ipc_types::{Command as Cmd, RobotState, WorldHeader};
 use observer::Observer;
+use os::pty::Pty;
 
 use super::common::{Proc, assert_no_shared_memory_left, robot_named, session, text};
 
@@ -105,7 +106,7 @@ fn teleop_drives_a_chair_from_a_pseudo_terminal_and_restores_the_terminal_on_qui
     let s = session("teleop");
     let hub = Proc::spawn(&["hub", "--session", &s, "--cycle-ms", "20", "--no-noise"]);
 
-    let pty = Pty::open().expect("a pseudo-terminal");
+    let pty = Pty::open(Some(TERMINAL_SIZE)).expect("a pseudo-terminal");
     let teleop = spawn_teleop(&s, &pty);
     let screen = Terminal::read(&pty);
     let mut master = pty.master().expect("master");
@@ -170,7 +171,7 @@ fn teleop_drives_a_chair_from_a_pseudo_terminal_and_restores_the_terminal_on_qui
 fn teleop_exits_with_a_message_and_a_restored_terminal_when_its_hub_is_killed() {
     let s = session("teleop-hub-dies");
     let mut hub = Proc::spawn(&["hub", "--session", &s, "--cycle-ms", "20"]);
-    let pty = Pty::open().expect("a pseudo-terminal");
+    let pty = Pty::open(Some(TERMINAL_SIZE)).expect("a pseudo-terminal");
     let teleop = spawn_teleop(&s, &pty);
     let screen = Terminal::read(&pty);
     screen.wait_for("a running tick", Duration::from_secs(20), |f| f.contains("run running"));

@@ -100,16 +100,9 @@ impl Port {
 
 /// Waits up to `timeout` for any of `fds` (negative entries are skipped) to become readable
 /// or hang up; returns at once when one is.
-#[allow(unsafe_code)] // poll(2) has no safe wrapper in std
 pub fn wait_readable(fds: &[RawFd], timeout: Duration) {
-    let mut polled: Vec<libc::pollfd> =
-        fds.iter().filter(|&&fd| fd >= 0).map(|&fd| libc::pollfd { fd, events: libc::POLLIN, revents: 0 }).collect();
-    let ms = timeout.as_millis().min(i32::MAX as u128) as i32;
-    // SAFETY: `polled` is a live array of pollfd for the duration of the call; poll writes
-    // only their revents.
-    unsafe {
-        libc::poll(polled.as_mut_ptr(), polled.len() as libc::nfds_t, ms);
-    }
+    // Whatever woke it (or a failed wait), the caller looks at every source next.
+    let _ = os::poll::Poller::default().wait(fds, Some(timeout));
 }
 
 /// Adds `b`'s counters to `a`'s (a port's decoder ends with its port; the adapter's totals

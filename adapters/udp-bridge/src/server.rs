@@ -583,20 +583,14 @@ impl Bridge {
 
     /// Serves until the hub ends the run or goes away.
     pub fn run(mut self) -> Result<Counters, BridgeError> {
-        let mut fds: Vec<libc::pollfd> = Vec::new();
+        let (mut fds, mut poller): (Vec<i32>, os::poll::Poller) = Default::default();
         loop {
             fds.clear();
-            fds.push(libc::pollfd { fd: self.reg.as_raw_fd(), events: libc::POLLIN, revents: 0 });
-            fds.push(libc::pollfd { fd: self.agent.tick_fd(), events: libc::POLLIN, revents: 0 });
-            for c in &self.clients {
-                fds.push(libc::pollfd { fd: c.socket.as_raw_fd(), events: libc::POLLIN, revents: 0 });
-            }
-            let timeout_ms = 20;
-            #[allow(unsafe_code)]
-            // SAFETY: fds is a live array of pollfd for the duration of the call.
-            unsafe {
-                libc::poll(fds.as_mut_ptr(), fds.len() as libc::nfds_t, timeout_ms);
-            }
+            fds.push(self.reg.as_raw_fd());
+            fds.push(self.agent.tick_fd());
+            fds.extend(self.clients.iter().map(|c| c.socket.as_raw_fd()));
+            // Whatever woke it (or a failed wait), every source is looked at below.
+            let _ = poller.wait(&fds, Some(Duration::from_millis(20)));
             self.serve_registrations();
             self.serve_joining()?;
             let changed = self.serve_clients();
@@ -645,7 +639,7 @@ impl Bridge {
         let mut measures = MeasuresData::default();
         let mut datagram = Vec::new();
         let mut buf = [0u8; 65536];
-        let mut fds: Vec<libc::pollfd> = Vec::new();
+        let (mut fds, mut poller): (Vec<i32>, os::poll::Poller) = Default::default();
         let mut due = Instant::now();
         loop {
             let now = Instant::now();
@@ -690,17 +684,9 @@ impl Bridge {
                 }
             }
             fds.clear();
-            fds.extend(clients.iter().map(|c| libc::pollfd {
-                fd: c.socket.as_raw_fd(),
-                events: libc::POLLIN,
-                revents: 0,
-            }));
-            let wait_ms = due.saturating_duration_since(Instant::now()).as_millis().min(1000) as libc::c_int;
-            #[allow(unsafe_code)]
-            // SAFETY: fds is a live array of pollfd for the duration of the call.
-            unsafe {
-                libc::poll(fds.as_mut_ptr(), fds.len() as libc::nfds_t, wait_ms);
-            }
+            fds.extend(clients.iter().map(|c| c.socket.as_raw_fd()));
+            let wait = due.saturating_duration_since(Instant::now()).min(Duration::from_secs(1));
+            let _ = poller.wait(&fds, Some(wait));
         }
     }
 

@@ -331,11 +331,8 @@ impl Host {
             std::thread::sleep(Duration::from_millis(1));
         }
         if terminate && matches!(e.hub.try_wait(), Ok(None)) {
-            #[allow(unsafe_code)]
-            // SAFETY: kill(2) on our own child's pid, which is not reaped yet.
-            unsafe {
-                libc::kill(e.hub.id() as libc::pid_t, libc::SIGTERM);
-            }
+            // Our own child, not reaped yet.
+            os::process::send(&e.hub, libc::SIGTERM);
         }
         let since = Instant::now();
         while matches!(e.hub.try_wait(), Ok(None)) {

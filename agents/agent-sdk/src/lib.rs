@@ -538,16 +538,7 @@ fn wait_readable(fd: i32, timeout: Duration) -> bool {
 /// Waits until one of `fds` (at most 4) is readable or `timeout` passes (a signal also ends
 /// the wait); whether one became readable.
 pub(crate) fn poll_readable(fds: &[i32], timeout: Duration) -> bool {
-    let mut pfds = [libc::pollfd { fd: -1, events: libc::POLLIN, revents: 0 }; 4];
-    let n = fds.len().min(pfds.len());
-    for (p, &fd) in pfds.iter_mut().zip(&fds[..n]) {
-        p.fd = fd;
-    }
-    let ms = timeout.as_millis().min(i32::MAX as u128) as i32;
-    #[allow(unsafe_code)]
-    // SAFETY: `n` live pollfds for the duration of the call.
-    let ready = unsafe { libc::poll(pfds.as_mut_ptr(), n as libc::nfds_t, ms) };
-    ready > 0 && pfds[..n].iter().any(|p| p.revents != 0)
+    os::poll::any_readable(fds, Some(timeout)).unwrap_or(false)
 }
 
 impl std::fmt::Debug for Agent {

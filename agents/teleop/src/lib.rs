@@ -27,7 +27,6 @@
 
 pub mod drive;
 pub mod keys;
-pub mod pty;
 pub mod term;
 pub mod view;
 
@@ -375,7 +374,7 @@ fn drive(agent: &mut Agent, args: &TeleopArgs) -> anyhow::Result<ExitCode> {
     } else {
         None
     };
-    let mut display = Display::new(term::is_tty(&std::io::stdout()));
+    let mut display = Display::new(term::is_tty(std::io::stdout()));
     let mut teleop = Teleop::new(id);
     let mut logs = RobotLogs::new(args.common.log.as_deref());
     logs.add(id, &args.robot.name);
@@ -409,7 +408,7 @@ fn drive_loop(
             keyboard = None;
         }
         if ready.first {
-            match term::read_some(stdin_fd, &mut buf) {
+            match term::read_some(std::io::stdin(), &mut buf) {
                 Ok(0) => return Ok(End::InputClosed),
                 Ok(n) => {
                     last_input = Instant::now();

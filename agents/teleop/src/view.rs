@@ -9,6 +9,10 @@ use ipc_types::{COLLISION, HAS_COMPASS, HAS_GPS, RunState, SensorBlock};
 
 use crate::drive::Drive;
 
+/// Rows and columns of the classic terminal the display is made to fit (and tests drive it
+/// in).
+pub const TERMINAL_SIZE: (u16, u16) = (24, 80);
+
 /// Proximity bars are drawn against this distance (the hub's default sensor range).
 pub const BAR_RANGE_M: f64 = 3.0;
 /// Characters in a full proximity bar.
@@ -280,7 +284,7 @@ mod tests {
             assert!(text.contains(want), "{want:?} missing in\n{text}");
         }
         assert!(lines.iter().all(|l| l.len() < 80 && !l.contains('\x1b')), "{text}");
-        assert!(lines.len() <= crate::pty::SIZE.0 as usize - 2, "fits a 24-line terminal");
+        assert!(lines.len() <= TERMINAL_SIZE.0 as usize - 2, "fits a 24-line terminal");
     }
 
     #[test]

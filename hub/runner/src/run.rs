@@ -322,32 +322,20 @@ impl Kid {
     /// Reaps the child if it has exited (with `block`, once it has), and keeps how it exited
     /// and the CPU time it used: the run's `summary.json` states each process's CPU exactly,
     /// where sampling `/proc` from outside misses what a short-lived process did last.
-    #[allow(unsafe_code)] // wait4(2): std's wait does not give the child's resource use
     fn reap(&mut self, block: bool) -> Option<ExitStatus> {
-        use std::os::unix::process::ExitStatusExt as _;
         if self.status.is_some() {
             return self.status;
         }
-        let pid = self.child.id() as libc::pid_t;
-        let mut raw = 0;
-        // SAFETY: rusage is plain integers, for which all zeroes is a value.
-        let mut usage: libc::rusage = unsafe { std::mem::zeroed() };
-        loop {
-            // SAFETY: wait4 writes only into the two locals it is given; the child is ours and
-            // not reaped yet (`status` is None), so its pid is still its own.
-            let got = unsafe { libc::wait4(pid, &mut raw, if block { 0 } else { libc::WNOHANG }, &mut usage) };
-            if got == pid {
-                let seconds = |t: libc::timeval| t.tv_sec as f64 + t.tv_usec as f64 * 1e-6;
-                self.status = Some(ExitStatus::from_raw(raw));
-                self.cpu_s = Some(seconds(usage.ru_utime) + seconds(usage.ru_stime));
-            } else if got == -1 && std::io::Error::last_os_error().kind() == std::io::ErrorKind::Interrupted {
-                continue;
-            } else if got == -1 {
-                // Not ours to wait for any more (reaped elsewhere): std says how it ended.
-                self.status = self.child.try_wait().ok().flatten();
+        match os::process::reap(&self.child, block) {
+            Ok(Some(r)) => {
+                self.status = Some(r.status);
+                self.cpu_s = Some(r.cpu_s);
             }
-            return self.status;
+            Ok(None) => {}
+            // Not ours to wait for any more (reaped elsewhere): std says how it ended.
+            Err(_) => self.status = self.child.try_wait().ok().flatten(),
         }
+        self.status
     }
 
     /// Sends `signal` to the child if it still runs.

@@ -11,7 +11,6 @@
 //! child the runner starts (without it, a child's own SIGINT/SIGTERM handlers never run).
 
 use std::io;
-use std::os::fd::{AsRawFd as _, FromRawFd as _, OwnedFd};
 use std::time::Duration;
 
 /// A termination signal the runner received.
@@ -82,107 +81,40 @@ pub enum SignalsInstallError {
 
 /// SIGINT, SIGTERM and SIGHUP, blocked and read from a signalfd until this is dropped.
 #[derive(Debug)]
-pub struct Signals {
-    fd: OwnedFd,
-    previous: libc::sigset_t,
-}
+pub struct Signals(os::signals::Blocked);
 
 impl Signals {
     /// Blocks the three signals in the calling thread and opens a signalfd for them.
     ///
     /// Call it before the process starts any thread: threads inherit the mask of the thread
     /// that spawns them, and a thread with the signals unblocked would take them instead.
-    #[allow(unsafe_code)] // the POSIX calls that have no safe wrapper in std
     pub fn install() -> Result<Self, SignalsInstallError> {
-        // SAFETY: sigset_t is plain data that sigemptyset initialises; pthread_sigmask and
-        // signalfd only read the set and write `previous`, both valid for the calls.
-        unsafe {
-            let mut set: libc::sigset_t = std::mem::zeroed();
-            libc::sigemptyset(&mut set);
-            for s in [libc::SIGINT, libc::SIGTERM, libc::SIGHUP] {
-                libc::sigaddset(&mut set, s);
-            }
-            let mut previous: libc::sigset_t = std::mem::zeroed();
-            let rc = libc::pthread_sigmask(libc::SIG_BLOCK, &set, &mut previous);
-            if rc != 0 {
-                return Err(SignalsInstallError::Block(io::Error::from_raw_os_error(rc)));
-            }
-            let fd = libc::signalfd(-1, &set, libc::SFD_NONBLOCK | libc::SFD_CLOEXEC);
-            if fd < 0 {
-                let err = io::Error::last_os_error();
-                libc::pthread_sigmask(libc::SIG_SETMASK, &previous, std::ptr::null_mut());
-                return Err(SignalsInstallError::Open(err));
-            }
-            Ok(Self { fd: OwnedFd::from_raw_fd(fd), previous })
+        match os::signals::Blocked::install(&[libc::SIGINT, libc::SIGTERM, libc::SIGHUP]) {
+            Ok(b) => Ok(Self(b)),
+            Err((true, e)) => Err(SignalsInstallError::Block(e)),
+            Err((false, e)) => Err(SignalsInstallError::Open(e)),
         }
     }
 
     /// The first signal received and not yet taken, waiting up to `timeout` for one.
-    #[allow(unsafe_code)] // the POSIX calls that have no safe wrapper in std
     pub fn wait(&self, timeout: Duration) -> Option<Signal> {
-        let mut pfd = libc::pollfd { fd: self.fd.as_raw_fd(), events: libc::POLLIN, revents: 0 };
-        let ms = timeout.as_millis().min(i32::MAX as u128) as i32;
-        // SAFETY: one valid pollfd for the duration of the call.
-        let _ = unsafe { libc::poll(&mut pfd, 1, ms) };
-        self.take()
+        self.0.wait(timeout).and_then(Signal::from_raw)
     }
 
     /// The first signal received and not yet taken, without waiting.
-    #[allow(unsafe_code)] // the POSIX calls that have no safe wrapper in std
     pub fn take(&self) -> Option<Signal> {
-        loop {
-            // SAFETY: signalfd_siginfo is plain data; read writes at most its size into it.
-            let mut info: libc::signalfd_siginfo = unsafe { std::mem::zeroed() };
-            let size = std::mem::size_of::<libc::signalfd_siginfo>();
-            // SAFETY: `info` is valid for `size` bytes for the duration of the call.
-            let n = unsafe { libc::read(self.fd.as_raw_fd(), (&mut info as *mut libc::signalfd_siginfo).cast(), size) };
-            if n != size as isize {
-                return None;
-            }
-            if let Some(s) = Signal::from_raw(info.ssi_signo as i32) {
-                return Some(s);
-            }
-        }
-    }
-}
-
-impl Drop for Signals {
-    #[allow(unsafe_code)] // the POSIX calls that have no safe wrapper in std
-    fn drop(&mut self) {
-        // SAFETY: restores the mask read at install; `previous` is a valid sigset_t.
-        unsafe {
-            libc::pthread_sigmask(libc::SIG_SETMASK, &self.previous, std::ptr::null_mut());
-        }
+        self.0.take().and_then(Signal::from_raw)
     }
 }
 
 /// Sends `signal` to `child`, which is not reaped yet (so its pid is still its own).
-#[allow(unsafe_code)] // kill(2): std sends only SIGKILL
 pub fn send(child: &std::process::Child, signal: i32) {
-    let pid = child.id() as libc::pid_t;
-    // SAFETY: kill touches no memory of ours; the child is not reaped yet, so its pid cannot
-    // have been given to another process.
-    unsafe {
-        libc::kill(pid, signal);
-    }
+    os::process::send(child, signal);
 }
 
 /// Makes `command`'s child start with no signal blocked, whatever the runner blocks.
 pub fn unblock_in_child(command: &mut std::process::Command) {
-    use std::os::unix::process::CommandExt as _;
-    #[allow(unsafe_code)]
-    // SAFETY: the closure runs in the forked child before exec and only calls sigemptyset and
-    // pthread_sigmask, both async-signal-safe; it allocates nothing and takes no lock.
-    unsafe {
-        command.pre_exec(|| {
-            let mut set: libc::sigset_t = std::mem::zeroed();
-            libc::sigemptyset(&mut set);
-            if libc::pthread_sigmask(libc::SIG_SETMASK, &set, std::ptr::null_mut()) != 0 {
-                return Err(io::Error::last_os_error());
-            }
-            Ok(())
-        });
-    }
+    os::signals::unblock_in_child(command);
 }
 
 pub use ipc_services::die_with_parent;
@@ -192,14 +124,11 @@ mod tests {
     use super::*;
 
     #[test]
-    #[allow(unsafe_code)] // pthread_kill, to send this thread a signal
     fn a_signal_to_the_process_is_read_not_delivered() {
         let signals = Signals::install().expect("signalfd");
         assert_eq!(signals.take(), None);
-        // SAFETY: sends SIGHUP to this thread, where it is blocked.
-        unsafe {
-            libc::pthread_kill(libc::pthread_self(), libc::SIGHUP);
-        }
+        // To this thread, where it is blocked.
+        os::signals::raise(libc::SIGHUP).expect("raise");
         let got = signals.wait(Duration::from_secs(5));
         assert_eq!(got, Some(Signal::Hangup));
         assert_eq!(got.map(Signal::forwarded), Some(libc::SIGTERM));
