@@ -4,7 +4,7 @@
 
 use std::time::Duration;
 
-use viewer::browser::Browser;
+use bench_harness::browser::Browser;
 
 fn main() -> anyhow::Result<()> {
     let args: Vec<String> = std::env::args().skip(1).collect();

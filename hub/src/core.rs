@@ -1106,6 +1106,12 @@ pub fn merge_chair_readings(
 const _: () = assert!(world::LINE_ELEMENTS == ipc_types::LINE_ELEMENTS && ipc_types::LINE_ELEMENTS <= 32);
 // Every name the world accepts fits the wire's name field whole.
 const _: () = assert!(world::MAX_NAME_LEN == ipc_types::NAME_BYTES - 1);
+// The world's limits are the wire's: a robot's sensors, beacons, messages and inbox all fit
+// the sensor block's fixed arrays, so a mismatch fails the build, not a run.
+const _: () = assert!(world::MAX_PROXIMITY == ipc_types::MAX_PROXIMITY);
+const _: () = assert!(world::MAX_BEACONS == ipc_types::MAX_BEACONS);
+const _: () = assert!(world::MAX_MESSAGE_BYTES == ipc_types::MESSAGE_BYTES);
+const _: () = assert!(world::MAX_INBOX_BYTES == ipc_types::INBOX_BYTES);
 
 /// The run parameters agents learn from the map header.
 pub fn hub_params(p: &Params, mode: Mode, tick_limit: u64, deadline_ms: u32) -> HubParams {

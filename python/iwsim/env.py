@@ -23,7 +23,6 @@ import math
 import os
 import shutil
 import subprocess
-import tomllib
 import uuid
 from dataclasses import dataclass, field
 from typing import Callable, Optional
@@ -79,25 +78,30 @@ class Scenario:
     seconds: float = 60.0
     cycle_ms: int = 100
     noise: bool = True
+    #: How long (ms) a lock-step tick waits for the chairs' actions: a learner may think (or
+    #: train) between steps, so a minute unless the scenario file sets its own.
+    deadline_ms: int = 60_000
 
     @classmethod
     def load(cls, path: str) -> "Scenario":
-        """A scenario file of ``iwsim run`` (TOML): its lab, checkpoints, obstacles, time and
-        the start poses of its agents' robots (``options.pose``)."""
-        with open(path, "rb") as f:
-            t = tomllib.load(f)
-        lab = t.get("lab", "builtin:liacc")
-        if not lab.startswith("builtin:") and not os.path.isabs(lab):
-            lab = os.path.join(os.path.dirname(os.path.abspath(path)), lab)
-        starts = [tuple(a["options"]["pose"]) for a in t.get("agents", []) if "pose" in a.get("options", {})]
+        """A scenario file of ``iwsim run`` (TOML, or ``builtin:NAME``): its lab, checkpoints,
+        obstacles, time, tick, noise, deadline and the start poses of its agents' robots
+        (``options.pose``). Read by ``iwsim run FILE --describe``, the reader ``iwsim run``
+        itself uses, so a file means the same here and there and a mistake is reported with
+        its line and column."""
+        out = subprocess.run([_iwsim_bin(), "run", str(path), "--describe"], capture_output=True, text=True)
+        if out.returncode != 0:
+            raise IwsimError(out.stderr.strip() or f"iwsim run {path} --describe failed ({out.returncode})")
+        d = json.loads(out.stdout)
         return cls(
-            lab=lab,
-            checkpoints=[(c["x"], c["y"], c.get("radius", 0.5)) for c in t.get("checkpoints", [])],
-            obstacles=[(o["x0"], o["y0"], o["x1"], o["y1"]) for o in t.get("obstacles", [])],
-            starts=starts or [(10.0, 6.1, 0.0)],
-            seconds=float(t.get("seconds", 60.0)),
-            cycle_ms=int(t.get("cycle_ms", 100)),
-            noise=bool(t.get("noise", True)),
+            lab=d["lab"],
+            checkpoints=[tuple(c) for c in d["checkpoints"]],
+            obstacles=[tuple(o) for o in d["obstacles"]],
+            starts=[tuple(p) for p in d["starts"]] or [(10.0, 6.1, 0.0)],
+            seconds=float(d["seconds"]),
+            cycle_ms=int(d["cycle_ms"]),
+            noise=bool(d["noise"]),
+            deadline_ms=int(d["deadline_ms"] or 60_000),
         )
 
     def ticks(self) -> int:
@@ -202,7 +206,7 @@ class ChairsParallelEnv(ParallelEnv):
         s = self.scenario
         scenario = ["--cycle-ms", str(s.cycle_ms), "--ticks", str(s.ticks()),
                     "--seed", str(int.from_bytes(os.urandom(4), "little") if seed is None else int(seed)),
-                    "--deadline-ms", "60000"]
+                    "--deadline-ms", str(s.deadline_ms)]
         if not s.noise:
             scenario.append("--no-noise")
         for o in s.obstacles:

@@ -7,6 +7,7 @@ import pathlib
 import numpy as np
 import pytest
 
+from iwsim import IwsimError
 from iwsim.env import ChairEnv, ChairsParallelEnv, Scenario
 
 SLALOM = pathlib.Path(__file__).resolve().parents[2] / "hub/runner/scenarios/slalom.toml"
@@ -30,6 +31,18 @@ def test_the_slalom_file_gives_its_lab_checkpoints_obstacles_and_start():
     assert s.lab == "builtin:liacc"
     assert [c[:2] for c in s.checkpoints] == [(10.0, 6.1), (20.0, 6.1)]
     assert len(s.obstacles) == 2 and s.starts[0] == (10.0, 6.1, 0.0)
+    assert s.deadline_ms == 60_000, "the file sets none: a learner's minute"
+
+
+def test_a_scenario_file_is_read_by_iwsims_own_reader_with_its_errors(tmp_path):
+    f = tmp_path / "s.toml"
+    f.write_text('name = "s"\nseconds = 5\ndeadline_ms = 900\nlab = "builtin:ward"\n'
+                 '[[agents]]\nkind = "navigator"\noptions = { pose = [3, 4, 90] }\n')
+    s = Scenario.load(str(f))
+    assert (s.lab, s.seconds, s.deadline_ms, s.starts) == ("builtin:ward", 5.0, 900, [(3.0, 4.0, 90.0)])
+    f.write_text('name = "s"\nseconds = 5\n[[agents]]\nkind = "navigator"\nbogus = 1\n')
+    with pytest.raises(IwsimError, match="line 5"):
+        Scenario.load(str(f))
 
 
 def test_pettingzoos_parallel_api_test_passes():

@@ -167,6 +167,7 @@ fn agents_adapters_and_the_viewer_never_link_the_hub_or_the_world() {
             "chair-emulator",
             "observer",
             "os",
+            "test-support",
         ]
         .contains(&m.as_str());
         assert!(is_client || known_other, "new workspace package {m:?}: add it to ARCHITECTURE.md and to this test");
@@ -529,6 +530,17 @@ fn the_python_agent_api_never_imports_the_referee() {
         }
     }
     assert!(bad.is_empty(), "Python agent code reaching the referee:\n{}", bad.join("\n"));
+}
+
+#[test]
+fn test_support_is_linked_by_tests_only() {
+    // Architecture invariant: no workspace package links `test-support` (the checkers' Python
+    // environment) as a normal dependency; tests take it as a dev-dependency, so no process
+    // carries test set-up.
+    let g = graph();
+    for m in g.member_names() {
+        assert_links_none(&g, &m, |d| d == "test-support", &format!("{m} must not link test-support"));
+    }
 }
 
 #[test]

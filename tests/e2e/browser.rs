@@ -5,7 +5,7 @@
 use std::net::SocketAddr;
 use std::time::Duration;
 
-use viewer::browser::Browser;
+use bench_harness::browser::Browser;
 
 use super::common::{Proc, session, text};
 

@@ -10,11 +10,11 @@ use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
 use agent_sdk::{Agent, Wait};
+use bench_harness::browser::Browser;
 use ipc_types::{
     ACT_GHOST, ACT_REAL, ActionBlock, ChairState, MAX_PROXIMITY, REG_CHAIR, REG_HAS_POSE, RobotKind, RobotRegistration,
     SensorMode, SensorSpec,
 };
-use viewer::browser::Browser;
 use viewer::frame;
 
 use super::common::{Proc, assert_no_shared_memory_left, session, text};

@@ -68,7 +68,7 @@ fn package_from_this_build(root: &Path) -> PathBuf {
 #[test]
 fn the_python_packages_own_tests_pass_against_real_hubs() {
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
-    let python = recorder::python::checker_python().unwrap_or_else(|e| panic!("{e}"));
+    let python = test_support::python::checker_python().unwrap_or_else(|e| panic!("{e}"));
     let dir = package_from_this_build(root);
     let out = Command::new(&python)
         .args(["-m", "pytest", "-q", "-p", "no:cacheprovider"])

@@ -182,9 +182,9 @@ fn the_python_mcap_reader_decodes_a_runs_recording_and_agrees_with_its_summary()
     ])
     .wait(Duration::from_secs(120));
     assert!(run.status.success(), "{}", text(&run.stderr));
-    let python = recorder::python::checker_python().unwrap_or_else(|e| panic!("{e}"));
+    let python = test_support::python::checker_python().unwrap_or_else(|e| panic!("{e}"));
     let out = std::process::Command::new(&python)
-        .arg(recorder::python::checker_script())
+        .arg(test_support::python::checker_script())
         .arg(dir.join("run.mcap"))
         .arg("--summary")
         .arg(dir.join("summary.json"))

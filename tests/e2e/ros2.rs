@@ -48,7 +48,7 @@ fn round_trip_run(
     bridge_args: &[&str],
     node_args: &[&str],
 ) -> (String, String) {
-    let python = recorder::python::checker_python().unwrap_or_else(|e| panic!("{e}"));
+    let python = test_support::python::checker_python().unwrap_or_else(|e| panic!("{e}"));
     let (router, endpoint) = router();
     let ticks = ticks.to_string();
     let mut hub_args = vec!["hub", "--session", s, "--lab", "builtin:thesis", "--ticks", &ticks];
@@ -200,7 +200,7 @@ fn slalom_over_ros2(endpoint: &str) -> String {
 
 #[test]
 fn a_ros_2_go_to_goal_controller_drives_the_slalom_to_checkpoint_2_without_a_contact() {
-    let python = recorder::python::checker_python().unwrap_or_else(|e| panic!("{e}"));
+    let python = test_support::python::checker_python().unwrap_or_else(|e| panic!("{e}"));
     let dir = work_dir("go-to-goal");
     for seed in 1..=5 {
         let (router, endpoint) = router();

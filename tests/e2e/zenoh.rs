@@ -158,7 +158,7 @@ fn corridor_swap_with_one_chair_on_another_host_is_the_local_run() {
 #[test]
 fn an_agent_written_with_the_official_zenoh_binding_registers_reads_its_blocks_and_drives() {
     let s = session("zenoh-third-party");
-    let python = recorder::python::checker_python().unwrap_or_else(|e| panic!("{e}"));
+    let python = test_support::python::checker_python().unwrap_or_else(|e| panic!("{e}"));
     let hub = Proc::spawn(&["hub", "--session", &s, "--lockstep", "--ticks", "60", "--wait-agents", "1"]);
     let endpoint = format!("tcp/127.0.0.1:{}", free_port());
     let (bridge, bridge_said, _) = serving_bridge(&s, &["--listen", &endpoint]);

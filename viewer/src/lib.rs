@@ -2,7 +2,6 @@
 //! page and a WebSocket stream of it to browsers on this machine or the LAN.
 #![warn(missing_docs)]
 
-pub mod browser;
 pub mod cli;
 pub mod frame;
 pub mod server;

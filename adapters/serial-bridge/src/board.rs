@@ -47,7 +47,7 @@ pub struct LinkConfig {
     /// The hub's encoder units: ticks per metre of wheel travel.
     pub hub_ticks_per_m: f64,
     /// Where the chair starts: x, y metres, heading degrees.
-    pub start_pose: [f64; 3],
+    pub start_pose_deg: [f64; 3],
     /// The chair's name in the hub (for the operator's resume command).
     pub robot: String,
     /// Resume after a stop as soon as every cause has cleared (see [`Safety::with_auto_resume`]).
@@ -142,7 +142,8 @@ impl BoardLink {
         let safety = Safety::new(Duration::ZERO, cfg.stepped, hello)
             .with_cycle(Duration::from_millis(u64::from(cfg.cycle_ms)))
             .with_auto_resume(cfg.auto_resume);
-        let odometry = WheelOdometry::new(cfg.start_pose, chair::BODY[1], chair::WHEEL_RADIUS_M);
+        let [x, y, h] = cfg.start_pose_deg;
+        let odometry = WheelOdometry::new([x, y, h.to_radians()], chair::BODY[1], chair::WHEEL_RADIUS_M);
         let mut link = BoardLink {
             cfg,
             start: Instant::now(),

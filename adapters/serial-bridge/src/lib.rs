@@ -215,7 +215,7 @@ fn serve(agent: &mut Agent, port: Port, args: &SerialArgs, stop: &AtomicBool) ->
         stepped: args.stepped,
         cycle_ms: map.header.cycle_ms,
         hub_ticks_per_m: map.header.params.encoder_ticks_per_m,
-        start_pose: args.pose,
+        start_pose_deg: args.pose,
         robot: name.to_owned(),
         auto_resume: args.auto_resume,
     };

@@ -7,14 +7,16 @@
 //! connection, or a board that restarted (its clock went back), makes the next sample the new
 //! baseline: its counters start again, the pose does not jump.
 
-use sim_model::{advance, encoder_ticks_per_m, wire_deg};
+use agent_sdk::odometry::Odometry;
+use sim_model::{encoder_ticks_per_m, wire_deg};
 
-/// Dead reckoning on the chair's wheel encoders.
+/// Dead reckoning on the chair's wheel encoders: the board's counters turned into wheel travel,
+/// integrated by the agents' own odometry ([`Odometry::travel`]), so a physical chair and a
+/// simulated one are estimated by one model.
 #[derive(Debug, Clone, PartialEq)]
 pub struct WheelOdometry {
-    /// x, y metres; heading radians.
-    pose: [f64; 3],
-    track_m: f64,
+    /// The pose: x, y metres, heading radians.
+    core: Odometry,
     wheel_radius_m: f64,
     /// Board counts per metre of wheel travel, once a BoardInfo said the counts per turn.
     counts_per_m: Option<f64>,
@@ -38,12 +40,12 @@ pub enum Step {
 }
 
 impl WheelOdometry {
-    /// Odometry starting at `start` (x, y metres, heading degrees) for wheels of
-    /// `wheel_radius_m`, `track_m` apart.
-    pub fn new(start: [f64; 3], track_m: f64, wheel_radius_m: f64) -> WheelOdometry {
+    /// Odometry starting at `start_rad` (x, y metres, heading radians, as the agents'
+    /// odometry) for wheels of `wheel_radius_m`, `track_m` apart.
+    pub fn new(start_rad: [f64; 3], track_m: f64, wheel_radius_m: f64) -> WheelOdometry {
         WheelOdometry {
-            pose: [start[0], start[1], start[2].to_radians()],
-            track_m,
+            // The core counts no ticks of its own: the board's come in as metres.
+            core: Odometry::new(start_rad, 0.0, track_m),
             wheel_radius_m,
             counts_per_m: None,
             last: None,
@@ -80,17 +82,14 @@ impl WheelOdometry {
         let d = [0, 1].map(|k| f64::from(counts[k].wrapping_sub(last_counts[k])) / counts_per_m);
         self.travel_m[0] += d[0];
         self.travel_m[1] += d[1];
-        let (ds, dth) = ((d[0] + d[1]) / 2.0, (d[1] - d[0]) / self.track_m);
-        // The sample's distance and turn as speeds over one unit of time, along the heading it
-        // began with: the hub's own kinematics (thesis eq. 4.7), as the agents' odometry does.
-        let (sin, cos) = self.pose[2].sin_cos();
-        self.pose = advance(self.pose, ds, dth, cos, sin, 1.0);
+        self.core.travel(d);
         Step::Moved
     }
 
     /// The pose: x, y metres, heading degrees in (−180, 180].
     pub fn pose_deg(&self) -> [f64; 3] {
-        [self.pose[0], self.pose[1], wire_deg(self.pose[2])]
+        let [x, y, h] = self.core.pose();
+        [x, y, wire_deg(h)]
     }
 
     /// Whether the encoders' scale is known (a BoardInfo came).
@@ -148,7 +147,7 @@ mod tests {
 
     #[test]
     fn a_turn_on_the_spot_turns_by_the_wheels_difference_over_the_track_and_wraps() {
-        let mut o = WheelOdometry::new([0.0, 0.0, 170.0], 0.5, 1.0 / TAU);
+        let mut o = WheelOdometry::new([0.0, 0.0, 170f64.to_radians()], 0.5, 1.0 / TAU);
         o.set_counts_per_rev(1000);
         o.sample(0, [0, 0]);
         // 20° = 0.349 rad = (dr − dl) / 0.5 → dr = −dl = 0.0873 m.

@@ -53,18 +53,27 @@ impl Odometry {
     pub fn advance(&mut self, ticks: [i64; 2]) -> [f64; 3] {
         if let Some(last) = self.last
             && self.ticks_per_m > 0.0
-            && self.track_m > 0.0
         {
             let dl = ticks[0].wrapping_sub(last[0]) as f64 / self.ticks_per_m;
             let dr = ticks[1].wrapping_sub(last[1]) as f64 / self.ticks_per_m;
+            self.travel([dl, dr]);
+        }
+        self.last = Some(ticks);
+        self.pose
+    }
+
+    /// Advances by each wheel's travel since the last step, left and right, metres (for
+    /// encoders counted elsewhere, such as a physical chair's board). Returns the estimate.
+    pub fn travel(&mut self, wheels_m: [f64; 2]) -> [f64; 3] {
+        if self.track_m > 0.0 {
+            let [dl, dr] = wheels_m;
             let ds = (dl + dr) / 2.0;
             let dth = (dr - dl) / self.track_m;
-            // The tick's distance and turn as speeds over one unit of time, along the heading
-            // the tick began with, as the hub moves robots (thesis eq. 4.7).
+            // The step's distance and turn as speeds over one unit of time, along the heading
+            // the step began with, as the hub moves robots (thesis eq. 4.7).
             let (sin, cos) = self.pose[2].sin_cos();
             self.pose = sim_model::advance(self.pose, ds, dth, cos, sin, 1.0);
         }
-        self.last = Some(ticks);
         self.pose
     }
 

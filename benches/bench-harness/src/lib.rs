@@ -7,6 +7,7 @@
 #![warn(missing_docs)]
 
 pub mod args;
+pub mod browser;
 mod crew;
 pub mod load;
 pub mod repeat;
@@ -581,156 +582,13 @@ fn run_lockstep(
     if let Some(path) = record {
         hub_args.extend(["--record".into(), path.display().to_string()]);
     }
-    let mut crew = crew::Crew::new(spawn_self(&hub_args)?);
-    let origin = |i: usize| ipc_origin(i, robots_per_agent);
-    let total = (agents * robots_per_agent).to_string();
-    let mut flooder = None;
-    let mut stderr_bytes = None;
-    let mut client_outputs = Vec::new();
-    let mut agent_errs = Vec::new();
-    if udp {
-        let mut bridge = spawn_self(&[
-            "udp".into(),
-            "--session".into(),
-            session.to_owned(),
-            "--port".into(),
-            "0".into(),
-            "--bind".into(),
-            bridge_ip.to_string(),
-            "--connect-timeout".into(),
-            "30".into(),
-            // The hub starts when the bridge is ready: with every client's robots in, so
-            // that every tick measured carries all of them.
-            "--wait-robots".into(),
-            total.clone(),
-        ])?;
-        let announced = bridge_address(&mut bridge);
-        crew.push(bridge, "bridge");
-        let (server, bytes) = announced?;
-        stderr_bytes = Some(bytes);
-        let mut registered = Vec::new();
-        for i in 0..agents {
-            let (bx, by) = origin(i);
-            let mut client_args = vec![
-                "bench".into(),
-                "udp-client".into(),
-                "--server".into(),
-                server.to_string(),
-                "--robots".into(),
-                robots_per_agent.to_string(),
-                "--pose".into(),
-                format!("{bx},{by}"),
-            ];
-            if real {
-                client_args.extend([
-                    "--real".into(),
-                    "--first".into(),
-                    (i * robots_per_agent).to_string(),
-                    "--total".into(),
-                    total.clone(),
-                ]);
-            }
-            let mut client = spawn_self_in(there, &client_args)?;
-            registered.push(std::io::BufReader::new(client.stdout.take().context("a UDP client's stdout")?));
-            crew.push(client, "UDP client");
-        }
-        // The bridge is helper 0, the clients follow.
-        // The flood starts once every robot is in: a registration lost in it would leave the
-        // hub waiting for ever, and what is measured is the run under the flood.
-        for (i, out) in registered.iter_mut().enumerate() {
-            let mut line = String::new();
-            let _ = std::io::BufRead::read_line(out, &mut line);
-            if !line.starts_with(UDP_CLIENT_REGISTERED) {
-                return Err(crew.helper_failed(1 + i, "a UDP client ended before registering its robots"));
-            }
-        }
-        client_outputs = registered;
-        if flood > 0 {
-            flooder = Some(start_flood(server, flood)?);
-        }
+    let crew = crew::Crew::new(spawn_self(&hub_args)?);
+    let shape = (agents, robots_per_agent);
+    let (crew, Helpers { flooder, stderr_bytes, client_outputs, agent_errs }) = if udp {
+        start_udp_clients(crew, session, (bridge_ip, there), shape, real, flood)?
     } else {
-        // Through Zenoh: the bridge on a free port (loopback, or the link to the other host),
-        // and every agent told to use it.
-        let mut via = Vec::new();
-        if zenoh {
-            let port = std::net::TcpListener::bind((bridge_ip, 0))?.local_addr()?.port();
-            let endpoint = format!("tcp/{bridge_ip}:{port}");
-            let mut bridge = spawn_self(&[
-                "zenoh".into(),
-                "--session".into(),
-                session.to_owned(),
-                "--listen".into(),
-                endpoint.clone(),
-                "--connect-timeout".into(),
-                "30".into(),
-                // Every agent in before the first tick: the ticks counted are the same for all.
-                "--wait-agents".into(),
-                agents.to_string(),
-            ])?;
-            // Keep draining its stderr, so the bridge never blocks on a full pipe.
-            let mut err = bridge.stderr.take().context("the Zenoh bridge's stderr")?;
-            stderr_bytes = Some(std::thread::spawn(move || std::io::copy(&mut err, &mut std::io::sink()).unwrap_or(0)));
-            crew.push(bridge, "Zenoh bridge");
-            via = vec!["--zenoh".to_owned(), endpoint];
-        }
-        // Agents join in waves, each wave once the last has registered: a hub that met a
-        // hundred hellos at once would make them in one pass of its loop, and the first agents
-        // would wait longer than their 5 s for the map it hands out between passes. Only the
-        // start is staggered; the ticks are timed once every agent is in.
-        for wave in (0..agents).collect::<Vec<_>>().chunks(AGENT_WAVE) {
-            let first_helper = crew.len();
-            let mut announced = Vec::new();
-            for &i in wave {
-                let args: Vec<String> = if real {
-                    [
-                        "bench",
-                        "load-agent",
-                        "--session",
-                        session,
-                        "--robots",
-                        &robots_per_agent.to_string(),
-                        "--first",
-                        &(i * robots_per_agent).to_string(),
-                        "--total",
-                        &total,
-                    ]
-                    .map(str::to_owned)
-                    .into()
-                } else {
-                    let (bx, by) = origin(i);
-                    [
-                        "agent",
-                        "wheelchair",
-                        "--session",
-                        session,
-                        "--robots",
-                        &robots_per_agent.to_string(),
-                        "--pose",
-                        &format!("{bx},{by},0"),
-                        "--spacing",
-                        &IPC_SPACING.to_string(),
-                        "--powers",
-                        "0.3,0.28",
-                        "--connect-timeout",
-                        "30",
-                    ]
-                    .map(str::to_owned)
-                    .into()
-                };
-                let mut args = args;
-                args.extend(via.iter().cloned());
-                let mut agent = spawn_self_in(if zenoh { there } else { None }, &args)?;
-                announced.push(std::io::BufReader::new(agent.stderr.take().context("an agent's stderr")?));
-                crew.push(agent, "agent");
-            }
-            for (k, err) in announced.iter_mut().enumerate() {
-                if !registered(err) {
-                    return Err(crew.helper_failed(first_helper + k, "an agent ended before registering its robots"));
-                }
-            }
-            agent_errs.extend(announced);
-        }
-    }
+        start_agents(crew, session, (bridge_ip, there), shape, real, zenoh)?
+    };
     let mut out = crew.finish()?;
     // The UDP clients' stdout was taken to read their registration: the rest of it (their
     // report) is read here, now that they have exited; and the rest of the agents' stderr.
@@ -744,6 +602,192 @@ fn run_lockstep(
     // The bridge has exited: its stderr is closed and the counting thread ends.
     let bridge_stderr_bytes = stderr_bytes.map_or(0, |h| h.join().unwrap_or(0));
     Ok((out, flood_sent, bridge_stderr_bytes))
+}
+
+/// What a lock-step bench run started besides the hub, to read or stop once it ends.
+#[derive(Default)]
+struct Helpers {
+    flooder: Option<Flood>,
+    /// The bridge's stderr, counted by a thread until it closes.
+    stderr_bytes: Option<std::thread::JoinHandle<u64>>,
+    /// The UDP clients' stdout, read past their registration line.
+    client_outputs: Vec<std::io::BufReader<std::process::ChildStdout>>,
+    /// The agents' stderr, read past their registration.
+    agent_errs: Vec<std::io::BufReader<std::process::ChildStderr>>,
+}
+
+/// The UDP bridge on `bridge_ip` and `agents` Ciber-Rato-like clients of `robots_per_agent`
+/// robots each (in network namespace `there`, if given), each once the last registered; then
+/// the flood, if asked for. The crew comes back with them in it (or, on a failure, is ended).
+fn start_udp_clients(
+    mut crew: crew::Crew,
+    session: &str,
+    (bridge_ip, there): (std::net::IpAddr, Option<&str>),
+    (agents, robots_per_agent): (usize, usize),
+    real: bool,
+    flood: u64,
+) -> anyhow::Result<(crew::Crew, Helpers)> {
+    let mut started = Helpers::default();
+    let origin = |i: usize| ipc_origin(i, robots_per_agent);
+    let total = (agents * robots_per_agent).to_string();
+    let mut bridge = spawn_self(&[
+        "udp".into(),
+        "--session".into(),
+        session.to_owned(),
+        "--port".into(),
+        "0".into(),
+        "--bind".into(),
+        bridge_ip.to_string(),
+        "--connect-timeout".into(),
+        "30".into(),
+        // The hub starts when the bridge is ready: with every client's robots in, so
+        // that every tick measured carries all of them.
+        "--wait-robots".into(),
+        total.clone(),
+    ])?;
+    let announced = bridge_address(&mut bridge);
+    crew.push(bridge, "bridge");
+    let (server, bytes) = announced?;
+    started.stderr_bytes = Some(bytes);
+    let mut registered = Vec::new();
+    for i in 0..agents {
+        let (bx, by) = origin(i);
+        let mut client_args = vec![
+            "bench".into(),
+            "udp-client".into(),
+            "--server".into(),
+            server.to_string(),
+            "--robots".into(),
+            robots_per_agent.to_string(),
+            "--pose".into(),
+            format!("{bx},{by}"),
+        ];
+        if real {
+            client_args.extend([
+                "--real".into(),
+                "--first".into(),
+                (i * robots_per_agent).to_string(),
+                "--total".into(),
+                total.clone(),
+            ]);
+        }
+        let mut client = spawn_self_in(there, &client_args)?;
+        registered.push(std::io::BufReader::new(client.stdout.take().context("a UDP client's stdout")?));
+        crew.push(client, "UDP client");
+    }
+    // The bridge is helper 0, the clients follow.
+    // The flood starts once every robot is in: a registration lost in it would leave the
+    // hub waiting for ever, and what is measured is the run under the flood.
+    for (i, out) in registered.iter_mut().enumerate() {
+        let mut line = String::new();
+        let _ = std::io::BufRead::read_line(out, &mut line);
+        if !line.starts_with(UDP_CLIENT_REGISTERED) {
+            return Err(crew.helper_failed(1 + i, "a UDP client ended before registering its robots"));
+        }
+    }
+    started.client_outputs = registered;
+    if flood > 0 {
+        started.flooder = Some(start_flood(server, flood)?);
+    }
+    Ok((crew, started))
+}
+
+/// `agents` shared-memory agents of `robots_per_agent` robots each, or through a Zenoh bridge
+/// on `bridge_ip` (the agents in network namespace `there`, if given), joining in waves.
+fn start_agents(
+    mut crew: crew::Crew,
+    session: &str,
+    (bridge_ip, there): (std::net::IpAddr, Option<&str>),
+    (agents, robots_per_agent): (usize, usize),
+    real: bool,
+    zenoh: bool,
+) -> anyhow::Result<(crew::Crew, Helpers)> {
+    let mut started = Helpers::default();
+    let origin = |i: usize| ipc_origin(i, robots_per_agent);
+    let total = (agents * robots_per_agent).to_string();
+    // Through Zenoh: the bridge on a free port (loopback, or the link to the other host),
+    // and every agent told to use it.
+    let mut via = Vec::new();
+    if zenoh {
+        let port = std::net::TcpListener::bind((bridge_ip, 0))?.local_addr()?.port();
+        let endpoint = format!("tcp/{bridge_ip}:{port}");
+        let mut bridge = spawn_self(&[
+            "zenoh".into(),
+            "--session".into(),
+            session.to_owned(),
+            "--listen".into(),
+            endpoint.clone(),
+            "--connect-timeout".into(),
+            "30".into(),
+            // Every agent in before the first tick: the ticks counted are the same for all.
+            "--wait-agents".into(),
+            agents.to_string(),
+        ])?;
+        // Keep draining its stderr, so the bridge never blocks on a full pipe.
+        let mut err = bridge.stderr.take().context("the Zenoh bridge's stderr")?;
+        started.stderr_bytes =
+            Some(std::thread::spawn(move || std::io::copy(&mut err, &mut std::io::sink()).unwrap_or(0)));
+        crew.push(bridge, "Zenoh bridge");
+        via = vec!["--zenoh".to_owned(), endpoint];
+    }
+    // Agents join in waves, each wave once the last has registered: a hub that met a
+    // hundred hellos at once would make them in one pass of its loop, and the first agents
+    // would wait longer than their 5 s for the map it hands out between passes. Only the
+    // start is staggered; the ticks are timed once every agent is in.
+    for wave in (0..agents).collect::<Vec<_>>().chunks(AGENT_WAVE) {
+        let first_helper = crew.len();
+        let mut announced = Vec::new();
+        for &i in wave {
+            let args: Vec<String> = if real {
+                [
+                    "bench",
+                    "load-agent",
+                    "--session",
+                    session,
+                    "--robots",
+                    &robots_per_agent.to_string(),
+                    "--first",
+                    &(i * robots_per_agent).to_string(),
+                    "--total",
+                    &total,
+                ]
+                .map(str::to_owned)
+                .into()
+            } else {
+                let (bx, by) = origin(i);
+                [
+                    "agent",
+                    "wheelchair",
+                    "--session",
+                    session,
+                    "--robots",
+                    &robots_per_agent.to_string(),
+                    "--pose",
+                    &format!("{bx},{by},0"),
+                    "--spacing",
+                    &IPC_SPACING.to_string(),
+                    "--powers",
+                    "0.3,0.28",
+                    "--connect-timeout",
+                    "30",
+                ]
+                .map(str::to_owned)
+                .into()
+            };
+            let mut args = args;
+            args.extend(via.iter().cloned());
+            let mut agent = spawn_self_in(if zenoh { there } else { None }, &args)?;
+            announced.push(std::io::BufReader::new(agent.stderr.take().context("an agent's stderr")?));
+            crew.push(agent, "agent");
+        }
+        for (k, err) in announced.iter_mut().enumerate() {
+            if !registered(err) {
+                return Err(crew.helper_failed(first_helper + k, "an agent ended before registering its robots"));
+            }
+        }
+        started.agent_errs.extend(announced);
+    }
+    Ok((crew, started))
 }
 
 /// Shared-memory agents that join the hub at once (see `run_lockstep`).
@@ -1090,112 +1134,164 @@ pub fn measure_lockstep_runs(args: &BenchLockstepArgs) -> anyhow::Result<Vec<Loc
     Ok(variants.iter().zip(runs).map(|(plan, runs)| LockstepVariant { name: plan.name, runs }).collect())
 }
 
+/// The ratios and figures of a lock-step bench's variants that both of its reports print.
+struct LockstepFigures<'a> {
+    shm_udp: Option<LockstepRatio>,
+    shm_udp_real: Option<LockstepRatio>,
+    zenoh_udp: Option<LockstepRatio>,
+    shm_zenoh: Option<LockstepRatio>,
+    zenoh_udp_real: Option<LockstepRatio>,
+    real_shm: Option<LockstepRatio>,
+    real_udp: Option<LockstepRatio>,
+    flood: Option<&'a LockstepVariant>,
+    quiet: Option<&'a LockstepVariant>,
+    flood_ratio: Option<LockstepRatio>,
+    record_ratio: Option<LockstepRatio>,
+    bytes_per_robot_tick: Option<f64>,
+    neighbours: Option<f64>,
+    ticks: u64,
+}
+
+impl<'a> LockstepFigures<'a> {
+    fn of(args: &BenchLockstepArgs, variants: &'a [LockstepVariant]) -> Self {
+        let find = |n: &str| variants.iter().find(|v| v.name == n);
+        let pair = |a: &str, b: &str| match (find(a), find(b)) {
+            (Some(a), Some(b)) => Some(LockstepRatio::of(a, b)),
+            _ => None,
+        };
+        let shm_udp = pair("shm", "udp");
+        let shm_udp_real = pair("shm+real", "udp+real");
+        let zenoh_udp = pair("zenoh", "udp");
+        let shm_zenoh = pair("shm", "zenoh");
+        let zenoh_udp_real = pair("zenoh+real", "udp+real");
+        let real_shm = pair("shm+real", "shm");
+        let real_udp = pair("udp+real", "udp");
+        let (flood, quiet) = (find("udp+flood"), find("udp"));
+        let flood_ratio = pair("udp+flood", "udp");
+        let recorded = find("shm+record");
+        let record_ratio = pair("shm+record", "shm");
+        // The recording's size per robot per tick, from the median-sized file.
+        let bytes_per_robot_tick = recorded.map(|r| {
+            let mut b: Vec<u64> = r.runs.iter().map(|b| b.recorded_bytes).collect();
+            b.sort_unstable();
+            let robots = (args.agents * args.robots_per_agent).max(1) as f64;
+            b.get(b.len() / 2).copied().unwrap_or(0) as f64
+                / robots
+                / r.runs.first().map_or(1, |b| b.ticks.max(1)) as f64
+        });
+        let neighbours = variants.iter().any(LockstepVariant::real).then(|| {
+            load::Lattice::new(args.agents * args.robots_per_agent).mean_neighbours_within(load::sensor_range_m())
+        });
+        let ticks = variants.first().and_then(|v| v.runs.first()).map_or(0, |b| b.ticks);
+        Self {
+            shm_udp,
+            shm_udp_real,
+            zenoh_udp,
+            shm_zenoh,
+            zenoh_udp_real,
+            real_shm,
+            real_udp,
+            flood,
+            quiet,
+            flood_ratio,
+            record_ratio,
+            bytes_per_robot_tick,
+            neighbours,
+            ticks,
+        }
+    }
+}
+
 /// What `iwsim bench lockstep` prints for `variants` (text, or one JSON object with `--json`).
 pub fn lockstep_report(args: &BenchLockstepArgs, variants: &[LockstepVariant]) -> String {
-    let find = |n: &str| variants.iter().find(|v| v.name == n);
-    let pair = |a: &str, b: &str| match (find(a), find(b)) {
-        (Some(a), Some(b)) => Some(LockstepRatio::of(a, b)),
-        _ => None,
-    };
-    let shm_udp = pair("shm", "udp");
-    let shm_udp_real = pair("shm+real", "udp+real");
-    let zenoh_udp = pair("zenoh", "udp");
-    let shm_zenoh = pair("shm", "zenoh");
-    let zenoh_udp_real = pair("zenoh+real", "udp+real");
-    let real_shm = pair("shm+real", "shm");
-    let real_udp = pair("udp+real", "udp");
-    let (flood, quiet) = (find("udp+flood"), find("udp"));
-    let flood_ratio = pair("udp+flood", "udp");
-    let recorded = find("shm+record");
-    let record_ratio = pair("shm+record", "shm");
-    // The recording's size per robot per tick, from the median-sized file.
-    let bytes_per_robot_tick = recorded.map(|r| {
-        let mut b: Vec<u64> = r.runs.iter().map(|b| b.recorded_bytes).collect();
-        b.sort_unstable();
-        let robots = (args.agents * args.robots_per_agent).max(1) as f64;
-        b.get(b.len() / 2).copied().unwrap_or(0) as f64 / robots / r.runs.first().map_or(1, |b| b.ticks.max(1)) as f64
-    });
-    let neighbours = variants.iter().any(LockstepVariant::real).then(|| {
-        load::Lattice::new(args.agents * args.robots_per_agent).mean_neighbours_within(load::sensor_range_m())
-    });
-    let ticks = variants.first().and_then(|v| v.runs.first()).map_or(0, |b| b.ticks);
+    let f = LockstepFigures::of(args, variants);
+    if args.json { lockstep_json(args, variants, &f) } else { lockstep_text(args, variants, &f) }
+}
+
+/// [`lockstep_report`] as one JSON object.
+fn lockstep_json(args: &BenchLockstepArgs, variants: &[LockstepVariant], f: &LockstepFigures) -> String {
+    let ticks = f.ticks;
     let mut s = String::new();
-    if args.json {
-        s += &format!(
-            "{{\"agents\":{},\"robots_per_agent\":{},\"ticks\":{ticks},\"runs\":{}",
-            args.agents, args.robots_per_agent, args.runs
-        );
-        if let (Some(ns), Some(a)) = (&args.netns, args.netns_address) {
-            s += &format!(",\"netns\":{ns:?},\"netns_address\":\"{a}\"");
-        }
-        for v in variants {
-            let t = v.ticks_per_s();
-            // One variant keeps the old `transport` and `ticks_per_s` keys; several are named.
-            let (key, prefix) = if variants.len() == 1 {
-                s += &format!(",\"transport\":\"{}\"", v.name);
-                ("ticks_per_s".to_owned(), String::new())
-            } else {
-                let name = v.name.replace('+', "_");
-                (format!("{name}_ticks_per_s"), format!("{name}_"))
-            };
-            s += &format!(",\"{key}\":{:.1},\"{key}_min\":{:.1},\"{key}_max\":{:.1}", t.median, t.min, t.max);
-            if v.hub_peak_rss_mib() > 0.0 {
-                s += &format!(",\"{prefix}hub_peak_rss_mib\":{:.1}", v.hub_peak_rss_mib());
-            }
-            if let Some((p50, p99)) = v.round_trip_us() {
-                s += &format!(
-                    ",\"{prefix}round_trip_p50_us\":{:.1},\"{prefix}round_trip_p99_us\":{:.1}",
-                    p50.median, p99.median
-                );
-            }
-            if v.real() {
-                let r = v.readings();
-                s += &format!(
-                    ",\"{prefix}readings\":{},\"{prefix}readings_near\":{},\"{prefix}readings_near_fraction\":{:.3}",
-                    r.total,
-                    r.near,
-                    r.near_fraction()
-                );
-            }
-        }
-        if let Some(n) = neighbours {
-            s += &format!(",\"real_neighbours_in_range\":{n:.2},\"real_near_m\":{}", load::NEAR_M);
-        }
-        let ratio = |s: &mut String, key: &str, r: &LockstepRatio| {
-            *s += &format!(
-                ",\"{key}\":{:.2},\"{key}_min\":{:.2},\"{key}_max\":{:.2}",
-                r.of_medians, r.by_round.min, r.by_round.max
-            );
-        };
-        for (key, r) in [
-            ("ratio_shm_over_udp", &shm_udp),
-            ("ratio_shm_real_over_udp_real", &shm_udp_real),
-            ("ratio_shm_real_over_shm", &real_shm),
-            ("ratio_udp_real_over_udp", &real_udp),
-            ("ratio_zenoh_over_udp", &zenoh_udp),
-            ("ratio_shm_over_zenoh", &shm_zenoh),
-            ("ratio_zenoh_real_over_udp_real", &zenoh_udp_real),
-        ] {
-            if let Some(r) = r {
-                ratio(&mut s, key, r);
-            }
-        }
-        if let (Some(f), Some(r), Some(q)) = (flood, &flood_ratio, quiet) {
-            s += &format!(",\"flood_sent\":{}", f.flood_sent());
-            ratio(&mut s, "ratio_flood_over_udp", r);
-            s += &format!(
-                ",\"udp_stderr_bytes\":{},\"flood_stderr_bytes\":{}",
-                q.bridge_stderr_bytes(),
-                f.bridge_stderr_bytes()
-            );
-        }
-        if let (Some(r), Some(bytes)) = (&record_ratio, bytes_per_robot_tick) {
-            ratio(&mut s, "ratio_record_over_shm", r);
-            s += &format!(",\"recorded_bytes_per_robot_tick\":{bytes:.0}");
-        }
-        s += "}\n";
-        return s;
+    s += &format!(
+        "{{\"agents\":{},\"robots_per_agent\":{},\"ticks\":{ticks},\"runs\":{}",
+        args.agents, args.robots_per_agent, args.runs
+    );
+    if let (Some(ns), Some(a)) = (&args.netns, args.netns_address) {
+        s += &format!(",\"netns\":{ns:?},\"netns_address\":\"{a}\"");
     }
+    for v in variants {
+        let t = v.ticks_per_s();
+        // One variant keeps the old `transport` and `ticks_per_s` keys; several are named.
+        let (key, prefix) = if variants.len() == 1 {
+            s += &format!(",\"transport\":\"{}\"", v.name);
+            ("ticks_per_s".to_owned(), String::new())
+        } else {
+            let name = v.name.replace('+', "_");
+            (format!("{name}_ticks_per_s"), format!("{name}_"))
+        };
+        s += &format!(",\"{key}\":{:.1},\"{key}_min\":{:.1},\"{key}_max\":{:.1}", t.median, t.min, t.max);
+        if v.hub_peak_rss_mib() > 0.0 {
+            s += &format!(",\"{prefix}hub_peak_rss_mib\":{:.1}", v.hub_peak_rss_mib());
+        }
+        if let Some((p50, p99)) = v.round_trip_us() {
+            s += &format!(
+                ",\"{prefix}round_trip_p50_us\":{:.1},\"{prefix}round_trip_p99_us\":{:.1}",
+                p50.median, p99.median
+            );
+        }
+        if v.real() {
+            let r = v.readings();
+            s += &format!(
+                ",\"{prefix}readings\":{},\"{prefix}readings_near\":{},\"{prefix}readings_near_fraction\":{:.3}",
+                r.total,
+                r.near,
+                r.near_fraction()
+            );
+        }
+    }
+    if let Some(n) = f.neighbours {
+        s += &format!(",\"real_neighbours_in_range\":{n:.2},\"real_near_m\":{}", load::NEAR_M);
+    }
+    let ratio = |s: &mut String, key: &str, r: &LockstepRatio| {
+        *s += &format!(
+            ",\"{key}\":{:.2},\"{key}_min\":{:.2},\"{key}_max\":{:.2}",
+            r.of_medians, r.by_round.min, r.by_round.max
+        );
+    };
+    for (key, r) in [
+        ("ratio_shm_over_udp", &f.shm_udp),
+        ("ratio_shm_real_over_udp_real", &f.shm_udp_real),
+        ("ratio_shm_real_over_shm", &f.real_shm),
+        ("ratio_udp_real_over_udp", &f.real_udp),
+        ("ratio_zenoh_over_udp", &f.zenoh_udp),
+        ("ratio_shm_over_zenoh", &f.shm_zenoh),
+        ("ratio_zenoh_real_over_udp_real", &f.zenoh_udp_real),
+    ] {
+        if let Some(r) = r {
+            ratio(&mut s, key, r);
+        }
+    }
+    if let (Some(f), Some(r), Some(q)) = (f.flood, &f.flood_ratio, f.quiet) {
+        s += &format!(",\"flood_sent\":{}", f.flood_sent());
+        ratio(&mut s, "ratio_flood_over_udp", r);
+        s += &format!(
+            ",\"udp_stderr_bytes\":{},\"flood_stderr_bytes\":{}",
+            q.bridge_stderr_bytes(),
+            f.bridge_stderr_bytes()
+        );
+    }
+    if let (Some(r), Some(bytes)) = (&f.record_ratio, f.bytes_per_robot_tick) {
+        ratio(&mut s, "ratio_record_over_shm", r);
+        s += &format!(",\"recorded_bytes_per_robot_tick\":{bytes:.0}");
+    }
+    s += "}\n";
+    s
+}
+
+/// [`lockstep_report`] as text.
+fn lockstep_text(args: &BenchLockstepArgs, variants: &[LockstepVariant], f: &LockstepFigures) -> String {
+    let ticks = f.ticks;
+    let mut s = String::new();
     if let (Some(ns), Some(a)) = (&args.netns, args.netns_address) {
         s += &format!("the bridges' clients in network namespace {ns}, reaching them at {a}\n");
     }
@@ -1251,34 +1347,34 @@ pub fn lockstep_report(args: &BenchLockstepArgs, variants: &[LockstepVariant]) -
             format!("{:.2}x", r.of_medians)
         }
     };
-    if let Some(r) = &shm_udp {
+    if let Some(r) = &f.shm_udp {
         s += &format!("  shared memory / UDP: {}\n", ratio(r));
     }
-    if let Some(r) = &shm_udp_real {
+    if let Some(r) = &f.shm_udp_real {
         s += &format!("  shared memory / UDP, real load: {}\n", ratio(r));
     }
-    if let Some(r) = &zenoh_udp {
+    if let Some(r) = &f.zenoh_udp {
         s += &format!("  Zenoh / UDP: {}\n", ratio(r));
     }
-    if let Some(r) = &shm_zenoh {
+    if let Some(r) = &f.shm_zenoh {
         s += &format!("  shared memory / Zenoh: {}\n", ratio(r));
     }
-    if let Some(r) = &zenoh_udp_real {
+    if let Some(r) = &f.zenoh_udp_real {
         s += &format!("  Zenoh / UDP, real load: {}\n", ratio(r));
     }
-    if let Some(r) = &real_shm {
+    if let Some(r) = &f.real_shm {
         s += &format!("  real load / IPC only, shared memory: {}\n", ratio(r));
     }
-    if let Some(r) = &real_udp {
+    if let Some(r) = &f.real_udp {
         s += &format!("  real load / IPC only, UDP: {}\n", ratio(r));
     }
-    if let Some(r) = &flood_ratio {
+    if let Some(r) = &f.flood_ratio {
         s += &format!("  UDP with the flood / without: {}\n", ratio(r));
     }
-    if let (Some(r), Some(bytes)) = (&record_ratio, bytes_per_robot_tick) {
+    if let (Some(r), Some(bytes)) = (&f.record_ratio, f.bytes_per_robot_tick) {
         s += &format!("  recording / not: {} ticks/s; {bytes:.0} bytes per robot per tick recorded\n", ratio(r));
     }
-    if let Some(n) = neighbours {
+    if let Some(n) = f.neighbours {
         s += &format!(
             "  IPC only: robots {IPC_SPACING} m apart, 4 sensors each, agents send constant powers unread. Real load: robots {} m apart, 8 sensors each, {n:.1} neighbours within {} m on average at the start; agents read every sensor block (UDP clients parse every Measures) and steer each robot by a reactive rule\n",
             load::SPACING_M,

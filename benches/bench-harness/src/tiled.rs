@@ -30,7 +30,7 @@ pub struct TiledWorld {
 
 /// A wheelchair of the Intellwheels prototype's size with eight sensors round its body.
 pub fn chair_spec(pose: Pose) -> RobotSpec {
-    let (w, h, com) = (1.1, 0.65, 0.8);
+    let [w, h, com] = sim_model::chair::BODY;
     let (front, rear, side) = (com * w, -(1.0 - com) * w, h / 2.0);
     let sensors = vec![
         ProximitySpec::deg(front, 0.0, 0.0, 45.0),

@@ -4,9 +4,9 @@
 use std::process::{Child, ExitCode};
 use std::time::Duration;
 
+use crate::browser::Browser;
 use anyhow::Context as _;
 use records::outcome::HubOutcome;
-use viewer::browser::Browser;
 
 use crate::args::BenchViewerArgs;
 use crate::{finish, spawn_self};

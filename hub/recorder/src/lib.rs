@@ -71,7 +71,6 @@
 pub mod foxglove;
 pub mod journal;
 mod proto;
-pub mod python;
 pub mod read;
 mod writer;
 

@@ -754,7 +754,7 @@ mod python {
     /// published schema package) on a recording and compares what it prints with the world.
     #[test]
     fn the_python_mcap_reader_decodes_every_foxglove_channel() {
-        let python = recorder::python::checker_python().unwrap_or_else(|e| panic!("{e}"));
+        let python = test_support::python::checker_python().unwrap_or_else(|e| panic!("{e}"));
         let dir = scratch("python");
         let path = dir.join("run.mcap");
         let start = run_start();
@@ -777,7 +777,7 @@ mod python {
         let summary = dir.join("summary.json");
         std::fs::write(&summary, format!(r#"{{"robots":[{}]}}"#, robots.join(","))).expect("summary");
 
-        let script = recorder::python::checker_script();
+        let script = test_support::python::checker_script();
         let out = std::process::Command::new(&python)
             .arg(&script)
             .arg(&path)

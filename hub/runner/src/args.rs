@@ -22,6 +22,11 @@ pub struct RunArgs {
     /// No viewer.
     #[arg(long)]
     pub headless: bool,
+    /// Print the scenario as a learning environment runs it (lab, checkpoints, obstacles,
+    /// start poses, time, tick, noise, deadline) as JSON, and run nothing: the Python
+    /// package reads scenario files this way.
+    #[arg(long)]
+    pub describe: bool,
     /// Seed (default: the scenario's).
     #[arg(long, conflicts_with = "seeds")]
     pub seed: Option<u64>,
@@ -101,6 +106,11 @@ pub struct DemoArgs {
     /// No viewer.
     #[arg(long)]
     pub headless: bool,
+    /// Print the scenario as a learning environment runs it (lab, checkpoints, obstacles,
+    /// start poses, time, tick, noise, deadline) as JSON, and run nothing: the Python
+    /// package reads scenario files this way.
+    #[arg(long)]
+    pub describe: bool,
     /// As fast as the agents allow instead of real time (implies --headless makes sense).
     #[arg(long)]
     pub lockstep: bool,

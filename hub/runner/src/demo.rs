@@ -19,7 +19,11 @@ pub fn dynamic_characteristic(max_speed: f64, curve: f64, dt: f64) -> anyhow::Re
     let params = world::map::Params { noise: world::map::NoiseParams::NONE, ..Default::default() };
     let mut w = World::new(&map.lab, params, 0)?;
     // Along the long corridor from checkpoint 1.
-    let r = w.add_robot(RobotSpec::at(10.0, 6.1, 0.0).body(1.1, 0.65, 0.8).motors(max_speed, curve))?;
+    let r = w.add_robot(
+        RobotSpec::at(10.0, 6.1, 0.0)
+            .body(sim_model::chair::BODY[0], sim_model::chair::BODY[1], sim_model::chair::BODY[2])
+            .motors(max_speed, curve),
+    )?;
     let mut speeds = Vec::new();
     let mut last = 10.0;
     for _ in 0..100 {

@@ -831,6 +831,58 @@ fn chair_started(
     Ok(None)
 }
 
+/// `iwsim hub`'s command line for a run of `scenario` with `seed`, recording to `recording`.
+fn hub_command(
+    scenario: &Scenario,
+    seed: u64,
+    session: &str,
+    recording: &Path,
+    chair: Option<&ChairRun>,
+    opts: &RunOptions,
+) -> Vec<String> {
+    let s = |x: &str| x.to_owned();
+    let mut hub_args = vec![
+        s("hub"),
+        s("--session"),
+        session.to_owned(),
+        s("--lab"),
+        scenario.lab_spec(),
+        s("--cycle-ms"),
+        scenario.cycle_ms.to_string(),
+        s("--seed"),
+        seed.to_string(),
+        s("--ticks"),
+        scenario.ticks().to_string(),
+        s("--wait-agents"),
+        // The chair's adapter is a hub client too.
+        (scenario.agents.len() + chair.is_some() as usize).to_string(),
+        s("--json"),
+        s("--record"),
+        recording.display().to_string(),
+    ];
+    if let Some(g) = scenario.grid_spec() {
+        hub_args.extend([s("--grid"), g]);
+    }
+    if opts.lockstep {
+        hub_args.extend([s("--lockstep"), s("--deadline-ms"), scenario.deadline_ms().to_string()]);
+    }
+    if !scenario.noise {
+        hub_args.push(s("--no-noise"));
+    }
+    for o in &scenario.obstacles {
+        hub_args.extend([s("--obstacle"), o.to_string()]);
+    }
+    for c in &scenario.checkpoints {
+        hub_args.extend([s("--checkpoint"), c.to_string()]);
+    }
+    if let Some(c) = &chair {
+        // The physical chair is the run's one Real robot: its adapter pushes its pose.
+        hub_args.extend([s("--real"), c.spec.robot.clone()]);
+    }
+    hub_args.extend(opts.hub_options.iter().cloned());
+    hub_args
+}
+
 /// Runs `scenario` once with `seed`, writing logs and `summary.json` into `out`. A signal
 /// stops every process of the run and gives a partial summary; a process that fails before
 /// the run's end stops the rest and gives an error.
@@ -867,46 +919,8 @@ pub fn run_once(
     let session =
         opts.session.clone().unwrap_or_else(|| format!("run-{}-{seed}-{}", std::process::id(), crate::run::unique()));
     let ticks = scenario.ticks();
+    let hub_args = hub_command(scenario, seed, &session, &recording, chair.as_ref(), opts);
     let s = |x: &str| x.to_owned();
-    let mut hub_args = vec![
-        s("hub"),
-        s("--session"),
-        session.clone(),
-        s("--lab"),
-        scenario.lab_spec(),
-        s("--cycle-ms"),
-        scenario.cycle_ms.to_string(),
-        s("--seed"),
-        seed.to_string(),
-        s("--ticks"),
-        ticks.to_string(),
-        s("--wait-agents"),
-        // The chair's adapter is a hub client too.
-        (scenario.agents.len() + chair.is_some() as usize).to_string(),
-        s("--json"),
-        s("--record"),
-        recording.display().to_string(),
-    ];
-    if let Some(g) = scenario.grid_spec() {
-        hub_args.extend([s("--grid"), g]);
-    }
-    if opts.lockstep {
-        hub_args.extend([s("--lockstep"), s("--deadline-ms"), scenario.deadline_ms.to_string()]);
-    }
-    if !scenario.noise {
-        hub_args.push(s("--no-noise"));
-    }
-    for o in &scenario.obstacles {
-        hub_args.extend([s("--obstacle"), o.to_string()]);
-    }
-    for c in &scenario.checkpoints {
-        hub_args.extend([s("--checkpoint"), c.to_string()]);
-    }
-    if let Some(c) = &chair {
-        // The physical chair is the run's one Real robot: its adapter pushes its pose.
-        hub_args.extend([s("--real"), c.spec.robot.clone()]);
-    }
-    hub_args.extend(opts.hub_options.iter().cloned());
     let started = Instant::now();
     let (tx, rx) = std::sync::mpsc::channel::<String>();
     let (banner_tx, banner) = std::sync::mpsc::channel();
@@ -954,86 +968,64 @@ pub fn run_once(
                             scenario.agents.len()
                         );
                     }
-                    let zenoh = match &opts.zenoh {
-                        Some(z) => {
-                            let (listen, connect) = z.endpoints()?;
-                            let args = vec![
-                                s("zenoh"),
-                                s("--session"),
-                                session.clone(),
-                                s("--listen"),
-                                listen,
-                                s("--connect-timeout"),
-                                s("30"),
-                            ];
-                            let mut kid = Kid::spawn(&args, "Zenoh bridge", false)?;
-                            kid.forward_stderr(s("zenoh: "), opts.verbose, tx.clone(), None);
-                            procs.bridge = Some(kid);
-                            Some((z, connect))
-                        }
-                        None => None,
-                    };
-                    for (k, a) in scenario.agents.iter().enumerate() {
-                        let ros2 = a.kind == "ros2";
-                        let mut args = if ros2 {
-                            // The ROS 2 bridge: its chairs are driven from ROS 2 (no logs of its own).
-                            vec![s("ros2"), s("--session"), session.clone(), s("--connect-timeout"), s("30")]
-                        } else {
-                            vec![
-                                s("agent"),
-                                a.kind.clone(),
-                                s("--session"),
-                                session.clone(),
-                                s("--connect-timeout"),
-                                s("30"),
-                                s("--log"),
-                                out.display().to_string(),
-                            ]
-                        };
-                        if let Some(cfg) = &a.config {
-                            let path = out.join(format!("agent{}-{}.toml", k + 1, a.kind));
-                            std::fs::write(&path, toml::to_string(cfg).context("writing an agent's config")?)?;
-                            args.extend([s("--config"), path.display().to_string()]);
-                        }
-                        args.extend(
-                            option_flags(&a.options)
-                                .map_err(|e| anyhow::anyhow!("agent {} ({}): {e}", k + 1, a.kind))?,
-                        );
-                        let mut netns = None;
-                        if let Some((z, connect)) = &zenoh
-                            && z.agents.includes(k)
-                            && !ros2
-                        {
-                            // Agents retry for their --connect-timeout while the bridge comes up.
-                            args.extend([s("--zenoh"), connect.clone()]);
-                            netns = z.netns.as_deref();
-                        }
-                        let mut kid = Kid::spawn_in(netns, &args, &format!("agent {} ({})", k + 1, a.kind), false)?;
-                        kid.forward_stderr(format!("{}: ", a.kind), opts.verbose, tx.clone(), None);
-                        procs.agents.push(kid);
-                    }
-                    let mut viewer_start = None;
-                    if !opts.headless {
-                        let mut args =
-                            vec![s("view"), s("--session"), session.clone(), s("--http"), opts.http.to_string()];
-                        if opts.allow_control {
-                            args.push(s("--allow-control"));
-                        }
-                        for h in &opts.allow_host {
-                            args.extend([s("--allow-host"), h.clone()]);
-                        }
-                        let mut v = Kid::spawn(&args, "viewer", false)?;
-                        let (vtx, lines) = std::sync::mpsc::channel();
-                        v.forward_stderr(String::new(), false, vtx, None);
-                        procs.viewer = Some(v);
-                        viewer_start = Some(ViewerStart { lines, since: Instant::now(), last: None });
-                    }
+                    start_agents(&mut procs, scenario, &session, out, opts, &tx)?;
+                    let mut viewer_start = start_viewer(&mut procs, &session, opts)?;
                     supervise(&mut procs, &mut viewer_start, &watch, signals)
                 }
             }
         }
     };
     drop(tx);
+    let (interrupted, agent_failures, failure) = wind_down(&mut procs, stop, signals);
+    // Every process is gone: collect what they said, and leave nothing of the session behind
+    // (a process killed above could not remove its files itself).
+    drop(stop_watch);
+    if let Some(w) = watcher {
+        let _ = w.join();
+    }
+    procs.all().for_each(Kid::join_stderr);
+    if let Ok(s) = ipc_services::Session::new(&session) {
+        s.release_if_unused();
+    }
+    let messages: Vec<String> = rx.try_iter().collect();
+    // A run that failed (a process it needed died, the hub failed or was killed) still gets
+    // its summary, partial, saying what ended it: the record holds what happened up to there.
+    if let Some(failure) = &failure {
+        ipc_services::report!(
+            "iwsim run: the run failed: {failure}; what the processes said:\n{}",
+            messages.join("\n")
+        );
+    }
+    let hub_out = procs.hub.stdout();
+    let Verdict { ticks, state_hash, failures, robots, traffic, chair: chair_summary } =
+        judge(scenario, out, &hub_out, chair.as_ref(), interrupted, failure, agent_failures)?;
+    let cpu_s = procs.all().filter_map(|k| Some((k.what.clone(), k.cpu_s?))).collect();
+    let summary = RunSummary {
+        scenario: scenario.name.clone(),
+        seed,
+        ticks,
+        state_hash,
+        wall_s: started.elapsed().as_secs_f64(),
+        passed: failures.is_empty(),
+        failures,
+        lab: scenario.lab_spec(),
+        obstacles: scenario.obstacles.clone(),
+        checkpoints: scenario.checkpoints.clone(),
+        robots,
+        traffic,
+        cpu_s,
+    };
+    let text = chair::summary_json(&summary, chair_summary.as_ref()).context("writing summary.json")?;
+    std::fs::write(out.join("summary.json"), text)?;
+    Ok(RunEnd { summary, chair: chair_summary, interrupted })
+}
+
+/// Ends a run's processes as `stop` says: on a signal, forwarded to every child; on a failure,
+/// the others stopped; at the run's end, each left to go in its order (agents and the chair's
+/// adapter, then the emulator, then the viewer), killed past its bound. Returns the signal
+/// that interrupted the run, what the runner saw go wrong with an agent, and what ended the
+/// run early.
+fn wind_down(procs: &mut Procs, stop: Stop, signals: &Signals) -> (Option<Signal>, Vec<String>, Option<String>) {
     let mut interrupted = None;
     let mut agent_failures = Vec::new();
     let failure = match stop {
@@ -1127,28 +1119,125 @@ pub fn run_once(
             }
         },
     };
-    // Every process is gone: collect what they said, and leave nothing of the session behind
-    // (a process killed above could not remove its files itself).
-    drop(stop_watch);
-    if let Some(w) = watcher {
-        let _ = w.join();
+    (interrupted, agent_failures, failure)
+}
+
+/// Starts the scenario's agents (and, for agents run as on other machines, the Zenoh bridge
+/// they join through), each with its options, config file and log folder.
+fn start_agents(
+    procs: &mut Procs,
+    scenario: &Scenario,
+    session: &str,
+    out: &Path,
+    opts: &RunOptions,
+    tx: &std::sync::mpsc::Sender<String>,
+) -> anyhow::Result<()> {
+    let s = |x: &str| x.to_owned();
+    let zenoh = match &opts.zenoh {
+        Some(z) => {
+            let (listen, connect) = z.endpoints()?;
+            let args = vec![
+                s("zenoh"),
+                s("--session"),
+                session.to_owned(),
+                s("--listen"),
+                listen,
+                s("--connect-timeout"),
+                s("30"),
+            ];
+            let mut kid = Kid::spawn(&args, "Zenoh bridge", false)?;
+            kid.forward_stderr(s("zenoh: "), opts.verbose, tx.clone(), None);
+            procs.bridge = Some(kid);
+            Some((z, connect))
+        }
+        None => None,
+    };
+    for (k, a) in scenario.agents.iter().enumerate() {
+        let ros2 = a.kind == "ros2";
+        let mut args = if ros2 {
+            // The ROS 2 bridge: its chairs are driven from ROS 2 (no logs of its own).
+            vec![s("ros2"), s("--session"), session.to_owned(), s("--connect-timeout"), s("30")]
+        } else {
+            vec![
+                s("agent"),
+                a.kind.clone(),
+                s("--session"),
+                session.to_owned(),
+                s("--connect-timeout"),
+                s("30"),
+                s("--log"),
+                out.display().to_string(),
+            ]
+        };
+        if let Some(cfg) = &a.config {
+            let path = out.join(format!("agent{}-{}.toml", k + 1, a.kind));
+            std::fs::write(&path, toml::to_string(cfg).context("writing an agent's config")?)?;
+            args.extend([s("--config"), path.display().to_string()]);
+        }
+        args.extend(option_flags(&a.options).map_err(|e| anyhow::anyhow!("agent {} ({}): {e}", k + 1, a.kind))?);
+        let mut netns = None;
+        if let Some((z, connect)) = &zenoh
+            && z.agents.includes(k)
+            && !ros2
+        {
+            // Agents retry for their --connect-timeout while the bridge comes up.
+            args.extend([s("--zenoh"), connect.clone()]);
+            netns = z.netns.as_deref();
+        }
+        let mut kid = Kid::spawn_in(netns, &args, &format!("agent {} ({})", k + 1, a.kind), false)?;
+        kid.forward_stderr(format!("{}: ", a.kind), opts.verbose, tx.clone(), None);
+        procs.agents.push(kid);
     }
-    procs.all().for_each(Kid::join_stderr);
-    if let Ok(s) = ipc_services::Session::new(&session) {
-        s.release_if_unused();
+    Ok(())
+}
+
+/// Starts the viewer unless the run is headless; what it says is watched for its address.
+fn start_viewer(procs: &mut Procs, session: &str, opts: &RunOptions) -> anyhow::Result<Option<ViewerStart>> {
+    let s = |x: &str| x.to_owned();
+    let mut viewer_start = None;
+    if !opts.headless {
+        let mut args = vec![s("view"), s("--session"), session.to_owned(), s("--http"), opts.http.to_string()];
+        if opts.allow_control {
+            args.push(s("--allow-control"));
+        }
+        for h in &opts.allow_host {
+            args.extend([s("--allow-host"), h.clone()]);
+        }
+        let mut v = Kid::spawn(&args, "viewer", false)?;
+        let (vtx, lines) = std::sync::mpsc::channel();
+        v.forward_stderr(String::new(), false, vtx, None);
+        procs.viewer = Some(v);
+        viewer_start = Some(ViewerStart { lines, since: Instant::now(), last: None });
     }
-    let messages: Vec<String> = rx.try_iter().collect();
-    // A run that failed (a process it needed died, the hub failed or was killed) still gets
-    // its summary, partial, saying what ended it: the record holds what happened up to there.
-    if let Some(failure) = &failure {
-        ipc_services::report!(
-            "iwsim run: the run failed: {failure}; what the processes said:\n{}",
-            messages.join("\n")
-        );
-    }
+    Ok(viewer_start)
+}
+
+/// How a run went, judged from the hub's record (and the chair emulator's ground truth):
+/// what [`run_once`] writes to `summary.json` besides the run's own figures.
+struct Verdict {
+    ticks: u64,
+    state_hash: records::outcome::StateHash,
+    failures: Vec<String>,
+    robots: Vec<records::summary::RobotSummary>,
+    traffic: Option<records::summary::TrafficSummary>,
+    chair: Option<ChairSummary>,
+}
+
+/// Judges a run that has ended (every process gone) from its record in `out`: the hub's last
+/// words `hub_out`, the signal that `interrupted` it or the `failure` that ended it early,
+/// and the `agent_failures` the runner saw.
+fn judge(
+    scenario: &Scenario,
+    out: &Path,
+    hub_out: &str,
+    chair: Option<&ChairRun>,
+    interrupted: Option<Signal>,
+    failure: Option<String>,
+    agent_failures: Vec<String>,
+) -> anyhow::Result<Verdict> {
+    let recording = out.join(RECORDING);
     let ended_early = interrupted.is_some() || failure.is_some();
-    let hub_out = procs.hub.stdout();
-    let hub_said = HubOutcome::from_stdout(&hub_out);
+    let hub_said = HubOutcome::from_stdout(hub_out);
     let hub_outcome = match &hub_said {
         Ok(o) => o.clone(),
         // A hub interrupted or killed may have had no time to say how far it got.
@@ -1207,25 +1296,7 @@ pub fn run_once(
     // An agent that fails (a navigator that did not arrive exits 1) fails the run's outcome,
     // not the runner: the summary still says what happened.
     failures.extend(agent_failures);
-    let cpu_s = procs.all().filter_map(|k| Some((k.what.clone(), k.cpu_s?))).collect();
-    let summary = RunSummary {
-        scenario: scenario.name.clone(),
-        seed,
-        ticks,
-        state_hash,
-        wall_s: started.elapsed().as_secs_f64(),
-        passed: failures.is_empty(),
-        failures,
-        lab: scenario.lab_spec(),
-        obstacles: scenario.obstacles.clone(),
-        checkpoints: scenario.checkpoints.clone(),
-        robots,
-        traffic,
-        cpu_s,
-    };
-    let text = chair::summary_json(&summary, chair_summary.as_ref()).context("writing summary.json")?;
-    std::fs::write(out.join("summary.json"), text)?;
-    Ok(RunEnd { summary, chair: chair_summary, interrupted })
+    Ok(Verdict { ticks, state_hash, failures, robots, traffic, chair: chair_summary })
 }
 
 /// A number unique within this process, for session names.
@@ -1401,12 +1472,42 @@ pub fn parse_seeds(text: &str) -> Result<std::ops::RangeInclusive<u64>, String> 
 pub fn run(args: &RunArgs) -> anyhow::Result<ExitCode> {
     // First, before any thread starts (see `signals`).
     let signals = Signals::install()?;
+    let scenario = scenario_of(args)?;
+    if args.describe {
+        println!("{}", serde_json::to_string_pretty(&scenario.describe())?);
+        return Ok(ExitCode::SUCCESS);
+    }
+    if let Some(session) = &args.session {
+        ipc_services::Session::new(session)?;
+    }
+    let out = args.out.clone().unwrap_or_else(|| PathBuf::from(format!("runs/{}", scenario.name)));
+    let opts = run_options(args);
+    let Some(seeds) = &args.seeds else {
+        let seed = args.seed.unwrap_or(scenario.seed);
+        ipc_services::report!(
+            "iwsim run: {} ({}), seed {seed}, {} s simulated in {}",
+            scenario.name,
+            scenario.description,
+            scenario.seconds,
+            if opts.lockstep { "lock-step" } else { "real time" }
+        );
+        let scenario = scenario.populated(seed).map_err(|e| anyhow::anyhow!("scenario {}: {e}", scenario.name))?;
+        let end = run_once(&scenario, seed, &out, &opts, &signals)?;
+        print_summary(&end.summary, end.chair.as_ref(), &out);
+        return Ok(exit_code(&end));
+    };
+    let seeds = parse_seeds(seeds).map_err(anyhow::Error::msg)?;
+    run_batch(&scenario, seeds, &out, &opts, &signals, args.quiet)
+}
+
+/// The scenario `iwsim run` names, with its command line's overrides applied.
+fn scenario_of(args: &RunArgs) -> anyhow::Result<Scenario> {
     let mut scenario = Scenario::load(&args.scenario)?;
     if let Some(mode) = args.chair_mode {
         scenario.set_chair_mode(mode).map_err(|e| anyhow::anyhow!("--chair-mode {}: {e}", mode.as_str()))?;
     }
     if let Some(ms) = args.deadline_ms {
-        scenario.deadline_ms = ms;
+        scenario.deadline_ms = Some(ms);
     }
     if args.chair_odometry_only {
         let name = scenario.name.clone();
@@ -1420,11 +1521,12 @@ pub fn run(args: &RunArgs) -> anyhow::Result<ExitCode> {
         crowd.chairs = n;
         crowd.check().map_err(|e| anyhow::anyhow!("--chairs {n}: {e}"))?;
     }
-    if let Some(session) = &args.session {
-        ipc_services::Session::new(session)?;
-    }
-    let out = args.out.clone().unwrap_or_else(|| PathBuf::from(format!("runs/{}", scenario.name)));
-    let opts = RunOptions {
+    Ok(scenario)
+}
+
+/// How `iwsim run`'s command line asks each run to go.
+fn run_options(args: &RunArgs) -> RunOptions {
+    RunOptions {
         lockstep: args.lockstep,
         headless: args.headless || args.seeds.is_some(),
         http: args.http,
@@ -1445,22 +1547,19 @@ pub fn run(args: &RunArgs) -> anyhow::Result<ExitCode> {
             listen: args.zenoh_listen.clone(),
             netns: args.zenoh_netns.clone(),
         }),
-    };
-    let Some(seeds) = &args.seeds else {
-        let seed = args.seed.unwrap_or(scenario.seed);
-        ipc_services::report!(
-            "iwsim run: {} ({}), seed {seed}, {} s simulated in {}",
-            scenario.name,
-            scenario.description,
-            scenario.seconds,
-            if opts.lockstep { "lock-step" } else { "real time" }
-        );
-        let scenario = scenario.populated(seed).map_err(|e| anyhow::anyhow!("scenario {}: {e}", scenario.name))?;
-        let end = run_once(&scenario, seed, &out, &opts, &signals)?;
-        print_summary(&end.summary, end.chair.as_ref(), &out);
-        return Ok(exit_code(&end));
-    };
-    let seeds = parse_seeds(seeds).map_err(anyhow::Error::msg)?;
+    }
+}
+
+/// One run per seed, each in `out/seed-N/`, a line of the table per run as it ends, then the
+/// table and the batch's figures. Stops with a run that was interrupted.
+fn run_batch(
+    scenario: &Scenario,
+    seeds: std::ops::RangeInclusive<u64>,
+    out: &Path,
+    opts: &RunOptions,
+    signals: &Signals,
+    quiet: bool,
+) -> anyhow::Result<ExitCode> {
     let mut table = String::new();
     let mut all = Vec::new();
     // With a physical chair, contacts are counted in both worlds.
@@ -1482,7 +1581,7 @@ pub fn run(args: &RunArgs) -> anyhow::Result<ExitCode> {
         let dir = out.join(format!("seed-{seed}"));
         let placed =
             scenario.populated(seed).map_err(|e| anyhow::anyhow!("scenario {}, seed {seed}: {e}", scenario.name))?;
-        let end = run_once(&placed, seed, &dir, &RunOptions { verbose: false, ..opts.clone() }, &signals)?;
+        let end = run_once(&placed, seed, &dir, &RunOptions { verbose: false, ..opts.clone() }, signals)?;
         if end.interrupted.is_some() {
             // The batch stops with the run it was in: that run's partial summary, and where
             // the finished ones are.
@@ -1512,7 +1611,7 @@ pub fn run(args: &RunArgs) -> anyhow::Result<ExitCode> {
             if time.is_nan() { "-".into() } else { format!("{time:.1}") },
             s.state_hash
         );
-        if !args.quiet {
+        if !quiet {
             ipc_services::report!("{line}");
         }
         table += &line;

@@ -100,9 +100,10 @@ pub struct Scenario {
     pub cycle_ms: u32,
     /// Lock-step: how long (wall-clock ms) the hub waits for a tick's answers before it steps
     /// without the late agents. A stack that thinks long (a ROS 2 planner) needs more than the
-    /// default; a deadline that is met changes nothing in the run.
-    #[serde(default = "default_deadline")]
-    pub deadline_ms: u64,
+    /// default ([`DEFAULT_DEADLINE_MS`]; [`Scenario::deadline_ms`]); a deadline that is met
+    /// changes nothing in the run.
+    #[serde(default)]
+    pub deadline_ms: Option<u64>,
     /// Simulated time limit, seconds.
     pub seconds: f64,
     /// Noise on (true: `world::map::NoiseParams::WHEELCHAIR`, Ciber-Rato's sensor and motor
@@ -141,9 +142,6 @@ pub struct Scenario {
 fn default_lab() -> String {
     "builtin:liacc".into()
 }
-fn default_deadline() -> u64 {
-    DEFAULT_DEADLINE_MS
-}
 fn default_cycle() -> u32 {
     100
 }
@@ -153,6 +151,29 @@ fn yes() -> bool {
 fn one() -> u64 {
     1
 }
+/// A scenario as a learning environment runs it ([`Scenario::describe`]), as JSON.
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct Description {
+    /// The lab as the hub takes it (`builtin:NAME` or a path).
+    pub lab: String,
+    /// The grid, likewise, if the scenario names one.
+    pub grid: Option<String>,
+    /// Checkpoints: x, y, radius, metres.
+    pub checkpoints: Vec<[f64; 3]>,
+    /// Obstacles: x0, y0, x1, y1, metres.
+    pub obstacles: Vec<[f64; 4]>,
+    /// The agents' start poses (`options.pose`): x, y metres, heading degrees.
+    pub starts: Vec<[f64; 3]>,
+    /// Simulated time limit, seconds.
+    pub seconds: f64,
+    /// Tick, ms.
+    pub cycle_ms: u32,
+    /// Noise on.
+    pub noise: bool,
+    /// The file's lock-step deadline, ms, if it sets one.
+    pub deadline_ms: Option<u64>,
+}
+
 /// One agent process.
 #[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -385,12 +406,10 @@ impl Scenario {
         if s.cycle_ms == 0 {
             return Err(bad("cycle_ms must be at least 1".into()));
         }
-        if !(1..=hub::cli::MAX_DEADLINE_MS).contains(&s.deadline_ms) {
-            return Err(bad(format!(
-                "deadline_ms = {}: must be 1..={} (a day)",
-                s.deadline_ms,
-                hub::cli::MAX_DEADLINE_MS
-            )));
+        if let Some(ms) = s.deadline_ms
+            && !(1..=hub::cli::MAX_DEADLINE_MS).contains(&ms)
+        {
+            return Err(bad(format!("deadline_ms = {ms}: must be 1..={} (a day)", hub::cli::MAX_DEADLINE_MS)));
         }
         if s.agents.is_empty() && s.crowd.is_none() {
             return Err(bad("no [[agents]] and no [crowd]: a run needs at least one agent".into()));
@@ -466,6 +485,34 @@ impl Scenario {
     /// the file); `None` without a chair.
     pub fn chair_lab_spec(&self) -> Option<String> {
         self.chair.as_ref().map(|c| self.resolve(c.lab.as_deref().unwrap_or(&self.lab)))
+    }
+
+    /// The lock-step deadline, ms: the file's, else [`DEFAULT_DEADLINE_MS`].
+    pub fn deadline_ms(&self) -> u64 {
+        self.deadline_ms.unwrap_or(DEFAULT_DEADLINE_MS)
+    }
+
+    /// What a learning environment runs of it (`iwsim run SCENARIO --describe`): the Python
+    /// package reads scenario files through this, so there is one reader, with its checks and
+    /// its errors.
+    pub fn describe(&self) -> Description {
+        let number = |v: &toml::Value| v.as_float().or_else(|| v.as_integer().map(|i| i as f64));
+        Description {
+            lab: self.lab_spec(),
+            grid: self.grid_spec(),
+            checkpoints: self.checkpoints.iter().map(|c| [c.x, c.y, c.radius]).collect(),
+            obstacles: self.obstacles.iter().map(|o| [o.x0, o.y0, o.x1, o.y1]).collect(),
+            starts: self
+                .agents
+                .iter()
+                .filter_map(|a| a.options.get("pose").and_then(toml::Value::as_array))
+                .filter_map(|p| Some([number(p.first()?)?, number(p.get(1)?)?, number(p.get(2)?)?]))
+                .collect(),
+            seconds: self.seconds,
+            cycle_ms: self.cycle_ms,
+            noise: self.noise,
+            deadline_ms: self.deadline_ms,
+        }
     }
 
     /// The lab as the hub takes it (`builtin:NAME`, or a path made relative to the file).
@@ -651,10 +698,12 @@ mod tests {
     fn the_lock_step_deadline_is_the_files_or_five_seconds() {
         let head = "name = \"x\"\nseconds = 1\n[[agents]]\nkind = \"navigator\"\n";
         let unset = Scenario::parse(head, "x.toml", Path::new(".")).unwrap_or_else(|e| panic!("{e}"));
-        assert_eq!(unset.deadline_ms, 5000);
+        assert_eq!(unset.deadline_ms(), 5000);
+        assert_eq!(unset.describe().deadline_ms, None, "unset, so a learning environment keeps its own");
         let set = Scenario::parse(&format!("deadline_ms = 60000\n{head}"), "x.toml", Path::new("."))
             .unwrap_or_else(|e| panic!("{e}"));
-        assert_eq!(set.deadline_ms, 60_000);
+        assert_eq!(set.deadline_ms(), 60_000);
+        assert_eq!(set.describe().deadline_ms, Some(60_000));
     }
 
     #[test]

@@ -20,7 +20,12 @@ pub enum CheckerPythonError {
 
 /// The folder of the checker script and its `requirements.txt`.
 pub fn checker_dir() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("python")
+    workspace().join("hub/recorder/python")
+}
+
+/// The workspace's root folder.
+fn workspace() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../..")
 }
 
 /// The checker script, `check_recording.py`.
@@ -31,10 +36,7 @@ pub fn checker_script() -> PathBuf {
 /// The requirement files of the project's Python environment: this checker's, and the test
 /// needs of the `iwsim` Python package (`python/requirements-test.txt`).
 pub fn requirement_files() -> [PathBuf; 2] {
-    [
-        checker_dir().join("requirements.txt"),
-        Path::new(env!("CARGO_MANIFEST_DIR")).join("../../python/requirements-test.txt"),
-    ]
+    [checker_dir().join("requirements.txt"), workspace().join("python/requirements-test.txt")]
 }
 
 /// A Python with the packages of [`requirement_files`]: `$IWSIM_PYTHON` when set, else
@@ -45,7 +47,7 @@ pub fn checker_python() -> Result<PathBuf, CheckerPythonError> {
     if let Some(p) = std::env::var_os("IWSIM_PYTHON") {
         return Ok(PathBuf::from(p));
     }
-    let venv = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../target/pyvenv");
+    let venv = workspace().join("target/pyvenv");
     let python = venv.join("bin/python");
     let ready = venv.join(".iwsim-ready");
     let fail = |command: &str, detail: String| CheckerPythonError::Setup { command: command.to_owned(), detail };
