@@ -44,7 +44,7 @@ pub struct Refused {
 }
 
 impl Refused {
-    fn new(reason: Refusal, detail: impl Into<String>) -> Self {
+    pub(crate) fn new(reason: Refusal, detail: impl Into<String>) -> Self {
         Self { reason, detail: detail.into() }
     }
 }
@@ -822,7 +822,7 @@ impl HubCore {
     }
 
     /// The robots an agent gets sensor blocks for: its own, then the chairs it controls.
-    pub fn agent_blocks(&self, agent_id: u32) -> impl Iterator<Item = u32> + '_ {
+    pub fn agent_blocks(&self, agent_id: u32) -> impl Iterator<Item = u32> + Clone + '_ {
         self.agents.get(&agent_id).into_iter().flat_map(|a| a.robots.iter().chain(&a.controls).copied())
     }
 

@@ -11,9 +11,9 @@ use anyhow::Context as _;
 use recorder::Recording;
 use recorder::journal::Event;
 
+use crate::HubOutcome;
 use crate::serve::ServeOptions;
 use crate::stage::{Stage, StageApplyError};
-use crate::{HubOutcome, RobotAtEnd, StateHash};
 
 /// Options of `iwsim replay`.
 #[derive(Debug, clap::Args, Clone)]
@@ -115,30 +115,8 @@ pub fn replay_observed(
             Err(e) => return Err(e.into()),
         }
     }
-    let outcome = outcome_of(&stage);
+    let outcome = stage.outcome();
     Ok(Replayed { outcome, steps, mismatch, truncated: recording.truncated.clone() })
-}
-
-/// The world of `stage` as `iwsim hub --json` reports a run's end.
-pub fn outcome_of(stage: &Stage) -> HubOutcome {
-    let w = stage.world();
-    let robots = stage
-        .ids()
-        .filter_map(|id| {
-            let r = stage.robot(id)?;
-            let flags = (r.collision as u32 * ipc_types::ROBOT_COLLISION)
-                | (stage.frozen_without_agent(id) as u32 * ipc_types::ROBOT_FROZEN);
-            Some(RobotAtEnd { id, x_m: r.pose.x, y_m: r.pose.y, heading_deg: r.pose.heading_deg(), flags })
-        })
-        .collect();
-    HubOutcome {
-        ticks: w.tick(),
-        state_hash: StateHash(w.state_hash()),
-        robots,
-        scoring: stage.challenge().scoring().number(),
-        scores: stage.scores(),
-        ..HubOutcome::default()
-    }
 }
 
 /// `iwsim replay`.

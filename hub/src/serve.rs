@@ -17,26 +17,22 @@
 //! up to 2 s for its observers and agents to read it and leave, and exits. With `--loop` it
 //! starts over from tick 0 instead of finishing.
 
-use std::collections::BTreeMap;
-use std::os::fd::AsRawFd as _;
+use std::collections::{BTreeMap, BTreeSet};
 use std::time::{Duration, Instant};
 
-use ipc_services::iceoryx2::port::publisher::Publisher;
-use ipc_services::iceoryx2::prelude::PortFactory as _;
-use ipc_services::{HUB_NODE_NAME, ServicesError, Session, Svc, clean_dead_nodes};
+use ipc_services::ServicesError;
 use ipc_types::{
-    Command, ControlResponse, MAX_AGENTS, MapHeader, MapItem, Refusal, RegisterKind, RegisterResponse, RobotInfo,
-    RobotState, RunState, SensorBlock, TickHeader, WorldHeader,
+    ActionBlock, Command, MAX_AGENTS, MapHeader, MapItem, Refusal, RobotInfo, RobotRegistration, RobotState, RunState,
+    WorldHeader,
 };
 use recorder::Recording;
 use recorder::journal::Event;
 use world::WorldBuildError;
 
-use crate::core::{MapAudience, Mode, hub_params, pack_map_for, robot_info, robot_state};
-use crate::ports::{HubPorts, agent_sensor_port};
-use crate::replay::outcome_of;
+use crate::core::{MapAudience, Mode, Refused, hub_params, pack_map_for, robot_info, robot_state};
+use crate::server::{Host, IDLE_POLL, Server};
 use crate::stage::{Stage, StageApplyError};
-use crate::{HubError, HubOutcome, IDLE_POLL, PidFd, named_publisher, readable};
+use crate::{HubError, HubOutcome};
 
 /// How to serve a recording.
 #[derive(Debug, Clone, PartialEq)]
@@ -83,8 +79,15 @@ pub enum ReplayServeError {
     Ipc(String),
 }
 
-fn ipc<E: std::fmt::Debug>(what: &str) -> impl FnOnce(E) -> ReplayServeError + '_ {
-    move |e| ReplayServeError::Ipc(format!("{what}: {e:?}"))
+impl From<HubError> for ReplayServeError {
+    fn from(e: HubError) -> Self {
+        match e {
+            HubError::Services(e) => Self::Services(e),
+            HubError::World(e) => Self::World(e),
+            HubError::Ipc(what) => Self::Ipc(what),
+            e => Self::Ipc(e.to_string()),
+        }
+    }
 }
 
 /// A recording played tick by tick, with the hub's run states and commands, and no I/O: the
@@ -104,6 +107,9 @@ pub struct Player<'a> {
     looped: bool,
     steps: u64,
     mismatch: Option<StageApplyError>,
+    /// Agents attached to the replay (they watch: a recorded world takes no robots).
+    agents: BTreeSet<u32>,
+    next_agent_id: u32,
 }
 
 impl<'a> Player<'a> {
@@ -122,6 +128,8 @@ impl<'a> Player<'a> {
             looped: options.looped,
             steps: 0,
             mismatch: None,
+            agents: BTreeSet::new(),
+            next_agent_id: 1,
         };
         p.apply_changes()?;
         Ok(p)
@@ -313,19 +321,6 @@ pub struct Served {
     pub robots_refused: u64,
 }
 
-/// An agent attached to the replay: its sensor service carries nothing but the end of the run.
-struct AgentPorts {
-    publisher: Publisher<Svc, [SensorBlock], TickHeader>,
-    _service: ipc_services::SensorService,
-    pidfd: Option<PidFd>,
-    /// The register client that said hello: only its requests speak for this agent.
-    client: u128,
-}
-
-/// The longest the end waits for observers and agents to read the `Finished` tick and leave:
-/// what a client reads lives in the replay's shared memory, which goes when the replay does.
-const LINGER: Duration = Duration::from_secs(2);
-
 /// The longest a tick lasts, whatever the speed (a speed near 0 would otherwise overflow the
 /// clock).
 const LONGEST_TICK: Duration = Duration::from_secs(86_400);
@@ -339,39 +334,14 @@ pub fn serve(recording: &Recording, options: &ServeOptions) -> Result<Served, Re
     let mut player = Player::new(recording, options)?;
     let cycle_s = recording.start.cycle_ms.max(1) as f64 / 1000.0;
     let period = Duration::try_from_secs_f64(cycle_s / options.speed).unwrap_or(LONGEST_TICK).min(LONGEST_TICK);
-
-    let session = Session::new(&options.session)?;
-    // Dropped last, on every way out: the last process of a session leaves nothing in /dev/shm.
-    let _release = session.release_on_drop();
-    let cleaned = clean_dead_nodes(&session);
-    if cleaned > 0 {
-        tracing::info!("removed {cleaned} dead iceoryx2 nodes left by an earlier run of session {}", options.session);
-    }
-    // The hub's node name: observers find the process serving the session by it.
-    let node = session.node(HUB_NODE_NAME)?;
     // Both maps are kept for late subscribers, like the hub's; nobody's actions move a recorded
     // robot, but agents wait for the actions subscriber to exist.
-    let mut io = HubPorts::open(
-        &session,
-        &node,
+    let mut server = Server::open(
+        &options.session,
         player.map_items(MapAudience::Agents),
         player.map_items(MapAudience::Observers),
-    )
-    .map_err(|e| match e {
-        HubError::Services(e) => ReplayServeError::Services(e),
-        e => ReplayServeError::Ipc(e.to_string()),
-    })?;
-    let doorbell_fd = io.doorbell_fd();
-
-    let pid = std::process::id();
-    let mut agents: BTreeMap<u32, AgentPorts> = BTreeMap::new();
-    let mut next_agent_id = 1u32;
-    let mut served =
-        Served { steps: 0, outcome: HubOutcome::default(), mismatch: None, agents_seen: 0, robots_refused: 0 };
-    let mut fds: Vec<i32> = Vec::new();
-    let mut fd_agents: Vec<u32> = Vec::new();
-    let mut poller = os::poll::Poller::default();
-    let mut ready = Vec::new();
+    )?;
+    let mut interrupted = false;
     let mut next_tick_at = Instant::now() + period;
     let mut publish = true;
 
@@ -383,42 +353,19 @@ pub fn serve(recording: &Recording, options: &ServeOptions) -> Result<Served, Re
         options.speed
     );
     loop {
-        if ipc_services::stop_requested(&node) {
-            served.outcome.interrupted = true;
+        if server.stop_requested() {
+            interrupted = true;
             player.command(Command::Stop);
             publish = true;
         }
         if publish {
             publish = false;
-            let finished = player.state() == RunState::Finished;
-            let header = player.world_header(agents.len());
-            let count = player.robot_count();
-            let mut sample = io.world_pub.loan_slice_uninit(count).map_err(ipc("loan a world snapshot"))?;
-            *sample.user_header_mut() = header;
-            let sample = crate::ports::fill(sample, player.robot_states());
-            io.roster.note(sample.payload().iter().map(|s| s.id));
-            // Before the snapshot, as the live hub does: its robots' names are there first.
-            io.roster.publish_if_changed(|| player.robot_info()).map_err(|e| ReplayServeError::Ipc(e.to_string()))?;
-            sample.send().map_err(ipc("send a world snapshot"))?;
-            if finished {
-                // Agents have no robots here, so they get no blocks per tick, but every agent
-                // hears the end.
-                for ports in agents.values() {
-                    let sample = ports.publisher.loan_slice_uninit(0).map_err(ipc("loan sensor blocks"))?;
-                    let mut sample = crate::ports::fill(sample, std::iter::empty());
-                    *sample.user_header_mut() = TickHeader {
-                        tick: header.tick,
-                        sim_time_s: header.sim_time_s,
-                        run_state: header.run_state,
-                        count: 0,
-                        t_pub_ns: ipc_services::monotonic_ns(),
-                        ..TickHeader::default()
-                    };
-                    sample.send().map_err(ipc("send sensor blocks"))?;
-                }
-            }
-            io.tick_notifier.notify().map_err(ipc("ring the tick"))?;
-            if finished {
+            let header = player.world_header(server.agent_count());
+            server.publish_world(header, player.robot_count(), player.robot_states(), || player.robot_info(), None)?;
+            // The agents have no robots here: they hear only the end.
+            server.publish_blocks(&header, 0, false, |_| std::iter::empty())?;
+            server.ring()?;
+            if player.state() == RunState::Finished {
                 break;
             }
         }
@@ -431,102 +378,15 @@ pub fn serve(recording: &Recording, options: &ServeOptions) -> Result<Served, Re
             Duration::ZERO // a single step is due at once
         }
         .min(IDLE_POLL);
-        fds.clear();
-        fd_agents.clear();
-        fds.push(doorbell_fd);
-        for (&id, a) in &agents {
-            if let Some(p) = &a.pidfd {
-                fds.push(p.0.as_raw_fd());
-                fd_agents.push(id);
-            }
+        server.accept(timeout, &mut player);
+        server.admit(&mut player)?;
+        let before = player.state();
+        publish |= server.control(&mut player)?;
+        if before != RunState::Running && player.state() == RunState::Running {
+            next_tick_at = Instant::now() + period;
         }
-        readable(&mut poller, &fds, timeout, &mut ready);
-        let _ = io.doorbell.try_wait(|_| {});
-        // A new subscriber gets the kept sample only when the publisher next looks at its
-        // connections: the maps are sent once, and the world not while paused.
-        io.update_connections();
-        for &i in ready.iter().filter(|&&i| i > 0) {
-            let id = fd_agents[i - 1];
-            tracing::info!("agent {id} exited");
-            agents.remove(&id);
-            let _ = node.try_cleanup_dead_nodes();
-        }
-
-        while let Some(req) = io.register_server.receive().map_err(ipc("receive a registration"))? {
-            let r = *req.payload();
-            let origin = req.origin().value();
-            let tick = player.stage().world().tick();
-            let mut resp = RegisterResponse { hub_pid: pid, tick: tick as u32, ..bytemuck::Zeroable::zeroed() };
-            let kind = RegisterKind::from_u32(r.kind);
-            let foreign = kind.is_some_and(|k| k != RegisterKind::Hello)
-                && agents.get(&r.agent_id).is_some_and(|a| a.client != origin);
-            match kind {
-                _ if foreign => {
-                    resp.status = Refusal::NotYours as u32;
-                    resp.set_detail("this agent id belongs to another process's port");
-                }
-                Some(RegisterKind::Hello) if named_publisher(&r) == 0 => {
-                    resp.status = Refusal::Malformed as u32;
-                    resp.set_detail("a hello must name its actions publisher");
-                }
-                Some(RegisterKind::Hello) if agents.len() >= MAX_AGENTS => {
-                    resp.status = Refusal::Capacity as u32;
-                    resp.set_detail(&format!("the replay serves at most {MAX_AGENTS} agents"));
-                }
-                Some(RegisterKind::Hello) => {
-                    let id = next_agent_id;
-                    match agent_sensor_port(&session, &node, id) {
-                        Ok((service, publisher)) => {
-                            next_agent_id += 1;
-                            let pidfd = PidFd::open(r.pid);
-                            agents.insert(id, AgentPorts { publisher, _service: service, pidfd, client: origin });
-                            served.agents_seen += 1;
-                            resp.agent_id = id;
-                        }
-                        Err(e) => {
-                            tracing::warn!("agent {id}: cannot create its sensor service: {e}");
-                            resp.status = Refusal::Capacity as u32;
-                            resp.set_detail("the replay cannot create this agent's sensor service");
-                        }
-                    }
-                }
-                Some(RegisterKind::Robot) => {
-                    served.robots_refused += 1;
-                    resp.agent_id = r.agent_id;
-                    resp.status = Refusal::RunStarted as u32;
-                    resp.set_detail("a replay takes no robots");
-                }
-                Some(RegisterKind::Ready) if !agents.contains_key(&r.agent_id) => {
-                    resp.status = Refusal::UnknownAgent as u32;
-                    resp.set_detail(&format!("agent {} is unknown", r.agent_id));
-                }
-                Some(RegisterKind::Ready) => resp.agent_id = r.agent_id,
-                Some(RegisterKind::Bye) => {
-                    agents.remove(&r.agent_id);
-                }
-                None => {
-                    resp.status = Refusal::Malformed as u32;
-                    resp.set_detail("unknown request kind");
-                }
-            }
-            req.send_copy(resp).map_err(ipc("answer a registration"))?;
-        }
-
-        while let Some(req) = io.control_server.receive().map_err(ipc("receive a command"))? {
-            let c = *req.payload();
-            let before = player.state();
-            let status = Command::from_u32(c.command).map_or(1, |cmd| player.command(cmd));
-            if before != RunState::Running && player.state() == RunState::Running {
-                next_tick_at = Instant::now() + period;
-            }
-            let resp =
-                ControlResponse { status, run_state: player.state() as u32, tick: player.stage().world().tick() };
-            req.send_copy(resp).map_err(ipc("answer a command"))?;
-            publish = true;
-        }
-
         // Drained so a sender's queue never fills; a recorded world takes no actions.
-        while io.actions_sub.receive().map_err(ipc("receive actions"))?.is_some() {}
+        server.collect(&mut player)?;
 
         if player.may_step() {
             let now = Instant::now();
@@ -544,27 +404,69 @@ pub fn serve(recording: &Recording, options: &ServeOptions) -> Result<Served, Re
         }
     }
 
-    // Observers and agents read the last tick from this process's shared memory: give them
-    // up to LINGER to read it and leave.
-    let linger_until = Instant::now() + LINGER;
-    while Instant::now() < linger_until {
-        let alive: Vec<i32> = agents.values().filter_map(|a| a.pidfd.as_ref().map(|p| p.0.as_raw_fd())).collect();
-        if alive.is_empty() && io.world_svc.dynamic_config().number_of_subscribers() == 0 {
-            break;
+    // Observers and agents read the last tick from this process's shared memory.
+    server.linger(true);
+    let counts = server.counts();
+    drop(server);
+    Ok(Served {
+        steps: player.steps(),
+        outcome: HubOutcome { interrupted, ..player.stage().outcome() },
+        mismatch: player.mismatch().cloned(),
+        agents_seen: counts.agents_seen as u64,
+        robots_refused: counts.robots_refused,
+    })
+}
+
+/// A recorded world behind the server: agents may attach and watch, but it takes no robots
+/// and no actions.
+impl Host for Player<'_> {
+    fn tick(&self) -> u64 {
+        self.stage.world().tick()
+    }
+
+    fn run_state(&self) -> RunState {
+        self.state
+    }
+
+    fn hello(&mut self, _pid: u32) -> Result<u32, Refused> {
+        if self.agents.len() >= MAX_AGENTS {
+            return Err(Refused::new(Refusal::Capacity, format!("the replay serves at most {MAX_AGENTS} agents")));
         }
-        // Wakes when an agent exits; observers leave no fd to wait on, so look again soon.
-        readable(&mut poller, &alive, Duration::from_millis(10), &mut ready);
-        for &i in &ready {
-            let fd = alive[i];
-            agents.retain(|_, a| a.pidfd.as_ref().is_none_or(|p| p.0.as_raw_fd() != fd));
+        let id = self.next_agent_id;
+        self.next_agent_id += 1;
+        self.agents.insert(id);
+        Ok(id)
+    }
+
+    fn register(&mut self, _agent: u32, _robot: &RobotRegistration) -> Result<(u32, u32), Refused> {
+        Err(Refused::new(Refusal::RunStarted, "a replay takes no robots"))
+    }
+
+    fn ready(&mut self, agent: u32) -> Result<(), Refused> {
+        if self.agents.contains(&agent) {
+            Ok(())
+        } else {
+            Err(Refused::new(Refusal::UnknownAgent, format!("agent {agent} is unknown")))
         }
     }
 
-    served.steps = player.steps();
-    served.outcome = HubOutcome { interrupted: served.outcome.interrupted, ..outcome_of(player.stage()) };
-    served.mismatch = player.mismatch().cloned();
-    drop((agents, io, node));
-    Ok(served)
+    fn bye(&mut self, agent: u32) {
+        self.agents.remove(&agent);
+    }
+
+    fn exited(&mut self, agent: u32) -> bool {
+        tracing::info!("agent {agent} exited");
+        self.agents.remove(&agent);
+        false
+    }
+
+    fn command(&mut self, command: Command, _robot: u32) -> u32 {
+        Player::command(self, command)
+    }
+
+    fn actions(&mut self, _agent: u32, _tick: u64, blocks: &[ActionBlock]) -> usize {
+        blocks.len()
+    }
 }
 
 #[cfg(test)]

@@ -7,7 +7,7 @@ use std::collections::BTreeMap;
 
 use ipc_types::MAX_ROBOTS;
 use recorder::journal::{Event, RecordedAction};
-use records::outcome::ScoreAtEnd;
+use records::outcome::{HubOutcome, RobotAtEnd, ScoreAtEnd, StateHash};
 use world::challenge::{Challenge, Standing, Turn};
 use world::map::{Lab, Params};
 use world::{
@@ -70,6 +70,28 @@ pub struct Stage {
 }
 
 impl Stage {
+    /// The world as `iwsim hub --json` reports a run's end.
+    pub fn outcome(&self) -> HubOutcome {
+        let w = self.world();
+        let robots = self
+            .ids()
+            .filter_map(|id| {
+                let r = self.robot(id)?;
+                let flags = (r.collision as u32 * ipc_types::ROBOT_COLLISION)
+                    | (self.frozen_without_agent(id) as u32 * ipc_types::ROBOT_FROZEN);
+                Some(RobotAtEnd { id, x_m: r.pose.x, y_m: r.pose.y, heading_deg: r.pose.heading_deg(), flags })
+            })
+            .collect();
+        HubOutcome {
+            ticks: w.tick(),
+            state_hash: StateHash(w.state_hash()),
+            robots,
+            scoring: self.challenge().scoring().number(),
+            scores: self.scores(),
+            ..HubOutcome::default()
+        }
+    }
+
     /// An empty world on `lab` with `params`, seeded with `seed`; a tick lasts `cycle_ms`, and
     /// the run lasts `tick_limit` ticks (0: no limit; the challenge's time rule reads it).
     pub fn new(lab: &Lab, params: Params, seed: u64, tick_limit: u64) -> Result<Self, WorldBuildError> {

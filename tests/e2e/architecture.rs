@@ -567,3 +567,51 @@ fn only_the_os_layer_calls_the_c_library() {
     }
     assert!(bad.is_empty(), "libc called outside the OS layer (os/):\n  {}", bad.join("\n  "));
 }
+
+#[test]
+fn the_live_hub_and_the_replay_serve_through_one_server() {
+    // Architecture invariant: the session's serving ports (registrations, commands, actions)
+    // are read in one place, `hub::server::Server`, whose phases both the live hub and the
+    // served replay turn through; neither has a serving loop of its own to drift.
+    let ports = ["register_server", "control_server", "actions_sub", "doorbell.try_wait"];
+    let bad = offending(&ports, |r| r == "hub/src/server.rs" || r == "hub/src/ports.rs");
+    assert!(bad.is_empty(), "serving ports read outside hub::server:\n  {}", bad.join("\n  "));
+}
+
+#[test]
+fn no_two_modules_of_the_hub_import_each_other() {
+    // Architecture invariant: the hub's modules form layers (the crate root aside, which
+    // declares them): a module never imports, directly or through others, one that imports it.
+    let dir = root().join("hub/src");
+    let mut uses: std::collections::BTreeMap<String, std::collections::BTreeSet<String>> = Default::default();
+    let modules: Vec<String> = std::fs::read_dir(&dir)
+        .expect("hub/src")
+        .flatten()
+        .filter_map(|e| e.file_name().to_str()?.strip_suffix(".rs").map(str::to_owned))
+        .filter(|m| m != "lib")
+        .collect();
+    for m in &modules {
+        let lines = production_lines(&dir.join(format!("{m}.rs")));
+        let text: String = lines.into_iter().map(|(_, l)| l + "\n").collect();
+        let named = modules.iter().filter(|other| {
+            *other != m
+                && (text.contains(&format!("crate::{other}::"))
+                    || text.contains(&format!("crate::{other}}}"))
+                    || text.contains(&format!("crate::{other};"))
+                    || text.contains(&format!("crate::{{{other}")))
+        });
+        uses.insert(m.clone(), named.cloned().collect());
+    }
+    assert!(uses["serve"].contains("server") && uses["replay"].contains("serve"), "the scan reads imports: {uses:?}");
+    // Depth-first search for a cycle.
+    fn reaches(
+        uses: &std::collections::BTreeMap<String, std::collections::BTreeSet<String>>,
+        from: &str,
+        to: &str,
+        seen: &mut std::collections::BTreeSet<String>,
+    ) -> bool {
+        uses[from].iter().any(|n| n == to || (seen.insert(n.clone()) && reaches(uses, n, to, seen)))
+    }
+    let circles: Vec<&String> = modules.iter().filter(|m| reaches(&uses, m, m, &mut Default::default())).collect();
+    assert!(circles.is_empty(), "hub modules in an import circle: {circles:?} ({uses:?})");
+}
