@@ -106,6 +106,228 @@ fn find(parent: &mut [usize], mut k: usize) -> usize {
     k
 }
 
+/// The cores: connected sets of cells wide enough for two chairs to pass (at least
+/// `wide_r` from the walls), of at least [`MIN_CORE_M2`]; each cell's core number, or
+/// `u32::MAX` for none.
+fn cores(spec: &GridSpec, free: &[bool], dist: &[f32], wide_r: f64) -> Vec<u32> {
+    let n = spec.len();
+    let mut core = vec![u32::MAX; n];
+    let mut cores = 0u32;
+    let min_cells = (MIN_CORE_M2 / (spec.cell * spec.cell)).ceil() as usize;
+    let mut stack = Vec::new();
+    let mut members = Vec::new();
+    // By flood fill over wide cells.
+    for s in 0..n {
+        if core[s] != u32::MAX || !free[s] || f64::from(dist[s]) < wide_r {
+            continue;
+        }
+        members.clear();
+        core[s] = cores;
+        stack.push(s);
+        while let Some(i) = stack.pop() {
+            members.push(i);
+            for (j, _) in neighbours(spec, i) {
+                if core[j] == u32::MAX && free[j] && f64::from(dist[j]) >= wide_r {
+                    core[j] = cores;
+                    stack.push(j);
+                }
+            }
+        }
+        if members.len() < min_cells {
+            for &i in &members {
+                core[i] = u32::MAX - 1; // wide, but too small to count
+            }
+        } else {
+            cores += 1;
+        }
+    }
+    for c in &mut core {
+        if *c == u32::MAX - 1 {
+            *c = u32::MAX;
+        }
+    }
+    core
+}
+
+/// Each free cell's nearest core along the free cells, and how far it is (Dijkstra from every
+/// core at once).
+fn nearest_cores(spec: &GridSpec, free: &[bool], core: &[u32]) -> (Vec<u32>, Vec<u32>) {
+    let n = spec.len();
+    let mut owner = core.to_vec();
+    let mut depth = vec![u32::MAX; n];
+    let mut heap = BinaryHeap::new();
+    for i in 0..n {
+        if core[i] != u32::MAX {
+            depth[i] = 0;
+            heap.push(Reverse((0u32, i)));
+        }
+    }
+    while let Some(Reverse((d, i))) = heap.pop() {
+        if d > depth[i] {
+            continue;
+        }
+        for (j, c) in neighbours(spec, i) {
+            if free[j] && d + c < depth[j] {
+                depth[j] = d + c;
+                owner[j] = owner[i];
+                heap.push(Reverse((d + c, j)));
+            }
+        }
+    }
+    (owner, depth)
+}
+
+/// Passages: the boundary cells (sorted) that touch, as sets; each cell's passage number
+/// (`u32::MAX`: none) and the sets.
+fn passages(spec: &GridSpec, boundary: &[usize]) -> (Vec<u32>, Vec<Vec<usize>>) {
+    let mut passage = vec![u32::MAX; spec.len()];
+    let mut passages: Vec<Vec<usize>> = Vec::new();
+    for &s in boundary {
+        if passage[s] != u32::MAX {
+            continue;
+        }
+        let k = passages.len() as u32;
+        let mut cells = vec![s];
+        passage[s] = k;
+        let mut at = 0;
+        while at < cells.len() {
+            let i = cells[at];
+            at += 1;
+            for (j, _) in neighbours(spec, i) {
+                if passage[j] == u32::MAX && boundary.binary_search(&j).is_ok() {
+                    passage[j] = k;
+                    cells.push(j);
+                }
+            }
+        }
+        passages.push(cells);
+    }
+    (passage, passages)
+}
+
+/// Grows each passage by its depth (at least [`MOUTH_M`]) and round its pivots by `pivot_r`;
+/// passages whose growth meets are merged. Each cell's passage grown into it (`u32::MAX`:
+/// none), and the union-find parents of the passages.
+fn grow(
+    spec: &GridSpec,
+    free: &[bool],
+    core: &[u32],
+    depth: &[u32],
+    passages: &[Vec<usize>],
+    pivot_r: f64,
+) -> (Vec<u32>, Vec<usize>) {
+    let n = spec.len();
+    let mut parent: Vec<usize> = (0..passages.len()).collect();
+    let mut reach = vec![u32::MAX; n];
+    let mut grown = vec![u32::MAX; n];
+    let mut heap = BinaryHeap::new();
+    let pivot_limit = (pivot_r / spec.cell * 100.0) as u32;
+    for (k, cells) in passages.iter().enumerate() {
+        let deepest = cells.iter().map(|&i| depth[i]).max().unwrap_or(0);
+        let mouth = ((MOUTH_M / spec.cell * 100.0) as u32).max(deepest);
+        // Growth runs to `limit`; each seed starts as far short of it as it reaches.
+        let limit = mouth.max(pivot_limit);
+        heap.clear();
+        for &i in cells {
+            reach[i] = limit - mouth;
+            heap.push(Reverse((limit - mouth, i)));
+        }
+        // The pivots: on each side, the core cell nearest the passage. Growing from a
+        // pivot starts `limit - pivot_limit` short, so it reaches `pivot_r` round it.
+        for p in pivots(spec, cells, core, depth, mouth) {
+            let start = limit.saturating_sub(pivot_limit);
+            if start < reach[p] {
+                reach[p] = start;
+                heap.push(Reverse((start, p)));
+            }
+        }
+        let mut touched = Vec::new();
+        while let Some(Reverse((d, i))) = heap.pop() {
+            if d > reach[i] {
+                continue;
+            }
+            touched.push(i);
+            if grown[i] != u32::MAX && grown[i] != k as u32 {
+                let (a, b) = (find(&mut parent, k), find(&mut parent, grown[i] as usize));
+                parent[a] = b;
+            }
+            grown[i] = k as u32;
+            for (j, c) in neighbours(spec, i) {
+                if free[j] && d + c <= limit && d + c < reach[j] {
+                    reach[j] = d + c;
+                    heap.push(Reverse((d + c, j)));
+                }
+            }
+        }
+        for i in touched {
+            reach[i] = u32::MAX;
+        }
+    }
+    (grown, parent)
+}
+
+/// Numbers the merged zones in the order of their first cell (the same on every chair): each
+/// cell's label (zone number + 1; 0 for none) and the zones, each centred on the boundary cell
+/// nearest its boundary's mean (two merged doorways' mean may lie between them, outside both).
+fn number_zones(spec: &GridSpec, passage: &[u32], grown: &[u32], parent: &mut [usize]) -> (Vec<u16>, Vec<Zone>) {
+    let n = spec.len();
+    let mut number = vec![u16::MAX; parent.len()];
+    let mut label = vec![0u16; n];
+    let mut zones: Vec<(V2, usize, V2, V2)> = Vec::new();
+    for i in 0..n {
+        if grown[i] == u32::MAX {
+            continue;
+        }
+        let root = find(parent, grown[i] as usize);
+        if number[root] == u16::MAX {
+            if zones.len() >= usize::from(u16::MAX - 1) {
+                continue;
+            }
+            number[root] = zones.len() as u16;
+            zones.push((
+                V2::new(0.0, 0.0),
+                0,
+                V2::new(f64::INFINITY, f64::INFINITY),
+                V2::new(-f64::INFINITY, -f64::INFINITY),
+            ));
+        }
+        let z = number[root];
+        label[i] = z + 1;
+        let (ix, iy) = spec.coords(i);
+        let p = spec.center(ix, iy);
+        let e = &mut zones[usize::from(z)];
+        e.2 = V2::new(e.2.x.min(p.x), e.2.y.min(p.y));
+        e.3 = V2::new(e.3.x.max(p.x), e.3.y.max(p.y));
+        if passage[i] != u32::MAX {
+            e.0 = e.0 + p;
+            e.1 += 1;
+        }
+    }
+    let mut zones: Vec<Zone> = zones
+        .into_iter()
+        .map(|(sum, count, lo, hi)| Zone { centre: sum * (1.0 / count.max(1) as f64), lo, hi })
+        .collect();
+    let mut best = vec![(f64::INFINITY, V2::new(0.0, 0.0)); zones.len()];
+    for i in 0..n {
+        if passage[i] == u32::MAX || label[i] == 0 {
+            continue;
+        }
+        let z = usize::from(label[i] - 1);
+        let (ix, iy) = spec.coords(i);
+        let p = spec.center(ix, iy);
+        let d = (p - zones[z].centre).norm();
+        if d < best[z].0 {
+            best[z] = (d, p);
+        }
+    }
+    for (z, (d, p)) in zones.iter_mut().zip(best) {
+        if d.is_finite() {
+            z.centre = p;
+        }
+    }
+    (label, zones)
+}
+
 impl Zones {
     /// No zones at all (the zone rule off): every place is in none.
     pub fn none() -> Zones {
@@ -123,70 +345,12 @@ impl Zones {
     /// walls are at least `fp.half` away).
     pub fn find(statics: &StaticRaster, fp: &crate::geom::Footprint) -> Zones {
         let half = fp.half;
-        let pivot_r = fp.reach() + PIVOT_SLACK_M;
         let spec = statics.spec;
         let dist = statics.distances();
         let n = spec.len();
-        let cell = spec.cell;
         let free: Vec<bool> = (0..n).map(|i| !statics.occupied(i) && f64::from(dist[i]) >= half).collect();
-        let wide_r = Self::wide_radius(half);
-        // The cores, by flood fill over wide cells.
-        let mut core = vec![u32::MAX; n];
-        let mut cores = 0u32;
-        let min_cells = (MIN_CORE_M2 / (cell * cell)).ceil() as usize;
-        let mut stack = Vec::new();
-        let mut members = Vec::new();
-        for s in 0..n {
-            if core[s] != u32::MAX || !free[s] || f64::from(dist[s]) < wide_r {
-                continue;
-            }
-            members.clear();
-            core[s] = cores;
-            stack.push(s);
-            while let Some(i) = stack.pop() {
-                members.push(i);
-                for (j, _) in neighbours(&spec, i) {
-                    if core[j] == u32::MAX && free[j] && f64::from(dist[j]) >= wide_r {
-                        core[j] = cores;
-                        stack.push(j);
-                    }
-                }
-            }
-            if members.len() < min_cells {
-                for &i in &members {
-                    core[i] = u32::MAX - 1; // wide, but too small to count
-                }
-            } else {
-                cores += 1;
-            }
-        }
-        for c in &mut core {
-            if *c == u32::MAX - 1 {
-                *c = u32::MAX;
-            }
-        }
-        // Each free cell's nearest core along the free cells (Dijkstra from every core at once).
-        let mut owner = core.clone();
-        let mut depth = vec![u32::MAX; n];
-        let mut heap = BinaryHeap::new();
-        for i in 0..n {
-            if core[i] != u32::MAX {
-                depth[i] = 0;
-                heap.push(Reverse((0u32, i)));
-            }
-        }
-        while let Some(Reverse((d, i))) = heap.pop() {
-            if d > depth[i] {
-                continue;
-            }
-            for (j, c) in neighbours(&spec, i) {
-                if free[j] && d + c < depth[j] {
-                    depth[j] = d + c;
-                    owner[j] = owner[i];
-                    heap.push(Reverse((d + c, j)));
-                }
-            }
-        }
+        let core = cores(&spec, &free, dist, Self::wide_radius(half));
+        let (owner, depth) = nearest_cores(&spec, &free, &core);
         // Boundary cells: free, owned, beside a cell of another core.
         let boundary: Vec<usize> = (0..n)
             .filter(|&i| {
@@ -195,132 +359,10 @@ impl Zones {
                     && neighbours(&spec, i).any(|(j, _)| owner[j] != u32::MAX && owner[j] != owner[i])
             })
             .collect();
-        // Passages: boundary cells that touch, each grown by its depth (at least MOUTH_M);
-        // passages whose growth meets are merged.
-        let mut passage = vec![u32::MAX; n];
-        let mut passages: Vec<Vec<usize>> = Vec::new();
-        for &s in &boundary {
-            if passage[s] != u32::MAX {
-                continue;
-            }
-            let k = passages.len() as u32;
-            let mut cells = vec![s];
-            passage[s] = k;
-            let mut at = 0;
-            while at < cells.len() {
-                let i = cells[at];
-                at += 1;
-                for (j, _) in neighbours(&spec, i) {
-                    if passage[j] == u32::MAX && boundary.binary_search(&j).is_ok() {
-                        passage[j] = k;
-                        cells.push(j);
-                    }
-                }
-            }
-            passages.push(cells);
-        }
-        let mut parent: Vec<usize> = (0..passages.len()).collect();
-        let mut reach = vec![u32::MAX; n];
-        let mut grown = vec![u32::MAX; n];
-        let pivot_limit = (pivot_r / cell * 100.0) as u32;
-        for (k, cells) in passages.iter().enumerate() {
-            let deepest = cells.iter().map(|&i| depth[i]).max().unwrap_or(0);
-            let mouth = ((MOUTH_M / cell * 100.0) as u32).max(deepest);
-            // Growth runs to `limit`; each seed starts as far short of it as it reaches.
-            let limit = mouth.max(pivot_limit);
-            heap.clear();
-            for &i in cells {
-                reach[i] = limit - mouth;
-                heap.push(Reverse((limit - mouth, i)));
-            }
-            // The pivots: on each side, the core cell nearest the passage. Growing from a
-            // pivot starts `limit - pivot_limit` short, so it reaches `pivot_r` round it.
-            for p in pivots(&spec, cells, &core, &depth, mouth) {
-                let start = limit.saturating_sub(pivot_limit);
-                if start < reach[p] {
-                    reach[p] = start;
-                    heap.push(Reverse((start, p)));
-                }
-            }
-            let mut touched = Vec::new();
-            while let Some(Reverse((d, i))) = heap.pop() {
-                if d > reach[i] {
-                    continue;
-                }
-                touched.push(i);
-                if grown[i] != u32::MAX && grown[i] != k as u32 {
-                    let (a, b) = (find(&mut parent, k), find(&mut parent, grown[i] as usize));
-                    parent[a] = b;
-                }
-                grown[i] = k as u32;
-                for (j, c) in neighbours(&spec, i) {
-                    if free[j] && d + c <= limit && d + c < reach[j] {
-                        reach[j] = d + c;
-                        heap.push(Reverse((d + c, j)));
-                    }
-                }
-            }
-            for i in touched {
-                reach[i] = u32::MAX;
-            }
-        }
-        // Number the merged zones in the order of their first cell (the same on every chair).
-        let mut number = vec![u16::MAX; passages.len()];
-        let mut label = vec![0u16; n];
-        let mut zones: Vec<(V2, usize, V2, V2)> = Vec::new();
-        for i in 0..n {
-            if grown[i] == u32::MAX {
-                continue;
-            }
-            let root = find(&mut parent, grown[i] as usize);
-            if number[root] == u16::MAX {
-                if zones.len() >= usize::from(u16::MAX - 1) {
-                    continue;
-                }
-                number[root] = zones.len() as u16;
-                zones.push((
-                    V2::new(0.0, 0.0),
-                    0,
-                    V2::new(f64::INFINITY, f64::INFINITY),
-                    V2::new(-f64::INFINITY, -f64::INFINITY),
-                ));
-            }
-            let z = number[root];
-            label[i] = z + 1;
-            let (ix, iy) = spec.coords(i);
-            let p = spec.center(ix, iy);
-            let e = &mut zones[usize::from(z)];
-            e.2 = V2::new(e.2.x.min(p.x), e.2.y.min(p.y));
-            e.3 = V2::new(e.3.x.max(p.x), e.3.y.max(p.y));
-            if passage[i] != u32::MAX {
-                e.0 = e.0 + p;
-                e.1 += 1;
-            }
-        }
-        let mut zones: Vec<Zone> = zones
-            .into_iter()
-            .map(|(sum, count, lo, hi)| Zone { centre: sum * (1.0 / count.max(1) as f64), lo, hi })
-            .collect();
-        // The centre is the boundary cell nearest the boundary's mean: a point in the zone
-        // (two merged doorways' mean may lie between them, outside both).
-        let mut best = vec![(f64::INFINITY, V2::new(0.0, 0.0)); zones.len()];
-        for i in 0..n {
-            if passage[i] == u32::MAX || label[i] == 0 {
-                continue;
-            }
-            let z = usize::from(label[i] - 1);
-            let (ix, iy) = spec.coords(i);
-            let p = spec.center(ix, iy);
-            let d = (p - zones[z].centre).norm();
-            if d < best[z].0 {
-                best[z] = (d, p);
-            }
-        }
-        for (z, (d, p)) in zones.iter_mut().zip(best) {
-            if d.is_finite() {
-                z.centre = p;
-            }
-        }
+        let (passage, passages) = passages(&spec, &boundary);
+        let pivot_r = fp.reach() + PIVOT_SLACK_M;
+        let (grown, mut parent) = grow(&spec, &free, &core, &depth, &passages, pivot_r);
+        let (label, zones) = number_zones(&spec, &passage, &grown, &mut parent);
         Zones { spec, label, zones }
     }
 
