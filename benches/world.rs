@@ -4,7 +4,7 @@
 //!
 //! Run: `cargo bench --bench world` (add `-- 'world_tick/1000$'` to run one size). The same load
 //! (100 untimed ticks, then 300 timed) is what `iwsim bench world --robots N` times, which
-//! README quotes.
+//! docs/performance.md quotes.
 
 use std::hint::black_box;
 use std::time::{Duration, Instant};

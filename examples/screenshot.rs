@@ -1,4 +1,4 @@
-//! Takes a screenshot of a running viewer's page in headless Chromium, as README's figures
+//! Takes a screenshot of a running viewer's page in headless Chromium, as the guide's figures
 //! were made: `cargo run --release --example screenshot -- URL OUT.png [WIDTH HEIGHT]`.
 //! It waits until the page has the world and has drawn for a second, in real time.
 

@@ -168,15 +168,15 @@ def test_a_hub_that_dies_mid_run_raises_hub_gone(hub_factory):
         agent.wait_tick()
 
 
-def test_the_readme_example_runs_as_shown(hub_factory):
+def test_the_guides_example_runs_as_shown(hub_factory):
     import pathlib
     import re
 
-    readme = (pathlib.Path(__file__).resolve().parents[2] / "README.md").read_text()
-    example = re.search(r"```python\n(.*?)```", readme, re.S).group(1)
+    page = (pathlib.Path(__file__).resolve().parents[2] / "docs" / "python.md").read_text()
+    example = re.search(r"```python\n(.*?)```", page, re.S).group(1)
     assert 'iwsim.connect("lab1"' in example
     hub = hub_factory("--lockstep", "--ticks", "20", "--wait-agents", "1", "--no-noise")
-    exec(compile(example.replace('"lab1"', repr(hub.session)), "README.md", "exec"), {})
+    exec(compile(example.replace('"lab1"', repr(hub.session)), "docs/python.md", "exec"), {})
     out = hub.stop()
     x = float(out.split("robot 1: x ")[1].split(" m")[0])
     assert x > 10.2, out  # the example drove the chair ahead

@@ -73,7 +73,7 @@ fn assert_arrived(run: &RunSummary, chair: &ChairSummary) {
 }
 
 // Lock-step with a stepped emulator, a seed's run is the same every time (its state hash
-// too), so these are regression tests on single seeds; README gives the success rate over
+// too), so these are regression tests on single seeds; docs/agents.md gives the success rate over
 // seeds 1–10.
 #[test]
 fn slalom_real_passes_with_no_contact_in_either_world() {

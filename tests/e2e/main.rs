@@ -7,6 +7,7 @@ mod challenge;
 mod ciberrato;
 mod cli;
 mod common;
+mod docs;
 mod hardening;
 mod hub;
 mod maps;

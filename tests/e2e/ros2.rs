@@ -169,7 +169,7 @@ fn a_controller_that_falls_silent_is_stopped_by_the_zero_velocity_timeout_in_rea
 
 #[test]
 fn bench_ros2_measures_chairs_driven_over_ros_2_beside_shared_memory() {
-    // Small, for the suite: the figures README quotes come from the default sizes.
+    // Small, for the suite: the figures docs/ros2.md quotes come from the default sizes.
     let out = Proc::spawn(&["bench", "ros2", "--chairs", "2", "--ticks", "50", "--runs", "1", "--json"])
         .wait(Duration::from_secs(120));
     let said = text(&out.stdout);

@@ -296,26 +296,28 @@ fn readme_commands_are_split_from_their_comments() {
 }
 
 #[test]
-fn every_iwsim_command_in_the_readme_takes_the_options_it_shows() {
-    let readme = std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("README.md")).expect("README");
-    let commands = readme_commands(&readme);
-    assert!(commands.len() >= 20, "README shows {} commands: {commands:?}", commands.len());
+fn every_iwsim_command_in_the_readme_and_the_docs_takes_the_options_it_shows() {
+    let mut commands = Vec::new();
+    for (name, text) in crate::docs::user_docs() {
+        commands.extend(readme_commands(&text).into_iter().map(|(line, args)| (format!("{name}:{line}"), args)));
+    }
+    assert!(commands.len() >= 20, "README and docs show {} commands: {commands:?}", commands.len());
     let mut refused = Vec::new();
-    for (line, args) in &commands {
+    for (place, args) in &commands {
         let mut args: Vec<&str> = args.iter().map(String::as_str).collect();
         args.push("--help");
         let output = Proc::spawn(&args).wait(Duration::from_secs(30));
         if !output.status.success() {
-            refused.push(format!("README.md:{line}: iwsim {}\n{}", args.join(" "), text(&output.stderr)));
+            refused.push(format!("{place}: iwsim {}\n{}", args.join(" "), text(&output.stderr)));
         }
     }
     assert!(refused.is_empty(), "{}", refused.join("\n"));
 }
 
 #[test]
-fn every_option_in_the_readme_command_table_is_one_the_command_takes() {
-    let readme = std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("README.md")).expect("README");
-    let (_, table) = readme.split_once("## Command line").expect("README's command line section");
+fn every_option_in_the_command_table_is_one_the_command_takes() {
+    let page = std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("docs/cli.md")).expect("docs/cli.md");
+    let (_, table) = page.split_once("## Command line").expect("docs/cli.md's command line section");
     let mut rows = 0;
     let mut stale = Vec::new();
     for row in table.lines().take_while(|l| !l.starts_with("## ")).filter(|l| l.starts_with("| `iwsim ")) {
@@ -359,8 +361,9 @@ fn readme_toml(readme: &str, heading: &str) -> String {
 }
 
 #[test]
-fn the_readme_scenario_file_runs_as_copied_and_passes() {
-    let readme = std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("README.md")).expect("README");
+fn the_documented_scenario_file_runs_as_copied_and_passes() {
+    let readme = std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("docs/scenarios.md"))
+        .expect("docs/scenarios.md");
     let dir = work_dir("readme-scenario");
     let file = dir.join("slalom.toml");
     std::fs::write(&file, readme_toml(&readme, "### The scenario file")).expect("scenario written");

@@ -250,7 +250,7 @@ impl Rig {
         assert!(dt <= STOP_WITHIN_NS, "{what}: the board stopped {} ms after the cause ({reason})", dt / 1_000_000);
         // The adapter stopped it, not the board's own watchdog (the last line of defence).
         assert_ne!(reason, "watchdog", "{what}: the adapter did not stop the chair, the board's watchdog did");
-        // README's safety table quotes these (`cargo test --test e2e serial -- --nocapture`).
+        // docs/serial.md's safety table quotes these (`cargo test --test e2e serial -- --nocapture`).
         eprintln!("stopped {:5.1} ms after: {what} (board reason: {reason})", dt as f64 / 1e6);
         (dt, reason)
     }

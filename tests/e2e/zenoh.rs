@@ -684,7 +684,7 @@ fn a_recorder_on_another_host_writes_the_hubs_own_world_frames_and_says_they_can
 
 #[test]
 fn with_the_documented_user_password_files_only_a_listed_agent_gets_in() {
-    // README's example files, as they are: run from the repository's root, as README says.
+    // docs/zenoh.md's example files, as they are: run from the repository's root, as it says.
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
     let s = session("zenoh-auth");
     let hub = Proc::spawn(&["hub", "--session", &s, "--lockstep", "--ticks", "100", "--wait-agents", "1"]);
@@ -843,7 +843,7 @@ fn in_real_time_a_link_pulled_for_two_seconds_rests_the_chair_and_the_clock_goes
 
 #[test]
 fn with_the_documented_tls_files_only_an_agent_holding_the_labs_certificate_gets_in() {
-    // README's example: certificates made by docs/zenoh/make-certs.sh, the two documented
+    // docs/zenoh.md's example: certificates made by docs/zenoh/make-certs.sh, the two documented
     // configuration files as they are, each process started where `certs/` is.
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
     let dir = work_dir("tls");

@@ -164,7 +164,7 @@ pub struct NavigatorArgs {
     pub plan_allowance: Option<u64>,
     /// Correct the pose estimate's position from proximity readings of the map's walls: the
     /// share of each reading's disagreement taken per tick (0, the default: off; 0.01 works).
-    /// Fewer wall contacts, but not more chairs home in a crowd (README).
+    /// Fewer wall contacts, but not more chairs home in a crowd (docs/agents.md).
     #[arg(long, value_name = "GAIN", default_value_t = 0.0, value_parser = parse_gain)]
     pub wall_fix: f64,
 }
