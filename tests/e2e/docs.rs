@@ -164,3 +164,24 @@ fn no_page_talks_of_how_it_was_made() {
     }
     assert!(found.is_empty(), "pages that talk of their making:\n  {}", found.join("\n  "));
 }
+
+#[test]
+fn the_user_guide_renders_with_mkdocs_in_strict_mode() {
+    // A third-party renderer: MkDocs fails a strict build on a page left out of the guide, a
+    // link to a missing page or a missing anchor (its own rules, beside ours above).
+    let python = test_support::python::checker_python().unwrap_or_else(|e| panic!("{e}"));
+    let site = std::env::temp_dir().join(format!("iwsim-e2e-docs-site-{}", std::process::id()));
+    let output = std::process::Command::new(&python)
+        .current_dir(root())
+        .args(["-m", "mkdocs", "build", "--strict", "--config-file", "mkdocs.yml", "--site-dir"])
+        .arg(&site)
+        .output()
+        .expect("python runs");
+    let said = String::from_utf8_lossy(&output.stderr);
+    assert!(output.status.success(), "mkdocs build --strict failed:\n{said}");
+    for page in ["scenarios/index.html", "agents/index.html", "python/index.html", "performance/index.html"] {
+        let html = std::fs::read_to_string(site.join(page)).unwrap_or_else(|e| panic!("{page}: {e}"));
+        assert!(html.contains("<h1"), "{page} has no title:\n{said}");
+    }
+    let _ = std::fs::remove_dir_all(site);
+}

@@ -33,10 +33,15 @@ pub fn checker_script() -> PathBuf {
     checker_dir().join("check_recording.py")
 }
 
-/// The requirement files of the project's Python environment: this checker's, and the test
-/// needs of the `iwsim` Python package (`python/requirements-test.txt`).
-pub fn requirement_files() -> [PathBuf; 2] {
-    [checker_dir().join("requirements.txt"), workspace().join("python/requirements-test.txt")]
+/// The requirement files of the project's Python environment: this checker's, the test needs
+/// of the `iwsim` Python package (`python/requirements-test.txt`), and the user guide's
+/// renderer (`docs/requirements.txt`).
+pub fn requirement_files() -> [PathBuf; 3] {
+    [
+        checker_dir().join("requirements.txt"),
+        workspace().join("python/requirements-test.txt"),
+        workspace().join("docs/requirements.txt"),
+    ]
 }
 
 /// A Python with the packages of [`requirement_files`]: `$IWSIM_PYTHON` when set, else
