@@ -60,7 +60,7 @@ const LOOK_TICKS: u64 = 5;
 fn setup(case: &Case) -> (World, world::RobotHandle, Navigator) {
     let lab = builtin::map("ward").expect("the ward is built in").lab.clone();
     let mut world = World::new(&lab, Params::default(), 1).expect("a valid world");
-    let goal = records::places::Checkpoint { x: case.goal[0], y: case.goal[1], radius: 0.5 };
+    let goal = places::Checkpoint { x: case.goal[0], y: case.goal[1], radius: 0.5 };
     let hub_params = hub::core::hub_params(world.params(), hub::core::Mode::LockStep, 0, 1000);
     let (header, items) =
         hub::core::pack_map(&lab, &Grid::default(), lab.walls.len(), std::slice::from_ref(&goal), 100, hub_params);

@@ -8,7 +8,7 @@ use std::time::Duration;
 use crate::HubConfig;
 use crate::core::Mode;
 use anyhow::Context as _;
-use records::places::{Checkpoint, Obstacle};
+use places::{Checkpoint, Obstacle};
 use world::map::builtin::{self, PREFIX};
 use world::map::xml::{parse_params, read_text};
 use world::map::{Grid, NoiseParams, Wall};

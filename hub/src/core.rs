@@ -16,8 +16,8 @@ use ipc_types::{
     SensorGeometry, SensorMode, WorldHeader,
 };
 
+use places::Checkpoint;
 use recorder::journal::{Event, RecordedAction, RunStart};
-use records::places::Checkpoint;
 use world::challenge::{Phase, Standing};
 use world::map::{Grid, Lab, Params};
 use world::math::Pose;

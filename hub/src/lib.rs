@@ -55,7 +55,7 @@ pub struct HubConfig {
     /// The lab's walls from this index on are a scenario's obstacles (`lab.walls.len()`: none).
     pub obstacle_from: usize,
     /// A scenario's checkpoints, published in the map for viewers and agents.
-    pub checkpoints: Vec<records::places::Checkpoint>,
+    pub checkpoints: Vec<places::Checkpoint>,
     /// Record the run to this MCAP file (see the `recorder` crate).
     pub record: Option<std::path::PathBuf>,
     /// Threads the world's step may use (0: one per core); never changes a run.
@@ -89,7 +89,7 @@ pub enum HubError {
 }
 
 /// How a hub run ended: the type `iwsim hub --json` prints, defined once with its JSON form.
-pub use records::outcome::{HubOutcome, RobotAtEnd, StateHash};
+pub use run_records::outcome::{HubOutcome, RobotAtEnd, StateHash};
 
 fn ipc<E: std::fmt::Debug>(what: &str) -> impl FnOnce(E) -> HubError + '_ {
     move |e| HubError::Ipc(format!("{what}: {e:?}"))
@@ -448,7 +448,7 @@ impl Live {
         outcome.ticks = core.world().tick();
         outcome.run_s = self.first_step.map_or(0.0, |t| t.elapsed().as_secs_f64());
         outcome.answer_wait = (self.cfg.mode == Mode::LockStep && !self.answer_waits.is_empty())
-            .then(|| records::latency::Percentiles::of_ns(&self.answer_waits));
+            .then(|| run_records::latency::Percentiles::of_ns(&self.answer_waits));
         outcome.state_hash = StateHash(core.world().state_hash());
         outcome.robots = core
             .robot_states()
@@ -463,7 +463,7 @@ impl Live {
 /// and one JSON object per robot under its zero-padded id.
 fn challenge_table(
     scoring: u32,
-    scores: &[records::outcome::ScoreAtEnd],
+    scores: &[run_records::outcome::ScoreAtEnd],
 ) -> std::collections::BTreeMap<String, String> {
     let mut t = std::collections::BTreeMap::new();
     t.insert("scoring".to_owned(), scoring.to_string());

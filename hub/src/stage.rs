@@ -7,7 +7,7 @@ use std::collections::BTreeMap;
 
 use ipc_types::MAX_ROBOTS;
 use recorder::journal::{Event, RecordedAction};
-use records::outcome::{HubOutcome, RobotAtEnd, ScoreAtEnd, StateHash};
+use run_records::outcome::{HubOutcome, RobotAtEnd, ScoreAtEnd, StateHash};
 use world::challenge::{Challenge, Standing, Turn};
 use world::map::{Lab, Params};
 use world::{

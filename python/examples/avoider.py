@@ -14,7 +14,7 @@ import numpy as np
 
 from iwsim.env import ChairEnv, Scenario
 
-SLALOM = pathlib.Path(__file__).resolve().parents[2] / "hub/runner/scenarios/slalom.toml"
+SLALOM = pathlib.Path(__file__).resolve().parents[2] / "runner/scenarios/slalom.toml"
 
 BLOCKED_M = 0.9  # the front IR this near (mean of 3 readings): change sides now
 GAP_M = 0.16  # the gap kept between the chair's side and the wall it keeps to

@@ -10,7 +10,7 @@ import pytest
 from iwsim import IwsimError
 from iwsim.env import ChairEnv, ChairsParallelEnv, Scenario
 
-SLALOM = pathlib.Path(__file__).resolve().parents[2] / "hub/runner/scenarios/slalom.toml"
+SLALOM = pathlib.Path(__file__).resolve().parents[2] / "runner/scenarios/slalom.toml"
 
 
 @pytest.fixture(autouse=True)

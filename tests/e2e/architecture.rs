@@ -158,7 +158,9 @@ fn agents_adapters_and_the_viewer_never_link_the_hub_or_the_world() {
             "hub",
             "world",
             "sim-model",
-            "records",
+            "places",
+            "robot-log",
+            "run-records",
             "runner",
             "recorder",
             "plot",
@@ -233,7 +235,7 @@ fn the_shared_formulas_and_formats_link_no_ipc_runtime() {
         g.direct("sim-model", &g.normal)
     );
     let payload_traits: BTreeSet<String> = g.linked("ipc-types").into_keys().collect();
-    for c in ["records", "recorder", "plot", "world"] {
+    for c in ["places", "robot-log", "run-records", "recorder", "plot", "world"] {
         assert_links_none(
             &g,
             c,
@@ -337,14 +339,14 @@ fn offending(needles: &[&str], allowed: impl Fn(&str) -> bool) -> Vec<String> {
 fn only_ipc_services_names_iceoryx2_service_builders() {
     // Architecture invariant: every iceoryx2 service is built in ipc-services, nowhere else.
     let bad = offending(&[".service_builder(", ".publish_subscribe::<", ".request_response::<", ".event()"], |r| {
-        r.starts_with("ipc-services/")
+        r.starts_with("libs/ipc-services/")
     });
     assert!(bad.is_empty(), "iceoryx2 services built outside ipc-services:\n  {}", bad.join("\n  "));
     // Architecture invariant: iceoryx2's `testing` API is called in one place only (the node
     // counter's removal, whose race ARCHITECTURE.md explains).
     let calls = offending(&["iceoryx2::testing"], |_| false);
     assert!(
-        calls.len() == 1 && calls[0].starts_with("ipc-services/src/lib.rs:"),
+        calls.len() == 1 && calls[0].starts_with("libs/ipc-services/src/lib.rs:"),
         "iceoryx2::testing must be called exactly once, in ipc-services: {calls:#?}"
     );
 }
@@ -551,7 +553,7 @@ fn only_the_os_layer_calls_the_c_library() {
     let mut bad = Vec::new();
     for f in sources() {
         let r = rel(&f);
-        if r.starts_with("os/") || is_test_file(&r) {
+        if r.starts_with("libs/os/") || is_test_file(&r) {
             continue;
         }
         for (n, line) in production_lines(&f) {
@@ -614,4 +616,64 @@ fn no_two_modules_of_the_hub_import_each_other() {
     }
     let circles: Vec<&String> = modules.iter().filter(|m| reaches(&uses, m, m, &mut Default::default())).collect();
     assert!(circles.is_empty(), "hub modules in an import circle: {circles:?} ({uses:?})");
+}
+
+#[test]
+fn the_folders_show_the_parts() {
+    // Architecture invariant: the top level shows the parts. `hub/` holds the hub process and
+    // what only it runs (the world model, the recorder); the libraries many processes link are
+    // under `libs/`, tools under `tools/`, the runner at the top; role folders go one level
+    // deep, and a package's folder is named as the package.
+    let manifest = std::fs::read_to_string(root().join("Cargo.toml")).expect("Cargo.toml");
+    let members: Vec<&str> = manifest
+        .split("members = [")
+        .nth(1)
+        .and_then(|m| m.split(']').next())
+        .expect("a members list")
+        .split(',')
+        .map(|m| m.trim().trim_matches('"'))
+        .filter(|m| !m.is_empty())
+        .collect();
+    assert!(members.len() >= 25, "{members:?}");
+    let mut wrong = Vec::new();
+    for m in &members {
+        let toml = std::fs::read_to_string(root().join(m).join("Cargo.toml")).expect("a member's Cargo.toml");
+        let name = toml
+            .lines()
+            .find_map(|l| l.strip_prefix("name = \""))
+            .and_then(|l| l.split('"').next())
+            .expect("a package name");
+        let folder = Path::new(m).file_name().map_or("", |f| f.to_str().unwrap_or(""));
+        // The root package is the binary; the test-support and Python packages keep folders
+        // named for their place (tests/support, python/).
+        let renamed = [(".", "iwsim"), ("tests/support", "test-support"), ("python", "iwsim-python")];
+        if folder != name && !renamed.contains(&(m, name)) {
+            wrong.push(format!("{m}: package {name} in a folder named otherwise"));
+        }
+        if m.matches('/').count() > 1 {
+            wrong.push(format!("{m}: more than one level below a role folder"));
+        }
+        if m.starts_with("hub/") && !["hub/world", "hub/recorder"].contains(m) {
+            wrong.push(format!("{m}: not the hub's, yet under hub/"));
+        }
+        let top = m.split('/').next().unwrap_or_default();
+        let tops = [
+            ".",
+            "ipc-types",
+            "hub",
+            "libs",
+            "runner",
+            "adapters",
+            "agents",
+            "viewer",
+            "tools",
+            "python",
+            "tests",
+            "benches",
+        ];
+        if !tops.contains(&top) {
+            wrong.push(format!("{m}: a top-level folder not in the layout ({tops:?})"));
+        }
+    }
+    assert!(wrong.is_empty(), "the layout:\n  {}", wrong.join("\n  "));
 }

@@ -7,7 +7,7 @@
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 
-use records::summary::RunSummary;
+use run_records::summary::RunSummary;
 use runner::chair::ChairSummary;
 
 use super::common::{Proc, assert_no_shared_memory_left, processes_with_argument, session, text, wait_for_tick};

@@ -7,7 +7,7 @@
 use std::path::PathBuf;
 use std::time::Duration;
 
-use records::outcome::HubOutcome;
+use run_records::outcome::HubOutcome;
 
 use super::ciberrato::{StandIn, attr, ended, num};
 use super::common::{Proc, hub_and_logged_bridge as hub_and_bridge, session, text};
@@ -152,7 +152,7 @@ fn stop_run(
 }
 
 /// The hub's final table entry of robot 1, from its JSON outcome.
-fn final_entry(stdout: &str) -> records::outcome::ScoreAtEnd {
+fn final_entry(stdout: &str) -> run_records::outcome::ScoreAtEnd {
     let out = HubOutcome::from_stdout(stdout).expect("the hub's JSON line");
     out.scores.into_iter().find(|s| s.id == 1).expect("robot 1 in the final table")
 }

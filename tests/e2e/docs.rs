@@ -77,7 +77,7 @@ fn links(line: &str) -> Vec<String> {
         let target = after[..end].split_whitespace().next().unwrap_or_default();
         // Inline code (`a](b)` in a command) is not a link.
         let before = &rest[..i];
-        if before.matches('`').count() % 2 == 0 && !target.is_empty() {
+        if before.matches('`').count().is_multiple_of(2) && !target.is_empty() {
             out.push(target.to_owned());
         }
         rest = &after[end..];
@@ -125,7 +125,7 @@ fn every_link_in_the_readme_and_the_docs_leads_to_a_file_and_a_heading_that_exis
         }
         // Every code block is closed, or the rest of the page renders as code.
         let fences = text.lines().filter(|l| l.trim_start().starts_with("```")).count();
-        if fences % 2 != 0 {
+        if !fences.is_multiple_of(2) {
             broken.push(format!("{name}: a code block is never closed"));
         }
     }

@@ -7,7 +7,7 @@ use super::common::{Proc, assert_no_shared_memory_left, session, text, truth, wa
 
 use agent_sdk::{Agent, AgentError, Wait, control};
 use ipc_types::{Command as Cmd, REG_HAS_POSE, ROBOT_FROZEN, Refusal, RobotRegistration};
-use records::outcome::{HubOutcome, StateHash};
+use run_records::outcome::{HubOutcome, StateHash};
 use world::map::{NoiseParams, Params, builtin};
 use world::{Action, RobotSpec, World};
 

@@ -12,7 +12,7 @@ use super::common::text;
 /// The newest modification time of the Rust sources the native module is built from.
 fn sources_changed(root: &Path) -> std::time::SystemTime {
     let mut newest = std::time::SystemTime::UNIX_EPOCH;
-    for dir in ["python/src", "agents/agent-sdk/src", "observer/src", "ipc-types/src", "ipc-services/src"] {
+    for dir in ["python/src", "agents/agent-sdk/src", "libs/observer/src", "ipc-types/src", "libs/ipc-services/src"] {
         for entry in std::fs::read_dir(root.join(dir)).into_iter().flatten().flatten() {
             if let Ok(t) = entry.metadata().and_then(|m| m.modified()) {
                 newest = newest.max(t);

@@ -7,8 +7,8 @@ use std::time::{Duration, Instant};
 
 use recorder::journal::Event;
 use recorder::{Recorder, RecorderOptions, Recording};
-use records::outcome::HubOutcome;
-use records::summary::RunSummary;
+use run_records::outcome::HubOutcome;
+use run_records::summary::RunSummary;
 
 use super::common::{Proc, assert_no_shared_memory_left, session, text};
 
@@ -58,7 +58,7 @@ fn a_real_time_door_run_replays_bit_for_bit() {
     // time. The actions are recorded as the hub applied them, so timing does not matter.
     let dir = out_dir("door-rt");
     std::fs::create_dir_all(&dir).expect("dir");
-    let toml = std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("hub/runner/scenarios/door.toml"))
+    let toml = std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("runner/scenarios/door.toml"))
         .expect("the door scenario");
     assert!(toml.contains("seconds = 60"), "the door scenario changed: update this test");
     let scenario = dir.join("door-short.toml");

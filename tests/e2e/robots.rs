@@ -8,7 +8,7 @@ use std::time::{Duration, Instant};
 use agent_sdk::{Agent, AgentError, control};
 use ipc_types::{Command as Cmd, ROBOT_FROZEN, Refusal, RobotRegistration, RobotState, SensorSpec};
 use observer::Observer;
-use records::outcome::HubOutcome;
+use run_records::outcome::HubOutcome;
 
 use super::common::{Proc, assert_no_shared_memory_left, robot_names, session, text, wait_for_tick};
 

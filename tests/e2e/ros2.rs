@@ -188,9 +188,8 @@ fn bench_ros2_measures_chairs_driven_over_ros_2_beside_shared_memory() {
 /// The thesis slalom (`builtin:slalom`) with its chair served by `iwsim ros2`, for a ROS 2
 /// controller to drive: the scenario file a user writes.
 fn slalom_over_ros2(endpoint: &str) -> String {
-    let slalom =
-        std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("hub/runner/scenarios/slalom.toml"))
-            .expect("the slalom scenario");
+    let slalom = std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("runner/scenarios/slalom.toml"))
+        .expect("the slalom scenario");
     let (head, tail) = slalom.split_once("[[agents]]").expect("an agent");
     let (_, rest) = tail.split_once("\n\n").expect("the agent's table ends");
     format!(
@@ -237,7 +236,8 @@ fn a_ros_2_go_to_goal_controller_drives_the_slalom_to_checkpoint_2_without_a_con
         let rec = recorder::Recording::open(out.join("run.mcap")).unwrap_or_else(|e| panic!("{e}"));
         assert_eq!(rec.start.deadline_ms, 60_000, "seed {seed}");
         // Judged from the hub's record: checkpoint 2 reached, no contact of any kind.
-        let summary = records::summary::RunSummary::read(&out.join("summary.json")).unwrap_or_else(|e| panic!("{e}"));
+        let summary =
+            run_records::summary::RunSummary::read(&out.join("summary.json")).unwrap_or_else(|e| panic!("{e}"));
         assert!(
             r.status.success() && summary.passed,
             "seed {seed}: {:?}\n{}\n{said}",

@@ -6,7 +6,7 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::time::{Duration, Instant};
 
-use records::summary::RunSummary;
+use run_records::summary::RunSummary;
 
 use super::common::{
     Lines, Proc, assert_no_shared_memory_left, processes_with_argument, session, shared_memory_files, text, wait_until,

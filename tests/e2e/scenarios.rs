@@ -8,7 +8,7 @@ use agent_sdk::log::LogTable;
 use agent_sdk::{Agent, Wait};
 use ipc_types::{ActionBlock, REG_HAS_POSE, RobotKind, RobotRegistration};
 use observer::Observer;
-use records::summary::{RobotSummary, RunSummary};
+use run_records::summary::{RobotSummary, RunSummary};
 
 use super::common::{Proc, assert_no_shared_memory_left, robot_named, session, text, truth};
 
@@ -554,7 +554,7 @@ fn every_agents_log_ends_with_the_runs_final_tick_under_a_name_no_other_robot_sh
         [("front%20door.csv", None), ("chair1.csv", Some(0.5)), ("chair2.csv", Some(0.5)), ("nav%201.csv", None)];
     for (file, scripted) in logs {
         let log = LogTable::read(&dir.join(file)).unwrap_or_else(|e| panic!("{file}: {e}"));
-        assert_eq!(records::log::robot_name_of(&dir.join(file)), file.trim_end_matches(".csv").replace("%20", " "));
+        assert_eq!(robot_log::robot_name_of(&dir.join(file)), file.trim_end_matches(".csv").replace("%20", " "));
         let col = |c: &str| log.column(c).expect("a column");
         let ticks: Vec<f64> = log.rows.iter().map(|r| r[col("tick")]).collect();
         assert_eq!(ticks, [0.0, 1.0, 2.0, 3.0, 4.0, 5.0], "{file}");

@@ -11,7 +11,7 @@ use std::time::{Duration, Instant};
 use agent_sdk::AgentError;
 use ipc_types::{Command, Refusal, RobotRegistration, RobotState, RunState, WorldHeader};
 use observer::Observer;
-use records::outcome::HubOutcome;
+use run_records::outcome::HubOutcome;
 
 use super::common::{Proc, assert_no_shared_memory_left, robot_names, session, text, truth};
 

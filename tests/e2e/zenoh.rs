@@ -8,7 +8,7 @@ use std::process::Command;
 use std::sync::atomic::{AtomicU32, Ordering};
 use std::time::Duration;
 
-use records::summary::RunSummary;
+use run_records::summary::RunSummary;
 
 use super::common::{Lines, Proc, assert_no_shared_memory_left, free_port, session, text};
 
@@ -937,7 +937,7 @@ fn an_episode_that_reached_its_time_limit_still_answers_its_end_with_its_summary
         std::thread::sleep(Duration::from_millis(20));
     }
     // Ended long before the environment asks: its summary is still there, once.
-    let summary = records::outcome::HubOutcome::from_stdout(&episodes.end(&s).expect("the host answers"))
+    let summary = run_records::outcome::HubOutcome::from_stdout(&episodes.end(&s).expect("the host answers"))
         .expect("the hub's summary");
     assert_eq!(summary.ticks, 40);
     let again = episodes.end(&s).expect_err("an episode ends once");

@@ -43,7 +43,8 @@
 #![warn(missing_docs)]
 
 pub use ipc_services::{report, stop_signalled};
-pub use records::{args, files, log};
+pub use places::{args, files};
+pub use robot_log as log;
 
 pub mod cli;
 pub mod inbox;

@@ -77,7 +77,7 @@ impl RobotLogs {
     }
 
     /// Logs robot `robot_id` (as the hub numbered it at registration) under `name`, the log's
-    /// file being `records::log::file_stem(name)` `.csv`.
+    /// file being `robot_log::file_stem(name)` `.csv`.
     pub fn add(&mut self, robot_id: u32, name: &str) {
         self.robots.push(Entry { robot_id, name: name.to_owned(), log: None });
     }

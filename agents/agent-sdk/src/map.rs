@@ -15,7 +15,7 @@
 //! ```
 
 use ipc_types::{MAP_BEACON, MAP_CHECKPOINT, MAP_CORNER, MAP_GRID, MAP_TARGET, MAP_WALL, MapHeader, MapItem};
-use records::places::Checkpoint;
+use places::Checkpoint;
 
 /// A point on the floor, metres.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
@@ -91,7 +91,7 @@ pub struct Map {
     /// Targets, by index.
     pub targets: Vec<Circle>,
     /// The scenario's checkpoints, by index, in the project's one checkpoint type (the hub
-    /// publishes its own `records::places::Checkpoint`s; the radius is passed on as sent).
+    /// publishes its own `places::Checkpoint`s; the radius is passed on as sent).
     pub checkpoints: Vec<Checkpoint>,
     /// Grid start poses, by slot.
     pub grid: Vec<GridPose>,

@@ -113,7 +113,7 @@ pub struct NavigatorArgs {
         allow_hyphen_values = true,
         required = true
     )]
-    pub checkpoints: Vec<records::places::Checkpoint>,
+    pub checkpoints: Vec<places::Checkpoint>,
     /// The body W,H,COM: length along the heading and width in metres, and where the wheel
     /// axle sits along the length from the rear (0.8: the Intellwheels rear-wheel-drive
     /// chair; 0.5: mid-wheel drive).
@@ -183,8 +183,8 @@ fn parse_keep_right(s: &str) -> Result<f64, String> {
     }
 }
 
-fn parse_checkpoint(s: &str) -> Result<records::places::Checkpoint, String> {
-    records::places::Checkpoint::parse(s).map_err(|e| e.to_string())
+fn parse_checkpoint(s: &str) -> Result<places::Checkpoint, String> {
+    places::Checkpoint::parse(s).map_err(|e| e.to_string())
 }
 
 fn parse_body(s: &str) -> Result<[f64; 3], String> {
@@ -221,7 +221,7 @@ mod tests {
         ])
         .expect("valid");
         let a = cli.args;
-        let cp = |x, y, radius| records::places::Checkpoint { x, y, radius };
+        let cp = |x, y, radius| places::Checkpoint { x, y, radius };
         assert_eq!(a.checkpoints, vec![cp(10.0, 6.1, 0.5), cp(20.0, -6.1, 0.3)]);
         assert_eq!(a.robot.pose, Some([-1.0, 2.0, -90.0]));
         assert_eq!(a.body, [1.1, 0.65, 0.8]);

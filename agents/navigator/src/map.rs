@@ -3,7 +3,7 @@
 
 use agent_sdk::map::{Map, MapDecodeError};
 use ipc_types::{MapHeader, MapItem};
-use records::places::Checkpoint;
+use places::Checkpoint;
 
 use crate::geom::{Seg, V2};
 

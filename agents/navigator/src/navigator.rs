@@ -44,7 +44,7 @@ impl Body {
 }
 
 /// A checkpoint to pass (or, the last one, to stop at), as the planner uses it: the
-/// project's one checkpoint type, [`records::places::Checkpoint`], with its centre as a
+/// project's one checkpoint type, [`places::Checkpoint`], with its centre as a
 /// vector.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Checkpoint {
@@ -67,8 +67,8 @@ impl Checkpoint {
     }
 }
 
-impl From<&records::places::Checkpoint> for Checkpoint {
-    fn from(c: &records::places::Checkpoint) -> Self {
+impl From<&places::Checkpoint> for Checkpoint {
+    fn from(c: &places::Checkpoint) -> Self {
         Self { pos: V2::new(c.x, c.y), radius_m: c.radius }
     }
 }

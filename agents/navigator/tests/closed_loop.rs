@@ -24,7 +24,7 @@ struct Scenario {
     /// Scenario obstacles: boxes x0, y0, x1, y1 (1 m tall), unknown to the navigator.
     obstacles: Vec<[f64; 4]>,
     start: [f64; 3],
-    checkpoints: Vec<records::places::Checkpoint>,
+    checkpoints: Vec<places::Checkpoint>,
     body: Body,
     time_limit_s: f64,
     /// Where the navigator's pose comes from.
@@ -43,10 +43,7 @@ impl Scenario {
             map,
             obstacles: vec![],
             start,
-            checkpoints: checkpoints
-                .iter()
-                .map(|&[x, y, radius]| records::places::Checkpoint { x, y, radius })
-                .collect(),
+            checkpoints: checkpoints.iter().map(|&[x, y, radius]| places::Checkpoint { x, y, radius }).collect(),
             body: Body::INTELLWHEELS,
             time_limit_s,
             pose_source: PoseSourceKind::Odometry,
@@ -83,7 +80,7 @@ fn map_items(
     lab: &Lab,
     params: &Params,
     obstacle_from: usize,
-    checkpoints: &[records::places::Checkpoint],
+    checkpoints: &[places::Checkpoint],
 ) -> (MapHeader, Vec<MapItem>) {
     let hub_params = hub::core::hub_params(params, hub::core::Mode::LockStep, 0, 1000);
     hub::core::pack_map(lab, &Grid::default(), obstacle_from, checkpoints, 100, hub_params)
@@ -611,8 +608,8 @@ mod corridor_swap {
         let mut world = World::new(&lab, params, seed).expect("a valid world");
         let body = Body::INTELLWHEELS;
         let fp = body.footprint();
-        let checkpoints: Vec<records::places::Checkpoint> =
-            chairs.iter().map(|c| records::places::Checkpoint { x: c.goal[0], y: c.goal[1], radius: 0.5 }).collect();
+        let checkpoints: Vec<places::Checkpoint> =
+            chairs.iter().map(|c| places::Checkpoint { x: c.goal[0], y: c.goal[1], radius: 0.5 }).collect();
         let (header, items) = map_items(&lab, world.params(), lab.walls.len(), &checkpoints);
         let ticks_per_m = header.params.encoder_ticks_per_m;
         let mut fleet = Vec::new();

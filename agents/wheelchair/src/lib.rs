@@ -168,7 +168,7 @@ struct ConfigFile {
 
 /// Reads a `--config` file.
 pub fn read_config(path: &Path) -> anyhow::Result<Vec<ChairConfig>> {
-    let text = records::files::read_text(path).with_context(|| format!("reading {}", path.display()))?;
+    let text = places::files::read_text(path).with_context(|| format!("reading {}", path.display()))?;
     let cfg: ConfigFile = toml::from_str(&text).map_err(|e| anyhow::anyhow!("{}: {}", path.display(), e))?;
     anyhow::ensure!(!cfg.chairs.is_empty(), "{}: no [[chairs]]", path.display());
     for c in &cfg.chairs {
@@ -408,7 +408,7 @@ fn drive(agent: &mut Agent, args: &WheelchairArgs, chairs: &[ChairConfig]) -> an
     if args.report_latency {
         // The first ticks include connection set-up; they are not the steady state.
         let steady = latencies_ns.get(latencies_ns.len().min(100)..).unwrap_or(&[]);
-        println!("{}", records::latency::Percentiles::of_ns(steady).json());
+        println!("{}", run_records::latency::Percentiles::of_ns(steady).json());
     }
     Ok(ExitCode::SUCCESS)
 }
@@ -422,7 +422,7 @@ mod tests {
     fn a_config_file_larger_than_the_cap_or_not_a_file_is_refused() {
         let big = std::env::temp_dir().join(format!("iwsim-wheelchair-big-{}.toml", std::process::id()));
         std::fs::File::create(&big)
-            .and_then(|f| f.set_len(records::files::MAX_TEXT_FILE_BYTES + 1))
+            .and_then(|f| f.set_len(places::files::MAX_TEXT_FILE_BYTES + 1))
             .expect("a sparse file");
         let err = read_config(&big).expect_err("too large");
         std::fs::remove_file(&big).expect("clean up");

@@ -227,8 +227,8 @@ pub fn world(args: &BenchWorldArgs) -> anyhow::Result<ExitCode> {
     Ok(ExitCode::SUCCESS)
 }
 
-pub use records::latency::Percentiles;
-use records::outcome::HubOutcome;
+pub use run_records::latency::Percentiles;
+use run_records::outcome::HubOutcome;
 
 fn iwsim_exe() -> anyhow::Result<std::path::PathBuf> {
     std::env::current_exe().context("finding the iwsim executable")
@@ -448,7 +448,7 @@ pub struct LockstepBench {
     pub readings: load::Readings,
     /// One tick's round trip as the hub timed it: from its publication to the last answer
     /// (through the bridge from remote agents), percentiles over the run's ticks.
-    pub round_trip: Option<records::latency::Percentiles>,
+    pub round_trip: Option<run_records::latency::Percentiles>,
 }
 
 /// A hub in lock-step with `agents` agent processes of `robots_per_agent` robots each, physics
@@ -1517,7 +1517,12 @@ mod tests {
     #[test]
     fn the_report_gives_a_ticks_round_trip_and_where_the_clients_ran() {
         let trip = |p50: f64, p99: f64| LockstepBench {
-            round_trip: Some(records::latency::Percentiles { samples: 1000, p50_us: p50, p99_us: p99, p999_us: p99 }),
+            round_trip: Some(run_records::latency::Percentiles {
+                samples: 1000,
+                p50_us: p50,
+                p99_us: p99,
+                p999_us: p99,
+            }),
             ..run(2000.0, 0, 0)
         };
         let v =

@@ -13,9 +13,9 @@ use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use anyhow::Context as _;
-use records::outcome::HubOutcome;
 use ros2_bridge::msgs::{self, Message as _};
 use ros2_bridge::names;
+use run_records::outcome::HubOutcome;
 use zenoh::Wait as _;
 
 use crate::args::BenchRos2Args;

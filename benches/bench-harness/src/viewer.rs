@@ -6,7 +6,7 @@ use std::time::Duration;
 
 use crate::browser::Browser;
 use anyhow::Context as _;
-use records::outcome::HubOutcome;
+use run_records::outcome::HubOutcome;
 
 use crate::args::BenchViewerArgs;
 use crate::{finish, spawn_self};

@@ -28,7 +28,7 @@
 //! # Ok::<(), recorder::journal::JournalDecodeError>(())
 //! ```
 
-use records::places::Checkpoint;
+use places::Checkpoint;
 use world::map::{
     Beacon, ChallengeParams, Grid, Lab, LatencyParams, NoiseParams, Params, RequestParams, SensorSwitches, StartPose,
     Target, Wall,

@@ -275,7 +275,7 @@ fn scan(
 ) -> Result<Scan, RecordingReadError> {
     let io = |source| RecordingReadError::Io { path: path.into(), source };
     // A device or a pipe is refused: a FIFO with no writer would block the open for ever.
-    let mut file = records::files::open_regular(path).map_err(io)?;
+    let mut file = places::files::open_regular(path).map_err(io)?;
     // Whole chunks only: messages of a chunk are used once all of it has arrived, so a cut
     // chunk is dropped whole rather than half-read.
     let mut reader = LinearReader::new_with_options(

@@ -4,8 +4,8 @@
 use std::path::{Path, PathBuf};
 
 use ipc_types::{FixedName, ROBOT_COLLISION, RobotInfo, RobotState, SensorGeometry};
+use places::Checkpoint;
 use recorder::journal::{Event, RecordedAction, RunStart};
-use records::places::Checkpoint;
 use world::map::{Params, Wall, builtin};
 use world::{Action, RobotHandle, RobotSpec, World};
 

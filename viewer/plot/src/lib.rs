@@ -122,7 +122,7 @@ pub fn is_recording(path: &Path) -> bool {
     let mut magic = [0u8; MCAP_MAGIC.len()];
     // Only a regular file is looked into: opening a FIFO with no writer would block for ever
     // (the reader then says what the path is).
-    records::files::open_regular(path).and_then(|mut f| std::io::Read::read_exact(&mut f, &mut magic)).is_ok()
+    places::files::open_regular(path).and_then(|mut f| std::io::Read::read_exact(&mut f, &mut magic)).is_ok()
         && &magic == MCAP_MAGIC
 }
 
@@ -158,7 +158,7 @@ fn draw(args: &PlotArgs) -> anyhow::Result<(PathBuf, Option<String>)> {
             }
             let logs = args.log.iter().map(|p| RunLog::read(p)).collect::<Result<Vec<_>, _>>()?;
             let named: Vec<(String, RunLog)> =
-                args.log.iter().zip(logs).map(|(p, l)| (records::log::robot_name_of(p), l)).collect();
+                args.log.iter().zip(logs).map(|(p, l)| (robot_log::robot_name_of(p), l)).collect();
             let title = args.log.iter().map(|p| file_name(p)).collect::<Vec<_>>().join(", ");
             (title, named, scene(args, summary_base(args)?)?, None)
         }

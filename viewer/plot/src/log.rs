@@ -1,5 +1,5 @@
 //! A run log as the plot uses it: the per-robot CSV the agents write (read by
-//! [`records::log::LogTable`], the project's one log reader, whose errors name the file,
+//! [`robot_log::LogTable`], the project's one log reader, whose errors name the file,
 //! line and column), turned into samples of tick, time, position, heading and collision.
 //! The plot needs `tick`, `time_s`, `x_m` and `y_m`; the tick must be a whole number and the
 //! clock finite.
@@ -10,8 +10,8 @@
 
 use std::path::{Path, PathBuf};
 
-pub use records::log::LogReadError;
-use records::log::LogTable;
+pub use robot_log::LogReadError;
+use robot_log::LogTable;
 
 /// Columns a log must have: the plot cannot be drawn without them.
 pub const REQUIRED_COLUMNS: [&str; 4] = ["tick", "time_s", "x_m", "y_m"];

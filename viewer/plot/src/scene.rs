@@ -2,8 +2,8 @@
 //! from the command line or from the run's `summary.json` (both forms are `records`'), and the
 //! window of the floor shown.
 
-pub use records::places::{Checkpoint, DEFAULT_CHECKPOINT_RADIUS_M, DEFAULT_OBSTACLE_HEIGHT_M, Obstacle, PlaceError};
-pub use records::summary::{SummaryReadError, SummaryScene};
+pub use places::{Checkpoint, DEFAULT_CHECKPOINT_RADIUS_M, DEFAULT_OBSTACLE_HEIGHT_M, Obstacle, PlaceError};
+pub use run_records::summary::{SummaryReadError, SummaryScene};
 use world::map::Lab;
 
 /// Floor shown around the trajectory, metres.

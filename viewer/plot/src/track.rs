@@ -9,10 +9,10 @@
 
 use std::path::{Path, PathBuf};
 
+use places::Obstacle;
 pub use recorder::RecordingReadError;
 use recorder::journal::RunStart;
 use recorder::{Recording, WorldTrack};
-use records::places::Obstacle;
 
 use crate::log::{RunLog, Sample};
 
@@ -131,7 +131,7 @@ pub fn lab_and_obstacles(start: &RunStart) -> (world::map::Lab, Vec<Obstacle>) {
         .split_off(from)
         .into_iter()
         .filter_map(|w| {
-            // Scenario obstacles are axis-aligned boxes (records::places), so the box around
+            // Scenario obstacles are axis-aligned boxes (the places crate), so the box around
             // a wall's corners is the obstacle itself.
             let (mut x0, mut y0, mut x1, mut y1) = (f64::INFINITY, f64::INFINITY, f64::NEG_INFINITY, f64::NEG_INFINITY);
             for c in &w.corners {
@@ -147,9 +147,9 @@ pub fn lab_and_obstacles(start: &RunStart) -> (world::map::Lab, Vec<Obstacle>) {
 mod tests {
     use super::*;
     use ipc_types::{FixedName, RobotInfo, RobotState};
+    use places::Checkpoint;
     use recorder::journal::Event;
     use recorder::{Recorder, RecorderOptions};
-    use records::places::Checkpoint;
     use world::map::{Params, Wall, builtin};
 
     /// A fresh file path for one test, removed when dropped.

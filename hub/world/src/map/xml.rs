@@ -281,56 +281,22 @@ pub enum MapFile {
 /// Ciber-Rato's largest shipped lab is a few kilobytes and iwsim's largest benchmark lab well
 /// under a megabyte; the cap only stops a wrong path (`/dev/zero`, a disk image) from being read
 /// until memory runs out.
-pub const MAX_FILE_BYTES: u64 = 16 * 1024 * 1024;
+pub const MAX_FILE_BYTES: u64 = places::files::MAX_TEXT_FILE_BYTES;
 
 /// Reads a whole file as text: at most [`MAX_FILE_BYTES`], and UTF-8 (a byte-order mark is
 /// kept; the parsers skip it).
 ///
-/// This is the world crate's one file-reading function. It cannot share
-/// `records::files::read_text` (the scenario and agent configs' reader) because `records`
-/// links `ipc-types`, which the world model must not.
+/// This is the world crate's one file-reading function, and it reads through the one capped
+/// reader of the files users write, `places::files::read_text` (regular files only: a FIFO
+/// with no writer would block the open for ever, a device be read until the cap).
 pub fn read_text(path: &Path) -> Result<String, MapLoadError> {
-    use std::io::Read;
-
-    use std::os::unix::fs::FileTypeExt as _;
-
-    let io = |source| MapLoadError::Io { path: path.to_owned(), source };
-    // A FIFO with no writer would block the open for ever, a device be read until the cap:
-    // only regular files (or links to them) are read.
-    let kind = std::fs::metadata(path).map_err(io)?.file_type();
-    if !kind.is_file() {
-        let what = if kind.is_dir() {
-            "a directory"
-        } else if kind.is_fifo() {
-            "a pipe (FIFO)"
-        } else if kind.is_char_device() || kind.is_block_device() {
-            "a device"
-        } else {
-            "not a file"
-        };
-        let why = format!("not a regular file but {what}: give a file");
-        return Err(io(std::io::Error::new(std::io::ErrorKind::InvalidInput, why)));
-    }
-    let file = std::fs::File::open(path).map_err(io)?;
-    let mut bytes = Vec::new();
-    // One byte past the cap tells "exactly the cap" from "larger".
-    file.take(MAX_FILE_BYTES + 1).read_to_end(&mut bytes).map_err(io)?;
-    if u64::try_from(bytes.len()).unwrap_or(u64::MAX) > MAX_FILE_BYTES {
-        return Err(MapLoadError::TooLarge { path: path.to_owned(), max: MAX_FILE_BYTES });
-    }
-    text_from_bytes(bytes)
-}
-
-/// The bytes as text, or where the first byte that is not UTF-8 is.
-pub fn text_from_bytes(bytes: Vec<u8>) -> Result<String, MapLoadError> {
-    String::from_utf8(bytes).map_err(|err| {
-        let good = err.utf8_error().valid_up_to();
-        let bytes = err.as_bytes();
-        // Everything before `good` is valid UTF-8, so this never fails.
-        let before = std::str::from_utf8(bytes.get(..good).unwrap_or_default()).unwrap_or_default();
-        let line = before.matches('\n').count() + 1;
-        let column = before.rsplit('\n').next().unwrap_or_default().chars().count() + 1;
-        MapLoadError::NotUtf8 { pos: TextPos { line: saturate(line), column: saturate(column) } }
+    use places::files::TextReadError;
+    places::files::read_text(path).map_err(|e| match e {
+        TextReadError::Io(source) => MapLoadError::Io { path: path.to_owned(), source },
+        TextReadError::TooLarge { max } => MapLoadError::TooLarge { path: path.to_owned(), max },
+        TextReadError::NotUtf8 { line, column } => {
+            MapLoadError::NotUtf8 { pos: TextPos { line: saturate(line), column: saturate(column) } }
+        }
     })
 }
 
@@ -1677,11 +1643,14 @@ mod tests {
 
     #[test]
     fn invalid_utf8_is_refused_at_its_first_bad_byte() {
-        let bytes = b"<Lab Width=\"1\" Height=\"1\">\n  <!-- caf\xe9 -->\n</Lab>".to_vec();
-        let err = text_from_bytes(bytes).expect_err("latin-1 is not UTF-8");
+        let path = std::env::temp_dir().join(format!("iwsim-latin1-lab-{}.xml", std::process::id()));
+        std::fs::write(&path, b"<Lab Width=\"1\" Height=\"1\">\n  <!-- caf\xe9 -->\n</Lab>").expect("written");
+        let err = read_text(&path).expect_err("latin-1 is not UTF-8");
         assert!(matches!(err, MapLoadError::NotUtf8 { pos } if pos == at(2, 11)), "{err:?}");
         assert!(err.to_string().starts_with("2:11: the file is not UTF-8 text"), "{err}");
-        assert_eq!(text_from_bytes("é\nok".as_bytes().to_vec()).expect("UTF-8"), "é\nok");
+        std::fs::write(&path, "é\nok").expect("written");
+        assert_eq!(read_text(&path).expect("UTF-8"), "é\nok");
+        let _ = std::fs::remove_file(path);
     }
 
     #[test]

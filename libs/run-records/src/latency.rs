@@ -1,13 +1,13 @@
 //! Latency percentiles, as agents report them (`--report-latency`) and `iwsim bench` reads them.
 //!
 //! ```
-//! use records::latency::Percentiles;
+//! use run_records::latency::Percentiles;
 //!
 //! let p = Percentiles::of_ns(&[1_000, 2_000, 3_000]);
 //! assert_eq!(p.p50_us, 2.0);
 //! let stdout = format!("wheelchair: done\n{}\n", p.json());
 //! assert_eq!(Percentiles::parse(&stdout)?, p);
-//! # Ok::<(), records::latency::PercentilesReadError>(())
+//! # Ok::<(), run_records::latency::PercentilesReadError>(())
 //! ```
 
 use serde::{Deserialize, Serialize};

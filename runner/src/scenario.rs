@@ -61,7 +61,7 @@
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
-pub use records::places::{Checkpoint, Obstacle};
+pub use places::{Checkpoint, Obstacle};
 use serde::Deserialize;
 
 /// The lock-step deadline of a scenario that sets none: long enough for any agent of ours on a
@@ -347,7 +347,7 @@ pub enum ScenarioError {
         /// File.
         path: String,
         /// Why.
-        source: records::files::TextReadError,
+        source: places::files::TextReadError,
     },
     /// Bad TOML, or a field of the wrong type (the message carries line and column).
     #[error("{path}: {message}")]
@@ -381,8 +381,8 @@ impl Scenario {
                 Self::parse(text, spec, Path::new("."))
             }
             None => {
-                let text = records::files::read_text(Path::new(spec)).map_err(|err| match err {
-                    records::files::TextReadError::Io(source) => ScenarioError::Io { path: spec.into(), source },
+                let text = places::files::read_text(Path::new(spec)).map_err(|err| match err {
+                    places::files::TextReadError::Io(source) => ScenarioError::Io { path: spec.into(), source },
                     source => ScenarioError::NotText { path: spec.into(), source },
                 })?;
                 let base = Path::new(spec).parent().map(Path::to_path_buf).unwrap_or_else(|| PathBuf::from("."));
@@ -645,13 +645,13 @@ mod tests {
     fn a_scenario_file_larger_than_the_cap_or_not_a_file_is_refused() {
         let big = std::env::temp_dir().join(format!("iwsim-scenario-big-{}.toml", std::process::id()));
         std::fs::File::create(&big)
-            .and_then(|f| f.set_len(records::files::MAX_TEXT_FILE_BYTES + 1))
+            .and_then(|f| f.set_len(places::files::MAX_TEXT_FILE_BYTES + 1))
             .expect("a sparse file");
         let name = big.display().to_string();
         let err = Scenario::load(&name).expect_err("too large");
         std::fs::remove_file(&big).expect("clean up");
         assert!(
-            matches!(&err, ScenarioError::NotText { path, source: records::files::TextReadError::TooLarge { .. } }
+            matches!(&err, ScenarioError::NotText { path, source: places::files::TextReadError::TooLarge { .. } }
                 if *path == name),
             "{err:?}"
         );

@@ -4,7 +4,7 @@
 //! their checks and one error type.
 //!
 //! ```
-//! use records::places::{Checkpoint, Obstacle};
+//! use places::{Checkpoint, Obstacle};
 //!
 //! let o = Obstacle::parse("17,6.1,17.6,6.4")?;
 //! assert_eq!(o.height, 1.0);
@@ -14,6 +14,10 @@
 //! assert!(Obstacle::parse("3,2,1,4").is_err());
 //! # Ok::<(), Box<dyn std::error::Error>>(())
 //! ```
+#![warn(missing_docs)]
+
+pub mod args;
+pub mod files;
 
 use std::fmt;
 

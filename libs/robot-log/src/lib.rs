@@ -6,6 +6,7 @@
 //! complete whatever the tick rate. They hold what the robot measured: `heading_deg` is its
 //! compass and `x_m`, `y_m` its GPS fix (NaN when the run has no such sensor), never its true
 //! pose, which only observers see; `iwsim run` judges a run from the hub's recording instead.
+#![warn(missing_docs)]
 
 use std::fs::File;
 use std::io::{BufWriter, Write};
@@ -288,7 +289,7 @@ impl LogTable {
         use std::io::Read as _;
         let io = |source| LogReadError::Io { path: path.into(), source };
         let mut bytes = Vec::new();
-        crate::files::open_regular(path).map_err(io)?.take(MAX_LOG_BYTES + 1).read_to_end(&mut bytes).map_err(io)?;
+        places::files::open_regular(path).map_err(io)?.take(MAX_LOG_BYTES + 1).read_to_end(&mut bytes).map_err(io)?;
         if u64::try_from(bytes.len()).unwrap_or(u64::MAX) > MAX_LOG_BYTES {
             let why = format!("larger than {MAX_LOG_BYTES} bytes: not a robot's log");
             return Err(io(std::io::Error::new(std::io::ErrorKind::InvalidData, why)));

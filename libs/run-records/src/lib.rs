@@ -1,21 +1,16 @@
-//! The formats iwsim writes and reads as text, each defined once for its writer and every
-//! reader: per-robot CSV logs ([`log`]), comma-separated option values ([`args`]), a scenario's
-//! obstacles and checkpoints ([`places`]), the hub's outcome line ([`outcome`]), a run's
-//! `summary.json` ([`summary`]) and latency percentiles ([`latency`]), plus the one capped
-//! reader of the text files users write ([`files`]).
+//! What a run writes and its judges read, each format defined once for its writer and every
+//! reader: the hub's outcome line ([`outcome`]), a run's `summary.json` ([`summary`]) and
+//! latency percentiles ([`latency`]). Agents do not link it: they write only their robots'
+//! logs (`robot-log`).
 //!
 //! ```
-//! let pose = records::args::pose("10,6.1,-90").expect("a pose");
-//! assert_eq!(pose, [10.0, 6.1, -90.0]);
+//! let p = run_records::latency::Percentiles::of_ns(&[1_000, 2_000, 3_000]);
+//! assert_eq!(p.p50_us, 2.0);
 //! ```
 #![warn(missing_docs)]
 
-pub mod args;
-pub mod files;
 pub mod latency;
-pub mod log;
 pub mod outcome;
-pub mod places;
 pub mod summary;
 
 /// `value` to `places` decimals, rounded exactly as `format!("{:.places$}")` prints it, so that

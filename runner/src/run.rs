@@ -21,8 +21,8 @@ use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
 use anyhow::Context as _;
-use records::outcome::HubOutcome;
-pub use records::summary::{RobotSummary, RunSummary};
+use run_records::outcome::HubOutcome;
+pub use run_records::summary::{RobotSummary, RunSummary};
 
 use crate::args::RunArgs;
 use crate::chair::{self, ChairSummary};
@@ -116,11 +116,11 @@ pub struct Judged {
     /// The world's last tick.
     pub ticks: u64,
     /// Its state hash then.
-    pub state_hash: records::outcome::StateHash,
+    pub state_hash: run_records::outcome::StateHash,
     /// Where a cut-short recording ends.
     pub truncated: Option<String>,
     /// The run's traffic, with two or more robots on routes.
-    pub traffic: Option<records::summary::TrafficSummary>,
+    pub traffic: Option<run_records::summary::TrafficSummary>,
 }
 
 /// Replays a run's recording and measures every robot from the truth it holds (never from
@@ -146,7 +146,7 @@ pub fn judge_recording(path: &Path, scenario: &Scenario, logs: &Path) -> anyhow:
             let Some(r) = stage.robot(id) else { continue };
             let next = judges.len();
             let (index, judge) = judges.entry(r.spec.name.clone()).or_insert_with(|| {
-                let log = format!("{}.csv", records::log::file_stem(&r.spec.name));
+                let log = format!("{}.csv", robot_log::file_stem(&r.spec.name));
                 let log = if logs.join(&log).exists() { log } else { String::new() };
                 (next, Judge::new(&r.spec.name, scenario.routes.get(&r.spec.name).map_or(&[], Vec::as_slice), log))
             });
@@ -1216,10 +1216,10 @@ fn start_viewer(procs: &mut Procs, session: &str, opts: &RunOptions) -> anyhow::
 /// what [`run_once`] writes to `summary.json` besides the run's own figures.
 struct Verdict {
     ticks: u64,
-    state_hash: records::outcome::StateHash,
+    state_hash: run_records::outcome::StateHash,
     failures: Vec<String>,
-    robots: Vec<records::summary::RobotSummary>,
-    traffic: Option<records::summary::TrafficSummary>,
+    robots: Vec<run_records::summary::RobotSummary>,
+    traffic: Option<run_records::summary::TrafficSummary>,
     chair: Option<ChairSummary>,
 }
 
@@ -1414,7 +1414,7 @@ pub fn print_summary(s: &RunSummary, chair: Option<&ChairSummary>, out: &Path) {
 
 /// The traffic of a run of many chairs: per robot its clearances, contacts by kind and time
 /// stood still short of its goal, then the run's measures.
-fn print_traffic(s: &RunSummary, t: &records::summary::TrafficSummary) {
+fn print_traffic(s: &RunSummary, t: &run_records::summary::TrafficSummary) {
     let m = |v: Option<f64>| v.map_or("-".to_owned(), |v| format!("{v:.3}"));
     println!(
         "  {:<10} {:>8} {:>13} {:>13} {:>24} {:>8}",

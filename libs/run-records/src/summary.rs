@@ -3,8 +3,8 @@
 //! ([`SummaryScene`]).
 //!
 //! ```
-//! use records::places::Checkpoint;
-//! use records::summary::{RunSummary, SummaryScene};
+//! use places::Checkpoint;
+//! use run_records::summary::{RunSummary, SummaryScene};
 //!
 //! let run = RunSummary {
 //!     scenario: "slalom".into(),
@@ -26,8 +26,8 @@ use std::path::{Path, PathBuf};
 use serde::{Deserialize, Serialize};
 
 use crate::outcome::StateHash;
-use crate::places::{Checkpoint, Obstacle};
 use crate::round_to;
+use places::{Checkpoint, Obstacle};
 
 /// One robot's outcome, measured from its log.
 #[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
@@ -284,7 +284,7 @@ fn items<T: serde::de::DeserializeOwned>(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::places::{DEFAULT_CHECKPOINT_RADIUS_M, DEFAULT_OBSTACLE_HEIGHT_M};
+    use places::{DEFAULT_CHECKPOINT_RADIUS_M, DEFAULT_OBSTACLE_HEIGHT_M};
 
     fn run() -> RunSummary {
         RunSummary {

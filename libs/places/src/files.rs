@@ -2,7 +2,7 @@
 //! most [`MAX_TEXT_FILE_BYTES`], as UTF-8.
 //!
 //! ```
-//! let err = records::files::read_text(std::path::Path::new("/dev/zero")).unwrap_err();
+//! let err = places::files::read_text(std::path::Path::new("/dev/zero")).unwrap_err();
 //! assert!(err.to_string().contains("not a regular file"), "{err}");
 //! ```
 

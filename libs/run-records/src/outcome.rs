@@ -2,13 +2,13 @@
 //! the benchmarks and the tests read back from the hub's stdout.
 //!
 //! ```
-//! use records::outcome::{HubOutcome, StateHash};
+//! use run_records::outcome::{HubOutcome, StateHash};
 //!
 //! let out = HubOutcome { ticks: 40, state_hash: StateHash(0xbeef), ..Default::default() };
 //! let stdout = format!("some line\n{}\n", out.json_line());
 //! assert!(stdout.contains(r#""state_hash":"000000000000beef""#));
 //! assert_eq!(HubOutcome::from_stdout(&stdout)?, out);
-//! # Ok::<(), records::outcome::OutcomeReadError>(())
+//! # Ok::<(), run_records::outcome::OutcomeReadError>(())
 //! ```
 
 use std::fmt;

@@ -19,7 +19,7 @@
 use std::io::BufRead as _;
 use std::path::{Path, PathBuf};
 
-use records::summary::RunSummary;
+use run_records::summary::RunSummary;
 use serde::{Deserialize, Serialize};
 
 use crate::scenario::{ChairMode, ChairSpec, Scenario};
@@ -332,8 +332,8 @@ pub fn summary_json(run: &RunSummary, chair: Option<&ChairSummary>) -> Result<St
 }
 
 /// The `"chair"` of a `summary.json`, if the run had one.
-pub fn read_chair_summary(path: &Path) -> Result<Option<ChairSummary>, records::summary::SummaryReadError> {
-    use records::summary::SummaryReadError;
+pub fn read_chair_summary(path: &Path) -> Result<Option<ChairSummary>, run_records::summary::SummaryReadError> {
+    use run_records::summary::SummaryReadError;
     #[derive(Deserialize)]
     struct File {
         #[serde(default)]

@@ -1,9 +1,9 @@
 //! The metrics of multi-robot navigation, measured from the hub's record (true poses, the
 //! world's contact counts): per robot its clearances, what its contacts were with, and how
 //! long it stood still short of its goal; per run the success rate, makespan, sum of times,
-//! deadlocks and throughput ([`records::summary::TrafficSummary`]).
+//! deadlocks and throughput ([`run_records::summary::TrafficSummary`]).
 
-use records::summary::{RobotSummary, TrafficSummary};
+use run_records::summary::{RobotSummary, TrafficSummary};
 use sim_model::{point_in_polygon, point_segment_distance};
 
 /// A robot slower than this, m/s, stands still.

@@ -6,8 +6,8 @@
 /// errors (`"X,Y,DIR"`).
 ///
 /// ```
-/// assert_eq!(records::args::numbers("1, 2.5", "X,Y[,R]", 2, 3), Ok(vec![1.0, 2.5]));
-/// assert!(records::args::numbers("1,x", "X,Y", 2, 2).unwrap_err().contains("X,Y"));
+/// assert_eq!(places::args::numbers("1, 2.5", "X,Y[,R]", 2, 3), Ok(vec![1.0, 2.5]));
+/// assert!(places::args::numbers("1,x", "X,Y", 2, 2).unwrap_err().contains("X,Y"));
 /// ```
 pub fn numbers(spec: &str, form: &str, min: usize, max: usize) -> Result<Vec<f64>, String> {
     let v: Vec<f64> = spec
