@@ -336,41 +336,20 @@ impl Cone {
     }
 
     /// Distance from the apex to the part of the segment `a`–`b` inside the cone, if any of
-    /// it is (what an exact proximity sensor reports for that segment).
+    /// it is (what an exact proximity sensor reports for that segment). The geometry is
+    /// `sim_model::cone_range`, the one that the hub's proximity kernel is tested against
+    /// (`sim_models_cone_range_is_the_hubs_proximity`), so the navigator predicts readings
+    /// as the world makes them.
     pub fn distance_to_segment(&self, a: V2, b: V2) -> Option<f64> {
-        let u1 = V2::unit(self.dir - self.half);
-        let u2 = V2::unit(self.dir + self.half);
-        let w = a - self.apex;
-        let d = b - a;
-        // Keep t in [0, 1] with cross(u1, w + t d) ≥ 0 and cross(w + t d, u2) ≥ 0.
-        let (mut t0, mut t1) = (0.0f64, 1.0f64);
-        for (k0, k1) in [(u1.cross(w), u1.cross(d)), (w.cross(u2), d.cross(u2))] {
-            if k1 == 0.0 {
-                if k0 < 0.0 {
-                    return None;
-                }
-            } else {
-                let t = -k0 / k1;
-                if k1 > 0.0 {
-                    t0 = t0.max(t);
-                } else {
-                    t1 = t1.min(t);
-                }
-            }
-            if t0 > t1 {
-                return None;
-            }
-        }
-        // A cone is convex only up to 180°; the half-planes also admit the opposite wedge,
-        // which a cone below 180° excludes by its axis.
-        let axis = V2::unit(self.dir);
-        let (p0, p1) = (w + d * t0, w + d * t1);
-        if p0.dot(axis) < 0.0 && p1.dot(axis) < 0.0 {
-            return None;
-        }
-        let len2 = d.norm2();
-        let t_star = if len2 > 0.0 { (-w.dot(d) / len2).clamp(t0, t1) } else { t0 };
-        Some((w + d * t_star).norm())
+        let d = sim_model::cone_range(
+            [self.apex.x, self.apex.y],
+            self.dir,
+            2.0 * self.half,
+            [a.x, a.y],
+            [b.x, b.y],
+            f64::INFINITY,
+        );
+        d.is_finite().then_some(d)
     }
 }
 
