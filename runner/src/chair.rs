@@ -37,11 +37,7 @@ pub const EMULATOR_BANNER: &str = "chair-emulator: ";
 pub fn emulator_args(spec: &ChairSpec, lab: &str, seed: u64, stepped: bool, link: &Path, truth: &Path) -> Vec<String> {
     let mut args = vec!["chair-emulator".to_owned(), "--lab".to_owned(), lab.to_owned()];
     for b in &spec.room {
-        let mut value = format!("{},{},{},{},{}", b.name, b.x0, b.y0, b.x1, b.y1);
-        if b.dark {
-            value.push_str(",dark");
-        }
-        args.extend(["--box".to_owned(), value]);
+        args.extend(["--box".to_owned(), b.to_string()]);
     }
     args.extend([
         "--pose".to_owned(),

@@ -61,7 +61,7 @@
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
-pub use places::{Checkpoint, Obstacle};
+pub use places::{Checkpoint, Obstacle, RoomBox};
 use serde::Deserialize;
 
 /// The lock-step deadline of a scenario that sets none: long enough for any agent of ours on a
@@ -239,50 +239,6 @@ pub struct ChairSpec {
     /// (default true); false pushes raw odometry (`iwsim serial --odometry-only`).
     #[serde(default = "yes")]
     pub localise: bool,
-}
-
-/// A box in the chair emulator's room (checked as it is read, as obstacles are).
-#[derive(Debug, Clone, PartialEq, Deserialize)]
-#[serde(try_from = "RoomBoxTable")]
-pub struct RoomBox {
-    /// Its name (no commas: the emulator's `--box` is comma-separated).
-    pub name: String,
-    /// Lower-left x, metres.
-    pub x0: f64,
-    /// Lower-left y, metres.
-    pub y0: f64,
-    /// Upper-right x, metres.
-    pub x1: f64,
-    /// Upper-right y, metres.
-    pub y1: f64,
-    /// A dark surface, which the chair's IR beams do not see.
-    pub dark: bool,
-}
-
-/// A room box's table in a scenario file.
-#[derive(Deserialize)]
-#[serde(deny_unknown_fields)]
-struct RoomBoxTable {
-    name: String,
-    x0: f64,
-    y0: f64,
-    x1: f64,
-    y1: f64,
-    #[serde(default)]
-    dark: bool,
-}
-
-impl TryFrom<RoomBoxTable> for RoomBox {
-    type Error = String;
-    fn try_from(t: RoomBoxTable) -> Result<Self, String> {
-        if t.name.is_empty() || t.name.contains(',') {
-            return Err(format!("room box {:?}: a name is needed, without commas", t.name));
-        }
-        // The same rule as the hub's obstacles, with their message.
-        let b = Obstacle { name: t.name, ..Obstacle::new(t.x0, t.y0, t.x1, t.y1, 1.0) };
-        let b = b.checked().map_err(|e| e.to_string())?;
-        Ok(Self { name: b.name, x0: b.x0, y0: b.y0, x1: b.x1, y1: b.y1, dark: t.dark })
-    }
 }
 
 /// What must hold at the end of a run.

@@ -18,6 +18,9 @@
 
 pub mod args;
 pub mod files;
+mod room;
+
+pub use room::RoomBox;
 
 use std::fmt;
 
