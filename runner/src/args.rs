@@ -19,9 +19,9 @@ pub struct RunArgs {
     /// for seconds needs more; a deadline that is met never changes the run.
     #[arg(long, value_name = "MS", value_parser = clap::value_parser!(u64).range(1..=hub::cli::MAX_DEADLINE_MS))]
     pub deadline_ms: Option<u64>,
-    /// No viewer.
-    #[arg(long)]
-    pub headless: bool,
+    /// The viewer.
+    #[command(flatten)]
+    pub viewer: ViewerArgs,
     /// Print the scenario as a learning environment runs it (lab, checkpoints, obstacles,
     /// start poses, time, tick, noise, deadline) as JSON, and run nothing: the Python
     /// package reads scenario files this way.
@@ -40,16 +40,6 @@ pub struct RunArgs {
     /// Where logs, the recording (run.mcap) and summary.json go (default runs/<scenario>; a batch uses seed-N/ below it).
     #[arg(long)]
     pub out: Option<PathBuf>,
-    /// Where the viewer serves (use 0.0.0.0:8080 to watch from another machine).
-    #[arg(long, default_value = "127.0.0.1:8080")]
-    pub http: std::net::SocketAddr,
-    /// Let the viewer's page start, pause, step and stop the run.
-    #[arg(long)]
-    pub allow_control: bool,
-    /// A host name the viewer may be opened under besides its address (`lab-pc`, or
-    /// `lab-pc:8080` for one port), passed to `iwsim view`. Repeatable.
-    #[arg(long, value_name = "HOST")]
-    pub allow_host: Vec<String>,
     /// Print only the summary.
     #[arg(long)]
     pub quiet: bool,
@@ -103,9 +93,9 @@ pub struct DemoArgs {
     /// Where the logs, the recording (run.mcap) and summary.json go.
     #[arg(long, default_value = "runs/demo")]
     pub out: PathBuf,
-    /// No viewer.
-    #[arg(long)]
-    pub headless: bool,
+    /// The viewer.
+    #[command(flatten)]
+    pub viewer: ViewerArgs,
     /// Print the scenario as a learning environment runs it (lab, checkpoints, obstacles,
     /// start poses, time, tick, noise, deadline) as JSON, and run nothing: the Python
     /// package reads scenario files this way.
@@ -114,7 +104,19 @@ pub struct DemoArgs {
     /// As fast as the agents allow instead of real time (implies --headless makes sense).
     #[arg(long)]
     pub lockstep: bool,
-    /// Where the viewer serves (0.0.0.0:8080 to watch from another machine).
+    /// Session name, so `iwsim view --session NAME` or `iwsim udp --session NAME` can attach
+    /// to the demo (default: a unique name, run-<pid>-<seed>-<n>).
+    #[arg(long)]
+    pub session: Option<String>,
+}
+
+/// The viewer a run starts (`iwsim view`), as `iwsim run` and `iwsim demo` ask for it.
+#[derive(Debug, Args, Clone)]
+pub struct ViewerArgs {
+    /// No viewer.
+    #[arg(long)]
+    pub headless: bool,
+    /// Where the viewer serves (use 0.0.0.0:8080 to watch from another machine).
     #[arg(long, default_value = "127.0.0.1:8080")]
     pub http: std::net::SocketAddr,
     /// Let the viewer's page start, pause, step and stop the run.
@@ -124,8 +126,4 @@ pub struct DemoArgs {
     /// `lab-pc:8080` for one port), passed to `iwsim view`. Repeatable.
     #[arg(long, value_name = "HOST")]
     pub allow_host: Vec<String>,
-    /// Session name, so `iwsim view --session NAME` or `iwsim udp --session NAME` can attach
-    /// to the demo (default: a unique name, run-<pid>-<seed>-<n>).
-    #[arg(long)]
-    pub session: Option<String>,
 }

@@ -60,10 +60,7 @@ pub fn run(args: &DemoArgs) -> anyhow::Result<ExitCode> {
     );
     let opts = RunOptions {
         lockstep: args.lockstep,
-        headless: args.headless,
-        http: args.http,
-        allow_control: args.allow_control,
-        allow_host: args.allow_host.clone(),
+        viewer: args.viewer.clone(),
         verbose: true,
         session: args.session.clone(),
         hub_options: Vec::new(),

@@ -664,14 +664,8 @@ pub struct RunEnd {
 pub struct RunOptions {
     /// Lock-step (as fast as the agents allow) instead of real time.
     pub lockstep: bool,
-    /// No viewer.
-    pub headless: bool,
-    /// Where the viewer serves.
-    pub http: std::net::SocketAddr,
-    /// Let the viewer's page control the run.
-    pub allow_control: bool,
-    /// Host names the viewer may be opened under (`iwsim view --allow-host`).
-    pub allow_host: Vec<String>,
+    /// The viewer (none when `headless`).
+    pub viewer: crate::args::ViewerArgs,
     /// Print progress and the agents' messages.
     pub verbose: bool,
     /// The session (default: a unique `run-<pid>-<seed>-<n>`).
@@ -1195,12 +1189,12 @@ fn start_agents(
 fn start_viewer(procs: &mut Procs, session: &str, opts: &RunOptions) -> anyhow::Result<Option<ViewerStart>> {
     let s = |x: &str| x.to_owned();
     let mut viewer_start = None;
-    if !opts.headless {
-        let mut args = vec![s("view"), s("--session"), session.to_owned(), s("--http"), opts.http.to_string()];
-        if opts.allow_control {
+    if !opts.viewer.headless {
+        let mut args = vec![s("view"), s("--session"), session.to_owned(), s("--http"), opts.viewer.http.to_string()];
+        if opts.viewer.allow_control {
             args.push(s("--allow-control"));
         }
-        for h in &opts.allow_host {
+        for h in &opts.viewer.allow_host {
             args.extend([s("--allow-host"), h.clone()]);
         }
         let mut v = Kid::spawn(&args, "viewer", false)?;
@@ -1528,10 +1522,11 @@ fn scenario_of(args: &RunArgs) -> anyhow::Result<Scenario> {
 fn run_options(args: &RunArgs) -> RunOptions {
     RunOptions {
         lockstep: args.lockstep,
-        headless: args.headless || args.seeds.is_some(),
-        http: args.http,
-        allow_control: args.allow_control,
-        allow_host: args.allow_host.clone(),
+        // A batch has no viewer: runs follow one another too fast to watch.
+        viewer: crate::args::ViewerArgs {
+            headless: args.viewer.headless || args.seeds.is_some(),
+            ..args.viewer.clone()
+        },
         verbose: !args.quiet,
         session: args.session.clone(),
         hub_options: vec![
