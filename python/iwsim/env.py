@@ -173,8 +173,7 @@ class ChairsParallelEnv(ParallelEnv):
             starts.append((x - spacing_m * math.cos(math.radians(h)), y - spacing_m * math.sin(math.radians(h)), h))
         self._starts = starts[:n]
         self.reward_fn = reward
-        self._checkpoints = np.asarray(self.scenario.checkpoints, dtype=np.float64).reshape(-1, 3)
-        self._never = np.zeros(n, dtype=bool)
+        self._judge = None
         self.possible_agents = [f"chair{i}" for i in range(n)]
         self._index = {a: k for k, a in enumerate(self.possible_agents)}
         self.agents: list[str] = []
@@ -244,8 +243,10 @@ class ChairsParallelEnv(ParallelEnv):
         if self._tick is None:
             raise IwsimError("the hub ended the run before its first tick")
         self.agents = list(self.possible_agents)
-        _, raw_poses = self._observer.poses(self._tick.tick, self._id_list, 20)
-        self._state = self._judge(raw_poses, np.zeros(len(self.possible_agents), dtype=np.int64))
+        # Judged by the scenario as it is now: a user may change it between episodes.
+        self._judge = referee.Judge([tuple(map(float, c)) for c in s.checkpoints])
+        self._last_tick = s.ticks()
+        self._judged = self._judge.start(self._observer, self._tick.tick, self._id_list, 20)
         return dict(zip(self.agents, self._observation_table())), {a: {} for a in self.agents}
 
     def step(self, actions: dict):
@@ -255,8 +256,8 @@ class ChairsParallelEnv(ParallelEnv):
         # chairs' observations and the referee's true poses.
         table = self._action_table(actions)
         try:
-            stepped = referee.env_step(self._agent._native, self._observer, self._tick.tick, table.tobytes(),
-                                      MAX_RANGE_M, 60, SPIN_S)
+            stepped = referee.env_step(self._agent._native, self._observer, self._judge, self._tick.tick,
+                                       table.tobytes(), MAX_RANGE_M, 60, SPIN_S)
         except ValueError:
             # The native side checks every power is finite before anything is sent: name the chair.
             bad = np.flatnonzero(~np.isfinite(table).all(axis=1))
@@ -271,34 +272,37 @@ class ChairsParallelEnv(ParallelEnv):
                       dict.fromkeys(live, False), dict.fromkeys(live, True), {a: {} for a in live})
             self.agents = []
             return result
-        tick, sim_time_s, raw_obs, raw_poses = stepped
+        tick, sim_time_s, raw_obs, raw_judged, rewards, done, contacts, any_done = stepped
         self._tick = Tick(tick, sim_time_s)
-        before = self._state
-        after = self._judge(raw_poses, before.next_checkpoint)
-        table = self._last_obs = np.frombuffer(raw_obs, dtype=np.float32).reshape(len(self.possible_agents), -1)
-        m = len(self.scenario.checkpoints)
-        rewards = np.asarray(self.reward_fn(before, after, self.scenario.checkpoints), dtype=np.float64)
-        if rewards.shape != (len(self.possible_agents),):
-            raise ValueError(f"the reward function returned shape {rewards.shape}: one reward per chair expected")
-        # No checkpoints: no goal, the episode ends at the time limit.
-        done = (after.next_checkpoint >= m) if m else self._never
-        last = self._tick.tick >= self.scenario.ticks()
-        self._state = after
+        n = len(self.possible_agents)
+        table = self._last_obs = np.frombuffer(raw_obs, dtype=np.float32).reshape(n, -1)
+        before, self._judged = self._judged, raw_judged
+        if self.reward_fn is not progress_reward:  # else the judge's rewards are progress_reward's
+            after = self._state(raw_judged)
+            rewards = np.asarray(self.reward_fn(self._state(before), after, self.scenario.checkpoints), dtype=np.float64)
+            if rewards.shape != (n,):
+                raise ValueError(f"the reward function returned shape {rewards.shape}: one reward per chair expected")
+            rewards = rewards.tolist()
+        last = tick >= self._last_tick
         live = self.agents
-        if len(live) == len(self.possible_agents):
+        # The dicts PettingZoo asks for, from the judge's lists with as few Python steps per
+        # chair as can be: this is most of what a step costs beside the hub's tick.
+        if len(live) == n:
             obs = dict(zip(live, table))
-            rewards = dict(zip(live, rewards.tolist()))
-            terminations = dict(zip(live, done.tolist()))
-            contacts = after.contacts.astype(np.int64).tolist()
+            rewards = dict(zip(live, rewards))
+            terminations = dict(zip(live, done))
         else:
             rows = [self._index[a] for a in live]
             obs = {a: table[k] for a, k in zip(live, rows)}
-            rewards = {a: float(rewards[k]) for a, k in zip(live, rows)}
-            terminations = {a: bool(done[k]) for a, k in zip(live, rows)}
-            contacts = [int(after.contacts[k]) for k in rows]
-        truncations = {a: last and not t for a, t in terminations.items()}
+            rewards = {a: rewards[k] for a, k in zip(live, rows)}
+            terminations = {a: done[k] for a, k in zip(live, rows)}
+            contacts = [contacts[k] for k in rows]
+        if last:
+            truncations = {a: not t for a, t in terminations.items()}
+        else:
+            truncations = dict.fromkeys(live, False)
         infos = {a: {"tick": tick, "contacts": c} for a, c in zip(live, contacts)}
-        if last or (m and done.any()):
+        if last or any_done:
             self.agents = [a for a in live if not (terminations[a] or truncations[a])]
         return obs, rewards, terminations, truncations, infos
 
@@ -352,20 +356,12 @@ class ChairsParallelEnv(ParallelEnv):
         self._last_obs = self._agent.observations(MAX_RANGE_M)
         return self._last_obs
 
-    def _judge(self, raw_poses: bytes, next_checkpoint: np.ndarray) -> ChairState:
-        """The referee's view from the observer's true poses: where each chair is, its
-        contacts, and the checkpoint it drives to next."""
-        x, y, heading, contacts = np.frombuffer(raw_poses, dtype=np.float64).reshape(-1, 4).T
-        nxt = next_checkpoint.copy()
-        cps = self._checkpoints
-        m = len(cps)
-        for _ in range(m):  # a chair may pass several checkpoints in one tick
-            k = np.minimum(nxt, m - 1)
-            reached = (nxt < m) & (np.hypot(x - cps[k, 0], y - cps[k, 1]) <= cps[k, 2])
-            if not reached.any():
-                break
-            nxt += reached
-        return ChairState(x, y, heading, contacts, nxt)
+    def _state(self, judged: bytes) -> ChairState:
+        """The referee's view of one tick from the judge's table (``iwsim._iwsim.referee.Judge``:
+        rows of x, y, heading, contacts, next checkpoint, reward), for a reward function of the
+        user's."""
+        x, y, heading, contacts, nxt, _ = np.frombuffer(judged, dtype=np.float64).reshape(-1, 6).T
+        return ChairState(x, y, heading, contacts, nxt.astype(np.int64))
 
 
 class ChairEnv(Env):

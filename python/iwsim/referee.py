@@ -18,6 +18,7 @@ from typing import Optional
 Observer = _native.Observer
 EpisodeHost = _native.EpisodeHost
 env_step = _native.env_step
+Judge = _native.Judge
 
 
 def observe(session: str, timeout: float = 5.0, zenoh: Optional[str] = None) -> Observer:
@@ -31,4 +32,4 @@ def observe(session: str, timeout: float = 5.0, zenoh: Optional[str] = None) -> 
     return _native.observe(session, timeout, zenoh)
 
 
-__all__ = ["EpisodeHost", "Observer", "env_step", "observe"]
+__all__ = ["EpisodeHost", "Judge", "Observer", "env_step", "observe"]

@@ -129,9 +129,13 @@ impl Observer {
         ids: Vec<u32>,
         timeout: f64,
     ) -> PyResult<(u64, Bound<'py, PyBytes>)> {
-        let (tick, table) =
-            self.with_world_at(py, tick, timeout, |h, robots| (h.tick, pose_table(robots, &ids, h.tick)))?;
-        Ok((tick, PyBytes::new(py, &table?)))
+        let (tick, rows) =
+            self.with_world_at(py, tick, timeout, |h, robots| (h.tick, pose_rows(robots, &ids, h.tick)))?;
+        let mut table = vec![0u8; ids.len() * 32];
+        for (out, row) in table.chunks_exact_mut(32).zip(rows?) {
+            write_f64s(out, &row);
+        }
+        Ok((tick, PyBytes::new(py, &table)))
     }
 
     /// Stops observing. Closing twice does nothing.
@@ -142,17 +146,18 @@ impl Observer {
 
 /// One step of `iwsim.env` in one call: `agent` answers `tick` with `powers` (see
 /// [`Agent::step`]) and waits for the next tick; returns `None` once the run has finished, else
-/// (tick, simulated seconds, the chairs' observations (see [`Agent::observations`]), their
-/// true poses from `observer` at that tick (see [`Observer::poses`]), both in the agent's
-/// registration order). The referee's poses never reach the agent: they go back to the
-/// environment's Python code, which judges rewards from them.
+/// (tick, simulated seconds, the chairs' observations (see [`Agent::observations`]), `judge`'s
+/// table of that tick (see [`Judge`]), both in the agent's registration order). The truth from
+/// `observer` never reaches the agent: it goes to the judge, whose table goes back to the
+/// environment's Python code for rewards and terminations.
 #[pyfunction]
-#[pyo3(signature = (agent, observer, tick, powers, max_range, timeout = None, spin = 0.0))]
-#[allow(clippy::too_many_arguments)] // Python's keyword arguments, one call per step
+#[pyo3(signature = (agent, observer, judge, tick, powers, max_range, timeout = None, spin = 0.0))]
+#[allow(clippy::too_many_arguments)] // one call per step is the point: each argument is a part of it
 fn env_step<'py>(
     py: Python<'py>,
     agent: &Bound<'py, Agent>,
     observer: &Bound<'py, Observer>,
+    judge: &Bound<'py, Judge>,
     tick: u64,
     powers: &[u8],
     max_range: f32,
@@ -166,30 +171,139 @@ fn env_step<'py>(
     // The referee reads the snapshot in the hub's shared memory; only the poses asked for leave it.
     let poses = observer
         .borrow_mut()
-        .with_world_at(py, tick, timeout.unwrap_or(20.0), |h, robots| pose_table(robots, sdk.robots(), h.tick))??;
-    let poses = PyBytes::new(py, &poses);
-    Ok(Some((tick, sim_time_s, observations, poses)))
+        .with_world_at(py, tick, timeout.unwrap_or(20.0), |h, robots| pose_rows(robots, sdk.robots(), h.tick))??;
+    let j = judge.borrow_mut().judge(&poses);
+    let ended = j.done.contains(&true);
+    Ok(Some((tick, sim_time_s, observations, PyBytes::new(py, &j.table), j.rewards, j.done, j.contacts, ended)))
 }
 
-/// What [`env_step`] returns.
-type EnvStep<'py> = (u64, f64, Bound<'py, PyByteArray>, Bound<'py, PyBytes>);
+/// What [`env_step`] returns: tick, simulated seconds, observations, then the [`Judged`] parts
+/// and whether any chair is done.
+type EnvStep<'py> = (u64, f64, Bound<'py, PyByteArray>, Bound<'py, PyBytes>, Vec<f64>, Vec<bool>, Vec<u32>, bool);
+
+/// A [`Judge`]'s verdict on one tick, per chair in the chairs' order. The lists go to Python as
+/// lists, ready for the env's dicts: each NumPy call that would make them costs as much as a
+/// chair's whole judgement.
+#[derive(Debug, Clone, PartialEq)]
+struct Judged {
+    /// Little-endian float64 rows (x, y, heading degrees, contacts, next checkpoint, reward).
+    table: Vec<u8>,
+    /// `progress_reward`'s reward for the tick.
+    rewards: Vec<f64>,
+    /// Whether the chair has passed the last checkpoint (never, without checkpoints).
+    done: Vec<bool>,
+    /// Contacts so far.
+    contacts: Vec<u32>,
+}
+
+/// The columns of a [`Judge`]'s table.
+const JUDGED: usize = 6;
+
+/// The referee of `iwsim.env`: from each tick's true poses, where each chair is, its contacts,
+/// the checkpoint it drives to next (a chair may pass several in one tick) and the default
+/// reward (`iwsim.env.progress_reward`: metres gained towards the next checkpoint, -1 per new
+/// contact, +10 on reaching the last; 0 once done). Judged here, in one pass over the chairs,
+/// rather than by a dozen NumPy calls per step: the env's own Python work per step is what
+/// sets its speed against an agent in Rust.
+#[pyclass(module = "iwsim._iwsim.referee")]
+#[derive(Debug, Clone)]
+pub struct Judge {
+    checkpoints: Vec<[f64; 3]>,
+    /// Per chair: the index of its next checkpoint (`checkpoints.len()` once done).
+    next: Vec<usize>,
+    /// Per chair: (x, y, heading, contacts) as last judged.
+    last: Vec<[f64; 4]>,
+}
+
+#[pymethods]
+impl Judge {
+    /// A judge of chairs driving through `checkpoints` ((x, y, radius) in metres) in order.
+    #[new]
+    fn new(checkpoints: Vec<(f64, f64, f64)>) -> Self {
+        Self { checkpoints: checkpoints.into_iter().map(|(x, y, r)| [x, y, r]).collect(), next: vec![], last: vec![] }
+    }
+
+    /// Starts an episode at the poses of `observer` at `tick` or later for robots `ids`
+    /// (waiting up to `timeout` seconds): every chair drives to the first checkpoint (or past
+    /// those it starts in); returns the table as [`env_step`] does.
+    fn start<'py>(
+        &mut self,
+        py: Python<'py>,
+        observer: &Bound<'py, Observer>,
+        tick: u64,
+        ids: Vec<u32>,
+        timeout: f64,
+    ) -> PyResult<Bound<'py, PyBytes>> {
+        let poses =
+            observer.borrow_mut().with_world_at(py, tick, timeout, |h, robots| pose_rows(robots, &ids, h.tick))??;
+        self.next = vec![0; poses.len()];
+        self.last = poses.clone();
+        Ok(PyBytes::new(py, &self.judge(&poses).table))
+    }
+}
+
+impl Judge {
+    /// Judges one tick's `poses` (per chair: x, y, heading, contacts) against the last.
+    fn judge(&mut self, poses: &[[f64; 4]]) -> Judged {
+        let m = self.checkpoints.len();
+        let n = poses.len();
+        let mut j = Judged {
+            table: vec![0u8; n * JUDGED * 8],
+            rewards: Vec::with_capacity(n),
+            done: Vec::with_capacity(n),
+            contacts: Vec::with_capacity(n),
+        };
+        for (k, (row, &[x, y, heading, contacts])) in j.table.chunks_exact_mut(JUDGED * 8).zip(poses).enumerate() {
+            let [bx, by, _, before_contacts] = self.last[k];
+            let before = self.next[k];
+            let mut next = before;
+            while let Some(&[cx, cy, r]) = self.checkpoints.get(next) {
+                if (x - cx).hypot(y - cy) > r {
+                    break;
+                }
+                next += 1;
+            }
+            // progress_reward's arithmetic, in its order, so the two agree to the bit (a test
+            // compares them).
+            let contact = -(contacts - before_contacts);
+            let reward = match self.checkpoints.get(before) {
+                _ if m == 0 => contact,
+                None => 0.0,
+                Some(&[cx, cy, _]) => {
+                    let gained = (bx - cx).hypot(by - cy) - (x - cx).hypot(y - cy);
+                    gained + contact + if next >= m { 10.0 } else { 0.0 }
+                }
+            };
+            write_f64s(row, &[x, y, heading, contacts, next as f64, reward]);
+            j.rewards.push(reward);
+            j.done.push(m > 0 && next >= m);
+            // A collision count is a u32 in the world snapshot: the f64 holds it exactly.
+            j.contacts.push(contacts as u32);
+            self.next[k] = next;
+            self.last[k] = [x, y, heading, contacts];
+        }
+        j
+    }
+}
 
 /// What [`Observer::robots`] returns.
 type RobotStates = (u64, Vec<(u32, f64, f64, f64, u32)>);
 
-/// The true poses of robots `ids` in `robots` (see [`Observer::poses`]).
-fn pose_table(robots: &[ipc_types::RobotState], ids: &[u32], tick: u64) -> PyResult<Vec<u8>> {
-    let mut out = vec![0u8; ids.len() * 32];
-    for (k, (row, id)) in out.chunks_exact_mut(32).zip(ids).enumerate() {
-        // The hub keeps robots in registration order: a referee's ids usually line up with it.
-        let r = robots
-            .get(k)
-            .filter(|r| r.id == *id)
-            .or_else(|| robots.iter().find(|r| r.id == *id))
-            .ok_or_else(|| PyKeyError::new_err(format!("robot {id} is not in the world of tick {tick}")))?;
-        write_f64s(row, &[r.x_m, r.y_m, r.heading_deg, f64::from(r.collision_count)]);
-    }
-    Ok(out)
+/// The true poses of robots `ids` in `robots` (see [`Observer::poses`]): per robot (x m, y m,
+/// heading degrees, collision count).
+fn pose_rows(robots: &[ipc_types::RobotState], ids: &[u32], tick: u64) -> PyResult<Vec<[f64; 4]>> {
+    ids.iter()
+        .enumerate()
+        .map(|(k, id)| {
+            // The hub keeps robots in registration order: a referee's ids usually line up with it.
+            let r = robots
+                .get(k)
+                .filter(|r| r.id == *id)
+                .or_else(|| robots.iter().find(|r| r.id == *id))
+                .ok_or_else(|| PyKeyError::new_err(format!("robot {id} is not in the world of tick {tick}")))?;
+            Ok([r.x_m, r.y_m, r.heading_deg, f64::from(r.collision_count)])
+        })
+        .collect()
 }
 
 /// Fills the submodule `referee` of the native module.
@@ -197,6 +311,7 @@ pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(observe, m)?)?;
     m.add_function(wrap_pyfunction!(env_step, m)?)?;
     m.add_class::<Observer>()?;
+    m.add_class::<Judge>()?;
     m.add_class::<EpisodeHost>()?;
     Ok(())
 }

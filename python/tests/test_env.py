@@ -133,6 +133,37 @@ def test_a_swapped_reward_sees_every_chair_at_once_and_a_wrong_shape_is_refused(
         env.close()
 
 
+def test_the_judges_default_reward_is_progress_reward_to_the_bit():
+    # The default reward is judged natively; progress_reward, given as a reward of one's own,
+    # runs in NumPy on the same states. Chair 0 passes both checkpoints (the +10 and its
+    # termination); chair 1 drives into it from the east (contacts, -1 each).
+    from iwsim.env import progress_reward
+
+    s = Scenario(lab="builtin:liacc", checkpoints=[(10.0, 6.1, 0.5), (12.0, 6.1, 0.5)],
+                 starts=[(9.5, 6.1, 0.0), (15.5, 6.1, 180.0)], seconds=12.0)
+
+    def episode(reward):
+        env = ChairsParallelEnv(2, s, reward=reward)
+        try:
+            env.reset(seed=5)
+            steps = []
+            while env.agents:
+                steps.append(env.step({a: np.array([1.0, 1.0]) for a in env.agents})[1:])
+            return steps
+        finally:
+            env.close()
+
+    native = episode(progress_reward)
+    numpy = episode(lambda before, after, checkpoints: progress_reward(before, after, checkpoints))
+    assert native == numpy, "the same rewards, terminations, truncations and infos, step by step"
+    rewards = [r for rew, *_ in native for r in rew.values()]
+    assert max(rewards) > 10.0, "chair 0 reached the last checkpoint"
+    assert any(t["chair0"] for _, t, *_ in native if "chair0" in t), "and was done there"
+    assert max(info["chair1"]["contacts"] for *_, infos in native for info in [infos] if "chair1" in info) > 0, \
+        "chair 1 ran into chair 0"
+    assert min(rewards) < -0.5, "a contact costs its -1"
+
+
 def _running(pid: int) -> bool:
     """Whether process `pid` exists and has not exited (a zombie waiting for its reaper has)."""
     try:
