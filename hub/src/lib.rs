@@ -413,6 +413,9 @@ impl Live {
     /// **Linger** and the end: tells everyone an interrupted run is over, gives the agents
     /// time to read it, finishes the recording, and reports.
     fn finish(mut self) -> Result<HubOutcome, HubError> {
+        // The run ends with its last step: the linger below (up to 2 s while an agent such as
+        // the UDP bridge outlives the run) is not part of it, and every rate divides by this.
+        let run_s = self.first_step.map_or(0.0, |t| t.elapsed().as_secs_f64());
         if self.outcome.interrupted {
             self.core.command(Command::Stop, 0);
             let _ = publish_tick(&self.core, &mut self.server, None, 0);
@@ -446,7 +449,7 @@ impl Live {
         outcome.foreign_dropped = counts.foreign_dropped;
         outcome.refused_poses = core.refused_poses();
         outcome.ticks = core.world().tick();
-        outcome.run_s = self.first_step.map_or(0.0, |t| t.elapsed().as_secs_f64());
+        outcome.run_s = run_s;
         outcome.answer_wait = (self.cfg.mode == Mode::LockStep && !self.answer_waits.is_empty())
             .then(|| run_records::latency::Percentiles::of_ns(&self.answer_waits));
         outcome.state_hash = StateHash(core.world().state_hash());

@@ -177,6 +177,41 @@ fn an_intellwheels_robot_drives_and_its_gps_track_follows_the_kinematics_within_
 }
 
 #[test]
+fn the_hubs_run_time_ends_with_its_last_tick_not_with_the_agents_linger_after_it() {
+    // After the run the bridge keeps a stock client's Measures coming until the client has
+    // been silent for 2 s, and the hub waits up to 2 s for it to exit. Ticks per second are
+    // the hub's ticks over its run_s (every bench divides so): that wait is not the run's.
+    let s = session("udp-run-s");
+    let (hub, bridge, reg) = hub_and_bridge(&s, &["--lockstep", "--wait-agents", "1", "--ticks", "30", "--json"], &[]);
+    let mut c = Client::new();
+    assert!(c.register(reg, r#"<Robot Name="r" X="10" Y="6.1" Dir="0"/>"#).starts_with("<Reply Status=\"Ok\""));
+    let mut first = None;
+    let last = loop {
+        let m = c.next("Measures");
+        let got = Instant::now();
+        first.get_or_insert(got);
+        if attr(&m, "Measures", "Time") == Some(30.0) {
+            break got;
+        }
+        c.send(r#"<Actions LeftMotor="0.1" RightMotor="0.1"/>"#);
+    };
+    // The client goes quiet, as one that has left.
+    let h = hub.wait(Duration::from_secs(20));
+    let ended = Instant::now();
+    assert!(h.status.success(), "{}", text(&h.stderr));
+    let json = text(&h.stdout).lines().find(|l| l.starts_with('{')).expect("the --json line").to_owned();
+    let out: serde_json::Value = serde_json::from_str(&json)
+        .expect("the hub's outcome");
+    let run_s = out["run_s"].as_f64().expect("run_s");
+    let seen = last.duration_since(first.expect("a first tick")).as_secs_f64();
+    let after = ended.duration_since(last).as_secs_f64();
+    assert!(after >= 1.0, "the hub waited {after:.2} s for the bridge after the run (the case this test is about)");
+    assert!(run_s < seen + 0.5, "run_s {run_s:.2} s, but the client saw ticks 0-30 within {seen:.2} s");
+    let b = bridge.wait(Duration::from_secs(10));
+    assert!(b.status.success(), "bridge: {}", text(&b.stderr));
+}
+
+#[test]
 fn a_viewer_gets_the_lab_the_grid_and_every_robot_each_tick() {
     let s = session("udp-view");
     let (hub, bridge, reg) = hub_and_bridge(&s, &["--cycle-ms", "20"], &[]);
