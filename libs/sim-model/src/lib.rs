@@ -1,7 +1,8 @@
 //! The formulas every iwsim process shares: the hub's world model steps robots with them, and a
 //! client that models its own chair (the wheelchair agent's `real` mode, the navigator's
 //! odometry, the UDP bridge's IR values) calls the same functions, so the two can never drift
-//! apart. No dependencies, no state: plain functions of their inputs.
+//! apart. No dependencies, no state: plain functions of their inputs, and the one [`Pose`]
+//! type (heading in radians) that clients pass them, degrees being only its wire form.
 //!
 //! ```
 //! use sim_model::{Pose, advance, motor_filter, velocity, wrap_rad};
