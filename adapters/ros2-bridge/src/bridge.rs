@@ -10,7 +10,7 @@ use agent_sdk::map::Map;
 use agent_sdk::odometry::Odometry;
 use agent_sdk::{Agent, AgentError};
 use ipc_types::{ActionBlock, COLLISION, HAS_COMPASS, RobotRegistration, SensorBlock, SensorSpec};
-use sim_model::chair;
+use sim_model::{Pose, chair};
 use zenoh::Wait as _;
 
 use crate::drive::{self, Cone};
@@ -41,7 +41,7 @@ fn zerr<E: std::fmt::Display>(what: &str) -> impl FnOnce(E) -> Ros2Error + '_ {
 pub struct ChairSpec {
     /// Name and namespace.
     pub name: String,
-    /// Start pose.
+    /// Start pose in its wire form (as registered).
     pub pose: Option<[f64; 3]>,
 }
 
@@ -212,11 +212,11 @@ impl Latched {
 struct Chair {
     name: String,
     id: u32,
-    /// The start pose, x, y metres and heading radians: the `odom` frame's origin in the map.
-    start: [f64; 3],
+    /// The start pose: the `odom` frame's origin in the map.
+    start: Pose,
     odometry: Odometry,
     /// The last estimate in the map frame and when (simulated seconds), for the twist.
-    last: Option<([f64; 3], f64)>,
+    last: Option<(Pose, f64)>,
     /// The last command and the simulated time it came at.
     command: Option<(msgs::Twist, f64)>,
     /// The tick this chair's controller answered last (lock-step).
@@ -312,10 +312,11 @@ impl Bridge {
         for (k, spec) in cfg.chairs.iter().enumerate() {
             let id = agent.register(&registration(&spec.name, spec.pose))?;
             let start = match spec.pose {
-                Some([x, y, deg]) => [x, y, deg.to_radians()],
-                None => {
-                    map.grid.get(id as usize - 1).map_or([0.0; 3], |g| [g.pos.x, g.pos.y, g.heading_deg.to_radians()])
-                }
+                Some(wire) => Pose::from_wire_deg(wire),
+                None => map
+                    .grid
+                    .get(id as usize - 1)
+                    .map_or(Pose::default(), |g| Pose::from_deg(g.pos.x, g.pos.y, g.heading_deg)),
             };
             let chair = serve_chair(&mut graph, &events, &z, k, spec, id, start, &map, &cfg)?;
             by_id.insert(id, k);
@@ -538,7 +539,7 @@ fn serve_chair(
     k: usize,
     spec: &ChairSpec,
     id: u32,
-    start: [f64; 3],
+    start: Pose,
     map: &Map,
     cfg: &Ros2Config,
 ) -> Result<Chair, Ros2Error> {
@@ -579,8 +580,8 @@ fn serve_chair(
         transforms.push(msgs::TransformStamped {
             header: msgs::Header { stamp: msgs::Time::default(), frame_id: "map".into() },
             child_frame_id: "odom".into(),
-            translation: [start[0], start[1], 0.0],
-            rotation: msgs::yaw_quaternion(start[2]),
+            translation: [start.x_m, start.y_m, 0.0],
+            rotation: msgs::yaw_quaternion(start.heading_rad),
         });
     }
     tf_static.put(&msgs::TfMessage { transforms });
@@ -626,25 +627,25 @@ fn publish_readings(
     let (v, omega) = match c.last {
         Some((p, t)) if now > t => {
             let dt = now - t;
-            let ds = (pose[0] - p[0]).hypot(pose[1] - p[1]);
-            let forward = (pose[0] - p[0]) * pose[2].cos() + (pose[1] - p[1]) * pose[2].sin();
-            (ds.copysign(forward) / dt, sim_model::wrap_rad(pose[2] - p[2]) / dt)
+            let ds = (pose.x_m - p.x_m).hypot(pose.y_m - p.y_m);
+            let forward = (pose.x_m - p.x_m) * pose.heading_rad.cos() + (pose.y_m - p.y_m) * pose.heading_rad.sin();
+            (ds.copysign(forward) / dt, sim_model::wrap_rad(pose.heading_rad - p.heading_rad) / dt)
         }
         _ => (0.0, 0.0),
     };
     c.last = Some((pose, now));
     // The pose in the odom frame, whose origin is the start pose.
-    let [sx, sy, sth] = c.start;
-    let (dx, dy) = (pose[0] - sx, pose[1] - sy);
+    let Pose { x_m: sx, y_m: sy, heading_rad: sth } = c.start;
+    let (dx, dy) = (pose.x_m - sx, pose.y_m - sy);
     let (s, co) = sth.sin_cos();
-    let odom_pose = [co * dx + s * dy, -s * dx + co * dy, sim_model::wrap_rad(pose[2] - sth)];
-    let q = msgs::yaw_quaternion(odom_pose[2]);
+    let odom_pose = Pose::new(co * dx + s * dy, -s * dx + co * dy, sim_model::wrap_rad(pose.heading_rad - sth));
+    let q = msgs::yaw_quaternion(odom_pose.heading_rad);
     let header = |frame: &str| msgs::Header { stamp, frame_id: frame.to_owned() };
     c.tf.put(&msgs::TfMessage {
         transforms: vec![msgs::TransformStamped {
             header: header("odom"),
             child_frame_id: "base_link".into(),
-            translation: [odom_pose[0], odom_pose[1], 0.0],
+            translation: [odom_pose.x_m, odom_pose.y_m, 0.0],
             rotation: q,
         }],
     });
@@ -658,7 +659,7 @@ fn publish_readings(
     c.odom.put(&msgs::Odometry {
         header: header("odom"),
         child_frame_id: "base_link".into(),
-        position: [odom_pose[0], odom_pose[1], 0.0],
+        position: [odom_pose.x_m, odom_pose.y_m, 0.0],
         orientation: q,
         pose_covariance,
         twist: msgs::Twist { linear: [v, 0.0, 0.0], angular: [0.0, 0.0, omega] },

@@ -10,7 +10,7 @@ use std::time::{Duration, Instant};
 
 use ipc_types::{ACT_GHOST, ACT_LINK_DOWN, ACT_REAL, ActionBlock, SensorBlock};
 use serial_protocol::{BoardInfo, DecoderStats, Frame, FrameDecodeError, Hello, Message, SimStep};
-use sim_model::chair;
+use sim_model::{Pose, chair};
 
 use crate::localise::Localiser;
 use crate::odometry::{Step, WheelOdometry};
@@ -46,8 +46,8 @@ pub struct LinkConfig {
     pub cycle_ms: u32,
     /// The hub's encoder units: ticks per metre of wheel travel.
     pub hub_ticks_per_m: f64,
-    /// Where the chair starts: x, y metres, heading degrees.
-    pub start_pose_deg: [f64; 3],
+    /// Where the chair starts.
+    pub start: Pose,
     /// The chair's name in the hub (for the operator's resume command).
     pub robot: String,
     /// Resume after a stop as soon as every cause has cleared (see [`Safety::with_auto_resume`]).
@@ -119,6 +119,8 @@ pub struct BoardLink {
     /// Map matching of the odometry pose (see [`Localiser`]); `None` pushes raw odometry.
     localiser: Option<Localiser>,
     fresh: FreshReadings,
+    /// The emulator's true pose (its SimTruth) in the wire form the hub takes, x, y metres and
+    /// heading degrees, forwarded as the board sent it.
     ghost: Option<[f64; 3]>,
     board: Option<BoardInfo>,
     /// Stepped mode: board time stepped since the last sample, ms.
@@ -142,8 +144,7 @@ impl BoardLink {
         let safety = Safety::new(Duration::ZERO, cfg.stepped, hello)
             .with_cycle(Duration::from_millis(u64::from(cfg.cycle_ms)))
             .with_auto_resume(cfg.auto_resume);
-        let [x, y, h] = cfg.start_pose_deg;
-        let odometry = WheelOdometry::new([x, y, h.to_radians()], chair::BODY[1], chair::WHEEL_RADIUS_M);
+        let odometry = WheelOdometry::new(cfg.start, chair::BODY[1], chair::WHEEL_RADIUS_M);
         let mut link = BoardLink {
             cfg,
             start: Instant::now(),
@@ -237,9 +238,9 @@ impl BoardLink {
         self.safety.shutdown_done()
     }
 
-    /// The odometry pose: x, y metres, heading degrees.
-    pub fn pose_deg(&self) -> [f64; 3] {
-        self.odometry.pose_deg()
+    /// The odometry pose.
+    pub fn pose(&self) -> Pose {
+        self.odometry.pose()
     }
 
     /// Whether the board is known and talking.
@@ -412,14 +413,16 @@ impl BoardLink {
         let link_up = self.safety.link_up(self.now());
         // The pose pushed: the odometry's, map-matched when localising (learning from this
         // tick's readings only while they are the board's own, scaled and fresh).
-        let [x, y, heading] = self.odometry.pose_deg();
+        let wire = self.odometry.pose().to_wire_deg();
         let [x, y, heading] = match &mut self.localiser {
-            None => [x, y, heading],
+            None => wire,
             Some(l) => {
-                let odometry = [x, y, heading.to_radians()];
-                let [x, y, theta] =
+                // The localiser matches the pose as pushed, its heading normalised in degrees,
+                // so that a localised run pushes the very poses it always did.
+                let odometry = Pose::from_wire_deg(wire);
+                let pose =
                     if link_up && self.odometry.scaled() { l.update(odometry, &fresh) } else { l.estimate(odometry) };
-                [x, y, sim_model::wire_deg(theta)]
+                pose.to_wire_deg()
             }
         };
         let mut a = ActionBlock::pose(robot_id, x, y, heading);

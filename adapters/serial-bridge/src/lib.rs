@@ -48,7 +48,7 @@ use std::time::Duration;
 use agent_sdk::cli::SessionArgs;
 use agent_sdk::{Agent, AgentError};
 use ipc_types::{FixedName, REG_CHAIR, RobotKind, RobotRegistration, SensorMode, SensorSpec};
-use sim_model::chair;
+use sim_model::{Pose, chair};
 
 pub use board::{BoardLink, LinkConfig, Outcome};
 pub use localise::Localiser;
@@ -82,7 +82,7 @@ pub struct SerialArgs {
     #[arg(long, value_enum)]
     pub mode: ModeArg,
     /// Where the chair stands on the hub's map at start, X,Y,DIR (metres, degrees): the
-    /// odometry starts here.
+    /// odometry starts here. Kept in this wire form, which the registration carries as typed.
     #[arg(long, value_name = "X,Y,DIR", value_parser = agent_sdk::args::pose, allow_hyphen_values = true)]
     pub pose: [f64; 3],
     /// The board is a stepped chair emulator: each tick sends it a SimStep of the hub's cycle
@@ -215,7 +215,7 @@ fn serve(agent: &mut Agent, port: Port, args: &SerialArgs, stop: &AtomicBool) ->
         stepped: args.stepped,
         cycle_ms: map.header.cycle_ms,
         hub_ticks_per_m: map.header.params.encoder_ticks_per_m,
-        start_pose_deg: args.pose,
+        start: Pose::from_wire_deg(args.pose),
         robot: name.to_owned(),
         auto_resume: args.auto_resume,
     };

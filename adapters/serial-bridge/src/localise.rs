@@ -24,7 +24,7 @@ use std::f64::consts::PI;
 use agent_sdk::map::Map;
 use ipc_types::MAX_PROXIMITY;
 use sim_model::chair::{Mount, SENSORS};
-use sim_model::{cone_range, wrap_rad};
+use sim_model::{Pose, cone_range, wrap_rad};
 
 /// A reading farther than this from the map's prediction is not a known wall, metres.
 pub const GATE_M: f64 = 0.25;
@@ -75,17 +75,17 @@ impl Localiser {
         Localiser { segments, turn: 0.0, shift: [0.0; 2], matched: 0 }
     }
 
-    /// The estimate for an odometry pose `[x, y, heading rad]`: the odometry with the
-    /// correction learnt so far.
-    pub fn estimate(&self, [x, y, theta]: [f64; 3]) -> [f64; 3] {
+    /// The estimate for an odometry pose: the odometry with the correction learnt so far.
+    pub fn estimate(&self, odometry: Pose) -> Pose {
+        let Pose { x_m: x, y_m: y, heading_rad: theta } = odometry;
         let (s, c) = self.turn.sin_cos();
-        [c * x - s * y + self.shift[0], s * x + c * y + self.shift[1], wrap_rad(theta + self.turn)]
+        Pose::new(c * x - s * y + self.shift[0], s * x + c * y + self.shift[1], wrap_rad(theta + self.turn))
     }
 
     /// Takes this tick's real readings (metres in the chair's sensor order; NaN where none
-    /// came, +∞ for no echo) at odometry pose `odometry` (x, y, heading rad), corrects the
-    /// estimate towards what they say, and returns it.
-    pub fn update(&mut self, odometry: [f64; 3], readings: &[f32; MAX_PROXIMITY]) -> [f64; 3] {
+    /// came, +∞ for no echo) at odometry pose `odometry`, corrects the estimate towards what
+    /// they say, and returns it.
+    pub fn update(&mut self, odometry: Pose, readings: &[f32; MAX_PROXIMITY]) -> Pose {
         let pose = self.estimate(odometry);
         // Each used reading with the map's prediction at the estimate.
         let used: Vec<(&Mount, f64, f64)> = SENSORS
@@ -113,7 +113,7 @@ impl Localiser {
             let mut j = [0.0; 3];
             for (k, e) in EPS.iter().enumerate() {
                 let mut p = pose;
-                p[k] += e;
+                *[&mut p.x_m, &mut p.y_m, &mut p.heading_rad][k] += e;
                 j[k] = (self.predict(p, m) - h) / e;
             }
             for r in 0..3 {
@@ -131,12 +131,12 @@ impl Localiser {
         let shrink = MAX_STEP_M / dx.hypot(dy).max(MAX_STEP_M);
         let (dx, dy) = (dx * shrink, dy * shrink);
         let dtheta = (GAIN * step[2]).clamp(-MAX_TURN_RAD, MAX_TURN_RAD);
-        let corrected = [pose[0] + dx, pose[1] + dy, wrap_rad(pose[2] + dtheta)];
+        let corrected = Pose::new(pose.x_m + dx, pose.y_m + dy, wrap_rad(pose.heading_rad + dtheta));
         // The new transform takes the odometry pose to the corrected one.
-        self.turn = wrap_rad(corrected[2] - odometry[2]);
+        self.turn = wrap_rad(corrected.heading_rad - odometry.heading_rad);
         let (s, c) = self.turn.sin_cos();
-        self.shift =
-            [corrected[0] - (c * odometry[0] - s * odometry[1]), corrected[1] - (s * odometry[0] + c * odometry[1])];
+        let [ox, oy] = odometry.position();
+        self.shift = [corrected.x_m - (c * ox - s * oy), corrected.y_m - (s * ox + c * oy)];
         // What `estimate` gives from now on (the corrected pose, to rounding).
         self.estimate(odometry)
     }
@@ -147,7 +147,7 @@ impl Localiser {
     }
 
     /// What sensor `m` reads at `pose` off the map's known walls.
-    fn predict(&self, [x, y, theta]: [f64; 3], m: &Mount) -> f64 {
+    fn predict(&self, Pose { x_m: x, y_m: y, heading_rad: theta }: Pose, m: &Mount) -> f64 {
         let (s, c) = theta.sin_cos();
         let apex = [x + c * m.x_m - s * m.y_m, y + s * m.x_m + c * m.y_m];
         let axis = theta + m.angle_deg.to_radians();
@@ -206,7 +206,7 @@ mod tests {
     }
 
     /// What the chair's sensors read at the true pose off the known walls.
-    fn readings(l: &Localiser, truth: [f64; 3]) -> [f32; MAX_PROXIMITY] {
+    fn readings(l: &Localiser, truth: Pose) -> [f32; MAX_PROXIMITY] {
         let mut z = [f32::NAN; MAX_PROXIMITY];
         for (slot, m) in z.iter_mut().zip(&SENSORS) {
             let h = l.predict(truth, m);
@@ -220,48 +220,48 @@ mod tests {
         let mut l = Localiser::new(&corridor());
         assert_eq!(l.segments.len(), 4 + 8, "the border and the two known walls, not the obstacle");
         // The odometry is 6 cm to the left and 2° off; the chair stands still in the corridor.
-        let truth = [6.0, 1.6, 0.0];
-        let odometry = [6.0, 1.66, 2f64.to_radians()];
+        let truth = Pose::new(6.0, 1.6, 0.0);
+        let odometry = Pose::from_deg(6.0, 1.66, 2.0);
         let z = readings(&l, truth);
         let mut pose = odometry;
         for _ in 0..60 {
             pose = l.update(odometry, &z);
         }
         assert!(l.matched() >= MIN_READINGS, "{}", l.matched());
-        assert!((pose[1] - truth[1]).abs() < 0.005, "across the corridor: {pose:?}");
-        assert!(pose[2].abs() < 0.2f64.to_radians(), "heading: {pose:?}");
-        assert!((pose[0] - truth[0]).abs() < 0.02, "along it, nothing pulls: odometry's x stays: {pose:?}");
+        assert!((pose.y_m - truth.y_m).abs() < 0.005, "across the corridor: {pose:?}");
+        assert!(pose.heading_rad.abs() < 0.2f64.to_radians(), "heading: {pose:?}");
+        assert!((pose.x_m - truth.x_m).abs() < 0.02, "along it, nothing pulls: odometry's x stays: {pose:?}");
     }
 
     #[test]
     fn each_tick_moves_the_pose_a_bounded_step() {
         let mut l = Localiser::new(&corridor());
-        let truth = [6.0, 1.6, 0.0];
-        let odometry = [6.0, 1.8, 0.0];
-        let z = readings(&l, [truth[0], truth[1] + 0.0, 0.0]);
+        let truth = Pose::new(6.0, 1.6, 0.0);
+        let odometry = Pose::new(6.0, 1.8, 0.0);
+        let z = readings(&l, truth);
         let before = l.estimate(odometry);
         let after = l.update(odometry, &z);
-        let moved = (after[0] - before[0]).hypot(after[1] - before[1]);
+        let moved = (after.x_m - before.x_m).hypot(after.y_m - before.y_m);
         assert!(moved > 0.0 && moved <= MAX_STEP_M + 1e-12, "{moved}");
-        assert!((after[2] - before[2]).abs() <= MAX_TURN_RAD + 1e-12);
+        assert!((after.heading_rad - before.heading_rad).abs() <= MAX_TURN_RAD + 1e-12);
     }
 
     #[test]
     fn the_correction_rides_along_with_odometry() {
         let mut l = Localiser::new(&corridor());
-        let z = readings(&l, [6.0, 1.6, 0.0]);
+        let z = readings(&l, Pose::new(6.0, 1.6, 0.0));
         for _ in 0..60 {
-            l.update([6.0, 1.7, 0.0], &z);
+            l.update(Pose::new(6.0, 1.7, 0.0), &z);
         }
         // Odometry moves 1 m ahead with no readings: the estimate moves with it, corrected.
-        let est = l.update([7.0, 1.7, 0.0], &[f32::NAN; MAX_PROXIMITY]);
-        assert!((est[0] - 7.0).abs() < 0.02 && (est[1] - 1.6).abs() < 0.01, "{est:?}");
+        let est = l.update(Pose::new(7.0, 1.7, 0.0), &[f32::NAN; MAX_PROXIMITY]);
+        assert!((est.x_m - 7.0).abs() < 0.02 && (est.y_m - 1.6).abs() < 0.01, "{est:?}");
     }
 
     #[test]
     fn readings_of_what_the_map_lacks_are_left_out() {
         let mut l = Localiser::new(&corridor());
-        let pose = [6.0, 1.6, 0.0];
+        let pose = Pose::new(6.0, 1.6, 0.0);
         // Every sensor sees something 0.4 m nearer than any known wall (a box only the room
         // has), or gets no echo (a dropout), or none came: nothing is matched, the pose stays.
         let mut z = readings(&l, pose);

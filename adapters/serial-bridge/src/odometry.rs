@@ -8,14 +8,14 @@
 //! baseline: its counters start again, the pose does not jump.
 
 use agent_sdk::odometry::Odometry;
-use sim_model::{encoder_ticks_per_m, wire_deg};
+use sim_model::{Pose, encoder_ticks_per_m};
 
 /// Dead reckoning on the chair's wheel encoders: the board's counters turned into wheel travel,
 /// integrated by the agents' own odometry ([`Odometry::travel`]), so a physical chair and a
 /// simulated one are estimated by one model.
 #[derive(Debug, Clone, PartialEq)]
 pub struct WheelOdometry {
-    /// The pose: x, y metres, heading radians.
+    /// The pose.
     core: Odometry,
     wheel_radius_m: f64,
     /// Board counts per metre of wheel travel, once a BoardInfo said the counts per turn.
@@ -40,12 +40,11 @@ pub enum Step {
 }
 
 impl WheelOdometry {
-    /// Odometry starting at `start_rad` (x, y metres, heading radians, as the agents'
-    /// odometry) for wheels of `wheel_radius_m`, `track_m` apart.
-    pub fn new(start_rad: [f64; 3], track_m: f64, wheel_radius_m: f64) -> WheelOdometry {
+    /// Odometry starting at `start` for wheels of `wheel_radius_m`, `track_m` apart.
+    pub fn new(start: Pose, track_m: f64, wheel_radius_m: f64) -> WheelOdometry {
         WheelOdometry {
             // The core counts no ticks of its own: the board's come in as metres.
-            core: Odometry::new(start_rad, 0.0, track_m),
+            core: Odometry::new(start, 0.0, track_m),
             wheel_radius_m,
             counts_per_m: None,
             last: None,
@@ -86,10 +85,9 @@ impl WheelOdometry {
         Step::Moved
     }
 
-    /// The pose: x, y metres, heading degrees in (−180, 180].
-    pub fn pose_deg(&self) -> [f64; 3] {
-        let [x, y, h] = self.core.pose();
-        [x, y, wire_deg(h)]
+    /// The pose (its wire form is [`Pose::to_wire_deg`]).
+    pub fn pose(&self) -> Pose {
+        self.core.pose()
     }
 
     /// Whether the encoders' scale is known (a BoardInfo came).
@@ -113,7 +111,7 @@ mod tests {
 
     /// Wheels of circumference 1 m, 0.5 m apart, 1000 counts a turn: 1000 counts a metre.
     fn odo() -> WheelOdometry {
-        let mut o = WheelOdometry::new([1.0, 2.0, 0.0], 0.5, 1.0 / TAU);
+        let mut o = WheelOdometry::new(Pose::new(1.0, 2.0, 0.0), 0.5, 1.0 / TAU);
         assert!(o.set_counts_per_rev(1000));
         o
     }
@@ -126,9 +124,9 @@ mod tests {
     fn the_first_sample_is_the_baseline_and_straight_travel_moves_along_the_heading() {
         let mut o = odo();
         assert_eq!(o.sample(0, [5000, -7000]), Step::Baseline);
-        assert_eq!(o.pose_deg(), [1.0, 2.0, 0.0], "the baseline does not move the chair");
+        assert_eq!(o.pose().to_wire_deg(), [1.0, 2.0, 0.0], "the baseline does not move the chair");
         assert_eq!(o.sample(100, [5500, -6500]), Step::Moved);
-        assert!(close(o.pose_deg(), [1.5, 2.0, 0.0]), "{:?}", o.pose_deg());
+        assert!(close(o.pose().to_wire_deg(), [1.5, 2.0, 0.0]), "{:?}", o.pose().to_wire_deg());
         assert_eq!(o.hub_encoders(2000.0), [1000, 1000]);
     }
 
@@ -139,7 +137,7 @@ mod tests {
         // Left forward 200 counts across the wrap; right back 100 across it the other way.
         assert_eq!(o.sample(100, [i32::MIN + 100, i32::MAX - 49]), Step::Moved);
         assert_eq!(o.hub_encoders(1000.0), [200, -100]);
-        let [x, y, h] = o.pose_deg();
+        let [x, y, h] = o.pose().to_wire_deg();
         // 0.05 m along the start heading, turned by (−0.1 − 0.2) / 0.5 rad.
         assert!((x - 1.05).abs() < 1e-9 && (y - 2.0).abs() < 1e-9, "{x} {y}");
         assert!((h - (-0.6f64).to_degrees()).abs() < 1e-9, "{h}");
@@ -147,13 +145,13 @@ mod tests {
 
     #[test]
     fn a_turn_on_the_spot_turns_by_the_wheels_difference_over_the_track_and_wraps() {
-        let mut o = WheelOdometry::new([0.0, 0.0, 170f64.to_radians()], 0.5, 1.0 / TAU);
+        let mut o = WheelOdometry::new(Pose::from_deg(0.0, 0.0, 170.0), 0.5, 1.0 / TAU);
         o.set_counts_per_rev(1000);
         o.sample(0, [0, 0]);
         // 20° = 0.349 rad = (dr − dl) / 0.5 → dr = −dl = 0.0873 m.
         let d = (20f64.to_radians() * 0.5 / 2.0 * 1000.0).round() as i32;
         o.sample(100, [-d, d]);
-        let [x, y, h] = o.pose_deg();
+        let [x, y, h] = o.pose().to_wire_deg();
         assert!(x.abs() < 1e-12 && y.abs() < 1e-12);
         assert!((h + 170.0).abs() < 0.1, "wrapped into (−180, 180]: {h}");
     }
@@ -166,9 +164,9 @@ mod tests {
         // Reconnected to a board whose counters restarted elsewhere.
         o.rebase();
         assert_eq!(o.sample(5, [-123_456, 98_765]), Step::Baseline);
-        assert!(close(o.pose_deg(), [2.0, 2.0, 0.0]));
+        assert!(close(o.pose().to_wire_deg(), [2.0, 2.0, 0.0]));
         o.sample(105, [-122_456, 99_765]);
-        assert!(close(o.pose_deg(), [3.0, 2.0, 0.0]));
+        assert!(close(o.pose().to_wire_deg(), [3.0, 2.0, 0.0]));
         assert_eq!(o.hub_encoders(1000.0), [2000, 2000], "the encoders continue too");
     }
 
@@ -177,9 +175,9 @@ mod tests {
         let mut o = odo();
         o.sample(5000, [10_000, 10_000]);
         assert_eq!(o.sample(20, [0, 0]), Step::BoardRestarted);
-        assert_eq!(o.pose_deg(), [1.0, 2.0, 0.0]);
+        assert_eq!(o.pose().to_wire_deg(), [1.0, 2.0, 0.0]);
         o.sample(120, [100, 100]);
-        assert!(close(o.pose_deg(), [1.1, 2.0, 0.0]));
+        assert!(close(o.pose().to_wire_deg(), [1.1, 2.0, 0.0]));
         // The board's clock wrapping forwards is no restart.
         let mut o = odo();
         o.sample(u32::MAX - 10, [0, 0]);
@@ -188,11 +186,11 @@ mod tests {
 
     #[test]
     fn without_a_board_info_samples_are_not_integrated() {
-        let mut o = WheelOdometry::new([0.0, 0.0, 0.0], 0.5, 0.17);
+        let mut o = WheelOdometry::new(Pose::default(), 0.5, 0.17);
         assert_eq!(o.sample(0, [0, 0]), Step::Unscaled);
         assert_eq!(o.sample(100, [500, 500]), Step::Unscaled);
         assert!(!o.set_counts_per_rev(0), "0 counts a turn is refused");
         assert!(!o.scaled());
-        assert_eq!(o.pose_deg(), [0.0, 0.0, 0.0]);
+        assert_eq!(o.pose().to_wire_deg(), [0.0, 0.0, 0.0]);
     }
 }

@@ -33,7 +33,7 @@
 //! ```
 //!
 //! ```compile_fail,E0609
-//! fn cheat(block: &ipc_types::SensorBlock) -> [f64; 3] {
+//! fn cheat(block: &ipc_types::SensorBlock) -> sim_model::Pose {
 //!     block.pose // no such field: a sensor block carries what the sensors measure
 //! }
 //! ```

@@ -20,7 +20,7 @@ use agent_sdk::{Agent, Wait};
 use anyhow::Context as _;
 use ipc_types::{ActionBlock, COLLISION, HAS_COMPASS, RobotKind, RobotRegistration, SensorBlock, SensorSpec};
 use serde::Deserialize;
-use sim_model::wrap_rad;
+use sim_model::{Pose, wrap_rad};
 
 /// Options of `iwsim agent door`.
 #[derive(Debug, clap::Args, Clone)]
@@ -73,7 +73,7 @@ pub struct DoorConfig {
     /// Preset.
     #[serde(default = "normal")]
     pub preset: Preset,
-    /// Closed pose: x, y, heading.
+    /// Closed pose in its wire form: x, y metres, heading degrees (as registered).
     pub pose: [f64; 3],
     /// Length, thickness, centre of movement (default: the preset's).
     #[serde(default)]
@@ -294,16 +294,17 @@ impl Door {
     }
 
     /// How far from closed (radians or metres, signed like `open`).
-    fn progress(&self, pose: [f64; 3]) -> f64 {
-        let [x0, y0, h0] = self.cfg.pose;
+    fn progress(&self, pose: Pose) -> f64 {
+        let shut = Pose::from_wire_deg(self.cfg.pose);
+        let h0 = shut.heading_rad;
         match self.cfg.preset {
-            Preset::Normal | Preset::Rotating => wrap_rad(pose[2].to_radians() - h0.to_radians()),
-            Preset::Sliding => (pose[0] - x0) * h0.to_radians().cos() + (pose[1] - y0) * h0.to_radians().sin(),
+            Preset::Normal | Preset::Rotating => wrap_rad(pose.heading_rad - h0),
+            Preset::Sliding => (pose.x_m - shut.x_m) * h0.cos() + (pose.y_m - shut.y_m) * h0.sin(),
         }
     }
 
     /// Powers that move the door toward `target` progress; `None` once there.
-    fn drive_to(&self, pose: [f64; 3], target: f64) -> Option<[f64; 2]> {
+    fn drive_to(&self, pose: Pose, target: f64) -> Option<[f64; 2]> {
         let err = target - self.progress(pose);
         match self.cfg.preset {
             Preset::Normal => (err.abs() > 1f64.to_radians()).then(|| turn_powers(wrap_rad(err))),
@@ -320,7 +321,7 @@ impl Door {
     /// within twice the tolerance it stops at (so it does not hunt on its compass's noise),
     /// back to the target once its estimate, which keeps converging on the compass at rest,
     /// says it has drifted further — as a door closer does.
-    fn hold(&self, pose: [f64; 3], target: f64) -> [f64; 2] {
+    fn hold(&self, pose: Pose, target: f64) -> [f64; 2] {
         let slack = match self.cfg.preset {
             Preset::Normal => 2f64.to_radians(),
             Preset::Sliding => 0.02,
@@ -336,9 +337,9 @@ impl Door {
     /// One tick: what the sensors see, whether it is touching something, whether a robot asked
     /// it to open. Returns the powers and, when the state changed, the new state.
     ///
-    /// `pose` is where the door thinks its leaf is (x, y metres, heading degrees), from its own
-    /// encoders and compass (see [`serve`]): an agent never gets its robot's true pose.
-    pub fn step(&mut self, b: &SensorBlock, pose: [f64; 3], now_s: f64, asked: bool) -> ([f64; 2], Option<DoorState>) {
+    /// `pose` is where the door thinks its leaf is, from its own encoders and compass (see
+    /// [`serve`]): an agent never gets its robot's true pose.
+    pub fn step(&mut self, b: &SensorBlock, pose: Pose, now_s: f64, asked: bool) -> ([f64; 2], Option<DoorState>) {
         let readings = &b.proximity_m[..(b.proximity_count as usize).min(b.proximity_m.len())];
         let seen = self.observe(readings) || asked;
         if seen {
@@ -476,13 +477,8 @@ fn serve(agent: &mut Agent, mut doors: Vec<Door>, log: Option<&Path>) -> anyhow:
         ids.push(agent.register(&d.registration()).with_context(|| format!("registering {}", d.cfg.name))?);
     }
     let ticks_per_m = agent.map()?.header.params.encoder_ticks_per_m;
-    let mut odometry: Vec<Odometry> = doors
-        .iter()
-        .map(|d| {
-            let [x, y, h] = d.cfg.pose;
-            Odometry::new([x, y, h.to_radians()], ticks_per_m, d.body[1])
-        })
-        .collect();
+    let mut odometry: Vec<Odometry> =
+        doors.iter().map(|d| Odometry::new(Pose::from_wire_deg(d.cfg.pose), ticks_per_m, d.body[1])).collect();
     agent.ready()?;
     let mut logs = RobotLogs::new(log);
     for (d, &id) in doors.iter().zip(&ids) {
@@ -494,9 +490,12 @@ fn serve(agent: &mut Agent, mut doors: Vec<Door>, log: Option<&Path>) -> anyhow:
         for ((door, odo), &id) in doors.iter_mut().zip(&mut odometry).zip(&ids) {
             let Some(b) = agent.sensors().iter().find(|b| b.robot_id == id) else { continue };
             let compass = (b.present & HAS_COMPASS != 0).then_some(b.compass_deg);
-            let [x, y, h] = odo.update(b.encoder_ticks, compass);
+            let p = odo.update(b.encoder_ticks, compass);
             let asked = b.messages().any(|(_, m)| asks_to_open(m, &door.cfg.name));
-            let (powers, changed) = door.step(b, [x, y, h.to_degrees()], tick.sim_time_s, asked);
+            // The leaf's heading rounded through degrees, the unit its closed pose is written
+            // in, as the door has always judged it: recorded door runs reproduce bit for bit.
+            let estimate = Pose::from_deg(p.x_m, p.y_m, p.heading_deg());
+            let (powers, changed) = door.step(b, estimate, tick.sim_time_s, asked);
             if let Some(s) = changed {
                 agent_sdk::report!("door {}: {} at t {:.1} s", door.cfg.name, s.label(), tick.sim_time_s);
             }
@@ -543,7 +542,7 @@ mod tests {
     }
 
     /// Steps the door `n` ticks of 0.1 s from `t`; returns the last powers and every change.
-    fn run(d: &mut Door, t: &mut f64, n: usize, pose: [f64; 3], near: Option<f64>) -> ([f64; 2], Vec<DoorState>) {
+    fn run(d: &mut Door, t: &mut f64, n: usize, pose: Pose, near: Option<f64>) -> ([f64; 2], Vec<DoorState>) {
         let mut changes = Vec::new();
         let mut last = [0.0; 2];
         for _ in 0..n {
@@ -559,72 +558,78 @@ mod tests {
     fn a_normal_door_opens_when_something_comes_and_closes_after_the_quiet_period() {
         let mut d = door(Preset::Normal);
         let mut t = 0.0;
-        assert_eq!(run(&mut d, &mut t, 10, [0.0, 0.0, 0.0], None), ([0.0, 0.0], vec![]));
+        assert_eq!(run(&mut d, &mut t, 10, Pose::from_deg(0.0, 0.0, 0.0), None), ([0.0, 0.0], vec![]));
         // Something at 1.0 m: seen once the median has it (the third tick).
-        let (_, c) = run(&mut d, &mut t, 3, [0.0, 0.0, 0.0], Some(1.0));
+        let (_, c) = run(&mut d, &mut t, 3, Pose::from_deg(0.0, 0.0, 0.0), Some(1.0));
         assert_eq!(c, vec![DoorState::Opening]);
         // Opening turns it counter-clockwise: right wheel forward.
-        let (p, _) = run(&mut d, &mut t, 1, [0.0, 0.0, 10.0], Some(1.0));
+        let (p, _) = run(&mut d, &mut t, 1, Pose::from_deg(0.0, 0.0, 10.0), Some(1.0));
         assert!(p[1] > 0.0 && p[0] < 0.0, "{p:?}");
-        assert_eq!(run(&mut d, &mut t, 1, [0.0, 0.0, 89.5], Some(1.0)).1, vec![DoorState::Open]);
+        assert_eq!(run(&mut d, &mut t, 1, Pose::from_deg(0.0, 0.0, 89.5), Some(1.0)).1, vec![DoorState::Open]);
         let opened = t;
         // Open: the view differs (a wall at 0.6 m), which is its new background, not a
         // visitor; it stays open 3 s, then closes.
-        let (_, c) = run(&mut d, &mut t, 29, [0.0, 0.0, 89.5], Some(0.6));
+        let (_, c) = run(&mut d, &mut t, 29, Pose::from_deg(0.0, 0.0, 89.5), Some(0.6));
         assert_eq!(c, vec![]);
-        let (_, c) = run(&mut d, &mut t, 2, [0.0, 0.0, 89.5], Some(0.6));
+        let (_, c) = run(&mut d, &mut t, 2, Pose::from_deg(0.0, 0.0, 89.5), Some(0.6));
         assert_eq!(c, vec![DoorState::Closing], "at {t} s, opened at {opened} s");
-        let (p, _) = run(&mut d, &mut t, 1, [0.0, 0.0, 60.0], None);
+        let (p, _) = run(&mut d, &mut t, 1, Pose::from_deg(0.0, 0.0, 60.0), None);
         assert!(p[1] < 0.0 && p[0] > 0.0, "closing turns back: {p:?}");
-        assert_eq!(run(&mut d, &mut t, 1, [0.0, 0.0, 0.5], None).1, vec![DoorState::Closed]);
+        assert_eq!(run(&mut d, &mut t, 1, Pose::from_deg(0.0, 0.0, 0.5), None).1, vec![DoorState::Closed]);
     }
 
     #[test]
     fn an_open_door_stays_open_while_someone_passes() {
         let mut d = door(Preset::Normal);
         let mut t = 0.0;
-        run(&mut d, &mut t, 5, [0.0, 0.0, 0.0], None);
-        d.step(&block(None, false), [0.0, 0.0, 0.0], t, true);
-        run(&mut d, &mut t, 1, [0.0, 0.0, 90.0], None);
+        run(&mut d, &mut t, 5, Pose::from_deg(0.0, 0.0, 0.0), None);
+        d.step(&block(None, false), Pose::from_deg(0.0, 0.0, 0.0), t, true);
+        run(&mut d, &mut t, 1, Pose::from_deg(0.0, 0.0, 90.0), None);
         assert_eq!(d.state, DoorState::Open);
-        run(&mut d, &mut t, 20, [0.0, 0.0, 90.0], Some(1.4));
+        run(&mut d, &mut t, 20, Pose::from_deg(0.0, 0.0, 90.0), Some(1.4));
         // A chair in the doorway, 0.3 m from the leaf, for 5 s: no closing meanwhile.
-        let (_, c) = run(&mut d, &mut t, 50, [0.0, 0.0, 90.0], Some(0.3));
+        let (_, c) = run(&mut d, &mut t, 50, Pose::from_deg(0.0, 0.0, 90.0), Some(0.3));
         assert_eq!(c, vec![]);
-        let (_, c) = run(&mut d, &mut t, 28, [0.0, 0.0, 90.0], Some(1.4));
+        let (_, c) = run(&mut d, &mut t, 28, Pose::from_deg(0.0, 0.0, 90.0), Some(1.4));
         assert_eq!(c, vec![], "3 s from the last sighting, not from when it left the median");
-        let (_, c) = run(&mut d, &mut t, 5, [0.0, 0.0, 90.0], Some(1.4));
+        let (_, c) = run(&mut d, &mut t, 5, Pose::from_deg(0.0, 0.0, 90.0), Some(1.4));
         assert_eq!(c, vec![DoorState::Closing]);
     }
 
     #[test]
     fn contact_stops_the_door_and_it_retries() {
         let mut d = door(Preset::Normal);
-        d.step(&block(None, false), [0.0, 0.0, 0.0], 0.0, true);
-        let (p, s) = d.step(&block(Some(1.0), true), [0.0, 0.0, 30.0], 1.0, false);
+        d.step(&block(None, false), Pose::from_deg(0.0, 0.0, 0.0), 0.0, true);
+        let (p, s) = d.step(&block(Some(1.0), true), Pose::from_deg(0.0, 0.0, 30.0), 1.0, false);
         assert_eq!((p, s), ([0.0, 0.0], Some(DoorState::Blocked { opening: true, until_s: 3.0 })));
-        assert_eq!(d.step(&block(Some(1.0), false), [0.0, 0.0, 30.0], 2.9, false).1, None);
-        assert_eq!(d.step(&block(Some(1.0), false), [0.0, 0.0, 30.0], 3.0, false).1, Some(DoorState::Opening));
+        assert_eq!(d.step(&block(Some(1.0), false), Pose::from_deg(0.0, 0.0, 30.0), 2.9, false).1, None);
+        assert_eq!(
+            d.step(&block(Some(1.0), false), Pose::from_deg(0.0, 0.0, 30.0), 3.0, false).1,
+            Some(DoorState::Opening)
+        );
         // Closing into something: stop, wait, open again.
-        d.step(&block(None, false), [0.0, 0.0, 90.0], 3.1, false);
-        assert_eq!(d.step(&block(None, false), [0.0, 0.0, 90.0], 6.2, false).1, Some(DoorState::Closing));
-        let (p, s) = d.step(&block(None, true), [0.0, 0.0, 70.0], 6.3, false);
+        d.step(&block(None, false), Pose::from_deg(0.0, 0.0, 90.0), 3.1, false);
+        assert_eq!(d.step(&block(None, false), Pose::from_deg(0.0, 0.0, 90.0), 6.2, false).1, Some(DoorState::Closing));
+        let (p, s) = d.step(&block(None, true), Pose::from_deg(0.0, 0.0, 70.0), 6.3, false);
         assert_eq!((p, s), ([0.0, 0.0], Some(DoorState::Blocked { opening: false, until_s: 8.3 })));
-        assert_eq!(d.step(&block(None, false), [0.0, 0.0, 70.0], 8.3, false).1, Some(DoorState::Opening));
+        assert_eq!(d.step(&block(None, false), Pose::from_deg(0.0, 0.0, 70.0), 8.3, false).1, Some(DoorState::Opening));
     }
 
     #[test]
     fn messages_open_a_sliding_door_and_reopen_it_while_it_closes() {
         let mut d = door(Preset::Sliding);
-        assert_eq!(d.step(&block(None, false), [0.0, 0.0, 0.0], 0.0, true).1, Some(DoorState::Opening));
-        let (p, _) = d.step(&block(None, false), [0.3, 0.0, 0.0], 0.1, false);
+        assert_eq!(d.step(&block(None, false), Pose::from_deg(0.0, 0.0, 0.0), 0.0, true).1, Some(DoorState::Opening));
+        let (p, _) = d.step(&block(None, false), Pose::from_deg(0.3, 0.0, 0.0), 0.1, false);
         assert!(p[0] > 0.0 && p[0] == p[1], "slides forward: {p:?}");
-        assert_eq!(d.step(&block(None, false), [0.995, 0.0, 0.0], 1.0, false).1, Some(DoorState::Open));
-        assert_eq!(d.step(&block(None, false), [0.995, 0.0, 0.0], 3.9, false).1, None);
-        assert_eq!(d.step(&block(None, false), [0.995, 0.0, 0.0], 4.0, false).1, Some(DoorState::Closing));
-        let (p, _) = d.step(&block(None, false), [0.8, 0.0, 0.0], 4.1, false);
+        assert_eq!(d.step(&block(None, false), Pose::from_deg(0.995, 0.0, 0.0), 1.0, false).1, Some(DoorState::Open));
+        assert_eq!(d.step(&block(None, false), Pose::from_deg(0.995, 0.0, 0.0), 3.9, false).1, None);
+        assert_eq!(
+            d.step(&block(None, false), Pose::from_deg(0.995, 0.0, 0.0), 4.0, false).1,
+            Some(DoorState::Closing)
+        );
+        let (p, _) = d.step(&block(None, false), Pose::from_deg(0.8, 0.0, 0.0), 4.1, false);
         assert!(p[0] < 0.0, "slides back: {p:?}");
-        assert_eq!(d.step(&block(None, false), [0.8, 0.0, 0.0], 4.2, true).1, Some(DoorState::Opening));
+        assert_eq!(d.step(&block(None, false), Pose::from_deg(0.8, 0.0, 0.0), 4.2, true).1, Some(DoorState::Opening));
         assert!(asks_to_open(b"door open d", "d") && asks_to_open(b"door open *", "d"));
         assert!(!asks_to_open(b"door open e", "d") && !asks_to_open(b"doors open d", "d") && !asks_to_open(b"", "d"));
     }
@@ -633,14 +638,14 @@ mod tests {
     fn a_rotating_door_spins_after_a_sighting_and_stops_square() {
         let mut d = door(Preset::Rotating);
         let mut t = 0.0;
-        run(&mut d, &mut t, 5, [0.0, 0.0, 0.0], None);
-        assert_eq!(run(&mut d, &mut t, 3, [0.0, 0.0, 0.0], Some(1.0)).1, vec![DoorState::Opening]);
-        let (p, _) = run(&mut d, &mut t, 1, [0.0, 0.0, 40.0], Some(1.0));
+        run(&mut d, &mut t, 5, Pose::from_deg(0.0, 0.0, 0.0), None);
+        assert_eq!(run(&mut d, &mut t, 3, Pose::from_deg(0.0, 0.0, 0.0), Some(1.0)).1, vec![DoorState::Opening]);
+        let (p, _) = run(&mut d, &mut t, 1, Pose::from_deg(0.0, 0.0, 40.0), Some(1.0));
         assert!(p[1] > 0.0);
-        let (_, c) = run(&mut d, &mut t, 30, [0.0, 0.0, 100.0], None);
+        let (_, c) = run(&mut d, &mut t, 30, Pose::from_deg(0.0, 0.0, 100.0), None);
         assert_eq!(c, vec![DoorState::Closing]);
-        assert_eq!(run(&mut d, &mut t, 1, [0.0, 0.0, 150.0], None).1, vec![]);
-        assert_eq!(run(&mut d, &mut t, 1, [0.0, 0.0, 179.5], None).1, vec![DoorState::Closed]);
+        assert_eq!(run(&mut d, &mut t, 1, Pose::from_deg(0.0, 0.0, 150.0), None).1, vec![]);
+        assert_eq!(run(&mut d, &mut t, 1, Pose::from_deg(0.0, 0.0, 179.5), None).1, vec![DoorState::Closed]);
     }
 
     #[test]
@@ -649,9 +654,9 @@ mod tests {
         // way is +π from closed, never −π.
         let d = door(Preset::Normal);
         for heading in [180.0, -180.0, 540.0] {
-            assert_eq!(d.progress([0.0, 0.0, heading]), std::f64::consts::PI, "{heading}°");
+            assert_eq!(d.progress(Pose::from_deg(0.0, 0.0, heading)), std::f64::consts::PI, "{heading}°");
         }
-        assert_eq!(d.progress([0.0, 0.0, -90.0]), -std::f64::consts::FRAC_PI_2);
+        assert_eq!(d.progress(Pose::from_deg(0.0, 0.0, -90.0)), -std::f64::consts::FRAC_PI_2);
     }
 
     #[test]

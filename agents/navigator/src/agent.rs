@@ -44,7 +44,7 @@ fn config(args: &NavigatorArgs, header: &ipc_types::MapHeader) -> anyhow::Result
     let checkpoints: Vec<Checkpoint> = args.checkpoints.iter().map(Checkpoint::from).collect();
     let first = checkpoints.first().context("at least one --checkpoint is needed")?;
     let start = match args.robot.pose {
-        Some([x, y, dir]) => Pose::from_deg(x, y, dir),
+        Some(wire) => sim_model::Pose::from_wire_deg(wire).into(),
         None => {
             let toward = checkpoints.get(1).map_or(0.0, |c| {
                 let d = c.pos - first.pos;
@@ -97,7 +97,7 @@ fn drive(agent: &mut Agent, args: &NavigatorArgs) -> anyhow::Result<ExitCode> {
         .id(args.robot.id)
         .body(cfg.body.width_m, cfg.body.height_m, cfg.body.com)
         .motors(cfg.max_speed_mps, cfg.accel_curve)
-        .at(Some([cfg.start.x, cfg.start.y, sim_model::wire_deg(cfg.start.theta)]));
+        .at(Some(sim_model::Pose::from(cfg.start).to_wire_deg()));
     let mut sensors = [SensorSpec { x_m: 0.0, y_m: 0.0, angle_deg: 0.0, cone_deg: 0.0, range_m: 0.0 }; MAX_PROXIMITY];
     for (slot, mount) in sensors.iter_mut().zip(&cfg.sensors) {
         *slot = mount.spec();

@@ -88,6 +88,13 @@ impl Neg for V2 {
 }
 
 /// A pose: the chair's centre of movement (the wheel axle's midpoint) and its heading.
+///
+/// The planner's own pose, with the vector views its geometry uses ([`V2`], body frames); it
+/// keeps the heading wrapped. Everything outside the navigator (the SDK's odometry, the
+/// registration's wire form) speaks [`sim_model::Pose`]; the two convert with `From`, field for
+/// field. Replacing this type by the shared one (its methods becoming an extension trait) is
+/// left for a later change: it touches some 200 lines of the planner for no change in
+/// behaviour.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct Pose {
     /// x, metres.
@@ -107,9 +114,8 @@ impl Pose {
     /// The pose after `dt` seconds at speed `v` (m/s) and turn rate `w` (rad/s), moved as the
     /// hub moves a chair in one tick ([`sim_model::advance`]: along the heading it starts with).
     pub fn advanced(&self, v: f64, w: f64, dt: f64) -> Pose {
-        let [x, y, theta] =
-            sim_model::advance([self.x, self.y, self.theta], v, w, self.theta.cos(), self.theta.sin(), dt);
-        Self { x, y, theta }
+        let p = sim_model::advance((*self).into(), v, w, self.theta.cos(), self.theta.sin(), dt);
+        Self { x: p.x_m, y: p.y_m, theta: p.heading_rad }
     }
 
     /// A pose from metres and a heading in degrees.
@@ -143,6 +149,19 @@ impl Pose {
     pub fn body_frame(&self) -> BodyFrame {
         let (s, c) = self.theta.sin_cos();
         BodyFrame { origin: self.pos(), c, s }
+    }
+}
+
+impl From<sim_model::Pose> for Pose {
+    /// The shared pose in the navigator's terms (the heading wrapped, as [`Pose::new`] does).
+    fn from(p: sim_model::Pose) -> Self {
+        Self::new(p.x_m, p.y_m, p.heading_rad)
+    }
+}
+
+impl From<Pose> for sim_model::Pose {
+    fn from(p: Pose) -> Self {
+        Self::new(p.x, p.y, p.theta)
     }
 }
 

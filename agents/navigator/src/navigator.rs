@@ -1340,8 +1340,7 @@ mod tests {
             }
             let (v, w) = sim_model::velocity(vmax, track, self.out);
             let p = self.pose;
-            let [x, y, theta] = sim_model::advance([p.x, p.y, p.theta], v, w, p.theta.cos(), p.theta.sin(), dt);
-            self.pose = Pose::new(x, y, theta);
+            self.pose = sim_model::advance(p.into(), v, w, p.theta.cos(), p.theta.sin(), dt).into();
         }
 
         fn input(&self, tick: u64, pole: Option<V2>) -> Input {

@@ -51,41 +51,37 @@ pub struct Odometry {
     inner: agent_sdk::odometry::Odometry,
 }
 
-fn pose_of([x, y, theta]: [f64; 3]) -> Pose {
-    Pose::new(x, y, theta)
-}
-
 impl Odometry {
     /// Odometry starting at `start`, for encoders of `ticks_per_m` and wheels `track_m` apart.
     pub fn new(start: Pose, ticks_per_m: f64, track_m: f64) -> Self {
-        Self { inner: agent_sdk::odometry::Odometry::new([start.x, start.y, start.theta], ticks_per_m, track_m) }
+        Self { inner: agent_sdk::odometry::Odometry::new(start.into(), ticks_per_m, track_m) }
     }
 
     /// Advances the estimate by the ticks counted since the last call. The hub integrates a
     /// tick's motion along the heading the tick began with (thesis eq. 4.7), and so does this.
     pub fn advance(&mut self, ticks: [i64; 2]) -> Pose {
-        pose_of(self.inner.advance(ticks))
+        self.inner.advance(ticks).into()
     }
 
     /// Turns the estimate's heading by `gain` of its difference to `heading_rad` (taken the
     /// short way round): a complementary filter with an absolute heading sensor.
     pub fn steer_heading(&mut self, heading_rad: f64, gain: f64) -> Pose {
-        pose_of(self.inner.steer_heading(heading_rad, gain))
+        self.inner.steer_heading(heading_rad, gain).into()
     }
 
     /// Advances by this tick's encoder counts, then steers the heading towards the compass
     /// when there is one.
     fn update_with_compass(&mut self, input: &Input) -> Pose {
-        pose_of(self.inner.update(input.encoder_ticks, input.compass_deg))
+        self.inner.update(input.encoder_ticks, input.compass_deg).into()
     }
 
     /// The estimate.
     pub fn pose(&self) -> Pose {
-        pose_of(self.inner.pose())
+        self.inner.pose().into()
     }
 
     fn set_pose(&mut self, p: Pose) {
-        self.inner.set_pose([p.x, p.y, p.theta]);
+        self.inner.set_pose(p.into());
     }
 }
 

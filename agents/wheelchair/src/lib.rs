@@ -14,6 +14,7 @@ use ipc_types::{
     ActionBlock, COLLISION, HAS_COMPASS, MAX_PROXIMITY, RobotKind, RobotRegistration, SensorBlock, SensorSpec,
 };
 use serde::Deserialize;
+use sim_model::Pose;
 
 use clap::Args;
 use std::path::PathBuf;
@@ -228,42 +229,37 @@ fn registration(c: &ChairConfig) -> RobotRegistration {
 pub struct OwnMotion {
     /// Filtered motor outputs, left and right.
     pub out: [f64; 2],
-    /// x, y metres; heading radians.
-    pub pose: [f64; 3],
+    /// Where the chair is.
+    pub pose: Pose,
 }
 
 impl OwnMotion {
-    /// At rest at `pose` (x, y metres, heading degrees, as the hub reports it).
-    pub fn at(pose: [f64; 3]) -> Self {
-        Self { out: [0.0; 2], pose: [pose[0], pose[1], pose[2].to_radians()] }
+    /// At rest at `pose`.
+    pub fn at(pose: Pose) -> Self {
+        Self { out: [0.0; 2], pose }
     }
 
-    /// The pose as x, y metres, heading degrees.
-    pub fn pose_deg(&self) -> [f64; 3] {
-        [self.pose[0], self.pose[1], self.pose[2].to_degrees()]
-    }
-
-    /// One tick of `dt` seconds with `powers`; returns the new pose as x, y, heading degrees.
-    /// The formulas are the hub's own (`sim_model`), so only the hub's noise tells the two apart.
-    pub fn step(&mut self, c: &ChairConfig, powers: [f64; 2], dt: f64) -> [f64; 3] {
+    /// One tick of `dt` seconds with `powers`; returns the new pose. The formulas are the
+    /// hub's own (`sim_model`), so only the hub's noise tells the two apart.
+    pub fn step(&mut self, c: &ChairConfig, powers: [f64; 2], dt: f64) -> Pose {
         for (out, p) in self.out.iter_mut().zip(powers) {
             *out = sim_model::motor_filter(p.clamp(-1.0, 1.0), *out, c.accel_curve);
         }
         let (v, omega) = sim_model::velocity(c.max_speed, c.body[1], self.out);
-        let (sin, cos) = self.pose[2].sin_cos();
+        let (sin, cos) = self.pose.heading_rad.sin_cos();
         self.pose = sim_model::advance(self.pose, v, omega, cos, sin, dt);
-        [self.pose[0], self.pose[1], self.pose[2].to_degrees()]
+        self.pose
     }
 }
 
 /// Powers that steer a chair at `pose` to `goal`: turn on the spot when far off course,
 /// otherwise drive with a proportional correction. `None` once within 0.15 m.
-pub fn toward(pose: [f64; 3], goal: [f64; 2], speed: f64) -> Option<[f64; 2]> {
-    let (dx, dy) = (goal[0] - pose[0], goal[1] - pose[1]);
+pub fn toward(pose: Pose, goal: [f64; 2], speed: f64) -> Option<[f64; 2]> {
+    let (dx, dy) = (goal[0] - pose.x_m, goal[1] - pose.y_m);
     if dx.hypot(dy) < 0.15 {
         return None;
     }
-    let err = sim_model::wrap_rad(dy.atan2(dx) - pose[2].to_radians());
+    let err = sim_model::wrap_rad(dy.atan2(dx) - pose.heading_rad);
     if err.abs() > 0.6 {
         let t = 0.3 * err.signum();
         return Some([-t, t]);
@@ -334,9 +330,9 @@ fn drive(agent: &mut Agent, args: &WheelchairArgs, chairs: &[ChairConfig]) -> an
     let mut odometry: Vec<Odometry> = chairs
         .iter()
         .zip(&starts)
-        .map(|(c, &[x, y, h])| Odometry::new([x, y, h.to_radians()], map.header.params.encoder_ticks_per_m, c.body[1]))
+        .map(|(c, &start)| Odometry::new(Pose::from_wire_deg(start), map.header.params.encoder_ticks_per_m, c.body[1]))
         .collect();
-    let mut own: Vec<OwnMotion> = starts.iter().map(|&p| OwnMotion::at(p)).collect();
+    let mut own: Vec<OwnMotion> = starts.iter().map(|&p| OwnMotion::at(Pose::from_wire_deg(p))).collect();
     // A real chair's motion before its last step: where it goes back to when the hub refuses
     // the pose it pushed (the chair stopped against something).
     let mut before: Vec<Option<OwnMotion>> = chairs.iter().map(|_| None).collect();
@@ -351,7 +347,7 @@ fn drive(agent: &mut Agent, args: &WheelchairArgs, chairs: &[ChairConfig]) -> an
         for (k, (c, &id)) in chairs.iter().zip(&ids).enumerate() {
             let Some(b) = sensor_block_of(agent.sensors(), k, id) else { continue };
             let compass = (b.present & HAS_COMPASS != 0).then_some(b.compass_deg);
-            let [ox, oy, oh] = odometry[k].update(b.encoder_ticks, compass);
+            let estimate = odometry[k].update(b.encoder_ticks, compass);
             if c.kind == ChairKind::Real
                 && b.present & COLLISION != 0
                 && let Some(m) = before[k]
@@ -359,9 +355,12 @@ fn drive(agent: &mut Agent, args: &WheelchairArgs, chairs: &[ChairConfig]) -> an
                 own[k] = m;
             }
             let pose = match c.kind {
-                ChairKind::Simulated => [ox, oy, oh.to_degrees()],
-                ChairKind::Real => own[k].pose_deg(),
+                ChairKind::Simulated => estimate,
+                ChairKind::Real => own[k].pose,
             };
+            // The script steers on the heading rounded through degrees, the unit a chair
+            // reports, so that scripted runs reproduce bit for bit the paths they always drove.
+            let pose = Pose::from_deg(pose.x_m, pose.y_m, pose.heading_deg());
             let powers = if tick.sim_time_s < c.start_s {
                 [0.0, 0.0]
             } else if let Some(p) = c.powers {
@@ -388,8 +387,8 @@ fn drive(agent: &mut Agent, args: &WheelchairArgs, chairs: &[ChairConfig]) -> an
                 ChairKind::Simulated => ActionBlock::motors(id, powers[0], powers[1]),
                 ChairKind::Real => {
                     before[k] = Some(own[k]);
-                    let [x, y, dir] = own[k].step(c, powers, dt);
-                    ActionBlock::pose(id, x, y, dir)
+                    let p = own[k].step(c, powers, dt);
+                    ActionBlock::pose(id, p.x_m, p.y_m, p.heading_deg())
                 }
             });
         }
@@ -450,11 +449,11 @@ mod tests {
     #[test]
     fn waypoint_steering_turns_first_then_drives() {
         // Facing +x, goal behind: turn on the spot (left wheel back, right forward for +).
-        assert_eq!(toward([0.0, 0.0, 0.0], [-5.0, 0.1], 0.5).map(|p| p[0] < 0.0 && p[1] > 0.0), Some(true));
+        assert_eq!(toward(Pose::default(), [-5.0, 0.1], 0.5).map(|p| p[0] < 0.0 && p[1] > 0.0), Some(true));
         // Facing the goal: both wheels forward at the cruise power.
-        assert_eq!(toward([0.0, 0.0, 0.0], [5.0, 0.0], 0.5), Some([0.5, 0.5]));
+        assert_eq!(toward(Pose::default(), [5.0, 0.0], 0.5), Some([0.5, 0.5]));
         // Arrived.
-        assert_eq!(toward([5.0, 0.05, 0.0], [5.0, 0.0], 0.5), None);
+        assert_eq!(toward(Pose::new(5.0, 0.05, 0.0), [5.0, 0.0], 0.5), None);
     }
 
     #[test]

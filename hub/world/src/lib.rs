@@ -965,8 +965,7 @@ impl World {
                     };
                 }
                 let (v, omega) = r.velocity();
-                let [x, y, theta] = sim_model::advance([r.pose.x, r.pose.y, r.pose.theta], v, omega, co, s, dt);
-                Pose { x, y, theta }
+                sim_model::advance(r.pose.into(), v, omega, co, s, dt).into()
             }
         };
         let cur = r.shape.placed_cs(&r.pose, co, s);

@@ -56,6 +56,22 @@ impl Pose {
     }
 }
 
+// The shared model's pose carries the same three numbers; the world keeps its own type for the
+// nalgebra views its hot loop uses. Both conversions copy the fields as they are (no wrap).
+impl From<sim_model::Pose> for Pose {
+    #[inline]
+    fn from(p: sim_model::Pose) -> Self {
+        Self { x: p.x_m, y: p.y_m, theta: p.heading_rad }
+    }
+}
+
+impl From<Pose> for sim_model::Pose {
+    #[inline]
+    fn from(p: Pose) -> Self {
+        Self::new(p.x, p.y, p.theta)
+    }
+}
+
 /// 2D cross product (z of the 3D cross product).
 #[inline]
 pub(crate) fn cross(a: Vector2<Real>, b: Vector2<Real>) -> Real {

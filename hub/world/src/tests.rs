@@ -491,10 +491,10 @@ fn a_doors_encoder_counts_its_leaf_exactly_whatever_the_slip() {
 
 /// Dead reckoning as an agent does it: each tick's wheel travel from the encoder counts, along
 /// the heading the tick began with.
-fn dead_reckon(pose: [Real; 3], last: [i64; 2], now: [i64; 2], per_m: Real, track_m: Real) -> [Real; 3] {
+fn dead_reckon(pose: sim_model::Pose, last: [i64; 2], now: [i64; 2], per_m: Real, track_m: Real) -> sim_model::Pose {
     let dl = (now[0] - last[0]) as Real / per_m;
     let dr = (now[1] - last[1]) as Real / per_m;
-    let (s, c) = pose[2].sin_cos();
+    let (s, c) = pose.heading_rad.sin_cos();
     sim_model::advance(pose, (dl + dr) / 2.0, (dr - dl) / track_m, c, s, 1.0)
 }
 
@@ -510,7 +510,7 @@ fn default_slip_makes_pure_odometry_drift_by_a_few_percent_of_the_distance() {
         assert_eq!(p.noise.encoder_slip_frac, Params::default().noise.encoder_slip_frac, "the default");
         let mut w = World::new(&empty_lab(40.0, 8.0), p, seed).expect("valid");
         let r = w.add_robot(RobotSpec::at(2.0, 4.0, 0.0).body(1.1, 0.65, 0.8).motors(0.49, 0.83)).expect("valid");
-        let mut est = [2.0, 4.0, 0.0];
+        let mut est = sim_model::Pose::new(2.0, 4.0, 0.0);
         let mut last = [0, 0];
         while w.robot(r).expect("alive").pose.x < 12.0 {
             w.step(&[Action::motors(r, 1.0, 1.0)], 0.1);
@@ -520,9 +520,9 @@ fn default_slip_makes_pure_odometry_drift_by_a_few_percent_of_the_distance() {
         }
         let truth = w.robot(r).expect("alive").pose;
         assert!(close(truth.y, 4.0, 1e-9), "slip moves only the counts, not the chair");
-        side2 += (est[1] - truth.y).powi(2);
-        along2 += (est[0] - truth.x).powi(2);
-        heading2 += sim_model::wrap_rad(est[2] - truth.theta).powi(2);
+        side2 += (est.y_m - truth.y).powi(2);
+        along2 += (est.x_m - truth.x).powi(2);
+        heading2 += sim_model::wrap_rad(est.heading_rad - truth.theta).powi(2);
     }
     let rms = |sum: Real| (sum / runs as Real).sqrt();
     let (side, along, heading_deg) = (rms(side2), rms(along2), rms(heading2).to_degrees());

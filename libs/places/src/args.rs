@@ -31,7 +31,9 @@ pub fn fixed<const N: usize>(spec: &str, form: &str, last_default: Option<f64>) 
     Ok(out)
 }
 
-/// A pose `X,Y,DIR`: metres and degrees.
+/// A pose `X,Y,DIR` in its wire form `[x m, y m, heading °]`, exactly as typed: registrations
+/// carry it so, and `sim_model::Pose::from_wire_deg` turns it into a pose for those who compute
+/// with it (converting here would round the degrees a registration forwards).
 pub fn pose(spec: &str) -> Result<[f64; 3], String> {
     fixed::<3>(spec, "a pose X,Y,DIR", None)
 }

@@ -1,18 +1,19 @@
 //! The formulas every iwsim process shares: the hub's world model steps robots with them, and a
 //! client that models its own chair (the wheelchair agent's `real` mode, the navigator's
 //! odometry, the UDP bridge's IR values) calls the same functions, so the two can never drift
-//! apart. No dependencies, no state: plain functions of their inputs.
+//! apart. No dependencies, no state: plain functions of their inputs, and the one [`Pose`]
+//! type (heading in radians) that clients pass them, degrees being only its wire form.
 //!
 //! ```
-//! use sim_model::{advance, motor_filter, velocity, wrap_rad};
+//! use sim_model::{Pose, advance, motor_filter, velocity, wrap_rad};
 //!
 //! // One 100 ms tick of a chair at rest given full power on both wheels (thesis eqs. 4.4–4.9).
 //! let curve = 0.5;
 //! let out = [motor_filter(1.0, 0.0, curve), motor_filter(1.0, 0.0, curve)];
 //! let (v, omega) = velocity(0.5, 0.65, out);
 //! let (s, c) = 0.0_f64.sin_cos();
-//! let [x, y, theta] = advance([0.0, 0.0, 0.0], v, omega, c, s, 0.1);
-//! assert_eq!((x, y, theta), (0.025, 0.0, 0.0));
+//! let p = advance(Pose::default(), v, omega, c, s, 0.1);
+//! assert_eq!(p, Pose::new(0.025, 0.0, 0.0));
 //! assert_eq!(wrap_rad(3.0 * std::f64::consts::PI), std::f64::consts::PI);
 //! ```
 #![warn(missing_docs)]
@@ -67,12 +68,79 @@ pub fn velocity(max_speed_mps: f64, track_m: f64, [left, right]: [f64; 2]) -> (f
     (max_speed_mps * (right + left) / 2.0, max_speed_mps * (right - left) / track_m)
 }
 
-/// Thesis eqs. 4.7–4.9 (4.8's typo fixed): the pose `[x, y, θ]` (metres, radians) after `dt`
-/// seconds at speeds `v`, `omega`, moving along the *old* heading, whose cosine and sine the
-/// caller passes (the hub keeps them from its last commit). The new heading is wrapped.
+/// A robot's pose in the lab frame: position in metres and heading in radians (0 along +x,
+/// counter-clockwise positive). The units are in the field names so that a heading in degrees
+/// cannot pass for one in radians; degrees appear only at the wire and the command line, through
+/// [`Pose::from_wire_deg`] and [`Pose::to_wire_deg`].
+///
+/// ```
+/// use sim_model::Pose;
+///
+/// let p = Pose::from_wire_deg([1.0, 2.0, 90.0]); // the CLI's "1,2,90"
+/// assert_eq!(p.heading_rad, std::f64::consts::FRAC_PI_2);
+/// assert_eq!(p.to_wire_deg(), [1.0, 2.0, 90.0]);
+/// ```
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct Pose {
+    /// x, metres.
+    pub x_m: f64,
+    /// y, metres.
+    pub y_m: f64,
+    /// Heading, radians; not wrapped on construction (those who turn it wrap it).
+    pub heading_rad: f64,
+}
+
+impl Pose {
+    /// A pose from metres and a heading in radians, taken as given.
+    #[inline]
+    pub const fn new(x_m: f64, y_m: f64, heading_rad: f64) -> Self {
+        Self { x_m, y_m, heading_rad }
+    }
+
+    /// A pose from metres and a heading in degrees (`to_radians`, not wrapped).
+    #[inline]
+    pub fn from_deg(x_m: f64, y_m: f64, heading_deg: f64) -> Self {
+        Self::new(x_m, y_m, heading_deg.to_radians())
+    }
+
+    /// The wire and command-line form `[x m, y m, heading °]` as a pose.
+    #[inline]
+    pub fn from_wire_deg([x_m, y_m, heading_deg]: [f64; 3]) -> Self {
+        Self::from_deg(x_m, y_m, heading_deg)
+    }
+
+    /// The wire form `[x m, y m, heading °]`, the heading normalised by [`wire_deg`] to
+    /// (−180, 180] as every wire and file writes it.
+    #[inline]
+    pub fn to_wire_deg(&self) -> [f64; 3] {
+        [self.x_m, self.y_m, wire_deg(self.heading_rad)]
+    }
+
+    /// The heading in degrees, converted as it is (`to_degrees`, not normalised).
+    #[inline]
+    pub fn heading_deg(&self) -> f64 {
+        self.heading_rad.to_degrees()
+    }
+
+    /// The position `[x, y]`, metres.
+    #[inline]
+    pub fn position(&self) -> [f64; 2] {
+        [self.x_m, self.y_m]
+    }
+
+    /// Whether every component is finite.
+    #[inline]
+    pub fn is_finite(&self) -> bool {
+        self.x_m.is_finite() && self.y_m.is_finite() && self.heading_rad.is_finite()
+    }
+}
+
+/// Thesis eqs. 4.7–4.9 (4.8's typo fixed): the pose after `dt` seconds at speeds `v` (m/s),
+/// `omega` (rad/s), moving along the *old* heading, whose cosine and sine the caller passes
+/// (the hub keeps them from its last commit). The new heading is wrapped.
 #[inline]
-pub fn advance([x, y, theta]: [f64; 3], v: f64, omega: f64, cos: f64, sin: f64, dt: f64) -> [f64; 3] {
-    [x + v * cos * dt, y + v * sin * dt, wrap_rad(theta + omega * dt)]
+pub fn advance(p: Pose, v: f64, omega: f64, cos: f64, sin: f64, dt: f64) -> Pose {
+    Pose::new(p.x_m + v * cos * dt, p.y_m + v * sin * dt, wrap_rad(p.heading_rad + omega * dt))
 }
 
 /// Ciber-Rato's obstacle-sensor value of a distance: 1/d rounded to 0.1, saturating at 100
@@ -232,9 +300,25 @@ mod tests {
     fn opposite_wheels_spin_on_the_spot() {
         let (v, omega) = velocity(0.5, 0.5, [-1.0, 1.0]);
         assert_eq!((v, omega), (0.0, 2.0));
-        let [x, y, th] = advance([1.0, 2.0, 0.0], v, omega, 1.0, 0.0, 0.1);
-        assert_eq!((x, y), (1.0, 2.0));
-        assert!((th - 0.2).abs() < 1e-15);
+        let p = advance(Pose::new(1.0, 2.0, 0.0), v, omega, 1.0, 0.0, 0.1);
+        assert_eq!(p.position(), [1.0, 2.0]);
+        assert!((p.heading_rad - 0.2).abs() < 1e-15);
+    }
+
+    #[test]
+    fn a_pose_converts_degrees_exactly_as_to_radians_and_wire_deg_do() {
+        for deg in [0.0, 90.0, -90.0, 179.9, 180.0, -180.0, 270.0, -15.8, 1e-9] {
+            let p = Pose::from_deg(1.5, -2.0, deg);
+            assert_eq!(p, Pose::new(1.5, -2.0, f64::to_radians(deg)), "{deg}");
+            assert_eq!(Pose::from_wire_deg([1.5, -2.0, deg]), p, "{deg}");
+            assert_eq!(p.heading_deg(), f64::to_radians(deg).to_degrees(), "{deg}");
+            assert_eq!(p.to_wire_deg(), [1.5, -2.0, wire_deg(f64::to_radians(deg))], "{deg}");
+            assert_eq!(p.position(), [1.5, -2.0]);
+        }
+        // The wire form is normalised; the heading itself is kept as given.
+        assert_eq!(Pose::from_deg(0.0, 0.0, -180.0).to_wire_deg()[2], 180.0);
+        assert_eq!(Pose::from_deg(0.0, 0.0, 270.0).heading_rad, f64::to_radians(270.0));
+        assert!(!Pose::new(0.0, f64::NAN, 0.0).is_finite() && Pose::default().is_finite());
     }
 
     #[test]
