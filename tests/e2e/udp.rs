@@ -200,8 +200,7 @@ fn the_hubs_run_time_ends_with_its_last_tick_not_with_the_agents_linger_after_it
     let ended = Instant::now();
     assert!(h.status.success(), "{}", text(&h.stderr));
     let json = text(&h.stdout).lines().find(|l| l.starts_with('{')).expect("the --json line").to_owned();
-    let out: serde_json::Value = serde_json::from_str(&json)
-        .expect("the hub's outcome");
+    let out: serde_json::Value = serde_json::from_str(&json).expect("the hub's outcome");
     let run_s = out["run_s"].as_f64().expect("run_s");
     let seen = last.duration_since(first.expect("a first tick")).as_secs_f64();
     let after = ended.duration_since(last).as_secs_f64();
