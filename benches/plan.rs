@@ -18,6 +18,7 @@ use navigator::geom::Pose;
 use navigator::map::NavMap;
 use navigator::sensors::Input;
 use navigator::{Checkpoint, NavConfig, Navigator};
+use sim_model::PoseDeg;
 use world::map::{Grid, Params, builtin};
 use world::{ProximitySpec, RobotSpec, World};
 
@@ -25,9 +26,9 @@ use world::{ProximitySpec, RobotSpec, World};
 /// it will pass (x, y, heading).
 struct Case {
     name: &'static str,
-    start: [f64; 3],
+    start: PoseDeg,
     goal: [f64; 2],
-    standing: &'static [[f64; 3]],
+    standing: &'static [PoseDeg],
 }
 
 const CASES: &[Case] = &[

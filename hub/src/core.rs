@@ -18,6 +18,7 @@ use ipc_types::{
 
 use places::Checkpoint;
 use recorder::journal::{Event, RecordedAction, RunStart};
+use sim_model::PoseDeg;
 use world::challenge::{Phase, Standing};
 use world::map::{Grid, Lab, Params};
 use world::math::Pose;
@@ -113,7 +114,9 @@ struct ChairLink {
     /// The last real reading of each sensor, metres (NaN: none yet; +∞: no echo).
     real_m: [f32; MAX_PROXIMITY],
     real_encoders: Option<[i64; 2]>,
-    ghost: Option<[f64; 3]>,
+    /// The chair's true pose as its adapter last reported it (a chair emulator's SimTruth),
+    /// kept in the wire form it came in and is published in, for observers only.
+    ghost: Option<PoseDeg>,
     link_up: bool,
     /// The operator's resume requests so far (wrapping), published in `drive_flags`.
     resumes: u16,

@@ -21,6 +21,7 @@ use std::path::{Path, PathBuf};
 
 use run_records::summary::RunSummary;
 use serde::{Deserialize, Serialize};
+use sim_model::PoseDeg;
 
 use crate::scenario::{ChairMode, ChairSpec, Scenario};
 
@@ -83,7 +84,7 @@ pub fn adapter_args(spec: &ChairSpec, mode: ChairMode, session: &str, stepped: b
     args
 }
 
-fn pose([x, y, deg]: [f64; 3]) -> String {
+fn pose([x, y, deg]: PoseDeg) -> String {
     format!("{x},{y},{deg}")
 }
 
@@ -101,7 +102,7 @@ pub struct RoomTruth {
     /// Contacts with the room so far, at the last step.
     pub contacts: u64,
     /// The true pose at the last step: x, y metres, heading degrees.
-    pub final_pose: Option<[f64; 3]>,
+    pub final_pose: Option<PoseDeg>,
     /// Events logged (`motors_zero`, `hello`, …), in order, with how often each came.
     pub events: Vec<(String, u64)>,
 }
@@ -220,7 +221,7 @@ pub struct ChairSummary {
     pub contacts_room: u64,
     /// The chair's true final pose in the room: x, y metres, heading degrees (written to
     /// 0.1 mm and 0.01°); `null` when the emulator logged no step.
-    pub final_pose_room: Option<[f64; 3]>,
+    pub final_pose_room: Option<PoseDeg>,
     /// The checkpoint the distance is measured to: the last of the robot's route, else the
     /// scenario's last (numbered from 1).
     pub checkpoint: Option<usize>,
@@ -245,7 +246,7 @@ impl ChairSummary {
         mode: ChairMode,
         stepped: bool,
         contacts_sim: u64,
-        hub_final_pose: Option<[f64; 3]>,
+        hub_final_pose: Option<PoseDeg>,
         truth: &RoomTruth,
     ) -> Self {
         let checkpoint = scenario

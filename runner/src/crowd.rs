@@ -11,6 +11,7 @@
 //! there), and each goal is at least [`Crowd::min_trip_m`] from where the chair comes from.
 
 use serde::Deserialize;
+use sim_model::PoseDeg;
 use world::map::Lab;
 use world::rng::Rng;
 
@@ -107,7 +108,7 @@ impl Crowd {
 #[derive(Debug, Clone, PartialEq)]
 pub struct Trip {
     /// Start pose: x, y metres, heading degrees.
-    pub start: [f64; 3],
+    pub start: PoseDeg,
     /// Goals in order: x, y metres.
     pub goals: Vec<[f64; 2]>,
 }

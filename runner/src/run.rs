@@ -23,6 +23,7 @@ use std::time::{Duration, Instant};
 use anyhow::Context as _;
 use run_records::outcome::HubOutcome;
 pub use run_records::summary::{RobotSummary, RunSummary};
+use sim_model::PoseDeg;
 
 use crate::args::RunArgs;
 use crate::chair::{self, ChairSummary};
@@ -67,7 +68,7 @@ impl Judge {
     }
 
     /// The robot at `t` seconds: where it truly is and how many contacts it has had.
-    fn observe(&mut self, scenario: &Scenario, t: f64, [x, y, heading]: [f64; 3], contacts: u64) {
+    fn observe(&mut self, scenario: &Scenario, t: f64, [x, y, heading_deg]: PoseDeg, contacts: u64) {
         let s = &mut self.s;
         if let Some(&n) = s.route.get(s.checkpoints_reached)
             && let Some(c) = scenario.checkpoints.get(n.wrapping_sub(1))
@@ -89,7 +90,7 @@ impl Judge {
         }
         s.ticks += 1;
         s.collisions = contacts;
-        s.final_pose = [x, y, heading];
+        s.final_pose = [x, y, heading_deg];
         self.last = Some((t, x, y));
     }
 

@@ -63,6 +63,7 @@ use std::path::{Path, PathBuf};
 
 pub use places::{Checkpoint, Obstacle, RoomBox};
 use serde::Deserialize;
+use sim_model::PoseDeg;
 
 /// The lock-step deadline of a scenario that sets none: long enough for any agent of ours on a
 /// loaded machine, short enough that a hung one holds the run only seconds.
@@ -163,7 +164,7 @@ pub struct Description {
     /// Obstacles: x0, y0, x1, y1, metres.
     pub obstacles: Vec<[f64; 4]>,
     /// The agents' start poses (`options.pose`): x, y metres, heading degrees.
-    pub starts: Vec<[f64; 3]>,
+    pub starts: Vec<PoseDeg>,
     /// Simulated time limit, seconds.
     pub seconds: f64,
     /// Tick, ms.
@@ -223,7 +224,7 @@ pub struct ChairSpec {
     /// The adapter's sensor mode.
     pub mode: ChairMode,
     /// The start pose in both worlds: x, y metres, heading degrees.
-    pub pose: [f64; 3],
+    pub pose: PoseDeg,
     /// The emulator's room: `builtin:NAME` or a lab file (relative to the scenario file);
     /// default the scenario's lab.
     #[serde(default)]

@@ -10,7 +10,7 @@ use agent_sdk::map::Map;
 use agent_sdk::odometry::Odometry;
 use agent_sdk::{Agent, AgentError};
 use ipc_types::{ActionBlock, COLLISION, HAS_COMPASS, RobotRegistration, SensorBlock, SensorSpec};
-use sim_model::{Pose, chair};
+use sim_model::{Pose, PoseDeg, chair};
 use zenoh::Wait as _;
 
 use crate::drive::{self, Cone};
@@ -42,7 +42,7 @@ pub struct ChairSpec {
     /// Name and namespace.
     pub name: String,
     /// Start pose in its wire form (as registered).
-    pub pose: Option<[f64; 3]>,
+    pub pose: Option<PoseDeg>,
 }
 
 /// How the bridge runs.
@@ -69,7 +69,7 @@ pub struct Ros2Config {
 }
 
 /// The body and sensors the bridge registers: the Intellwheels chair.
-pub fn registration(name: &str, pose: Option<[f64; 3]>) -> RobotRegistration {
+pub fn registration(name: &str, pose: Option<PoseDeg>) -> RobotRegistration {
     let [length, width, com] = chair::BODY;
     let mut reg =
         RobotRegistration::new(name).body(length, width, com).motors(chair::MAX_SPEED_MPS, chair::ACCEL_CURVE).at(pose);

@@ -10,7 +10,7 @@ use std::time::{Duration, Instant};
 
 use ipc_types::{ACT_GHOST, ACT_LINK_DOWN, ACT_REAL, ActionBlock, SensorBlock};
 use serial_protocol::{BoardInfo, DecoderStats, Frame, FrameDecodeError, Hello, Message, SimStep};
-use sim_model::{Pose, chair};
+use sim_model::{Pose, PoseDeg, chair};
 
 use crate::localise::Localiser;
 use crate::odometry::{Step, WheelOdometry};
@@ -121,7 +121,7 @@ pub struct BoardLink {
     fresh: FreshReadings,
     /// The emulator's true pose (its SimTruth) in the wire form the hub takes, x, y metres and
     /// heading degrees, forwarded as the board sent it.
-    ghost: Option<[f64; 3]>,
+    ghost: Option<PoseDeg>,
     board: Option<BoardInfo>,
     /// Stepped mode: board time stepped since the last sample, ms.
     due_ms: u32,

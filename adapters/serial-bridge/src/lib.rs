@@ -48,7 +48,7 @@ use std::time::Duration;
 use agent_sdk::cli::SessionArgs;
 use agent_sdk::{Agent, AgentError};
 use ipc_types::{FixedName, REG_CHAIR, RobotKind, RobotRegistration, SensorMode, SensorSpec};
-use sim_model::{Pose, chair};
+use sim_model::{Pose, PoseDeg, chair};
 
 pub use board::{BoardLink, LinkConfig, Outcome};
 pub use localise::Localiser;
@@ -84,7 +84,7 @@ pub struct SerialArgs {
     /// Where the chair stands on the hub's map at start, X,Y,DIR (metres, degrees): the
     /// odometry starts here. Kept in this wire form, which the registration carries as typed.
     #[arg(long, value_name = "X,Y,DIR", value_parser = agent_sdk::args::pose, allow_hyphen_values = true)]
-    pub pose: [f64; 3],
+    pub pose: PoseDeg,
     /// The board is a stepped chair emulator: each tick sends it a SimStep of the hub's cycle
     /// and waits (up to 1 s) for the sample it produces — with a lock-step hub, fast and
     /// deterministic runs.
@@ -158,7 +158,7 @@ pub enum SerialError {
 
 /// The chair as the adapter registers it: a Real robot with the chair's body, motors and
 /// sensors, starting at `pose` (x, y metres, heading degrees), in sensor mode `mode`.
-pub fn registration(name: &str, mode: SensorMode, pose: [f64; 3]) -> RobotRegistration {
+pub fn registration(name: &str, mode: SensorMode, pose: PoseDeg) -> RobotRegistration {
     let [length, width, com] = chair::BODY;
     let mut reg = RobotRegistration::new(name)
         .body(length, width, com)

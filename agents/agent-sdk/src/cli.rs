@@ -29,6 +29,7 @@ use std::path::PathBuf;
 use std::time::Duration;
 
 use crate::{Agent, AgentError};
+use sim_model::PoseDeg;
 
 /// Which hub to join and how long to wait for it (`--session`, `--connect-timeout`): what
 /// every client of a hub takes, agents, the UDP bridge and the viewer alike.
@@ -111,7 +112,7 @@ pub struct RobotArgs {
     pub id: u32,
     /// Start pose as X,Y,DIR (metres, degrees); without it the chair takes its grid slot.
     #[arg(long, value_name = "X,Y,DIR", value_parser = crate::args::pose, allow_hyphen_values = true)]
-    pub pose: Option<[f64; 3]>,
+    pub pose: Option<PoseDeg>,
 }
 
 /// A rectangular body (thesis Table 4.1) as separate options: `--width` (length along the

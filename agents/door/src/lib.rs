@@ -20,7 +20,7 @@ use agent_sdk::{Agent, Wait};
 use anyhow::Context as _;
 use ipc_types::{ActionBlock, COLLISION, HAS_COMPASS, RobotKind, RobotRegistration, SensorBlock, SensorSpec};
 use serde::Deserialize;
-use sim_model::{Pose, wrap_rad};
+use sim_model::{Pose, PoseDeg, wrap_rad};
 
 /// Options of `iwsim agent door`.
 #[derive(Debug, clap::Args, Clone)]
@@ -74,7 +74,7 @@ pub struct DoorConfig {
     #[serde(default = "normal")]
     pub preset: Preset,
     /// Closed pose in its wire form: x, y metres, heading degrees (as registered).
-    pub pose: [f64; 3],
+    pub pose: PoseDeg,
     /// Length, thickness, centre of movement (default: the preset's).
     #[serde(default)]
     pub body: Option<[f64; 3]>,

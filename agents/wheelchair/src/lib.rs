@@ -14,7 +14,7 @@ use ipc_types::{
     ActionBlock, COLLISION, HAS_COMPASS, MAX_PROXIMITY, RobotKind, RobotRegistration, SensorBlock, SensorSpec,
 };
 use serde::Deserialize;
-use sim_model::Pose;
+use sim_model::{Pose, PoseDeg};
 
 use clap::Args;
 use std::path::PathBuf;
@@ -63,7 +63,7 @@ pub struct WheelchairArgs {
     /// Start pose of the first robot as X,Y,DIR (metres, degrees); further robots form a
     /// lattice `--spacing` apart, ten to a row. Without it, robots take grid slots.
     #[arg(long, value_parser = agent_sdk::args::pose, allow_hyphen_values = true)]
-    pub pose: Option<[f64; 3]>,
+    pub pose: Option<PoseDeg>,
     /// Distance between robots of the lattice, metres.
     #[arg(long, default_value_t = 2.0)]
     pub spacing: f64,
@@ -118,7 +118,7 @@ pub struct ChairConfig {
     pub id: u32,
     /// Start pose x, y metres, heading degrees (default: a grid slot).
     #[serde(default)]
-    pub pose: Option<[f64; 3]>,
+    pub pose: Option<PoseDeg>,
     /// `simulated` (default) or `real`.
     #[serde(default)]
     pub kind: ChairKind,
@@ -318,7 +318,7 @@ fn drive(agent: &mut Agent, args: &WheelchairArgs, chairs: &[ChairConfig]) -> an
     // Where each chair starts: the pose it asked for, or its grid slot. From there a simulated
     // chair knows where it is only by its encoders and compass (an agent never gets the true
     // pose), a real one by its own motion.
-    let starts: Vec<[f64; 3]> = chairs
+    let starts: Vec<PoseDeg> = chairs
         .iter()
         .zip(&ids)
         .map(|(c, &id)| {

@@ -18,6 +18,7 @@ use std::time::Duration;
 use agent_sdk::{Agent, Wait};
 use anyhow::Context as _;
 use ipc_types::{ActionBlock, COLLISION, HAS_COMPASS, MAX_PROXIMITY, RobotRegistration, SensorSpec};
+use sim_model::PoseDeg;
 use udp_bridge::codec::MeasuresData;
 use world::math::Pose;
 
@@ -56,9 +57,9 @@ impl Lattice {
     }
 
     /// The start pose of robot `g` (0-based over all agents): x, y metres, heading degrees.
-    pub fn pose(&self, g: usize) -> [f64; 3] {
-        let heading = (g as f64 * 137.507_764).rem_euclid(360.0) - 180.0;
-        [MARGIN_M + SPACING_M * (g % self.cols) as f64, MARGIN_M + SPACING_M * (g / self.cols) as f64, heading]
+    pub fn pose(&self, g: usize) -> PoseDeg {
+        let heading_deg = (g as f64 * 137.507_764).rem_euclid(360.0) - 180.0;
+        [MARGIN_M + SPACING_M * (g % self.cols) as f64, MARGIN_M + SPACING_M * (g / self.cols) as f64, heading_deg]
     }
 
     /// An open lab that holds the lattice with [`MARGIN_M`] all round.
@@ -101,7 +102,7 @@ pub fn sensor_range_m() -> f64 {
 
 /// The registration of a bench chair called `name` at `pose` (x, y metres, heading degrees):
 /// [`crate::tiled::chair_spec`]'s body, motors and eight sensors.
-pub fn chair_registration(name: &str, pose: [f64; 3]) -> RobotRegistration {
+pub fn chair_registration(name: &str, pose: PoseDeg) -> RobotRegistration {
     let spec = crate::tiled::chair_spec(Pose::new(0.0, 0.0, 0.0));
     let mut reg = RobotRegistration::new(name)
         .body(spec.width_m, spec.height_m, spec.com)
@@ -121,7 +122,7 @@ pub fn chair_registration(name: &str, pose: [f64; 3]) -> RobotRegistration {
 }
 
 /// The same chair as an Intellwheels `<Robot>` registration datagram.
-pub fn chair_registration_xml(name: &str, pose: [f64; 3]) -> String {
+pub fn chair_registration_xml(name: &str, pose: PoseDeg) -> String {
     let r = chair_registration(name, pose);
     let mut s = format!(
         "<Robot Name=\"{name}\" Width=\"{}\" Height=\"{}\" COM=\"{}\" MaxSpeed=\"{}\" AccelerationCurve=\"{}\" X=\"{}\" Y=\"{}\" Dir=\"{}\">",

@@ -16,6 +16,7 @@ use anyhow::Context as _;
 use ros2_bridge::msgs::{self, Message as _};
 use ros2_bridge::names;
 use run_records::outcome::HubOutcome;
+use sim_model::PoseDeg;
 use zenoh::Wait as _;
 
 use crate::args::BenchRos2Args;
@@ -36,7 +37,7 @@ impl Drop for Children {
 }
 
 /// The chairs' start poses: rows of ten, 3 m apart, on an empty 40 m x 40 m floor.
-fn pose(k: usize) -> [f64; 3] {
+fn pose(k: usize) -> PoseDeg {
     [3.0 + 3.0 * (k % 10) as f64, 3.0 + 3.0 * (k / 10) as f64, 0.0]
 }
 

@@ -2,6 +2,8 @@
 //! comma-separated numbers such as a pose `X,Y,DIR` or powers `LEFT,RIGHT`. The errors are
 //! clap's `value_parser` errors: a sentence naming the form expected and what was given.
 
+use sim_model::PoseDeg;
+
 /// Parses `spec` as `min` to `max` comma-separated finite numbers; `form` names the form in
 /// errors (`"X,Y,DIR"`).
 ///
@@ -34,7 +36,7 @@ pub fn fixed<const N: usize>(spec: &str, form: &str, last_default: Option<f64>) 
 /// A pose `X,Y,DIR` in its wire form `[x m, y m, heading °]`, exactly as typed: registrations
 /// carry it so, and `sim_model::Pose::from_wire_deg` turns it into a pose for those who compute
 /// with it (converting here would round the degrees a registration forwards).
-pub fn pose(spec: &str) -> Result<[f64; 3], String> {
+pub fn pose(spec: &str) -> Result<PoseDeg, String> {
     fixed::<3>(spec, "a pose X,Y,DIR", None)
 }
 

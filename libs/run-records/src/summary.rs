@@ -28,6 +28,7 @@ use serde::{Deserialize, Serialize};
 use crate::outcome::StateHash;
 use crate::round_to;
 use places::{Checkpoint, Obstacle};
+use sim_model::PoseDeg;
 
 /// One robot's outcome, measured from its log.
 #[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
@@ -57,7 +58,7 @@ pub struct RobotSummary {
     /// 10–90 % rise time of the speed, seconds (written to 10 ms).
     pub rise_time_s: f64,
     /// Final pose: x, y metres, heading degrees (written to 0.1 mm and 0.01°).
-    pub final_pose: [f64; 3],
+    pub final_pose: PoseDeg,
     /// Whether it has a route and reached every checkpoint of it.
     #[serde(default)]
     pub arrived: bool,

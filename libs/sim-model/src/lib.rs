@@ -68,10 +68,17 @@ pub fn velocity(max_speed_mps: f64, track_m: f64, [left, right]: [f64; 2]) -> (f
     (max_speed_mps * (right + left) / 2.0, max_speed_mps * (right - left) / track_m)
 }
 
+/// A pose in its wire and command-line form, `[x m, y m, heading °]`: x and y in metres and the
+/// heading in degrees, as registrations, action blocks, `--pose X,Y,DEG`, scenario files,
+/// summary.json and logs carry it. It is a plain triple because those formats are; nothing
+/// computes with it except through [`Pose::from_wire_deg`], so a heading in degrees never meets
+/// a formula that expects radians, and the name says which of the two a bare triple is.
+pub type PoseDeg = [f64; 3];
+
 /// A robot's pose in the lab frame: position in metres and heading in radians (0 along +x,
 /// counter-clockwise positive). The units are in the field names so that a heading in degrees
-/// cannot pass for one in radians; degrees appear only at the wire and the command line, through
-/// [`Pose::from_wire_deg`] and [`Pose::to_wire_deg`].
+/// cannot pass for one in radians; degrees appear only at the wire and the command line, as a
+/// [`PoseDeg`], through [`Pose::from_wire_deg`] and [`Pose::to_wire_deg`].
 ///
 /// ```
 /// use sim_model::Pose;
@@ -105,14 +112,14 @@ impl Pose {
 
     /// The wire and command-line form `[x m, y m, heading °]` as a pose.
     #[inline]
-    pub fn from_wire_deg([x_m, y_m, heading_deg]: [f64; 3]) -> Self {
+    pub fn from_wire_deg([x_m, y_m, heading_deg]: PoseDeg) -> Self {
         Self::from_deg(x_m, y_m, heading_deg)
     }
 
     /// The wire form `[x m, y m, heading °]`, the heading normalised by [`wire_deg`] to
     /// (−180, 180] as every wire and file writes it.
     #[inline]
-    pub fn to_wire_deg(&self) -> [f64; 3] {
+    pub fn to_wire_deg(&self) -> PoseDeg {
         [self.x_m, self.y_m, wire_deg(self.heading_rad)]
     }
 

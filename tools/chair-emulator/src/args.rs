@@ -2,6 +2,8 @@
 
 use std::path::PathBuf;
 
+use sim_model::PoseDeg;
+
 use crate::board::{BoardConfig, Imperfections};
 use crate::driver::{EmulatorConfig, EmulatorError, PortChoice};
 use crate::room::{Room, RoomBox};
@@ -28,7 +30,7 @@ pub struct EmulatorArgs {
     pub boxes: Vec<RoomBox>,
     /// The chair's true start pose X,Y,DEG in metres and degrees.
     #[arg(long, value_name = "X,Y,DEG", value_parser = parse_pose, default_value = "10,6.1,0", allow_hyphen_values = true)]
-    pub pose: [f64; 3],
+    pub pose: PoseDeg,
     /// Talk on this serial device instead of a new pseudo-terminal (raw, 8N1, at --baud).
     #[arg(long, value_name = "PATH", conflicts_with = "link")]
     pub port: Option<PathBuf>,
@@ -76,7 +78,7 @@ pub struct EmulatorArgs {
     pub truth: Option<PathBuf>,
 }
 
-fn parse_pose(spec: &str) -> Result<[f64; 3], String> {
+fn parse_pose(spec: &str) -> Result<PoseDeg, String> {
     let parts: Vec<&str> = spec.split(',').map(str::trim).collect();
     if parts.len() != 3 {
         return Err(format!("{spec:?}: a pose X,Y,DEG has 3 numbers, got {}", parts.len()));

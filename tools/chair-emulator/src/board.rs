@@ -8,7 +8,7 @@ use serial_protocol::{
     BoardInfo, BoardStatus, Decoder, DecoderStats, FrameDecodeError, MAX_ENCODED_LEN, MAX_SENSORS, Message,
     MotorPowers, NO_ECHO, Reading, Readings, Sample, SimTruth, StatusFlags, StopAck, StopReason, encode,
 };
-use sim_model::chair;
+use sim_model::{PoseDeg, chair};
 use world::map::{NoiseParams, Params};
 use world::math::Pose;
 use world::rng::Rng;
@@ -97,7 +97,7 @@ impl Default for Imperfections {
 #[derive(Debug, Clone, PartialEq)]
 pub struct BoardConfig {
     /// The chair's true start pose: x, y (metres) and heading (degrees).
-    pub pose: [f64; 3],
+    pub pose: PoseDeg,
     /// Fixes every random draw.
     pub seed: u64,
     /// The clock advances only on SimStep frames (deterministic); otherwise on
@@ -307,7 +307,7 @@ pub struct Board {
 }
 
 /// The chair's body and sensors as the world model takes them.
-fn chair_spec(pose: [f64; 3], kind: RobotKind) -> RobotSpec {
+fn chair_spec([x_m, y_m, heading_deg]: PoseDeg, kind: RobotKind) -> RobotSpec {
     let [length, width, com] = chair::BODY;
     let sensors = chair::SENSORS
         .iter()
@@ -316,7 +316,7 @@ fn chair_spec(pose: [f64; 3], kind: RobotKind) -> RobotSpec {
             ..ProximitySpec::deg(m.x_m, m.y_m, m.angle_deg, m.cone_deg)
         })
         .collect();
-    RobotSpec::at(pose[0], pose[1], pose[2])
+    RobotSpec::at(x_m, y_m, heading_deg)
         .named("chair")
         .kind(kind)
         .body(length, width, com)

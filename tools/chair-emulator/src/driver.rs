@@ -14,6 +14,8 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::thread::JoinHandle;
 use std::time::Duration;
 
+use sim_model::PoseDeg;
+
 use crate::board::{Board, BoardBuildError, BoardConfig, BoardCounters, EventKind, Outbox};
 use crate::room::{Room, RoomBuildError};
 use crate::sys;
@@ -131,7 +133,7 @@ pub struct Outcome {
     /// Contacts with the room.
     pub contacts: u64,
     /// The chair's true pose at the end: x, y (metres), heading (degrees).
-    pub pose: [f64; 3],
+    pub pose: PoseDeg,
     /// The board's clock at the end, ms.
     pub board_ms: f64,
     /// Bytes put on the line.
