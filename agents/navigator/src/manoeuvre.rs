@@ -52,50 +52,71 @@ impl PullOver {
 /// The S-curve from `from` that ends `offset` metres to its left (negative: right),
 /// `length` metres further on, parallel to it.
 pub fn s_curve(from: Pose, offset: f64, length: f64) -> Vec<PathPose> {
+    curve(from, offset, length, 1.0)
+}
+
+/// [`s_curve`] driven in reverse: it ends `length` metres behind `from`, `offset` metres to
+/// its left (negative: right), facing the way it faced.
+pub fn s_curve_back(from: Pose, offset: f64, length: f64) -> Vec<PathPose> {
+    curve(from, offset, length, -1.0)
+}
+
+/// The S-curve forwards (`dir` 1) or backwards (`dir` -1).
+fn curve(from: Pose, offset: f64, length: f64, dir: f64) -> Vec<PathPose> {
     let n = (length / STEP_M).ceil().max(2.0) as usize;
     let (c, s) = (from.theta.cos(), from.theta.sin());
     (0..=n)
         .map(|i| {
             let u = i as f64 / n as f64;
-            let x = u * length;
+            let x = dir * u * length;
             let y = offset * u * u * u * (10.0 - 15.0 * u + 6.0 * u * u);
             let dy = offset / length * 30.0 * u * u * (1.0 - u) * (1.0 - u);
             let ddy = offset / (length * length) * 60.0 * u * (1.0 - u) * (1.0 - 2.0 * u);
             let kappa = ddy / (1.0 + dy * dy).powf(1.5);
-            let pose = Pose::new(from.x + x * c - y * s, from.y + x * s + y * c, from.theta + dy.atan());
-            PathPose { pose, motion: if i == 0 { Motion::Start } else { Motion::Forward(kappa) } }
+            // Backwards, the chair faces against its way along the curve.
+            let pose = Pose::new(from.x + x * c - y * s, from.y + x * s + y * c, from.theta + dir * dy.atan());
+            let motion = match i {
+                0 => Motion::Start,
+                _ if dir > 0.0 => Motion::Forward(kappa),
+                _ => Motion::Reverse(kappa),
+            };
+            PathPose { pose, motion }
         })
         .collect()
 }
 
 /// Plans the pull-over of the chair at `me` (with the model's footprint) for `peer`, keeping
 /// clear of the `others` chairs heard; `None` when there is no room for it on either side
-/// just now.
+/// just now. Forwards first; where the way ahead has no room (a chair of the same way parked
+/// just ahead, in a platoon), backwards: the way behind a chair that has come that way is
+/// most often clear.
 pub fn pull_over(model: &WorldModel, me: Pose, peer: &Peer, others: &[Peer]) -> Option<PullOver> {
     let fp = model.footprint;
     // Farther aside than this helps nobody.
     let enough = fp.half + peer.footprint.half + 0.35;
-    'side: for side in [-1.0, 1.0] {
-        let mut offset = enough;
-        while offset >= 0.15 {
-            for length in LENGTHS_M {
-                let path = s_curve(me, side * offset, length);
-                let clear = path.iter().all(|p| {
-                    model.free(&p.pose, WALL_MARGIN_M)
-                        && !fp.meets(&p.pose, &peer.footprint, &peer.pose, PEER_MARGIN_M)
-                        && !others.iter().any(|o| fp.meets(&p.pose, &o.footprint, &o.pose, OTHERS_MARGIN_M))
-                });
-                if !clear {
-                    continue;
+    for make in [s_curve, s_curve_back] {
+        'side: for side in [-1.0, 1.0] {
+            let mut offset = enough;
+            while offset >= 0.15 {
+                for length in LENGTHS_M {
+                    let path = make(me, side * offset, length);
+                    let clear = path.iter().all(|p| {
+                        model.free(&p.pose, WALL_MARGIN_M)
+                            && !fp.meets(&p.pose, &peer.footprint, &peer.pose, PEER_MARGIN_M)
+                            && !others.iter().any(|o| fp.meets(&p.pose, &o.footprint, &o.pose, OTHERS_MARGIN_M))
+                    });
+                    if !clear {
+                        continue;
+                    }
+                    let end = path[path.len() - 1].pose;
+                    if room_to_pass(model, &fp, &end, peer, others) {
+                        return Some(PullOver { path, offset_m: side * offset });
+                    }
+                    // Less offset on this side leaves the other even less room.
+                    continue 'side;
                 }
-                let end = path[path.len() - 1].pose;
-                if room_to_pass(model, &fp, &end, peer, others) {
-                    return Some(PullOver { path, offset_m: side * offset });
-                }
-                // Less offset on this side leaves the other even less room.
-                continue 'side;
+                offset -= 0.02;
             }
-            offset -= 0.02;
         }
     }
     None
@@ -167,6 +188,21 @@ mod tests {
     }
 
     #[test]
+    fn the_s_curve_backwards_mirrors_the_one_forwards_behind_the_chair() {
+        let from = Pose::from_deg(2.0, 1.0, 90.0);
+        let (ahead, back) = (s_curve(from, -0.5, 2.0), s_curve_back(from, -0.5, 2.0));
+        assert_eq!(ahead.len(), back.len());
+        for (a, b) in ahead.iter().zip(&back) {
+            // Mirrored across the line through `from` square to its heading.
+            assert!((b.pose.x - a.pose.x).abs() < 1e-9 && (b.pose.y - (2.0 * from.y - a.pose.y)).abs() < 1e-9);
+            assert!((b.pose.theta - from.theta + (a.pose.theta - from.theta)).abs() < 1e-9);
+        }
+        let end = back[back.len() - 1].pose;
+        // Facing north, backing south, the right is east.
+        assert!((end.x - 2.5).abs() < 1e-9 && (end.y + 1.0).abs() < 1e-9, "{end:?}");
+    }
+
+    #[test]
     fn the_s_curve_is_smooth_and_ends_parallel_and_aside() {
         let from = Pose::from_deg(2.0, 1.0, 90.0);
         let path = s_curve(from, -0.5, 2.0);
@@ -220,14 +256,28 @@ mod tests {
     }
 
     #[test]
-    fn a_third_chair_where_the_pull_over_would_go_leaves_no_room_until_it_has_gone() {
+    fn a_third_chair_where_the_pull_over_would_go_leaves_room_only_behind_until_it_has_gone() {
         let model = corridor();
         let me = Pose::from_deg(23.0, 6.0, 180.0);
         let peer = peer_at(15.0, 6.0, 0.0);
-        // Another westbound chair 2 m ahead, itself pulling over to the north.
+        // Another westbound chair 2 m ahead, itself pulling over to the north: no room
+        // ahead, so the chair backs into the north side behind it, in line with it.
         let mut ahead = peer_at(21.0, 6.2, 170.0);
         ahead.name = "chair2".into();
-        assert_eq!(pull_over(&model, me, &peer, std::slice::from_ref(&ahead)), None);
+        let back = pull_over(&model, me, &peer, std::slice::from_ref(&ahead)).expect("room behind");
+        assert_eq!(back.side(), "right");
+        assert!(back.path[1..].iter().all(|q| matches!(q.motion, Motion::Reverse(_))), "{back:?}");
+        let end = back.path[back.path.len() - 1].pose;
+        assert!(end.x > me.x + 1.0 && end.y > 6.3 && (end.theta - me.theta).abs() < 1e-9, "{end:?}");
+        assert!(fp_top(&end) < 6.91 - WALL_MARGIN_M + 1e-9, "{end:?}");
+        for q in &back.path {
+            assert!(model.free(&q.pose, WALL_MARGIN_M), "{q:?}");
+            assert!(!model.footprint.meets(&q.pose, &ahead.footprint, &ahead.pose, OTHERS_MARGIN_M), "{q:?}");
+        }
+        // With a chair close behind too, there is no room either way.
+        let mut behind = peer_at(25.2, 6.0, 180.0);
+        behind.name = "chair4".into();
+        assert_eq!(pull_over(&model, me, &peer, &[ahead.clone(), behind]), None);
         ahead.pose = Pose::from_deg(18.5, 6.43, 180.0);
         let p = pull_over(&model, me, &peer, &[ahead]).expect("room behind it once it has parked further on");
         assert_eq!(p.side(), "right");
