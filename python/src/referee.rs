@@ -5,7 +5,7 @@
 
 use std::time::Instant;
 
-use pyo3::exceptions::{PyKeyError, PyTimeoutError};
+use pyo3::exceptions::{PyKeyError, PyTimeoutError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::{PyByteArray, PyBytes};
 
@@ -172,7 +172,7 @@ fn env_step<'py>(
     let poses = observer
         .borrow_mut()
         .with_world_at(py, tick, timeout.unwrap_or(20.0), |h, robots| pose_rows(robots, sdk.robots(), h.tick))??;
-    let j = judge.borrow_mut().judge(&poses);
+    let j = judge.borrow_mut().judge(&poses).map_err(PyValueError::new_err)?;
     let ended = j.done.contains(&true);
     Ok(Some((tick, sim_time_s, observations, PyBytes::new(py, &j.table), j.rewards, j.done, j.contacts, ended)))
 }
@@ -238,15 +238,27 @@ impl Judge {
             observer.borrow_mut().with_world_at(py, tick, timeout, |h, robots| pose_rows(robots, &ids, h.tick))??;
         self.next = vec![0; poses.len()];
         self.last = poses.clone();
-        Ok(PyBytes::new(py, &self.judge(&poses).table))
+        let judged = self.judge(&poses).map_err(PyValueError::new_err)?;
+        Ok(PyBytes::new(py, &judged.table))
     }
 }
 
 impl Judge {
     /// Judges one tick's `poses` (per chair: x, y, heading, contacts) against the last.
-    fn judge(&mut self, poses: &[[f64; 4]]) -> Judged {
+    ///
+    /// # Errors
+    /// When the poses are not of as many chairs as [`Judge::start`] began with (or it was
+    /// never called): which chair is which would be a guess.
+    fn judge(&mut self, poses: &[[f64; 4]]) -> Result<Judged, String> {
         let m = self.checkpoints.len();
         let n = poses.len();
+        if n != self.next.len() {
+            return Err(format!(
+                "the judge has {} chair(s) from its start() but was given the poses of {n}: call start() \
+                 with the robots of the episode first",
+                self.next.len()
+            ));
+        }
         let mut j = Judged {
             table: vec![0u8; n * JUDGED * 8],
             rewards: Vec::with_capacity(n),
@@ -282,7 +294,7 @@ impl Judge {
             self.next[k] = next;
             self.last[k] = [x, y, heading, contacts];
         }
-        j
+        Ok(j)
     }
 }
 
@@ -314,4 +326,25 @@ pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<Judge>()?;
     m.add_class::<EpisodeHost>()?;
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_judge_not_started_or_given_another_number_of_chairs_says_so_instead_of_panicking() {
+        let mut judge = Judge::new(vec![(1.0, 0.0, 0.5)]);
+        let e = judge.judge(&[[0.0, 0.0, 0.0, 0.0]]).expect_err("never started");
+        assert!(e.contains("0 chair(s)") && e.contains("poses of 1") && e.contains("start()"), "{e}");
+        judge.next = vec![0; 2];
+        judge.last = vec![[0.0; 4]; 2];
+        let e = judge.judge(&[[0.0; 4]; 3]).expect_err("three chairs for two");
+        assert!(e.contains("2 chair(s)") && e.contains("poses of 3"), "{e}");
+        // The right number is judged: the first chair reaches the checkpoint, +10 with its
+        // metre of progress.
+        let j = judge.judge(&[[1.0, 0.0, 0.0, 0.0], [0.25, 0.0, 0.0, 0.0]]).expect("two chairs");
+        assert_eq!(j.done, vec![true, false]);
+        assert_eq!(j.rewards, vec![11.0, 0.25]);
+    }
 }
