@@ -160,7 +160,7 @@ pub struct StaticRaster {
 
 /// A passage narrower than this (metres, wall to wall along one of the four axes of the grid)
 /// is a narrow: a doorway, a gap between furniture.
-const NARROW_PASSAGE_M: f64 = 1.3;
+pub const NARROW_PASSAGE_M: f64 = 1.3;
 
 /// The walls as lanes see them: per cell, free cells from it to the first occupied one in each
 /// of 8 directions (k·45°, capped at 255), the least of those within [`DOORWAY_BRIDGE_M`] across
@@ -177,16 +177,16 @@ struct LaneWalls<'a> {
 /// a corridor does not end the corridor's lanes. In the ward (a 1 m doorway every 5 m on both
 /// sides) lanes that ended 1.2 m either side of each doorway held on a third of the corridor,
 /// and chairs met head-on in the rest.
-const DOORWAY_BRIDGE_M: f64 = 0.6;
+pub const DOORWAY_BRIDGE_M: f64 = 0.6;
 
 /// Lanes end this far (metres, along the way) from where a passage stops being two lanes wide.
-const JUNCTION_M: f64 = 1.2;
+pub const JUNCTION_M: f64 = 1.2;
 
 /// The 8 directions of [`StaticRaster`]'s runs, as cell steps.
 const DIRS: [(isize, isize); 8] = [(1, 0), (1, 1), (0, 1), (-1, 1), (-1, 0), (-1, -1), (0, -1), (1, -1)];
 
 /// Passages between these widths (metres, wall to wall) have two lanes, one each way.
-const TWO_LANES_M: (f64, f64) = (1.5, 3.2);
+pub const TWO_LANES_M: (f64, f64) = (1.5, 3.2);
 
 /// The length of one step in direction `k` of [`DIRS`], metres (diagonals are √2 cells).
 fn step_m(spec: &GridSpec, k: usize) -> f64 {

@@ -75,7 +75,7 @@ pub mod zones;
 use agent_sdk::cli::{CommonArgs, RobotArgs};
 
 pub use agent::run;
-pub use navigator::{Body, Checkpoint, NavConfig, NavEvent, NavStats, Navigator, Output, WALL_FIX_GAIN};
+pub use navigator::{Body, Checkpoint, NavConfig, NavEvent, NavStats, Navigator, Output, POSE_MARGIN_M, WALL_FIX_GAIN};
 pub use pilot::{Pilot, PilotOutput};
 pub use pose::PoseSourceKind;
 pub use sensors::Mode;
