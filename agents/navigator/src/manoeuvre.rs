@@ -8,7 +8,9 @@
 //! it was going, against the side. The curve is the widest offset, and for it the shortest
 //! length, for which every pose keeps clear of the walls, of what the sensors found and of
 //! the other chairs; if the spot it ends at leaves the other no room to pass on the far side,
-//! the other side of the corridor is tried.
+//! the other side of the corridor is tried. Where neither side has room ahead (a chair of the
+//! same way already pulled over just in front), the same curves are tried in reverse, ending
+//! behind the chair.
 //! The navigator's path follower drives it ([`crate::Navigator::manoeuvre`]), so the motor
 //! model and the odometry stay in step.
 
