@@ -47,6 +47,9 @@ const TURN_OFF_GAP_M: f64 = 0.15;
 /// by a third (ward, 6 chairs, seed 4: five chairs stood two minutes, each waiting on one
 /// of the others, and none said it was stuck).
 const STUCK_NEGOTIATING_S: f64 = 15.0;
+/// A chair queued for a doorway behind a chair that is not stuck is not stuck for this long
+/// (seconds): a few chairs' passages through it.
+const ZONE_QUEUE_S: f64 = 60.0;
 /// Stuck chairs this near each other (axle to axle, metres) settle who backs off.
 const BACKOFF_NEAR_M: f64 = 4.5;
 /// A chair backs off this far along the way it came (metres), at this speed (m/s)...
@@ -170,10 +173,26 @@ impl Pilot {
 
     /// Whether the chair is stuck: it has somewhere to go and has not moved for [`STUCK_S`]
     /// (in no negotiation going its way) or for [`STUCK_NEGOTIATING_S`] (in one).
+    ///
+    /// A chair queued for a doorway ([`Pilot::zone_gate`]) behind a chair that is not stuck
+    /// itself is not stuck either, for up to [`ZONE_QUEUE_S`]: the queue moves. (Before, it
+    /// said `stuck` after 5 s, which let its claim go; with no claim it drove on, claimed
+    /// again at the back of the queue and stopped, every other tick for minutes.)
     fn stuck(&self, now: f64) -> bool {
         !self.nav.finished()
+            && !(self.queued() && !self.stood_for(now, ZONE_QUEUE_S))
             && ((self.traffic.may_be_stuck() && self.stood_for(now, STUCK_S))
                 || (self.traffic.negotiating() && self.stood_for(now, STUCK_NEGOTIATING_S)))
+    }
+
+    /// Whether it waits for a doorway that a chair not stuck has (or wanted first).
+    fn queued(&self) -> bool {
+        if self.zone_wait.is_none() {
+            return false;
+        }
+        let zones = &self.zones;
+        let Some(by) = self.traffic.zone_blocker(|c| zones.named(c)) else { return false };
+        self.traffic.peers().iter().any(|p| p.name == by && p.state != State::Stuck)
     }
 
     /// Of the chairs stuck near each other, all but the one whose name sorts first back
@@ -467,7 +486,16 @@ impl Pilot {
         // A chair that yields to another head-on goes nowhere until the other has passed: its
         // claim on zones would make the other wait for it (the two rules would then wait for
         // each other), so it lets them go and claims again when it drives on.
-        if matches!(self.traffic.state(), State::Pull | State::Park | State::Stuck) && self.traffic.claim().is_some() {
+        // A chair done for good lets its zones go too, though it may stand partly in one:
+        // it is an obstacle to plan round from now on, and a claim it kept would stop the
+        // queue at that doorway (and the one facing it) for the rest of the run.
+        // A chair stuck in the queue for a doorway keeps its place: it holds nothing, and
+        // with no claim it drove on, claimed again at the back of the queue and stopped,
+        // every other tick (backing off lets go).
+        let stuck_outside = self.traffic.state() == State::Stuck && self.zone_wait.is_none();
+        if (self.nav.finished() || stuck_outside || matches!(self.traffic.state(), State::Pull | State::Park))
+            && self.traffic.claim().is_some()
+        {
             self.traffic.release_zones();
             self.zone_wait = None;
         }
@@ -598,7 +626,9 @@ impl Pilot {
     /// The one-lane zone rule for a chair free to drive: claims the zones ahead, releases
     /// those left behind, and stops short of zones it does not hold. Whether it may drive.
     fn zone_gate(&mut self, me: Pose, now: f64, notes: &mut Vec<String>) -> bool {
-        if self.zones.all().is_empty() {
+        // A chair done for good claims nothing, though it may stand in a zone (its claim
+        // was let go when it arrived).
+        if self.zones.all().is_empty() || self.nav.finished() {
             return true;
         }
         let under = self.zones_under(me);
@@ -734,6 +764,80 @@ mod tests {
         let stuck_at = said.iter().find(|(_, s)| s.contains(" stuck ")).map(|(t, _)| *t);
         assert!(said.iter().any(|(_, s)| s.contains(" wait ")), "it waited first: {said:?}");
         assert!(stuck_at.is_some_and(|t| (150..=160).contains(&t)), "stuck after 15 s: {stuck_at:?}");
+    }
+
+    /// Two 15 m × 4 m rooms joined by a 1 m doorway (x 15–15.2, y 1.5–2.5), and a pilot with
+    /// the zone rule on at `start`, bound for `goal`.
+    fn doorway_pilot(start: Pose, goal: V2) -> Pilot {
+        let mut map = NavMap::empty(30.2, 4.0);
+        map.walls.push(MapWall::rectangle(0.0, 0.0, 30.2, 0.1, false));
+        map.walls.push(MapWall::rectangle(0.0, 3.9, 30.2, 4.0, false));
+        map.walls.push(MapWall::rectangle(15.0, 0.1, 15.2, 1.5, false));
+        map.walls.push(MapWall::rectangle(15.0, 2.5, 15.2, 3.9, false));
+        let cfg = NavConfig {
+            checkpoints: vec![Checkpoint { pos: goal, radius_m: 0.5 }],
+            start,
+            encoder_ticks_per_m: 1000.0,
+            ..NavConfig::intellwheels()
+        };
+        Pilot::new("chair1", Navigator::new(map, cfg)).with_zone_claims()
+    }
+
+    /// A chair queued for a doorway that another chair holds is not stuck while that chair
+    /// is not: the queue moves. (It said `stuck` after 5 s, let its claim go, drove on,
+    /// claimed again at the back of the queue and stopped, every other tick.) It waits
+    /// in its place, saying `wait` with its claim, for up to a minute, and is stuck after
+    /// that; behind a chair that is stuck itself it is stuck after 5 s.
+    #[test]
+    fn a_chair_queued_for_a_doorway_behind_a_chair_not_stuck_waits_its_turn() {
+        let run = |holder: State| {
+            let mut pilot = doorway_pilot(Pose::from_deg(12.0, 2.0, 0.0), V2::new(20.0, 2.0));
+            assert_eq!(pilot.zones().all().len(), 1, "{:?}", pilot.zones().all());
+            let door = pilot.zones().all()[0].centre;
+            let body = pilot.navigator().config().body;
+            let claim = traffic::Claim { hold: true, since_s: 0.0, zones: vec![door] };
+            let mut stuck_at = None;
+            for tick in 0..700u64 {
+                let input = standing(tick);
+                let other =
+                    traffic::encode_claim("chair2", Pose::from_deg(17.5, 2.0, 0.0), holder, &body, Some(&claim));
+                let out = pilot.tick(&input, [other.as_bytes()]);
+                let said = out.say.unwrap_or_default();
+                if said.contains(" stuck ") {
+                    stuck_at.get_or_insert(tick);
+                }
+                if tick >= 20 {
+                    // Stuck or not, it keeps its place in the queue (wanted since 0.1 s).
+                    assert_eq!(out.powers, [0.0, 0.0], "it stands short of the doorway (tick {tick})");
+                    assert!(said.contains(" w 1 "), "tick {tick}: {said}");
+                    assert!(stuck_at.is_some() || said.contains(" wait "), "tick {tick}: {said}");
+                }
+            }
+            stuck_at
+        };
+        let t = run(State::Go);
+        assert!(t.is_some_and(|t| (600..=620).contains(&t)), "stuck after a minute behind a chair going: {t:?}");
+        let t = run(State::Stuck);
+        assert!(t.is_some_and(|t| (50..=60).contains(&t)), "stuck after 5 s behind a stuck chair: {t:?}");
+    }
+
+    /// A chair done for good claims nothing, even where it stands in a doorway: a claim it
+    /// kept would stop the queue there for the rest of the run. (Its first tick's claim is
+    /// made before the navigator finds itself at its goal, and let go on the next.)
+    #[test]
+    fn a_chair_done_in_a_doorway_claims_nothing() {
+        let at = Pose::from_deg(15.1, 2.0, 0.0);
+        let mut pilot = doorway_pilot(at, at.pos());
+        for tick in 0..30u64 {
+            let out = pilot.tick(&standing(tick), []);
+            assert!(pilot.navigator().finished(), "at its goal from the start");
+            // The first tick's claim is made before the navigator finds itself at its goal.
+            if tick == 0 {
+                continue;
+            }
+            let said = out.say.unwrap_or_default();
+            assert!(!said.contains(" h ") && !said.contains(" w "), "tick {tick}: {said}");
+        }
     }
 
     /// A chair whose way turns off (here to a goal round a right turn) within 3 m goes on when

@@ -287,6 +287,9 @@ pub struct Traffic {
     crossed: Vec<String>,
     /// Our claim on one-lane zones.
     claim: Option<Claim>,
+    /// When the claim last changed its zones, simulated seconds: it holds new ones only
+    /// [`CLAIM_SETTLE_S`] after (a claim kept in its place in the queue says an older SINCE).
+    claim_changed_s: f64,
     /// Standing still until the zones claimed are ours.
     zone_waiting: bool,
     /// Stuck, or backing off ([`State::Stuck`]).
@@ -323,6 +326,7 @@ impl Traffic {
             role: Role::Free,
             crossed: Vec::new(),
             claim: None,
+            claim_changed_s: 0.0,
             zone_waiting: false,
             stuck: false,
             clash_slack: CLASH_SLACK_M,
@@ -361,9 +365,26 @@ impl Traffic {
             c.zones.len() == ids.len() && c.zones.iter().all(|&z| zone_of(z).is_some_and(|k| ids.contains(&k)))
         });
         if !same {
-            // Simulated time to a tenth of a second, as said.
-            let since_s = (now_s * 10.0).round() / 10.0;
-            self.claim = Some(Claim { hold: false, since_s, zones: zones.to_vec() });
+            // A claim on other zones keeps its place in the queue if it still wants one of
+            // those it wanted: a path planned anew (round a chair that stopped) changes the
+            // zones ahead by one more or one fewer, and a claim made anew each time went last
+            // in the queue again and again. It holds what it held only if it wants nothing
+            // more. Otherwise: simulated time to a tenth of a second, as said.
+            let old = self.claim.take();
+            let kept = old.filter(|c| c.zones.iter().any(|&z| zone_of(z).is_some_and(|k| ids.contains(&k))));
+            let claim = match kept {
+                Some(c) => {
+                    let had: Vec<usize> = c.zones.iter().filter_map(|&z| zone_of(z)).collect();
+                    Claim {
+                        hold: c.hold && ids.iter().all(|k| had.contains(k)),
+                        since_s: c.since_s,
+                        zones: zones.to_vec(),
+                    }
+                }
+                None => Claim { hold: false, since_s: (now_s * 10.0).round() / 10.0, zones: zones.to_vec() },
+            };
+            self.claim = Some(claim);
+            self.claim_changed_s = now_s;
         }
         let Some(mine) = self.claim.clone() else { return false };
         let name = self.name.as_str();
@@ -375,7 +396,7 @@ impl Traffic {
         let claim = self.claim.as_mut().expect("made above");
         if conflict || (!may_enter && !inside) {
             claim.hold = false;
-        } else if claim.hold || now_s - claim.since_s >= CLAIM_SETTLE_S - 1e-9 {
+        } else if claim.hold || now_s - claim.since_s.max(self.claim_changed_s) >= CLAIM_SETTLE_S - 1e-9 {
             claim.hold = true;
         }
         claim.hold
@@ -718,6 +739,33 @@ mod tests {
         // chair9 falls silent inside (crashed, its messages lost): its claim lapses after 1 s.
         assert!(!late.want_zones(&door, zone_of, 2.4, false, true));
         assert!(late.want_zones(&door, zone_of, 2.5, false, true), "a claim not heard for 1 s lapses");
+    }
+
+    /// A path planned anew changes the zones ahead: a claim that still wants one of those
+    /// it wanted keeps its place in the queue (a later claimant still waits for it); it keeps
+    /// its hold only if it wants nothing more. A claim on other zones altogether is a new one.
+    #[test]
+    fn a_claim_changed_by_a_new_path_keeps_its_place_in_the_queue() {
+        let (door, junction) = (V2::new(7.5, 6.0), V2::new(12.5, 6.0));
+        let mut first = Traffic::new("chair9");
+        let mut later = Traffic::new("chair1");
+        assert!(!first.want_zones(&[door], zone_of, 1.0, false, true));
+        assert!(first.want_zones(&[door], zone_of, 1.3, false, true), "settled, nobody before it");
+        // One more zone beyond: the hold goes (all or nothing), the place in the queue stays.
+        assert!(!first.want_zones(&[door, junction], zone_of, 5.0, false, true));
+        assert_eq!(first.claim().map(|c| (c.since_s, c.hold)), Some((1.0, false)));
+        assert!(!later.want_zones(&[door], zone_of, 4.0, false, true));
+        tell(&first, &mut later, pose(7.5, 4.0, 90.0), 5.1);
+        assert!(!later.want_zones(&[door], zone_of, 5.2, false, true), "chair9 wanted it first");
+        tell(&later, &mut first, pose(7.5, 8.0, -90.0), 5.1);
+        assert!(!first.want_zones(&[door, junction], zone_of, 5.2, false, true), "the new zone settles first");
+        assert!(first.want_zones(&[door, junction], zone_of, 5.3, false, true), "then chair9 goes first");
+        // Back to the doorway alone: held still, as it wants nothing it did not hold.
+        assert!(first.want_zones(&[door], zone_of, 6.0, false, true));
+        assert_eq!(first.claim().map(|c| c.since_s), Some(1.0));
+        // Somewhere else altogether: a new claim, wanted from now.
+        assert!(!first.want_zones(&[V2::new(22.5, 6.0)], zone_of, 9.0, false, true));
+        assert_eq!(first.claim().map(|c| (c.since_s, c.hold)), Some((9.0, false)));
     }
 
     #[test]
