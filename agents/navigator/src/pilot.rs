@@ -180,7 +180,7 @@ impl Pilot {
     /// again at the back of the queue and stopped, every other tick for minutes.)
     fn stuck(&self, now: f64) -> bool {
         !self.nav.finished()
-            && !(self.queued() && !self.stood_for(now, ZONE_QUEUE_S))
+            && (!self.queued() || self.stood_for(now, ZONE_QUEUE_S))
             && ((self.traffic.may_be_stuck() && self.stood_for(now, STUCK_S))
                 || (self.traffic.negotiating() && self.stood_for(now, STUCK_NEGOTIATING_S)))
     }
