@@ -42,6 +42,8 @@ pub struct PullOver {
     pub path: Vec<PathPose>,
     /// Sideways shift, metres: negative to the right.
     pub offset_m: f64,
+    /// Driven in reverse: it ends behind the chair ([`s_curve_back`]).
+    pub backwards: bool,
 }
 
 impl PullOver {
@@ -96,7 +98,8 @@ pub fn pull_over(model: &WorldModel, me: Pose, peer: &Peer, others: &[Peer]) -> 
     let fp = model.footprint;
     // Farther aside than this helps nobody.
     let enough = fp.half + peer.footprint.half + 0.35;
-    for make in [s_curve, s_curve_back] {
+    let makes: [(fn(Pose, f64, f64) -> Vec<PathPose>, bool); 2] = [(s_curve, false), (s_curve_back, true)];
+    for (make, backwards) in makes {
         'side: for side in [-1.0, 1.0] {
             let mut offset = enough;
             while offset >= 0.15 {
@@ -112,7 +115,7 @@ pub fn pull_over(model: &WorldModel, me: Pose, peer: &Peer, others: &[Peer]) -> 
                     }
                     let end = path[path.len() - 1].pose;
                     if room_to_pass(model, &fp, &end, peer, others) {
-                        return Some(PullOver { path, offset_m: side * offset });
+                        return Some(PullOver { path, offset_m: side * offset, backwards });
                     }
                     // Less offset on this side leaves the other even less room.
                     continue 'side;
@@ -227,7 +230,7 @@ mod tests {
         let me = Pose::from_deg(21.0, 6.02, 180.0);
         let peer = peer_at(14.5, 6.0, 0.0);
         let p = pull_over(&model, me, &peer, &[]).expect("room to pull over");
-        assert_eq!(p.side(), "right");
+        assert_eq!((p.side(), p.backwards), ("right", false));
         let end = p.path[p.path.len() - 1].pose;
         let fp = model.footprint;
         // Against the north wall, clear of it, and parallel to the corridor.
@@ -267,7 +270,7 @@ mod tests {
         let mut ahead = peer_at(21.0, 6.2, 170.0);
         ahead.name = "chair2".into();
         let back = pull_over(&model, me, &peer, std::slice::from_ref(&ahead)).expect("room behind");
-        assert_eq!(back.side(), "right");
+        assert_eq!((back.side(), back.backwards), ("right", true), "said to be backwards");
         assert!(back.path[1..].iter().all(|q| matches!(q.motion, Motion::Reverse(_))), "{back:?}");
         let end = back.path[back.path.len() - 1].pose;
         assert!(end.x > me.x + 1.0 && end.y > 6.3 && (end.theta - me.theta).abs() < 1e-9, "{end:?}");

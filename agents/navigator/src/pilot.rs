@@ -546,8 +546,9 @@ impl Pilot {
                 let others: Vec<_> = self.traffic.peers().iter().filter(|p| p.name != peer.name).cloned().collect();
                 match manoeuvre::pull_over(self.nav.model(), me, &peer, &others) {
                     Some(p) => {
+                        let how = if p.backwards { "backing" } else { "pulling over" };
                         notes.push(format!(
-                            "pulling over {:.2} m to the {} at t {now:.1} s to let {} pass",
+                            "{how} {:.2} m to the {} at t {now:.1} s to let {} pass",
                             p.offset_m.abs(),
                             p.side(),
                             peer.name
