@@ -29,7 +29,7 @@ pub struct EmulatorArgs {
     #[arg(long = "box", value_name = "NAME,X0,Y0,X1,Y1[,dark]", value_parser = RoomBox::parse, allow_hyphen_values = true)]
     pub boxes: Vec<RoomBox>,
     /// The chair's true start pose X,Y,DEG in metres and degrees.
-    #[arg(long, value_name = "X,Y,DEG", value_parser = parse_pose, default_value = "10,6.1,0", allow_hyphen_values = true)]
+    #[arg(long, value_name = "X,Y,DEG", value_parser = places::args::pose, default_value = "10,6.1,0", allow_hyphen_values = true)]
     pub pose: PoseDeg,
     /// Talk on this serial device instead of a new pseudo-terminal (raw, 8N1, at --baud).
     #[arg(long, value_name = "PATH", conflicts_with = "link")]
@@ -76,22 +76,6 @@ pub struct EmulatorArgs {
     /// stamped with CLOCK_MONOTONIC nanoseconds.
     #[arg(long, value_name = "FILE")]
     pub truth: Option<PathBuf>,
-}
-
-fn parse_pose(spec: &str) -> Result<PoseDeg, String> {
-    let parts: Vec<&str> = spec.split(',').map(str::trim).collect();
-    if parts.len() != 3 {
-        return Err(format!("{spec:?}: a pose X,Y,DEG has 3 numbers, got {}", parts.len()));
-    }
-    let mut v = [0.0; 3];
-    for (slot, text) in v.iter_mut().zip(&parts) {
-        *slot = text
-            .parse::<f64>()
-            .ok()
-            .filter(|x| x.is_finite())
-            .ok_or_else(|| format!("{spec:?}: {text:?} is not a finite number (a pose X,Y,DEG)"))?;
-    }
-    Ok(v)
 }
 
 impl EmulatorArgs {
@@ -188,7 +172,7 @@ mod tests {
     #[test]
     fn bad_values_are_refused_with_what_is_wrong() {
         let e = parse(&["--pose", "1,2"]).expect_err("two numbers");
-        assert!(e.to_string().contains("a pose X,Y,DEG has 3 numbers, got 2"), "{e}");
+        assert!(e.to_string().contains("is not a pose X,Y,DIR: expected 3 numbers, got 2"), "{e}");
         let e = parse(&["--box", "1,2,3,4"]).expect_err("no name");
         assert!(e.to_string().contains("starts with a name"), "{e}");
         let e = parse(&["--port", "/dev/ttyS0", "--link", "/tmp/x"]).expect_err("conflict");
