@@ -89,6 +89,9 @@ fn curve(from: Pose, offset: f64, length: f64, dir: f64) -> Vec<PathPose> {
         .collect()
 }
 
+/// An S-curve maker: from a pose, an offset aside and a length along ([`s_curve`]).
+type Curve = fn(Pose, f64, f64) -> Vec<PathPose>;
+
 /// Plans the pull-over of the chair at `me` (with the model's footprint) for `peer`, keeping
 /// clear of the `others` chairs heard; `None` when there is no room for it on either side
 /// just now. Forwards first; where the way ahead has no room (a chair of the same way parked
@@ -98,7 +101,7 @@ pub fn pull_over(model: &WorldModel, me: Pose, peer: &Peer, others: &[Peer]) -> 
     let fp = model.footprint;
     // Farther aside than this helps nobody.
     let enough = fp.half + peer.footprint.half + 0.35;
-    let makes: [(fn(Pose, f64, f64) -> Vec<PathPose>, bool); 2] = [(s_curve, false), (s_curve_back, true)];
+    let makes: [(Curve, bool); 2] = [(s_curve, false), (s_curve_back, true)];
     for (make, backwards) in makes {
         'side: for side in [-1.0, 1.0] {
             let mut offset = enough;
