@@ -397,20 +397,24 @@ impl Pilot {
     }
 
     /// The zones to claim on the path ahead: the first within [`CLAIM_AHEAD_M`] and those
-    /// that follow it closer than [`WAIT_ROOM_M`]; and how far ahead the first begins.
+    /// that follow it closer than [`WAIT_ROOM_M`]; and how far ahead the first begins. Only
+    /// zones the path goes through count ([`Pilot::zones_through`]): one it passes by along
+    /// the corridor is the corridor, where the lanes and the two-chair rule keep chairs apart.
     fn zones_ahead(&self, me: Pose) -> Option<(Vec<usize>, f64)> {
-        let mut group: Vec<usize> = self.zones_under(me);
+        let path = self.nav.path();
+        let through = self.zones_through(me, &path);
+        let mut group: Vec<usize> = self.zones_under(me).into_iter().filter(|z| through.contains(z)).collect();
         let mut first_at = if group.is_empty() { None } else { Some(0.0) };
         let mut along = 0.0;
         let mut last = me.pos();
         let mut gap_from = if group.is_empty() { None } else { Some(0.0) };
-        for p in self.nav.path() {
+        for p in &path {
             along += (p.pos() - last).norm();
             last = p.pos();
             if first_at.is_none() && along > CLAIM_AHEAD_M {
                 return None;
             }
-            match self.zones.at(p.pos()) {
+            match self.zones.at(p.pos()).filter(|z| through.contains(z)) {
                 Some(z) => {
                     if group.len() < MAX_CLAIM_ZONES && !group.contains(&z) {
                         group.push(z);
@@ -426,6 +430,33 @@ impl Pilot {
             }
         }
         first_at.map(|at| (group, at))
+    }
+
+    /// The zones that `path` from `me` goes through: its side ([`Zones::side`]) changes
+    /// within them (out of a room into the corridor, or across a junction into the room
+    /// opposite), or it ends in them (what lies beyond is not known yet), or there is no
+    /// path (waiting where it stands, the zones under it count).
+    fn zones_through(&self, me: Pose, path: &[Pose]) -> Vec<usize> {
+        let Some(end) = path.last() else { return self.zones_under(me) };
+        let mut sides: Vec<(usize, Option<u32>)> = Vec::new();
+        let mut through: Vec<usize> = self.zones.at(end.pos()).into_iter().collect();
+        let mine = self.zones.side(me.pos());
+        for z in self.zones_under(me) {
+            sides.push((z, mine));
+        }
+        for p in path {
+            let Some(z) = self.zones.at(p.pos()) else { continue };
+            if through.contains(&z) {
+                continue;
+            }
+            let side = self.zones.side(p.pos());
+            match sides.iter().find(|(k, _)| *k == z) {
+                Some(&(_, s)) if s != side => through.push(z),
+                Some(_) => {}
+                None => sides.push((z, side)),
+            }
+        }
+        through
     }
 
     /// The name it goes by.
@@ -839,6 +870,46 @@ mod tests {
             let said = out.say.unwrap_or_default();
             assert!(!said.contains(" h ") && !said.contains(" w "), "tick {tick}: {said}");
         }
+    }
+
+    /// A chair that drives along a corridor past a doorway claims nothing: it passes the
+    /// doorway by, in its lane. (Claiming every doorway on the way, as the zone rule did,
+    /// queued the whole corridor behind each chair going into a room: ward, 10 chairs,
+    /// 94 of 100 arrived, 98 with this.) A chair whose way goes through the doorway claims it.
+    #[test]
+    fn a_chair_passing_a_doorway_by_claims_nothing_one_going_in_claims_it() {
+        // A corridor 2 m wide (y 6–8) with a 1 m doorway (x 5.5–6.5) into a room south of it.
+        let mut map = NavMap::empty(12.0, 8.1);
+        map.walls.push(MapWall::rectangle(0.0, 5.9, 5.5, 6.0, false));
+        map.walls.push(MapWall::rectangle(6.5, 5.9, 12.0, 6.0, false));
+        map.walls.push(MapWall::rectangle(0.0, 8.0, 12.0, 8.1, false));
+        let run = |goal: V2| {
+            let cfg = NavConfig {
+                checkpoints: vec![Checkpoint { pos: goal, radius_m: 0.5 }],
+                start: Pose::from_deg(3.0, 6.6, 0.0),
+                encoder_ticks_per_m: 1000.0,
+                ..NavConfig::intellwheels()
+            };
+            let mut pilot = Pilot::new("chair1", Navigator::new(map.clone(), cfg)).with_zone_claims();
+            assert_eq!(pilot.zones().all().len(), 1, "the doorway: {:?}", pilot.zones().all());
+            let mut claimed = Vec::new();
+            for tick in 0..40u64 {
+                let said = pilot.tick(&standing(tick), []).say.unwrap_or_default();
+                assert!(!pilot.navigator().path().is_empty() || tick < 20, "tick {tick}: no path");
+                if pilot.traffic.claim().is_some() {
+                    claimed.push(tick);
+                }
+                assert_eq!(
+                    said.contains(" w ") || said.contains(" h "),
+                    pilot.traffic.claim().is_some() && !said.is_empty(),
+                    "tick {tick}: {said}"
+                );
+            }
+            claimed
+        };
+        assert_eq!(run(V2::new(10.5, 6.6)), Vec::<u64>::new(), "passing by");
+        let going_in = run(V2::new(6.0, 3.0));
+        assert!(going_in.len() >= 20, "going in claims the doorway: {going_in:?}");
     }
 
     /// A chair whose way turns off (here to a goal round a right turn) within 3 m goes on when

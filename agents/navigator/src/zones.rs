@@ -51,6 +51,10 @@ pub struct Zones {
     spec: GridSpec,
     /// Per cell: 0 = in no zone, k = in zone k − 1.
     label: Vec<u16>,
+    /// Per cell: the wide place (room or corridor) nearest along the free cells, or
+    /// `u32::MAX` where the axle cannot stand. A path that stays on one side of a zone
+    /// passes it by; one whose side changes in it goes through its passage.
+    side: Vec<u32>,
     zones: Vec<Zone>,
 }
 
@@ -332,7 +336,7 @@ impl Zones {
     /// No zones at all (the zone rule off): every place is in none.
     pub fn none() -> Zones {
         let spec = GridSpec { origin: V2::new(0.0, 0.0), cell: 1.0, nx: 1, ny: 1 };
-        Zones { spec, label: Vec::new(), zones: Vec::new() }
+        Zones { spec, label: Vec::new(), side: Vec::new(), zones: Vec::new() }
     }
 
     /// Twice a chair's width plus a gap of 0.3 m, halved: the clearance a cell needs for two
@@ -363,7 +367,7 @@ impl Zones {
         let pivot_r = fp.reach() + PIVOT_SLACK_M;
         let (grown, mut parent) = grow(&spec, &free, &core, &depth, &passages, pivot_r);
         let (label, zones) = number_zones(&spec, &passage, &grown, &mut parent);
-        Zones { spec, label, zones }
+        Zones { spec, label, side: owner, zones }
     }
 
     /// The zones.
@@ -376,6 +380,14 @@ impl Zones {
         let (ix, iy) = self.spec.cell_of(p)?;
         let l = *self.label.get(self.spec.index(ix, iy))?;
         (l > 0).then(|| usize::from(l - 1))
+    }
+
+    /// The wide place (room or corridor) nearest to `p` along the free cells, by number:
+    /// a path whose side changes within a zone goes through the zone's passage, one whose
+    /// side stays the same passes it by. `None` off the map or where the axle cannot stand.
+    pub fn side(&self, p: V2) -> Option<u32> {
+        let (ix, iy) = self.spec.cell_of(p)?;
+        self.side.get(self.spec.index(ix, iy)).copied().filter(|&s| s != u32::MAX)
     }
 
     /// The zone a peer names by its centre: the zone holding that point.
@@ -461,5 +473,19 @@ mod tests {
         for y in [6.4, 7.0, 7.6] {
             assert_eq!(zones.at(V2::new(5.0, y)), None, "the corridor between junctions at y {y}");
         }
+        // Each wide place is a side: the corridor's two lanes, by a junction and between
+        // junctions, are one; each room is another. A path from lane to lane through a
+        // junction stays on one side (it passes the doorways by), one into a room does not.
+        let corridor = zones.side(V2::new(5.0, 7.0)).expect("the corridor is a side");
+        for (x, y) in [(2.5, 6.4), (2.5, 7.6), (7.5, 6.4), (7.5, 7.6), (0.6, 6.4)] {
+            assert_eq!(zones.side(V2::new(x, y)), Some(corridor), "({x}, {y}) is in the corridor");
+        }
+        let rooms = [(1.0, 3.0), (8.0, 3.0), (1.0, 11.0), (8.0, 11.0)].map(|(x, y)| zones.side(V2::new(x, y)));
+        for (k, r) in rooms.iter().enumerate() {
+            assert!(r.is_some_and(|r| r != corridor), "room {k}: {rooms:?}");
+            assert!(rooms[..k].iter().all(|q| q != r), "each room its own side: {rooms:?}");
+        }
+        assert_eq!(zones.side(V2::new(2.5, 5.5)), rooms[0], "the doorway's room side");
+        assert_eq!(zones.side(V2::new(5.0, 5.0)), None, "inside a wall");
     }
 }
