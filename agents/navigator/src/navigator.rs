@@ -230,8 +230,10 @@ const PEER_GUARD_M: f64 = 0.1;
 /// 0.015 m), so only a motion off its line trips it, such as a turn on the spot begun a few
 /// centimetres from where it was planned.
 const SENSED_GUARD_M: f64 = 0.01;
-/// The same for known walls while a manoeuvre is driven (see [`Navigator::safety`]), metres.
-const MANOEUVRE_WALL_GUARD_M: f64 = 0.03;
+/// The same for known walls while a manoeuvre is driven (see [`Navigator::safety`]), metres:
+/// less than a refuge path's margin (0.6 of [`NavConfig::margin_m`], 3 cm), or the guard
+/// would stop a chair driving its refuge path as planned.
+const MANOEUVRE_WALL_GUARD_M: f64 = 0.02;
 
 /// A gain for the correction of the position estimate from wall readings (`--wall-fix`):
 /// the share of each reading's disagreement with the map taken per tick. Odometry drifts by
@@ -1556,7 +1558,7 @@ mod tests {
         assert_eq!(nav.safety(&input, 0.3, 0.0), None, "driving along it goes on");
     }
 
-    /// A manoeuvre (backing off along the trail, a refuge, pulling over) keeps 3 cm from the
+    /// A manoeuvre (backing off along the trail, a refuge, pulling over) keeps 2 cm from the
     /// known walls by its estimate, a planned path 1 cm: the manoeuvre has no margin checked
     /// along it. Here a gentle left curve brings the front-left corner from 4 cm to about
     /// 1.5 cm below a wall within 0.3 s.

@@ -118,6 +118,9 @@ pub struct Pilot {
     /// Zones ahead that we wait for: their centres, and how far ahead along the path the first
     /// one began when we stopped.
     zone_wait: Option<Vec<V2>>,
+    /// Zones ahead that the path only passes by but another chair holds (it is turning out
+    /// of or into a doorway there): their centres, while we stand short of them.
+    pass_wait: Option<Vec<V2>>,
     /// "Cannot say the claim" was logged.
     claim_too_long_said: bool,
     /// Where the chair has been, oldest first, [`TRAIL_STEP_M`] apart.
@@ -141,6 +144,7 @@ impl Pilot {
             no_room_said: false,
             zones: Zones::none(),
             zone_wait: None,
+            pass_wait: None,
             claim_too_long_said: false,
             trail: Vec::new(),
             still: None,
@@ -180,13 +184,17 @@ impl Pilot {
     /// again at the back of the queue and stopped, every other tick for minutes.)
     fn stuck(&self, now: f64) -> bool {
         !self.nav.finished()
-            && (!self.queued() || self.stood_for(now, ZONE_QUEUE_S))
+            && (!self.queued(now) || self.stood_for(now, ZONE_QUEUE_S))
             && ((self.traffic.may_be_stuck() && self.stood_for(now, STUCK_S))
                 || (self.traffic.negotiating() && self.stood_for(now, STUCK_NEGOTIATING_S)))
     }
 
     /// Whether it waits for a doorway that a chair not stuck has (or wanted first).
-    fn queued(&self) -> bool {
+    fn queued(&self, now: f64) -> bool {
+        if let Some(centres) = &self.pass_wait {
+            let ids: Vec<usize> = centres.iter().filter_map(|&c| self.zones.named(c)).collect();
+            return ids.iter().any(|&z| self.holder(z, now).is_some_and(|p| p.state != State::Stuck));
+        }
         if self.zone_wait.is_none() {
             return false;
         }
@@ -432,6 +440,61 @@ impl Pilot {
         first_at.map(|at| (group, at))
     }
 
+    /// The peer that holds zone `z` by a claim heard lately.
+    fn holder(&self, z: usize, now: f64) -> Option<&traffic::Peer> {
+        let zones = &self.zones;
+        self.traffic.peers().iter().find(|p| {
+            now - p.heard_s <= traffic::CLAIM_FRESH_S
+                && p.claim.as_ref().is_some_and(|c| c.hold && c.zones.iter().any(|&q| zones.named(q) == Some(z)))
+        })
+    }
+
+    /// A zone the path only passes by is not claimed ([`Pilot::zones_ahead`]), but it is not
+    /// driven into while another chair holds it: that chair is in its doorway or turning out
+    /// of it across both lanes (a chair passing by drove into a junction while another
+    /// turned into its doorway, and the two shut each other in for good: ward, 6 chairs,
+    /// seed 1). Stand short of it until it is let go. Whether the chair may drive on.
+    fn pass_by_gate(&mut self, me: Pose, now: f64, notes: &mut Vec<String>) -> bool {
+        if let Some(centres) = &self.pass_wait {
+            let held = centres.iter().filter_map(|&c| self.zones.named(c)).find(|&z| self.holder(z, now).is_some());
+            if held.is_some() {
+                self.traffic.set_zone_waiting(true);
+                self.nav.hold();
+                return false;
+            }
+            self.pass_wait = None;
+            self.traffic.set_zone_waiting(false);
+            return true;
+        }
+        let path = self.nav.path();
+        if path.is_empty() {
+            return true;
+        }
+        let under = self.zones_under(me);
+        let through = self.zones_through(me, &path);
+        let stop_at = self.nav.model().footprint.front + STOP_SHORT_M;
+        let (mut along, mut last) = (0.0, me.pos());
+        for p in &path {
+            along += (p.pos() - last).norm();
+            last = p.pos();
+            if along > stop_at {
+                break;
+            }
+            let Some(z) = self.zones.at(p.pos()).filter(|z| !through.contains(z) && !under.contains(z)) else {
+                continue;
+            };
+            if let Some(by) = self.holder(z, now).map(|p| p.name.clone()) {
+                let centre = self.zones.all()[z].centre;
+                notes.push(format!("waiting at t {now:.1} s by the doorway at {} ({by} is using it)", place(centre)));
+                self.pass_wait = Some(vec![centre]);
+                self.traffic.set_zone_waiting(true);
+                self.nav.hold();
+                return false;
+            }
+        }
+        true
+    }
+
     /// The zones that `path` from `me` goes through: its side ([`Zones::side`]) changes
     /// within them (out of a room into the corridor, or across a junction into the room
     /// opposite), or it ends in them (what lies beyond is not known yet), or there is no
@@ -529,6 +592,9 @@ impl Pilot {
         {
             self.traffic.release_zones();
             self.zone_wait = None;
+        }
+        if !matches!(decision, Decision::Go) {
+            self.pass_wait = None;
         }
         let backing = self.back_off(me, now, &mut notes);
         match decision {
@@ -661,7 +727,11 @@ impl Pilot {
         // A chair done for good claims nothing, though it may stand in a zone (its claim
         // was let go when it arrived).
         if self.zones.all().is_empty() || self.nav.finished() {
+            self.pass_wait = None;
             return true;
+        }
+        if !self.pass_by_gate(me, now, notes) {
+            return false;
         }
         let under = self.zones_under(me);
         // A chair that finds no way on while outside the zones it holds lets them go: it
@@ -910,6 +980,52 @@ mod tests {
         assert_eq!(run(V2::new(10.5, 6.6)), Vec::<u64>::new(), "passing by");
         let going_in = run(V2::new(6.0, 3.0));
         assert!(going_in.len() >= 20, "going in claims the doorway: {going_in:?}");
+    }
+
+    /// A chair passing a doorway along the corridor stands short of it while another chair
+    /// holds it (in the doorway, or turning out of it across both lanes), and drives on once
+    /// that chair lets it go. (Driving into the junction while another turned into its
+    /// doorway shut both in for good: ward, 6 chairs, seed 1.)
+    #[test]
+    fn a_chair_passing_a_doorway_by_waits_while_another_chair_holds_it() {
+        let mut map = NavMap::empty(12.0, 8.1);
+        map.walls.push(MapWall::rectangle(0.0, 5.9, 5.5, 6.0, false));
+        map.walls.push(MapWall::rectangle(6.5, 5.9, 12.0, 6.0, false));
+        map.walls.push(MapWall::rectangle(0.0, 8.0, 12.0, 8.1, false));
+        let cfg = NavConfig {
+            checkpoints: vec![Checkpoint { pos: V2::new(10.5, 6.6), radius_m: 0.5 }],
+            start: Pose::from_deg(3.6, 6.6, 0.0),
+            encoder_ticks_per_m: 1000.0,
+            ..NavConfig::intellwheels()
+        };
+        let body = cfg.body;
+        let mut pilot = Pilot::new("chair1", Navigator::new(map, cfg)).with_zone_claims();
+        let door = pilot.zones().all()[0].centre;
+        let other = Pose::from_deg(6.0, 5.0, 90.0);
+        let holding = traffic::Claim { hold: true, since_s: 0.0, zones: vec![door] };
+        let (mut waited, mut went) = (None, None);
+        for tick in 0..80u64 {
+            let msg = if tick < 50 {
+                traffic::encode_claim("chair2", other, State::Go, &body, Some(&holding))
+            } else {
+                traffic::encode("chair2", other, State::Go, &body)
+            };
+            let out = pilot.tick(&standing(tick), [msg.as_bytes()]);
+            assert!(pilot.traffic.claim().is_none(), "passing by claims nothing (tick {tick})");
+            if out.notes.iter().any(|n| n.contains("by the doorway") && n.contains("chair2 is using it")) {
+                waited.get_or_insert(tick);
+            }
+            // Standing: braking (the drive's model still has it rolling), never driving on.
+            let forward = out.powers.iter().any(|&p| p > 0.0);
+            if tick < 50 && waited.is_some() {
+                assert!(!forward, "it stands while chair2 holds the doorway (tick {tick}): {:?}", out.powers);
+            }
+            if tick >= 50 && forward {
+                went.get_or_insert(tick);
+            }
+        }
+        assert!(waited.is_some_and(|t| t < 20), "it stood short of the doorway: {waited:?}");
+        assert!(went.is_some_and(|t| t < 60), "and went on once it was let go: {went:?}");
     }
 
     /// A chair whose way turns off (here to a goal round a right turn) within 3 m goes on when
