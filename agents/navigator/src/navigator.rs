@@ -1537,21 +1537,25 @@ mod tests {
         assert!(nav.finished(), "stuck at {:?}", sim.pose);
     }
 
+    /// A chair at (2, 2) facing east, its left side `gap` metres below a wall that covers
+    /// only its front half, and its first tick's readings.
+    fn below_a_wall(gap: f64) -> (Navigator, Input) {
+        let fp = NavConfig::intellwheels().body.footprint();
+        let start = Pose::from_deg(2.0, 2.0, 0.0);
+        let mut map = NavMap::empty(14.0, 5.0);
+        let wall_y = start.y + fp.half + gap;
+        map.walls.push(MapWall::rectangle(start.x + 0.1, wall_y, 14.0, wall_y + 0.1, false));
+        let sim = Sim::at(&map, start);
+        (Navigator::new(map, cfg_to(start, V2::new(11.0, 1.0))), sim.input(0, None))
+    }
+
     #[test]
     fn a_turn_on_the_spot_that_would_swing_a_corner_into_a_known_wall_is_stopped() {
         // The chair stands facing east, its front-left corner 3 cm below a wall that covers
         // only the front half of it: a turn to the left lifts that corner into the wall within
         // a tick or two, a turn to the right takes it away. (A path keeps its margin where it
         // was planned; a turn begun a few centimetres on, or beside the line, would not.)
-        let fp = NavConfig::intellwheels().body.footprint();
-        let start = Pose::from_deg(2.0, 2.0, 0.0);
-        let mut map = NavMap::empty(14.0, 5.0);
-        let wall_y = start.y + fp.half + 0.03;
-        map.walls.push(MapWall::rectangle(start.x + 0.1, wall_y, 14.0, wall_y + 0.1, false));
-        let cfg = cfg_to(start, V2::new(11.0, 1.0));
-        let sim = Sim::at(&map, start);
-        let nav = Navigator::new(map, cfg);
-        let input = sim.input(0, None);
+        let (nav, input) = below_a_wall(0.03);
         let spin = TrackerParams::default().spin_rate;
         assert_eq!(nav.safety(&input, 0.0, spin).map(|s| s.2), Some(true), "turning left into the wall stops");
         assert_eq!(nav.safety(&input, 0.0, -spin), None, "turning right, away from it, goes on");
@@ -1564,14 +1568,8 @@ mod tests {
     /// 1.5 cm below a wall within 0.3 s.
     #[test]
     fn a_manoeuvre_keeps_farther_from_a_known_wall_than_a_planned_path() {
-        let fp = NavConfig::intellwheels().body.footprint();
-        let start = Pose::from_deg(2.0, 2.0, 0.0);
-        let mut map = NavMap::empty(14.0, 5.0);
-        let wall_y = start.y + fp.half + 0.04;
-        map.walls.push(MapWall::rectangle(start.x + 0.1, wall_y, 14.0, wall_y + 0.1, false));
-        let sim = Sim::at(&map, start);
-        let mut nav = Navigator::new(map, cfg_to(start, V2::new(11.0, 1.0)));
-        let input = sim.input(0, None);
+        let (mut nav, input) = below_a_wall(0.04);
+        let start = nav.pose();
         let (v, w) = (0.1, 0.1);
         assert_eq!(nav.safety(&input, v, w), None, "a path goes on");
         let ahead = [0.0, 0.5, 1.0]

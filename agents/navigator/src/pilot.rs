@@ -118,9 +118,9 @@ pub struct Pilot {
     /// Zones ahead that we wait for: their centres, and how far ahead along the path the first
     /// one began when we stopped.
     zone_wait: Option<Vec<V2>>,
-    /// Zones ahead that the path only passes by but another chair holds (it is turning out
-    /// of or into a doorway there): their centres, while we stand short of them.
-    pass_wait: Option<Vec<V2>>,
+    /// A zone ahead that the path only passes by but another chair holds (it is turning out
+    /// of or into a doorway there): its centre, while we stand short of it.
+    pass_wait: Option<V2>,
     /// "Cannot say the claim" was logged.
     claim_too_long_said: bool,
     /// Where the chair has been, oldest first, [`TRAIL_STEP_M`] apart.
@@ -191,9 +191,9 @@ impl Pilot {
 
     /// Whether it waits for a doorway that a chair not stuck has (or wanted first).
     fn queued(&self, now: f64) -> bool {
-        if let Some(centres) = &self.pass_wait {
-            let ids: Vec<usize> = centres.iter().filter_map(|&c| self.zones.named(c)).collect();
-            return ids.iter().any(|&z| self.holder(z, now).is_some_and(|p| p.state != State::Stuck));
+        if let Some(centre) = self.pass_wait {
+            let z = self.zones.named(centre);
+            return z.and_then(|z| self.holder(z, now)).is_some_and(|p| p.state != State::Stuck);
         }
         if self.zone_wait.is_none() {
             return false;
@@ -408,15 +408,13 @@ impl Pilot {
     /// that follow it closer than [`WAIT_ROOM_M`]; and how far ahead the first begins. Only
     /// zones the path goes through count ([`Pilot::zones_through`]): one it passes by along
     /// the corridor is the corridor, where the lanes and the two-chair rule keep chairs apart.
-    fn zones_ahead(&self, me: Pose) -> Option<(Vec<usize>, f64)> {
-        let path = self.nav.path();
-        let through = self.zones_through(me, &path);
+    fn zones_ahead(&self, me: Pose, path: &[Pose], through: &[usize]) -> Option<(Vec<usize>, f64)> {
         let mut group: Vec<usize> = self.zones_under(me).into_iter().filter(|z| through.contains(z)).collect();
         let mut first_at = if group.is_empty() { None } else { Some(0.0) };
         let mut along = 0.0;
         let mut last = me.pos();
         let mut gap_from = if group.is_empty() { None } else { Some(0.0) };
-        for p in &path {
+        for p in path {
             along += (p.pos() - last).norm();
             last = p.pos();
             if first_at.is_none() && along > CLAIM_AHEAD_M {
@@ -454,10 +452,9 @@ impl Pilot {
     /// of it across both lanes (a chair passing by drove into a junction while another
     /// turned into its doorway, and the two shut each other in for good: ward, 6 chairs,
     /// seed 1). Stand short of it until it is let go. Whether the chair may drive on.
-    fn pass_by_gate(&mut self, me: Pose, now: f64, notes: &mut Vec<String>) -> bool {
-        if let Some(centres) = &self.pass_wait {
-            let held = centres.iter().filter_map(|&c| self.zones.named(c)).find(|&z| self.holder(z, now).is_some());
-            if held.is_some() {
+    fn pass_by_gate(&mut self, me: Pose, now: f64, path: &[Pose], through: &[usize], notes: &mut Vec<String>) -> bool {
+        if let Some(centre) = self.pass_wait {
+            if self.zones.named(centre).is_some_and(|z| self.holder(z, now).is_some()) {
                 self.traffic.set_zone_waiting(true);
                 self.nav.hold();
                 return false;
@@ -466,15 +463,13 @@ impl Pilot {
             self.traffic.set_zone_waiting(false);
             return true;
         }
-        let path = self.nav.path();
         if path.is_empty() {
             return true;
         }
         let under = self.zones_under(me);
-        let through = self.zones_through(me, &path);
         let stop_at = self.nav.model().footprint.front + STOP_SHORT_M;
         let (mut along, mut last) = (0.0, me.pos());
-        for p in &path {
+        for p in path {
             along += (p.pos() - last).norm();
             last = p.pos();
             if along > stop_at {
@@ -486,7 +481,7 @@ impl Pilot {
             if let Some(by) = self.holder(z, now).map(|p| p.name.clone()) {
                 let centre = self.zones.all()[z].centre;
                 notes.push(format!("waiting at t {now:.1} s by the doorway at {} ({by} is using it)", place(centre)));
-                self.pass_wait = Some(vec![centre]);
+                self.pass_wait = Some(centre);
                 self.traffic.set_zone_waiting(true);
                 self.nav.hold();
                 return false;
@@ -730,7 +725,10 @@ impl Pilot {
             self.pass_wait = None;
             return true;
         }
-        if !self.pass_by_gate(me, now, notes) {
+        // The path and the zones it goes through, once for both gates.
+        let path = self.nav.path();
+        let through = self.zones_through(me, &path);
+        if !self.pass_by_gate(me, now, &path, &through, notes) {
             return false;
         }
         let under = self.zones_under(me);
@@ -759,7 +757,7 @@ impl Pilot {
                 let ids: Vec<usize> = centres.iter().filter_map(|&c| self.zones.named(c)).collect();
                 Some((ids, 0.0))
             }
-            None => self.zones_ahead(me),
+            None => self.zones_ahead(me, &path, &through),
         };
         let Some((ids, first_at)) = ahead.filter(|(ids, _)| !ids.is_empty()) else {
             // Nothing ahead on a known path: a claim is let go once the body is out of its
@@ -942,25 +940,30 @@ mod tests {
         }
     }
 
+    /// A corridor 2 m wide (y 6–8) with a 1 m doorway (x 5.5–6.5) into a room south of it,
+    /// and a pilot with the zone rule on at `start`, bound for `goal`.
+    fn corridor_pilot(start: Pose, goal: V2) -> Pilot {
+        let mut map = NavMap::empty(12.0, 8.1);
+        map.walls.push(MapWall::rectangle(0.0, 5.9, 5.5, 6.0, false));
+        map.walls.push(MapWall::rectangle(6.5, 5.9, 12.0, 6.0, false));
+        map.walls.push(MapWall::rectangle(0.0, 8.0, 12.0, 8.1, false));
+        let cfg = NavConfig {
+            checkpoints: vec![Checkpoint { pos: goal, radius_m: 0.5 }],
+            start,
+            encoder_ticks_per_m: 1000.0,
+            ..NavConfig::intellwheels()
+        };
+        Pilot::new("chair1", Navigator::new(map, cfg)).with_zone_claims()
+    }
+
     /// A chair that drives along a corridor past a doorway claims nothing: it passes the
     /// doorway by, in its lane. (Claiming every doorway on the way, as the zone rule did,
     /// queued the whole corridor behind each chair going into a room: ward, 10 chairs,
     /// 94 of 100 arrived, 98 with this.) A chair whose way goes through the doorway claims it.
     #[test]
     fn a_chair_passing_a_doorway_by_claims_nothing_one_going_in_claims_it() {
-        // A corridor 2 m wide (y 6–8) with a 1 m doorway (x 5.5–6.5) into a room south of it.
-        let mut map = NavMap::empty(12.0, 8.1);
-        map.walls.push(MapWall::rectangle(0.0, 5.9, 5.5, 6.0, false));
-        map.walls.push(MapWall::rectangle(6.5, 5.9, 12.0, 6.0, false));
-        map.walls.push(MapWall::rectangle(0.0, 8.0, 12.0, 8.1, false));
         let run = |goal: V2| {
-            let cfg = NavConfig {
-                checkpoints: vec![Checkpoint { pos: goal, radius_m: 0.5 }],
-                start: Pose::from_deg(3.0, 6.6, 0.0),
-                encoder_ticks_per_m: 1000.0,
-                ..NavConfig::intellwheels()
-            };
-            let mut pilot = Pilot::new("chair1", Navigator::new(map.clone(), cfg)).with_zone_claims();
+            let mut pilot = corridor_pilot(Pose::from_deg(3.0, 6.6, 0.0), goal);
             assert_eq!(pilot.zones().all().len(), 1, "the doorway: {:?}", pilot.zones().all());
             let mut claimed = Vec::new();
             for tick in 0..40u64 {
@@ -988,18 +991,8 @@ mod tests {
     /// doorway shut both in for good: ward, 6 chairs, seed 1.)
     #[test]
     fn a_chair_passing_a_doorway_by_waits_while_another_chair_holds_it() {
-        let mut map = NavMap::empty(12.0, 8.1);
-        map.walls.push(MapWall::rectangle(0.0, 5.9, 5.5, 6.0, false));
-        map.walls.push(MapWall::rectangle(6.5, 5.9, 12.0, 6.0, false));
-        map.walls.push(MapWall::rectangle(0.0, 8.0, 12.0, 8.1, false));
-        let cfg = NavConfig {
-            checkpoints: vec![Checkpoint { pos: V2::new(10.5, 6.6), radius_m: 0.5 }],
-            start: Pose::from_deg(3.6, 6.6, 0.0),
-            encoder_ticks_per_m: 1000.0,
-            ..NavConfig::intellwheels()
-        };
-        let body = cfg.body;
-        let mut pilot = Pilot::new("chair1", Navigator::new(map, cfg)).with_zone_claims();
+        let mut pilot = corridor_pilot(Pose::from_deg(3.6, 6.6, 0.0), V2::new(10.5, 6.6));
+        let body = pilot.navigator().config().body;
         let door = pilot.zones().all()[0].centre;
         let other = Pose::from_deg(6.0, 5.0, 90.0);
         let holding = traffic::Claim { hold: true, since_s: 0.0, zones: vec![door] };
